@@ -1,0 +1,332 @@
+"""`BathymetryMap`: a regular grid of seafloor depths in a local metric frame."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from tangraph.errors import MapFormatError, TangraphError
+from tangraph.maps._interp import depth_kernel, gradient_kernel
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+__all__ = ["BathymetryMap"]
+
+Order = Literal[1, 3]
+
+# Relative tolerance on the spacing of "regular" coordinates (float32 files round them).
+_SPACING_RTOL = 1e-4
+
+
+def _check_axis(values: np.ndarray, name: str, where: str) -> tuple[float, float]:
+    """Return (first, spacing) of a regular ascending axis, or raise naming the problem."""
+    if values.ndim != 1 or values.size < 2:
+        raise MapFormatError(f"{where}: {name} must be 1-D with at least 2 cells, got shape {values.shape}")
+    if not np.all(np.isfinite(values)):
+        raise MapFormatError(f"{where}: {name} holds non-finite coordinates")
+    steps = np.diff(values)
+    if np.any(steps <= 0):
+        k = int(np.argmax(steps <= 0))
+        raise MapFormatError(
+            f"{where}: {name} is not strictly ascending "
+            f"({name}[{k}] = {values[k]!r}, {name}[{k + 1}] = {values[k + 1]!r})"
+        )
+    spacing = (values[-1] - values[0]) / (values.size - 1)
+    worst = float(np.max(np.abs(steps - spacing)))
+    if worst > _SPACING_RTOL * spacing:
+        raise MapFormatError(
+            f"{where}: {name} is not regularly spaced (mean step {spacing!r}, "
+            f"a step deviates by {worst!r}); resample the grid first"
+        )
+    return float(values[0]), float(spacing)
+
+
+def _as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    n = np.asarray(north, dtype=np.float64)
+    e = np.asarray(east, dtype=np.float64)
+    try:
+        shape = np.broadcast_shapes(n.shape, e.shape)
+    except ValueError:
+        raise TangraphError(
+            f"north and east have shapes {n.shape} and {e.shape}, which do not broadcast"
+        ) from None
+    n = np.ascontiguousarray(np.broadcast_to(n, shape)).ravel()
+    e = np.ascontiguousarray(np.broadcast_to(e, shape)).ravel()
+    return n, e, shape
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class BathymetryMap:
+    """A regular grid of seafloor depths (metres, positive down) in a local NED frame.
+
+    Parameters
+    ----------
+    north, east : ndarray, shape (ny,), (nx,)
+        Ascending, regularly spaced cell-centre coordinates in metres.
+    depth : ndarray, shape (ny, nx)
+        Depth of the seafloor, positive down; NaN where there is no data.
+    crs : str or None
+        The projected CRS (anything ``pyproj.CRS`` accepts) in which the local frame lies, or
+        None for a synthetic map with no place on Earth.
+    origin : (float, float)
+        ``(northing, easting)`` in ``crs`` of the local point ``north = east = 0``.
+    name : str
+        A short name, used in figures and errors.
+
+    Notes
+    -----
+    The arrays are copied and made read-only, so a map never changes and never aliases
+    the caller's data.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> m = BathymetryMap(north=np.arange(3.0) * 10, east=np.arange(4.0) * 10,
+    ...                   depth=np.arange(12.0).reshape(3, 4) + 100)
+    >>> float(m.depth_at(5.0, 5.0))
+    102.5
+    >>> bool(np.isnan(m.depth_at(-1.0, 0.0)))  # off the map
+    True
+    """
+
+    north: np.ndarray
+    east: np.ndarray
+    depth: np.ndarray
+    crs: str | None = None
+    origin: tuple[float, float] = (0.0, 0.0)
+    name: str = "map"
+
+    def __post_init__(self) -> None:
+        where = f"map {self.name!r}"
+        north = np.array(self.north, dtype=np.float64)
+        east = np.array(self.east, dtype=np.float64)
+        depth = np.array(self.depth, dtype=np.float64)
+        n0, dn = _check_axis(north, "north", where)
+        e0, de = _check_axis(east, "east", where)
+        if depth.shape != (north.size, east.size):
+            raise MapFormatError(
+                f"{where}: depth has shape {depth.shape}, expected (len(north), len(east)) = "
+                f"{(north.size, east.size)}"
+            )
+        if np.any(np.isinf(depth)):
+            raise MapFormatError(f"{where}: depth holds infinite values; mark no-data with NaN")
+        if not np.any(np.isfinite(depth)):
+            raise MapFormatError(f"{where}: depth is all NaN (no data at all)")
+        origin = tuple(float(v) for v in self.origin)
+        if len(origin) != 2 or not all(np.isfinite(origin)):
+            raise MapFormatError(f"{where}: origin must be two finite numbers, got {self.origin!r}")
+        for a in (north, east, depth):
+            a.setflags(write=False)
+        object.__setattr__(self, "north", north)
+        object.__setattr__(self, "east", east)
+        object.__setattr__(self, "depth", depth)
+        object.__setattr__(self, "origin", origin)
+        object.__setattr__(self, "_grid", (n0, e0, dn, de))
+
+    # -- geometry -------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(ny, nx)``."""
+        return self.depth.shape  # type: ignore[return-value]
+
+    @property
+    def cell_size(self) -> tuple[float, float]:
+        """Cell size ``(d_north, d_east)`` in metres."""
+        _, _, dn, de = self._grid  # type: ignore[attr-defined]
+        return dn, de
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(north_min, north_max, east_min, east_max)`` of the cell centres."""
+        return (float(self.north[0]), float(self.north[-1]), float(self.east[0]), float(self.east[-1]))
+
+    @property
+    def valid_fraction(self) -> float:
+        """Fraction of cells that hold data."""
+        return float(np.mean(np.isfinite(self.depth)))
+
+    def __repr__(self) -> str:
+        dn, de = self.cell_size
+        n_lo, n_hi, e_lo, e_hi = self.extent
+        return (
+            f"BathymetryMap(name={self.name!r}, shape={self.shape}, cell=({dn:g}, {de:g}) m, "
+            f"north=[{n_lo:g}, {n_hi:g}], east=[{e_lo:g}, {e_hi:g}], "
+            f"depth=[{np.nanmin(self.depth):g}, {np.nanmax(self.depth):g}] m, crs={self.crs!r})"
+        )
+
+    # -- queries --------------------------------------------------------------------------
+    def _query(self, north, east, order: Order, with_grad: bool):
+        if order not in (1, 3):
+            raise TangraphError(f"order must be 1 (bilinear) or 3 (bicubic), got {order!r}")
+        n, e, shape = _as_query(north, east)
+        out = np.empty(n.size)
+        n0, e0, dn, de = self._grid  # type: ignore[attr-defined]
+        if not with_grad:
+            depth_kernel(self.depth, n0, e0, 1.0 / dn, 1.0 / de, n, e, order, out)
+            return out, None, shape
+        grad = np.empty((n.size, 2))
+        gradient_kernel(self.depth, n0, e0, 1.0 / dn, 1.0 / de, n, e, order, out, grad)
+        return out, grad, shape
+
+    def depth_at(self, north, east, *, order: Order = 1):
+        """Depth of the seafloor at points ``(north, east)``.
+
+        Parameters
+        ----------
+        north, east : array_like
+            Coordinates in metres, of any broadcastable shapes.
+        order : {1, 3}
+            1 bilinear, 3 bicubic (Keys, a = -0.5). Bicubic needs the 4 x 4 cells around a
+            point; where those leave the grid or hold a NaN it falls back to bilinear.
+
+        Returns
+        -------
+        ndarray
+            Depths with the broadcast shape; NaN off the map (outside the outer cell centres)
+            and next to NaN cells. Never clamped to the edge.
+        """
+        out, _, shape = self._query(north, east, order, with_grad=False)
+        return out.reshape(shape)[()]
+
+    def gradient_at(self, north, east, *, order: Order = 1) -> np.ndarray:
+        """Gradient of the interpolated depth, ``(d depth / d north, d depth / d east)``.
+
+        Returns an array of shape ``broadcast_shape + (2,)`` (dimensionless, m/m), the exact
+        derivative of the interpolant that :meth:`depth_at` evaluates, NaN where it is NaN.
+        """
+        _, grad, shape = self._query(north, east, order, with_grad=True)
+        return grad.reshape(*shape, 2)
+
+    def contains(self, north, east) -> np.ndarray:
+        """True where :meth:`depth_at` returns data: inside the grid and not next to a NaN."""
+        return np.isfinite(self.depth_at(north, east))
+
+    # -- new maps from this one -----------------------------------------------------------
+    def replace(self, **changes) -> BathymetryMap:
+        """A copy with some fields changed (validated again)."""
+        return dataclasses.replace(self, **changes)
+
+    def crop(
+        self,
+        north: Sequence[float] | None = None,
+        east: Sequence[float] | None = None,
+    ) -> BathymetryMap:
+        """The cells whose centres lie within ``north = (lo, hi)`` and ``east = (lo, hi)``."""
+        rows = self._index_range(self.north, north, "north")
+        cols = self._index_range(self.east, east, "east")
+        return self.replace(north=self.north[rows], east=self.east[cols], depth=self.depth[rows, cols])
+
+    def _index_range(self, axis: np.ndarray, bounds, name: str) -> slice:
+        if bounds is None:
+            return slice(None)
+        lo, hi = (float(b) for b in bounds)
+        keep = np.flatnonzero((axis >= lo) & (axis <= hi))
+        if keep.size < 2:
+            raise TangraphError(
+                f"crop of map {self.name!r}: {name} range [{lo:g}, {hi:g}] keeps {keep.size} cells "
+                f"of [{axis[0]:g}, {axis[-1]:g}]; at least 2 are needed"
+            )
+        return slice(int(keep[0]), int(keep[-1]) + 1)
+
+    def resample(self, cell: float | tuple[float, float], *, order: Order = 1) -> BathymetryMap:
+        """The map on a new regular grid of cell size ``cell`` (metres) over the same extent.
+
+        Finer cells interpolate (``order``); coarser cells average the cells that fall in each
+        new cell (so a coarse map is not aliased), then interpolate to the new centres.
+        """
+        dn_new, de_new = (float(cell), float(cell)) if np.isscalar(cell) else map(float, cell)
+        if not (dn_new > 0 and de_new > 0):
+            raise TangraphError(f"resample of map {self.name!r}: cell must be positive, got {cell!r}")
+        n_lo, n_hi, e_lo, e_hi = self.extent
+        north = n_lo + dn_new * np.arange(int(np.floor((n_hi - n_lo) / dn_new + 1e-9)) + 1)
+        east = e_lo + de_new * np.arange(int(np.floor((e_hi - e_lo) / de_new + 1e-9)) + 1)
+        if north.size < 2 or east.size < 2:
+            raise TangraphError(
+                f"resample of map {self.name!r}: cell {cell!r} leaves fewer than 2 x 2 cells"
+            )
+        source = self._smoothed_for(dn_new, de_new)
+        nn, ee = np.meshgrid(north, east, indexing="ij")
+        return self.replace(north=north, east=east, depth=source.depth_at(nn, ee, order=order))
+
+    def _smoothed_for(self, dn_new: float, de_new: float) -> BathymetryMap:
+        """A box average over the new cell size where the new grid is coarser (anti-aliasing)."""
+        dn, de = self.cell_size
+        kn = max(1, round(dn_new / dn))
+        ke = max(1, round(de_new / de))
+        if kn == 1 and ke == 1:
+            return self
+        from scipy.ndimage import uniform_filter
+
+        valid = np.isfinite(self.depth)
+        filled = np.where(valid, self.depth, 0.0)
+        total = uniform_filter(filled, size=(kn, ke), mode="nearest")
+        weight = uniform_filter(valid.astype(float), size=(kn, ke), mode="nearest")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean = total / weight
+        return self.replace(depth=np.where(valid, mean, np.nan))
+
+    # -- xarray ---------------------------------------------------------------------------
+    def to_xarray(self) -> xr.DataArray:
+        """The map as an ``xarray.DataArray`` with dims ``("north", "east")``."""
+        import xarray as xr
+
+        attrs = {
+            "long_name": "depth of the seafloor",
+            "standard_name": "sea_floor_depth_below_sea_surface",
+            "units": "m",
+            "positive": "down",
+            "name": self.name,
+            "origin_northing": self.origin[0],
+            "origin_easting": self.origin[1],
+        }
+        if self.crs is not None:
+            attrs["crs"] = self.crs
+        return xr.DataArray(
+            np.array(self.depth),
+            dims=("north", "east"),
+            coords={
+                "north": ("north", np.array(self.north), {"units": "m", "long_name": "local north"}),
+                "east": ("east", np.array(self.east), {"units": "m", "long_name": "local east"}),
+            },
+            name="depth",
+            attrs=attrs,
+        )
+
+    @classmethod
+    def from_xarray(cls, da: xr.DataArray, *, name: str | None = None) -> BathymetryMap:
+        """Inverse of :meth:`to_xarray`: a DataArray with dims ``("north", "east")`` holding depth.
+
+        Coordinates may be descending (the grid is flipped). Sign and CRS come from the attrs
+        ``positive`` ("down" or "up") and ``crs``; a DataArray without ``positive`` is taken
+        as depth only if it was written by :meth:`to_xarray`.
+        """
+        if tuple(da.dims) != ("north", "east"):
+            raise MapFormatError(
+                f"DataArray {da.name!r} has dims {tuple(da.dims)}, expected ('north', 'east')"
+            )
+        positive = da.attrs.get("positive")
+        if positive not in ("down", "up"):
+            raise MapFormatError(
+                f"DataArray {da.name!r}: attribute 'positive' is {positive!r}; set it to 'down' "
+                "(depth) or 'up' (elevation)"
+            )
+        depth = np.asarray(da.values, dtype=np.float64) * (1.0 if positive == "down" else -1.0)
+        north = np.asarray(da["north"].values, dtype=np.float64)
+        east = np.asarray(da["east"].values, dtype=np.float64)
+        if north.size > 1 and north[0] > north[-1]:
+            north, depth = north[::-1], depth[::-1]
+        if east.size > 1 and east[0] > east[-1]:
+            east, depth = east[::-1], depth[:, ::-1]
+        return cls(
+            north=north,
+            east=east,
+            depth=depth,
+            crs=da.attrs.get("crs"),
+            origin=(float(da.attrs.get("origin_northing", 0.0)), float(da.attrs.get("origin_easting", 0.0))),
+            name=name or str(da.attrs.get("name", da.name or "map")),
+        )
