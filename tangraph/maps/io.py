@@ -1,0 +1,567 @@
+"""Readers and writers of bathymetry grids: NetCDF/GMT, GeoTIFF, XYZ, NPZ and TINs.
+
+Everything enters through :func:`read_map` (or :func:`read_soundings` for scattered points)
+and leaves a `BathymetryMap` in a local metric frame: geographic grids are projected once
+(:mod:`tangraph.maps.projection`), projected grids keep their CRS with the origin at their
+first cell centre. Depth is positive down; a file that stores elevation says so in its
+metadata, or the caller says so with ``sign=``; a file where neither tells is refused.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+
+from tangraph.errors import MapFormatError, TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.maps.projection import project_geographic_grid
+
+__all__ = ["Soundings", "read_map", "read_soundings", "write_map"]
+
+Sign = Literal["depth", "elevation"]
+
+_FORMATS = {
+    ".nc": "netcdf", ".grd": "netcdf", ".cdf": "netcdf", ".nc4": "netcdf",
+    ".tif": "geotiff", ".tiff": "geotiff",
+    ".xyz": "xyz", ".txt": "xyz", ".csv": "xyz",
+    ".npz": "npz",
+    ".tsh": "tin", ".ply": "tin", ".obj": "tin",
+}
+_DEPTH_NAMES = ("depth", "depths", "bathy_depth", "sea_floor_depth")
+_ELEVATION_NAMES = ("elevation", "elev", "topo", "topography", "height", "altitude", "rose", "bathy")
+
+
+# -- small shared pieces --------------------------------------------------------------------
+def _format_of(path: Path, given: str | None) -> str:
+    if given is not None:
+        if given not in set(_FORMATS.values()):
+            raise TangraphError(f"unknown map format {given!r}; known: {sorted(set(_FORMATS.values()))}")
+        return given
+    fmt = _FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        raise MapFormatError(
+            f"{path}: cannot tell the format from the suffix {path.suffix!r}; known suffixes: "
+            f"{', '.join(sorted(_FORMATS))} (or pass format=)"
+        )
+    return fmt
+
+
+def _existing(path: str | os.PathLike) -> Path:
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"map file {p} does not exist")
+    if p.is_dir():
+        raise MapFormatError(f"{p} is a folder, not a map file")
+    return p
+
+
+def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | None, where: str) -> float:
+    """+1 if ``values`` are depths (positive down), -1 if elevations; raise if it can't be told.
+
+    Order: ``given``; the attributes ``positive`` and ``standard_name``; the variable's
+    name, checked against the data (a "depth" that is mostly negative is ambiguous).
+    """
+    if given is not None:
+        if given not in ("depth", "elevation"):
+            raise TangraphError(f"sign must be 'depth' or 'elevation', got {given!r}")
+        return 1.0 if given == "depth" else -1.0
+    positive = str(attrs.get("positive", "")).lower()
+    if positive in ("down", "up"):
+        return 1.0 if positive == "down" else -1.0
+    standard = str(attrs.get("standard_name", "")).lower()
+    if "depth" in standard:
+        return 1.0
+    if any(k in standard for k in ("height", "altitude", "elevation")):
+        return -1.0
+    name = variable.lower()
+    valid = values[np.isfinite(values)]
+    negative = float(np.mean(valid < 0)) if valid.size else 0.0
+    if name.startswith(_DEPTH_NAMES):
+        if negative > 0.5:
+            raise MapFormatError(
+                f"{where}: variable {variable!r} is named like a depth but {negative:.0%} of its "
+                "values are negative; say which it is with sign='depth' or sign='elevation'"
+            )
+        return 1.0
+    if name.startswith(_ELEVATION_NAMES):
+        return -1.0
+    raise MapFormatError(
+        f"{where}: cannot tell whether variable {variable!r} holds depths or elevations (no "
+        "'positive' or 'standard_name' attribute); pass sign='depth' or sign='elevation'"
+    )
+
+
+def _grid_to_map(
+    y: np.ndarray, x: np.ndarray, depth: np.ndarray, *, geographic: bool, crs: str | None,
+    cell: float | None, name: str, where: str,
+) -> BathymetryMap:
+    """Flip descending axes, then project (geographic) or shift to a local origin (projected)."""
+    y = np.asarray(y, float)
+    x = np.asarray(x, float)
+    depth = np.asarray(depth, float)
+    if y.size > 1 and y[0] > y[-1]:
+        y, depth = y[::-1], depth[::-1]
+    if x.size > 1 and x[0] > x[-1]:
+        x, depth = x[::-1], depth[:, ::-1]
+    try:
+        if geographic:
+            return project_geographic_grid(y, x, depth, cell=cell, name=name,
+                                           source_crs=crs or "EPSG:4326")
+        m = BathymetryMap(north=y - y[0], east=x - x[0], depth=depth, crs=crs,
+                          origin=(float(y[0]), float(x[0])) if crs else (0.0, 0.0), name=name)
+    except MapFormatError as exc:
+        raise MapFormatError(f"{where}: {exc}") from None
+    return m.resample(cell) if cell is not None else m
+
+
+def _write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
+    """Write through a temporary file in the same folder, then rename: never a half file."""
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+
+
+# -- NetCDF / GMT -----------------------------------------------------------------------------
+def _axis_kind(name: str, attrs: dict) -> tuple[str | None, bool]:
+    """('y' | 'x' | None, geographic?) of a coordinate from its CF attributes and name."""
+    units = str(attrs.get("units", "")).lower()
+    standard = str(attrs.get("standard_name", "")).lower()
+    long_name = str(attrs.get("long_name", "")).lower()
+    axis = str(attrs.get("axis", "")).upper()
+    lname = name.lower()
+    geographic = units.startswith("degree") or standard in ("latitude", "longitude") or long_name in (
+        "latitude", "longitude")
+    if units == "degrees_north" or "latitude" in (standard, long_name) or axis == "Y" or lname in (
+            "lat", "latitude", "y", "northing", "north") or lname.endswith("_y"):
+        return "y", geographic
+    if units == "degrees_east" or "longitude" in (standard, long_name) or axis == "X" or lname in (
+            "lon", "long", "longitude", "x", "easting", "east") or lname.endswith("_x"):
+        return "x", geographic
+    return None, geographic
+
+
+def _netcdf_crs(ds, var) -> str | None:
+    for source in (var.attrs, ds.attrs):
+        if "crs" in source:
+            return str(source["crs"])
+    mapping = var.attrs.get("grid_mapping")
+    if mapping and mapping in ds.variables:
+        attrs = ds[mapping].attrs
+        for key in ("crs_wkt", "spatial_ref", "proj4", "proj4text"):
+            if key in attrs:
+                return str(attrs[key])
+    return None
+
+
+def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=None) -> BathymetryMap:
+    """A grid from a NetCDF (COARDS/CF) or GMT ``.grd`` file; see :func:`read_map`."""
+    import xarray as xr
+
+    path = _existing(path)
+    try:
+        ds = xr.open_dataset(path, decode_times=False)
+    except Exception as exc:  # netCDF4/h5 raise many types for a bad file
+        raise MapFormatError(f"{path}: not a readable NetCDF file ({exc})") from None
+    with ds:
+        grids = [k for k, v in ds.data_vars.items() if v.ndim == 2]
+        if variable is None:
+            if len(grids) != 1:
+                raise MapFormatError(
+                    f"{path}: {'no' if not grids else len(grids)} 2-D variables "
+                    f"{grids if grids else ''}; choose one with variable="
+                )
+            variable = grids[0]
+        if variable not in ds.variables:
+            raise MapFormatError(f"{path}: no variable {variable!r}; it has {list(ds.data_vars)}")
+        var = ds[variable]
+        if var.ndim != 2:
+            raise MapFormatError(f"{path}: variable {variable!r} has dims {var.dims}, not 2-D")
+        if tuple(var.dims) == ("north", "east") and "positive" in var.attrs:  # tangraph's own
+            m = BathymetryMap.from_xarray(var.load(), name=name or path.stem)
+            return m.resample(cell) if cell is not None else m
+        kinds = [_axis_kind(d, ds[d].attrs if d in ds.variables else {}) for d in var.dims]
+        if kinds[0][0] == "x" and kinds[1][0] in ("y", None) or kinds[1][0] == "y":
+            var = var.transpose()
+            kinds = kinds[::-1]
+        ydim, xdim = var.dims
+        if ydim not in ds.variables or xdim not in ds.variables:
+            raise MapFormatError(f"{path}: variable {variable!r} has no coordinate values for {var.dims}")
+        values = np.asarray(var.values, dtype=float)
+        factor = resolve_sign(values, var.attrs, variable, sign, f"{path}")
+        geographic = kinds[0][1] or kinds[1][1]
+        return _grid_to_map(
+            ds[ydim].values, ds[xdim].values, factor * values, geographic=geographic,
+            crs=crs or _netcdf_crs(ds, var), cell=cell, name=name or path.stem, where=f"{path}:{variable}",
+        )
+
+
+def write_netcdf(bathymetry: BathymetryMap, path: Path) -> None:
+    """CF-1.8 NetCDF with dims (north, east), depth positive down, CRS and origin as attrs."""
+    import tangraph
+
+    ds = bathymetry.to_xarray().to_dataset()
+    ds.attrs.update({"Conventions": "CF-1.8", "title": bathymetry.name,
+                     "source": f"tangraph {tangraph.__version__}"})
+    ds.to_netcdf(path, encoding={"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan}})
+
+
+# -- GeoTIFF ----------------------------------------------------------------------------------
+_GDAL_NODATA = 42113
+_USER_DEFINED = 32767
+
+
+def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) -> BathymetryMap:
+    """A grid from a north-up GeoTIFF (tifffile reads its GeoKeys); see :func:`read_map`."""
+    import logging
+
+    import tifffile
+
+    path = _existing(path)
+    quiet = logging.getLogger("tifffile")
+    level = quiet.level
+    quiet.setLevel(logging.CRITICAL)  # it logs an error for a float64 GDAL_NODATA in a float32 file
+    try:
+        with tifffile.TiffFile(path) as tif:
+            page = tif.pages[0]
+            values = page.asarray().astype(float)
+            geo = page.geotiff_tags or {}
+            raw_nodata = page.tags.get(_GDAL_NODATA)
+            description = page.tags.get("ImageDescription")
+    except (tifffile.TiffFileError, OSError, ValueError) as exc:
+        raise MapFormatError(f"{path}: not a readable TIFF ({exc})") from None
+    finally:
+        quiet.setLevel(level)
+    if values.ndim != 2:
+        raise MapFormatError(f"{path}: image has shape {values.shape}; one band of depths is expected")
+    if "ModelTransformation" in geo or "ModelPixelScale" not in geo or "ModelTiepoint" not in geo:
+        raise MapFormatError(f"{path}: no north-up georeference (ModelPixelScale + ModelTiepoint)")
+    own = _tangraph_description(description.value if description else "")
+    if nodata is None and raw_nodata is not None:
+        text = str(raw_nodata.value).strip().strip("\x00")
+        nodata = float(text) if text else None
+    if nodata is not None and np.isfinite(nodata):
+        values[np.isclose(values, nodata, rtol=1e-6, atol=0)] = np.nan
+    sx, sy = float(geo["ModelPixelScale"][0]), float(geo["ModelPixelScale"][1])
+    i0, j0, _, x0, y0, _ = (float(v) for v in geo["ModelTiepoint"][:6])
+    offset = 0.0 if int(geo.get("GTRasterTypeGeoKey", 1)) == 1 else -0.5  # area vs point
+    ny, nx = values.shape
+    x = x0 + (np.arange(nx) - j0 + 0.5 + offset) * sx
+    y = y0 - (np.arange(ny) - i0 + 0.5 + offset) * sy
+    geographic = int(geo.get("GTModelTypeGeoKey", 1)) == 2
+    if crs is None:
+        crs = own.get("crs") or _geotiff_epsg(geo, geographic, path)
+    factor = (1.0 if own.get("positive") == "down" else -1.0) if own and sign is None else \
+        resolve_sign(values, {}, "band 1", sign, str(path))
+    return _grid_to_map(y, x, factor * values, geographic=geographic, crs=crs, cell=cell,
+                        name=name or own.get("name") or path.stem, where=str(path))
+
+
+def _tangraph_description(text: str) -> dict:
+    try:
+        data = json.loads(text)
+    except (json.JSONDecodeError, TypeError):
+        return {}
+    return data.get("tangraph", {}) if isinstance(data, dict) else {}
+
+
+def _geotiff_epsg(geo: dict, geographic: bool, path: Path) -> str:
+    key = "GeographicTypeGeoKey" if geographic else "ProjectedCSTypeGeoKey"
+    code = geo.get(key)
+    if code is None or int(code) == _USER_DEFINED:
+        raise MapFormatError(f"{path}: the GeoTIFF names no EPSG code in {key}; pass crs=")
+    return f"EPSG:{int(code)}"
+
+
+def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
+    """A float32 GeoTIFF, north up, NaN no-data, depth positive down (said in its description)."""
+    import pyproj
+    import tifffile
+
+    dn, de = bathymetry.cell_size
+    x0 = bathymetry.east[0] + bathymetry.origin[1] - 0.5 * de
+    y_top = bathymetry.north[-1] + bathymetry.origin[0] + 0.5 * dn
+    epsg = pyproj.CRS(bathymetry.crs).to_epsg() if bathymetry.crs else None
+    keys = [(1024, 0, 1, 1), (1025, 0, 1, 1), (3072, 0, 1, epsg or _USER_DEFINED)]
+    geokeys = [1, 1, 0, len(keys), *[v for k in keys for v in k]]
+    description = json.dumps({"tangraph": {"positive": "down", "name": bathymetry.name,
+                                           "crs": bathymetry.crs}})
+    tifffile.imwrite(
+        path, np.ascontiguousarray(bathymetry.depth[::-1], dtype=np.float32), description=description,
+        extratags=[
+            (33550, "d", 3, (de, dn, 0.0), True),
+            (33922, "d", 6, (0.0, 0.0, 0.0, x0, y_top, 0.0), True),
+            (34735, "H", len(geokeys), geokeys, True),
+            (_GDAL_NODATA, "s", 0, "nan", True),
+        ],
+    )
+
+
+# -- XYZ text -------------------------------------------------------------------------------
+def _load_xyz(path: Path) -> np.ndarray:
+    with open(path, encoding="utf-8", errors="replace") as f:
+        first = next((line for line in f if line.strip() and not line.startswith("#")), "")
+    delimiter = "," if "," in first else None
+    skip = 0 if _is_numeric_row(first, delimiter) else 1  # one header row allowed
+    try:
+        data = np.loadtxt(path, comments="#", delimiter=delimiter, skiprows=skip, ndmin=2)
+    except ValueError as exc:
+        raise MapFormatError(f"{path}: not a table of numbers x y z ({exc})") from None
+    if data.shape[1] < 3 or data.shape[0] == 0:
+        raise MapFormatError(f"{path}: expected at least 3 columns (x/east, y/north, z), got {data.shape}")
+    return data[:, :3]
+
+
+def _is_numeric_row(line: str, delimiter: str | None) -> bool:
+    try:
+        [float(v) for v in line.split(delimiter)]
+    except ValueError:
+        return False
+    return True
+
+
+def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) -> BathymetryMap:
+    """A regular grid from an ``x y z`` text file (x east/longitude, y north/latitude)."""
+    path = _existing(path)
+    data = _load_xyz(path)
+    x_values, x_index = np.unique(data[:, 0], return_inverse=True)
+    y_values, y_index = np.unique(data[:, 1], return_inverse=True)
+    flat = y_index * x_values.size + x_index
+    if x_values.size * y_values.size != data.shape[0] or np.unique(flat).size != flat.size:
+        raise MapFormatError(
+            f"{path}: {data.shape[0]} points do not form a full regular grid "
+            f"({y_values.size} x {x_values.size}); scattered soundings are gridded with "
+            "tangraph.maps.grid_soundings or `tangraph maps grid`"
+        )
+    z = data[:, 2].copy()
+    if nodata is not None:
+        z[z == nodata] = np.nan
+    grid = np.full(x_values.size * y_values.size, np.nan)
+    grid[flat] = z
+    grid = grid.reshape(y_values.size, x_values.size)
+    factor = resolve_sign(grid, {}, "z", sign, str(path))
+    geographic = crs is not None and _is_geographic(crs)
+    return _grid_to_map(y_values, x_values, factor * grid, geographic=geographic,
+                        crs=crs, cell=cell, name=name or path.stem, where=str(path))
+
+
+def _is_geographic(crs: str) -> bool:
+    import pyproj
+
+    return bool(pyproj.CRS(crs).is_geographic)
+
+
+def write_xyz(bathymetry: BathymetryMap, path: Path) -> None:
+    """``east north depth`` rows (projected coordinates: local plus origin), NaN cells kept."""
+    nn, ee = np.meshgrid(bathymetry.north + bathymetry.origin[0],
+                         bathymetry.east + bathymetry.origin[1], indexing="ij")
+    header = f"tangraph map {bathymetry.name}; crs {bathymetry.crs}; columns: east north depth (m, positive down)"
+    np.savetxt(path, np.column_stack([ee.ravel(), nn.ravel(), bathymetry.depth.ravel()]),
+               fmt="%.3f", header=header)
+
+
+@dataclasses.dataclass(frozen=True)
+class Soundings:
+    """Scattered soundings in a local frame: ``points`` (N, 3) as (north, east, depth)."""
+
+    points: np.ndarray
+    crs: str | None
+    origin: tuple[float, float]
+    source: str
+
+
+def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, nodata=None) -> Soundings:
+    """Scattered soundings from an ``x y z`` text file, in a local frame.
+
+    Geographic points (``crs`` geographic) are projected to a transverse Mercator centred on
+    them; projected points keep ``crs`` with the origin at the south-west corner of their
+    bounding box (rounded down to whole metres).
+    """
+    from tangraph.maps.projection import local_crs
+
+    path = _existing(path)
+    data = _load_xyz(path)
+    z = data[:, 2].copy()
+    if nodata is not None:
+        z[z == nodata] = np.nan
+    depth = resolve_sign(z, {}, "z", sign, str(path)) * z
+    x, y = data[:, 0], data[:, 1]
+    if crs is not None and _is_geographic(crs):
+        import pyproj
+
+        local = local_crs(float(np.mean(y)), float(np.mean(x)))
+        east, north = pyproj.Transformer.from_crs(crs, local, always_xy=True).transform(x, y)
+        return Soundings(np.column_stack([north, east, depth]), local, (0.0, 0.0), str(path))
+    origin = (float(np.floor(np.min(y))), float(np.floor(np.min(x)))) if crs else (0.0, 0.0)
+    return Soundings(np.column_stack([y - origin[0], x - origin[1], depth]), crs, origin, str(path))
+
+
+# -- NPZ ------------------------------------------------------------------------------------
+def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None) -> BathymetryMap:
+    """A grid from ``.npz``: tangraph's own (north, east, depth, ...) or (lat, lon, values)."""
+    path = _existing(path)
+    try:
+        data = dict(np.load(path, allow_pickle=False))
+    except (OSError, ValueError) as exc:
+        raise MapFormatError(f"{path}: not a readable .npz file ({exc})") from None
+    if {"north", "east", "depth"} <= data.keys() and variable is None:
+        m = BathymetryMap(
+            north=data["north"], east=data["east"], depth=data["depth"],
+            crs=str(data["crs"]) if "crs" in data and str(data["crs"]) else None,
+            origin=tuple(data.get("origin", (0.0, 0.0))), name=name or str(data.get("name", path.stem)),
+        )
+        return m.resample(cell) if cell is not None else m
+    y_key = next((k for k in ("lat", "latitude", "y") if k in data), None)
+    x_key = next((k for k in ("lon", "longitude", "x") if k in data), None)
+    grids = [k for k, v in data.items() if np.ndim(v) == 2]
+    variable = variable or (grids[0] if len(grids) == 1 else None)
+    if y_key is None or x_key is None or variable not in data:
+        raise MapFormatError(
+            f"{path}: keys {sorted(data)}; expected north/east/depth, or lat/lon (or x/y) with one "
+            "2-D variable (choose it with variable=)"
+        )
+    values = np.asarray(data[variable], float)
+    factor = resolve_sign(values, {}, variable, sign, str(path))
+    geographic = y_key.startswith("lat") and crs is None or (crs is not None and _is_geographic(crs))
+    return _grid_to_map(data[y_key], data[x_key], factor * values, geographic=geographic, crs=crs,
+                        cell=cell, name=name or path.stem, where=f"{path}:{variable}")
+
+
+def write_npz(bathymetry: BathymetryMap, path: Path) -> None:
+    with open(path, "wb") as f:
+        np.savez_compressed(f, north=bathymetry.north, east=bathymetry.east, depth=bathymetry.depth,
+                            crs=np.str_(bathymetry.crs or ""), origin=np.asarray(bathymetry.origin),
+                            name=np.str_(bathymetry.name))
+
+
+# -- TIN ------------------------------------------------------------------------------------
+def read_tsh(path: Path) -> tuple[np.ndarray, np.ndarray, str]:
+    """Vertices (N, 3) as (x, y, attribute), triangles (M, 3) and the attribute's title from an
+    ANUGA ``.tsh`` triangulation."""
+    path = _existing(path)
+    try:
+        with open(path, encoding="utf-8") as f:
+            lines = f.read().splitlines()
+        n_vert, n_attr = (int(v) for v in lines[0].split("#")[0].split()[:2])
+        if n_attr < 1:
+            raise MapFormatError(f"{path}: the vertices carry no attribute (no elevation)")
+        verts = np.array([line.split()[1:4] for line in lines[1:1 + n_vert]], dtype=float)
+        pos = 1 + n_vert
+        title = lines[pos + 1].strip() if lines[pos].startswith("#") else "elevation"
+        pos += 1 + n_attr
+        n_tri = int(lines[pos].split("#")[0].split()[0])
+        tris = np.array([line.split()[1:4] for line in lines[pos + 1:pos + 1 + n_tri]], dtype=np.int64)
+    except (IndexError, ValueError) as exc:
+        raise MapFormatError(f"{path}: not an ANUGA .tsh triangulation ({exc})") from None
+    if verts.shape != (n_vert, 3) or tris.shape != (n_tri, 3):
+        raise MapFormatError(f"{path}: truncated .tsh (expected {n_vert} vertices, {n_tri} triangles)")
+    return verts, tris, title
+
+
+def read_tin(path, *, sign=None, crs=None, cell=None, name=None) -> BathymetryMap:
+    """A triangulated surface (ANUGA ``.tsh``, PLY, OBJ) gridded at ``cell`` metres by ray casting."""
+    from tangraph.maps import mesh
+
+    path = _existing(path)
+    if cell is None:
+        raise TangraphError(f"{path}: a triangulated surface needs a grid cell size (cell=)")
+    if path.suffix.lower() != ".tsh":
+        return mesh.read_mesh(path, cell=cell, name=name or path.stem, crs=crs)
+    verts, tris, title = read_tsh(path)
+    factor = resolve_sign(verts[:, 2], {}, title, sign, str(path))
+    origin = (float(np.floor(verts[:, 1].min())), float(np.floor(verts[:, 0].min()))) if crs else (0.0, 0.0)
+    vertices = np.column_stack([verts[:, 1] - origin[0], verts[:, 0] - origin[1], factor * verts[:, 2]])
+    return mesh.triangles_to_map(vertices, tris, cell=cell, name=name or path.stem, crs=crs, origin=origin)
+
+
+# -- dispatch -------------------------------------------------------------------------------
+def read_map(
+    path: str | os.PathLike,
+    *,
+    format: str | None = None,  # noqa: A002 - the natural word
+    variable: str | None = None,
+    sign: Sign | None = None,
+    crs: str | None = None,
+    cell: float | None = None,
+    name: str | None = None,
+    nodata: float | None = None,
+) -> BathymetryMap:
+    """Read a bathymetry grid from a file into a local metric `BathymetryMap`.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.nc/.grd/.cdf`` NetCDF (COARDS/CF or GMT), ``.tif`` GeoTIFF, ``.xyz/.txt/.csv`` text
+        grid, ``.npz``, ``.tsh/.ply/.obj`` triangulated surface.
+    format : {"netcdf", "geotiff", "xyz", "npz", "tin"}, optional
+        Overrides the suffix.
+    variable : str, optional
+        The grid variable of a NetCDF/NPZ file holding several.
+    sign : {"depth", "elevation"}, optional
+        What the values are, where the file's metadata does not say.
+    crs : str, optional
+        The file's CRS where it does not say (e.g. ``"EPSG:32755"``, ``"EPSG:4326"``).
+    cell : float, optional
+        Resample to this cell size in metres (required for triangulated surfaces).
+    name : str, optional
+        Name of the map (default: the file's stem).
+    nodata : float, optional
+        A value that marks missing data, besides NaN and the file's own fill value.
+
+    Returns
+    -------
+    BathymetryMap
+
+    Examples
+    --------
+    >>> from tangraph.maps import catalogue_path, read_map
+    >>> m = read_map(catalogue_path() / "topobathy.npz")
+    >>> m.crs.startswith("+proj=tmerc")
+    True
+    """
+    p = Path(path)
+    fmt = _format_of(p, format)
+    if fmt == "netcdf":
+        return read_netcdf(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name)
+    if fmt == "geotiff":
+        return read_geotiff(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata)
+    if fmt == "xyz":
+        return read_xyz(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata)
+    if fmt == "npz":
+        return read_npz(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name)
+    return read_tin(p, sign=sign, crs=crs, cell=cell, name=name)
+
+
+def write_map(bathymetry: BathymetryMap, path: str | os.PathLike, *, format: str | None = None,  # noqa: A002
+              overwrite: bool = False) -> Path:
+    """Write a map as NetCDF, GeoTIFF, XYZ, NPZ or a PLY/OBJ mesh (by suffix or ``format``).
+
+    The file is written next to its final name and renamed into place, so an interrupted write
+    leaves nothing half-written; an existing file is only replaced with ``overwrite=True``.
+    """
+    from tangraph.maps import mesh
+
+    p = Path(path)
+    fmt = _format_of(p, format)
+    writers: dict[str, Callable[[BathymetryMap, Path], None]] = {
+        "netcdf": write_netcdf, "geotiff": write_geotiff, "xyz": write_xyz, "npz": write_npz,
+        "tin": mesh.write_mesh,
+    }
+    if fmt == "tin" and p.suffix.lower() == ".tsh":
+        raise TangraphError(f"{p}: writing .tsh is not supported; write .ply or .obj")
+    _write_atomically(p, overwrite, lambda tmp: writers[fmt](bathymetry, tmp))
+    return p
