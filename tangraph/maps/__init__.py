@@ -1,25 +1,88 @@
 """Bathymetry maps: the grid, its readers and writers, the catalogue, synthetic terrain,
 terrain statistics and the Open3D bridge."""
 
-from tangraph.maps.catalogue import CatalogueEntry, catalogue, catalogue_path, list_maps, load, load_any
+from tangraph.maps.catalogue import (
+    CatalogueEntry,
+    catalogue,
+    catalogue_path,
+    list_maps,
+    load,
+    load_any,
+)
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.io import Soundings, read_map, read_soundings, write_map
+from tangraph.maps.mesh import (
+    SoundingGrid,
+    TerrainScene,
+    cast_rays,
+    from_mesh,
+    grid_soundings,
+    raycasting_scene,
+    read_mesh,
+    to_mesh,
+    triangles_to_map,
+    write_mesh,
+)
 from tangraph.maps.projection import from_lonlat, local_crs, project_geographic_grid, to_lonlat
+from tangraph.maps.statistics import (
+    crlb,
+    fisher_information,
+    region_entropy,
+    roughness,
+    slope,
+    terrain_entropy,
+    terrain_std,
+    window_information,
+)
+from tangraph.maps.synthetic import (
+    HAN2020_AREAS,
+    flat_with_noise,
+    fractal,
+    han2020_chart,
+    polar_chart,
+    ridges,
+    seamounts,
+)
 
 __all__ = [
+    "HAN2020_AREAS",
     "BathymetryMap",
     "CatalogueEntry",
+    "SoundingGrid",
     "Soundings",
+    "TerrainScene",
+    "cast_rays",
     "catalogue",
     "catalogue_path",
+    "crlb",
+    "fisher_information",
+    "flat_with_noise",
+    "fractal",
     "from_lonlat",
+    "from_mesh",
+    "grid_soundings",
+    "han2020_chart",
     "list_maps",
     "load",
     "load_any",
     "local_crs",
+    "polar_chart",
     "project_geographic_grid",
+    "raycasting_scene",
     "read_map",
+    "read_mesh",
     "read_soundings",
+    "region_entropy",
+    "ridges",
+    "roughness",
+    "seamounts",
+    "slope",
+    "terrain_entropy",
+    "terrain_std",
     "to_lonlat",
+    "to_mesh",
+    "triangles_to_map",
+    "window_information",
     "write_map",
+    "write_mesh",
 ]

@@ -23,7 +23,7 @@ from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.projection import project_geographic_grid
 
-__all__ = ["Soundings", "read_map", "read_soundings", "write_map"]
+__all__ = ["Soundings", "read_map", "read_soundings", "write_atomically", "write_map", "write_sounding_grid"]
 
 Sign = Literal["depth", "elevation"]
 
@@ -121,7 +121,7 @@ def _grid_to_map(
     return m.resample(cell) if cell is not None else m
 
 
-def _write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
+def write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
     """Write through a temporary file in the same folder, then rename: never a half file."""
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
@@ -195,7 +195,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
             m = BathymetryMap.from_xarray(var.load(), name=name or path.stem)
             return m.resample(cell) if cell is not None else m
         kinds = [_axis_kind(d, ds[d].attrs if d in ds.variables else {}) for d in var.dims]
-        if kinds[0][0] == "x" and kinds[1][0] in ("y", None) or kinds[1][0] == "y":
+        if (kinds[0][0] == "x" and kinds[1][0] in ("y", None)) or kinds[1][0] == "y":
             var = var.transpose()
             kinds = kinds[::-1]
         ydim, xdim = var.dims
@@ -210,14 +210,32 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         )
 
 
-def write_netcdf(bathymetry: BathymetryMap, path: Path) -> None:
-    """CF-1.8 NetCDF with dims (north, east), depth positive down, CRS and origin as attrs."""
+def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] | None = None) -> None:
+    """CF-1.8 NetCDF with dims (north, east), depth positive down, CRS and origin as attrs.
+
+    ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``.
+    """
     import tangraph
 
     ds = bathymetry.to_xarray().to_dataset()
+    for key, (values, attrs) in (extra or {}).items():
+        ds[key] = (("north", "east"), np.asarray(values), attrs)
     ds.attrs.update({"Conventions": "CF-1.8", "title": bathymetry.name,
                      "source": f"tangraph {tangraph.__version__}"})
     ds.to_netcdf(path, encoding={"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan}})
+
+
+def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write a `tangraph.maps.mesh.SoundingGrid` as NetCDF: mean depth, count and std per cell."""
+    p = Path(path)
+    if _format_of(p, None) != "netcdf":
+        raise TangraphError(f"{p}: gridded soundings are written as NetCDF (.nc)")
+    extra = {
+        "count": (grid.count.astype(np.int32), {"long_name": "soundings in the cell"}),
+        "std": (grid.std, {"long_name": "std of the soundings in the cell", "units": "m"}),
+    }
+    write_atomically(p, overwrite, lambda tmp: write_netcdf(grid.mean, tmp, extra))
+    return p
 
 
 # -- GeoTIFF ----------------------------------------------------------------------------------
@@ -242,7 +260,7 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
             geo = page.geotiff_tags or {}
             raw_nodata = page.tags.get(_GDAL_NODATA)
             description = page.tags.get("ImageDescription")
-    except (tifffile.TiffFileError, OSError, ValueError) as exc:
+    except (tifffile.TiffFileError, OSError, ValueError, IndexError, KeyError) as exc:
         raise MapFormatError(f"{path}: not a readable TIFF ({exc})") from None
     finally:
         quiet.setLevel(level)
@@ -369,7 +387,8 @@ def write_xyz(bathymetry: BathymetryMap, path: Path) -> None:
     """``east north depth`` rows (projected coordinates: local plus origin), NaN cells kept."""
     nn, ee = np.meshgrid(bathymetry.north + bathymetry.origin[0],
                          bathymetry.east + bathymetry.origin[1], indexing="ij")
-    header = f"tangraph map {bathymetry.name}; crs {bathymetry.crs}; columns: east north depth (m, positive down)"
+    header = (f"tangraph map {bathymetry.name}; crs {bathymetry.crs}; "
+              "columns: east north depth (m, positive down)")
     np.savetxt(path, np.column_stack([ee.ravel(), nn.ravel(), bathymetry.depth.ravel()]),
                fmt="%.3f", header=header)
 
@@ -436,7 +455,7 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None) 
         )
     values = np.asarray(data[variable], float)
     factor = resolve_sign(values, {}, variable, sign, str(path))
-    geographic = y_key.startswith("lat") and crs is None or (crs is not None and _is_geographic(crs))
+    geographic = (y_key.startswith("lat") and crs is None) or (crs is not None and _is_geographic(crs))
     return _grid_to_map(data[y_key], data[x_key], factor * values, geographic=geographic, crs=crs,
                         cell=cell, name=name or path.stem, where=f"{path}:{variable}")
 
@@ -492,7 +511,7 @@ def read_tin(path, *, sign=None, crs=None, cell=None, name=None) -> BathymetryMa
 def read_map(
     path: str | os.PathLike,
     *,
-    format: str | None = None,  # noqa: A002 - the natural word
+    format: str | None = None,
     variable: str | None = None,
     sign: Sign | None = None,
     crs: str | None = None,
@@ -546,7 +565,7 @@ def read_map(
     return read_tin(p, sign=sign, crs=crs, cell=cell, name=name)
 
 
-def write_map(bathymetry: BathymetryMap, path: str | os.PathLike, *, format: str | None = None,  # noqa: A002
+def write_map(bathymetry: BathymetryMap, path: str | os.PathLike, *, format: str | None = None,
               overwrite: bool = False) -> Path:
     """Write a map as NetCDF, GeoTIFF, XYZ, NPZ or a PLY/OBJ mesh (by suffix or ``format``).
 
@@ -563,5 +582,5 @@ def write_map(bathymetry: BathymetryMap, path: str | os.PathLike, *, format: str
     }
     if fmt == "tin" and p.suffix.lower() == ".tsh":
         raise TangraphError(f"{p}: writing .tsh is not supported; write .ply or .obj")
-    _write_atomically(p, overwrite, lambda tmp: writers[fmt](bathymetry, tmp))
+    write_atomically(p, overwrite, lambda tmp: writers[fmt](bathymetry, tmp))
     return p

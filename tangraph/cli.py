@@ -1,0 +1,164 @@
+"""The ``tangraph`` command: parses arguments and calls one library function per subcommand."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+
+log = logging.getLogger("tangraph")
+
+
+def _read_options(args: argparse.Namespace) -> dict:
+    keys = ("variable", "sign", "crs", "cell")
+    return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
+
+
+def _map_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("map", metavar="NAME|PATH", help="a catalogue map name or a map file")
+    parser.add_argument("--variable", help="grid variable of a NetCDF/NPZ file")
+    parser.add_argument("--sign", choices=["depth", "elevation"], help="what the file's values are")
+    parser.add_argument("--crs", help="the file's CRS where it does not say (e.g. EPSG:32755)")
+    parser.add_argument("--cell", type=float, help="resample to this cell size (m)")
+
+
+def _output(parser: argparse.ArgumentParser, help_text: str) -> None:
+    parser.add_argument("-o", "--output", type=Path, required=True, help=help_text)
+    parser.add_argument("--force", action="store_true", help="replace OUTPUT if it exists")
+
+
+def _load(args: argparse.Namespace):
+    from tangraph.maps import load_any
+
+    return load_any(args.map, **_read_options(args))
+
+
+def cmd_maps_list(args: argparse.Namespace) -> None:
+    from tangraph.maps import catalogue
+
+    rows = [(e.name, e.title, e.licence) for e in catalogue().values()]
+    width = max(len(r[0]) for r in rows)
+    for name, title, licence in rows:
+        print(f"{name:<{width}}  {title}  [{licence}]")
+
+
+def cmd_maps_info(args: argparse.Namespace) -> None:
+    from tangraph.maps import to_lonlat
+    from tangraph.maps.statistics import roughness, slope
+
+    m = _load(args)
+    dn, de = m.cell_size
+    n_lo, n_hi, e_lo, e_hi = m.extent
+    print(f"name         {m.name}")
+    print(f"shape        {m.shape[0]} x {m.shape[1]} cells of {dn:g} x {de:g} m")
+    print(f"extent       north {n_lo:g} .. {n_hi:g} m, east {e_lo:g} .. {e_hi:g} m")
+    print(f"depth        {np.nanmin(m.depth):.2f} .. {np.nanmax(m.depth):.2f} m "
+          f"(mean {np.nanmean(m.depth):.2f}), {m.valid_fraction:.1%} of cells hold data")
+    print(f"crs          {m.crs}")
+    print(f"origin       northing {m.origin[0]:.3f}, easting {m.origin[1]:.3f}")
+    if m.crs is not None:
+        lat, lon = to_lonlat(m, 0.5 * (n_lo + n_hi), 0.5 * (e_lo + e_hi))
+        print(f"centre       {float(lat):.5f} N, {float(lon):.5f} E")
+    print(f"slope        median {np.nanmedian(slope(m)):.2f} deg")
+    window = 5
+    print(f"roughness    median {np.nanmedian(roughness(m, window)):.3f} m "
+          f"(plane-fit residual std, {window} x {window} cells)")
+
+
+def cmd_maps_plot(args: argparse.Namespace) -> None:
+    from matplotlib.figure import Figure
+
+    from tangraph.maps.io import write_atomically
+    from tangraph.plot import plot_map
+
+    m = _load(args)
+    fig = Figure(figsize=(8, 6.5), layout="constrained")
+    plot_map(m, fig.add_subplot(), title=args.title)
+    write_atomically(args.output, args.force, lambda tmp: fig.savefig(tmp, dpi=args.dpi,
+                                                                     format=args.output.suffix[1:]))
+    print(f"wrote {args.output}")
+
+
+def cmd_maps_mesh(args: argparse.Namespace) -> None:
+    from tangraph.maps import write_map
+
+    path = write_map(_load(args), args.output, format="tin", overwrite=args.force)
+    print(f"wrote {path}")
+
+
+def cmd_maps_grid(args: argparse.Namespace) -> None:
+    from tangraph.maps import read_soundings
+    from tangraph.maps.io import write_sounding_grid
+    from tangraph.maps.mesh import grid_soundings
+
+    soundings = read_soundings(args.soundings, sign=args.sign, crs=args.crs)
+    grid = grid_soundings(soundings.points, cell=args.cell, name=args.output.stem,
+                          crs=soundings.crs, origin=soundings.origin)
+    write_sounding_grid(grid, args.output, overwrite=args.force)
+    filled = int(np.count_nonzero(grid.count))
+    print(f"gridded {len(soundings.points) - grid.n_dropped} soundings into {filled} of "
+          f"{grid.count.size} cells ({args.cell:g} m); dropped {grid.n_dropped} without depth; "
+          f"wrote {args.output}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser (also used to document the CLI)."""
+    from tangraph import __version__
+
+    parser = argparse.ArgumentParser(prog="tangraph", description="Terrain-aided navigation of AUVs.")
+    parser.add_argument("--version", action="version", version=f"tangraph {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    maps = sub.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid")
+    maps_sub = maps.add_subparsers(dest="maps_command", required=True)
+    p = maps_sub.add_parser("list", help="list the map catalogue")
+    p.set_defaults(func=cmd_maps_list)
+    p = maps_sub.add_parser("info", help="describe a map")
+    _map_argument(p)
+    p.set_defaults(func=cmd_maps_info)
+    p = maps_sub.add_parser("plot", help="hill-shaded figure of a map")
+    _map_argument(p)
+    _output(p, "figure file (.png, .pdf, .svg)")
+    p.add_argument("--title", help="figure title (default: the map's name)")
+    p.add_argument("--dpi", type=int, default=150)
+    p.set_defaults(func=cmd_maps_plot)
+    p = maps_sub.add_parser("mesh", help="export a map as a triangle mesh (NED vertices)")
+    _map_argument(p)
+    _output(p, "mesh file (.ply or .obj)")
+    p.set_defaults(func=cmd_maps_mesh)
+    p = maps_sub.add_parser("grid", help="grid scattered soundings (x y z text) into a map")
+    p.add_argument("soundings", type=Path, help="x/east y/north z text file")
+    p.add_argument("--cell", type=float, required=True, help="cell size (m)")
+    p.add_argument("--sign", choices=["depth", "elevation"], help="what z is (default: told from the data)")
+    p.add_argument("--crs", help="CRS of x, y (e.g. EPSG:4326 for lon/lat); default local metres")
+    _output(p, "NetCDF file with depth, count and std per cell")
+    p.set_defaults(func=cmd_maps_grid)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``tangraph`` command; returns the exit status."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        args.func(args)
+    except (TangraphError, FileNotFoundError, FileExistsError) as exc:
+        print(f"tangraph: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("tangraph: interrupted", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
