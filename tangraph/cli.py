@@ -136,7 +136,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = maps_sub.add_parser("grid", help="grid scattered soundings (x y z text) into a map")
     p.add_argument("soundings", type=Path, help="x/east y/north z text file")
     p.add_argument("--cell", type=float, required=True, help="cell size (m)")
-    p.add_argument("--sign", choices=["depth", "elevation"], help="what z is (default: told from the data)")
+    p.add_argument("--sign", choices=["depth", "elevation"], required=True,
+                   help="what z is: depth (positive down) or elevation (positive up)")
     p.add_argument("--crs", help="CRS of x, y (e.g. EPSG:4326 for lon/lat); default local metres")
     _output(p, "NetCDF file with depth, count and std per cell")
     p.set_defaults(func=cmd_maps_grid)

@@ -87,14 +87,14 @@ def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | No
         if negative > 0.5:
             raise MapFormatError(
                 f"{where}: variable {variable!r} is named like a depth but {negative:.0%} of its "
-                "values are negative; say which it is with sign='depth' or sign='elevation'"
+                "values are negative; say which it is with sign='depth' or sign='elevation' (CLI: --sign)"
             )
         return 1.0
     if name.startswith(_ELEVATION_NAMES):
         return -1.0
     raise MapFormatError(
         f"{where}: cannot tell whether variable {variable!r} holds depths or elevations (no "
-        "'positive' or 'standard_name' attribute); pass sign='depth' or sign='elevation'"
+        "'positive' or 'standard_name' attribute); pass sign='depth' or sign='elevation' (CLI: --sign)"
     )
 
 
@@ -179,6 +179,8 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         raise MapFormatError(f"{path}: not a readable NetCDF file ({exc})") from None
     with ds:
         grids = [k for k, v in ds.data_vars.items() if v.ndim == 2]
+        if variable is None and "depth" in grids and ds["depth"].dims == ("north", "east"):
+            variable = "depth"  # tangraph's own files (maps and gridded soundings)
         if variable is None:
             if len(grids) != 1:
                 raise MapFormatError(
@@ -301,7 +303,7 @@ def _geotiff_epsg(geo: dict, geographic: bool, path: Path) -> str:
     key = "GeographicTypeGeoKey" if geographic else "ProjectedCSTypeGeoKey"
     code = geo.get(key)
     if code is None or int(code) == _USER_DEFINED:
-        raise MapFormatError(f"{path}: the GeoTIFF names no EPSG code in {key}; pass crs=")
+        raise MapFormatError(f"{path}: the GeoTIFF names no EPSG code in {key}; pass crs= (CLI: --crs)")
     return f"EPSG:{int(code)}"
 
 

@@ -1,0 +1,60 @@
+"""The shipped catalogue: every map loads, from the files as shipped, with sane figures."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.maps import catalogue, list_maps, load, load_any, to_lonlat
+
+# name: (a point inside the map's area (lat, lon), depth range it must fall within)
+REAL = {
+    "merimbula": ((-36.90, 149.90), (-2.0, 15.0)),
+    "lidar-dem": ((46.5, -93.9), (20.0, 60.0)),
+    "arabian-sea": ((14.0, 71.5), (-3000.0, 5500.0)),
+    "vancouver": ((49.0, -124.0), (-2500.0, 2500.0)),
+    "arctic-etopo5": ((75.5, -161.5), (0.0, 4000.0)),
+}
+
+
+def test_catalogue_lists_real_and_synthetic_maps_with_provenance():
+    assert set(REAL) | {"han2020", "polar500"} == set(list_maps())
+    for entry in catalogue().values():
+        assert entry.licence and entry.source and entry.title
+        assert (entry.file is None) != (entry.generator is None)
+
+
+@pytest.mark.parametrize("name", list(REAL))
+def test_real_maps_load_in_place(name):
+    (lat, lon), (lo, hi) = REAL[name]
+    m = load(name)
+    assert m.name == name
+    assert lo <= np.nanmin(m.depth) and np.nanmax(m.depth) <= hi
+    n_lo, n_hi, e_lo, e_hi = m.extent
+    c_lat, c_lon = to_lonlat(m, 0.5 * (n_lo + n_hi), 0.5 * (e_lo + e_hi))
+    assert abs(c_lat - lat) < 1.0 and abs(c_lon - lon) < 1.5
+
+
+def test_lidar_dem_is_rebased_and_merimbula_is_a_lake():
+    assert np.nanmin(load("lidar-dem").depth) == pytest.approx(20.0)
+    merimbula = load("merimbula")
+    assert merimbula.cell_size == (10.0, 10.0)
+    assert merimbula.crs == "EPSG:32755"
+    assert 0.15 < merimbula.valid_fraction < 0.5
+
+
+def test_synthetic_entries_are_seeded_and_have_the_papers_cells():
+    han = load("han2020")
+    assert han.shape == (1000, 1000) and han.cell_size == (5.0, 5.0)
+    assert load("polar500").cell_size == (500.0, 500.0)
+    assert load("han2020") is han  # maps are immutable: loaded once
+
+
+def test_unknown_name_lists_the_known_ones(tmp_path):
+    with pytest.raises(TangraphError, match="no map named 'atlantis'.*merimbula"):
+        load("atlantis")
+    with pytest.raises(TangraphError, match="neither a catalogue map"):
+        load_any("atlantis")
+    with pytest.raises(FileNotFoundError):
+        load_any(tmp_path / "atlantis.nc")

@@ -1,0 +1,72 @@
+"""The tangraph command: each subcommand end to end, and its errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.cli import main
+from tangraph.maps import read_map
+
+
+def test_maps_list(capsys):
+    assert main(["maps", "list"]) == 0
+    out = capsys.readouterr().out
+    assert "merimbula" in out and "Apache-2.0" in out
+
+
+def test_maps_info_of_a_name_and_of_a_file(capsys, tmp_path):
+    assert main(["maps", "info", "lidar-dem"]) == 0
+    out = capsys.readouterr().out
+    assert "400 x 400 cells of 1 x 1 m" in out and "EPSG:26915" in out
+    assert main(["maps", "info", "lidar-dem", "--cell", "4"]) == 2  # a name takes no read options
+    assert "neither a catalogue map" in capsys.readouterr().err
+
+
+def test_maps_plot_writes_a_png_and_does_not_clobber(tmp_path, capsys):
+    out = tmp_path / "dem.png"
+    assert main(["maps", "plot", "lidar-dem", "-o", str(out)]) == 0
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    before = out.stat().st_mtime_ns
+    assert main(["maps", "plot", "lidar-dem", "-o", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert out.stat().st_mtime_ns == before
+    assert main(["maps", "plot", "lidar-dem", "-o", str(out), "--force"]) == 0
+
+
+def test_maps_mesh_writes_ply(tmp_path):
+    out = tmp_path / "dem.ply"
+    assert main(["maps", "mesh", "lidar-dem", "-o", str(out)]) == 0
+    assert out.read_bytes().startswith(b"ply")
+
+
+def test_maps_grid_soundings_to_netcdf(tmp_path, capsys):
+    rng = np.random.default_rng(4)
+    east, north = rng.uniform(0, 100, (2, 4000))
+    depth = 30 + 0.1 * north + rng.normal(0, 0.2, 4000)
+    depth[:7] = np.nan
+    path = tmp_path / "soundings.xyz"
+    np.savetxt(path, np.column_stack([east, north, depth]))
+    out = tmp_path / "grid.nc"
+    assert main(["maps", "grid", str(path), "--cell", "10", "--sign", "depth", "-o", str(out)]) == 0
+    assert "dropped 7" in capsys.readouterr().out
+    m = read_map(out)
+    assert m.cell_size == (10.0, 10.0)
+    nn, _ = np.meshgrid(m.north, m.east, indexing="ij")
+    # cell means of a plane plus noise: within 5 sigma of the mean's standard error
+    assert np.nanmax(np.abs(m.depth - (30 + 0.1 * nn))) < 0.1 * 10 / 2 + 5 * 0.2 / np.sqrt(20)
+
+
+def test_unknown_map_and_bad_file_are_clear_errors(tmp_path, capsys):
+    assert main(["maps", "info", "atlantis"]) == 2
+    assert "neither a catalogue map (merimbula" in capsys.readouterr().err
+    bad = tmp_path / "bad.nc"
+    bad.write_text("nope")
+    assert main(["maps", "info", str(bad)]) == 2
+    assert "bad.nc: not a readable NetCDF" in capsys.readouterr().err
+
+
+def test_no_subcommand_is_a_usage_error():
+    with pytest.raises(SystemExit) as exc:
+        main([])
+    assert exc.value.code == 2
