@@ -22,8 +22,8 @@ def _keys(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return w, dw
 
 
-def interpolate(north, east, depth, qn, qe, order=1):
-    """Depth and gradient at (qn, qe): returns (value (n,), grad (n, 2))."""
+def interpolate(north, east, depth, qn, qe, order=1, with_gradient=True):
+    """Depth and gradient at (qn, qe): returns (value (n,), grad (n, 2) or None)."""
     qn = np.asarray(qn, float).ravel()
     qe = np.asarray(qe, float).ravel()
     ny, nx = depth.shape
@@ -41,6 +41,8 @@ def interpolate(north, east, depth, qn, qe, order=1):
     z00, z01 = depth[i, j], depth[i, j + 1]
     z10, z11 = depth[i + 1, j], depth[i + 1, j + 1]
     value = (1 - ty) * (1 - tx) * z00 + (1 - ty) * tx * z01 + ty * (1 - tx) * z10 + ty * tx * z11
+    if order == 1 and not with_gradient:
+        return np.where(inside, value, np.nan), None
     g_n = ((1 - tx) * (z10 - z00) + tx * (z11 - z01)) / dn
     g_e = ((1 - ty) * (z01 - z00) + ty * (z11 - z10)) / de
 
