@@ -550,7 +550,7 @@ def read_map(
     Examples
     --------
     >>> from tangraph.maps import catalogue_path, read_map
-    >>> m = read_map(catalogue_path() / "topobathy.npz")
+    >>> m = read_map(catalogue_path() / "topobathy_vancouver.npz")
     >>> m.crs.startswith("+proj=tmerc")
     True
     """

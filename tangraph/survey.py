@@ -1,0 +1,452 @@
+"""`Survey`: one recorded or simulated run as arrays, and its files.
+
+The NetCDF schema (version 1, CF-1.8, written and read through xarray) is documented in
+``docs/survey_schema.rst``; :func:`read_survey` validates everything and names what is wrong.
+A survey recorded by another system comes in as a CSV navigation log plus an XYZ soundings file
+(:func:`import_csv_xyz`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+
+__all__ = ["SCHEMA_VERSION", "Survey", "footprints", "import_csv_xyz", "read_survey", "write_survey"]
+
+SCHEMA_VERSION = 1
+
+
+class SurveyError(TangraphError):
+    """A survey (in memory or in a file) is not valid."""
+
+
+def footprints(pose: np.ndarray, forward: np.ndarray, starboard: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World ``(north, east)`` of body-frame points ``(forward, starboard)`` seen from ``pose``.
+
+    ``pose`` is (K, 3) ``(north, east, psi)``; ``forward``, ``starboard`` are (K, B).
+    """
+    pose = np.asarray(pose, float)
+    c = np.cos(pose[:, 2])[:, None]
+    s = np.sin(pose[:, 2])[:, None]
+    north = pose[:, 0:1] + c * forward - s * starboard
+    east = pose[:, 1:2] + s * forward + c * starboard
+    return north, east
+
+
+def to_body(pose: np.ndarray, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Inverse of :func:`footprints`: body ``(forward, starboard)`` of world points."""
+    dn = north - pose[:, 0:1]
+    de = east - pose[:, 1:2]
+    c = np.cos(pose[:, 2])[:, None]
+    s = np.sin(pose[:, 2])[:, None]
+    return c * dn + s * de, -s * dn + c * de
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Survey:
+    """One run of an AUV: poses, vehicle depth and the soundings of every ping.
+
+    Parameters
+    ----------
+    time : ndarray (K,)
+        Seconds from the survey start, strictly increasing.
+    dr_pose : ndarray (K, 3)
+        Dead-reckoned ``(north, east, psi)``, metres and radians (psi clockwise from north).
+    vehicle_depth : ndarray (K,)
+        Depth of the sonar below the surface, metres.
+    beam_forward, beam_starboard : ndarray (K, B)
+        Footprint of each beam in the vehicle's body frame, metres.
+    beam_depth : ndarray (K, B)
+        Measured depth of the seafloor at the footprint, metres positive down; NaN where the
+        beam has no return.
+    true_pose : ndarray (K, 3), optional
+        The truth, for simulated runs (or a GPS-surveyed ship track).
+    meta : dict
+        JSON-serialisable metadata: map name, sensor settings, seed, counts of what was
+        dropped or missing, start time (ISO 8601) and the like.
+    """
+
+    time: np.ndarray
+    dr_pose: np.ndarray
+    vehicle_depth: np.ndarray
+    beam_forward: np.ndarray
+    beam_starboard: np.ndarray
+    beam_depth: np.ndarray
+    true_pose: np.ndarray | None = None
+    meta: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        def arr(name, ndim):
+            a = np.array(getattr(self, name), dtype=np.float64)
+            if a.ndim != ndim:
+                raise SurveyError(f"survey: {name} must be {ndim}-D, got shape {a.shape}")
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+            return a
+
+        time = arr("time", 1)
+        k = time.size
+        if k < 1:
+            raise SurveyError("survey: no pings (time is empty)")
+        if not np.all(np.isfinite(time)):
+            raise SurveyError(f"survey: time holds non-finite values at pings {_first(~np.isfinite(time))}")
+        steps = np.diff(time)
+        if np.any(steps <= 0):
+            i = int(np.argmax(steps <= 0))
+            raise SurveyError(
+                f"survey: time is not increasing at ping {i + 1} "
+                f"(time[{i}] = {time[i]!r}, time[{i + 1}] = {time[i + 1]!r})"
+            )
+        names = ["dr_pose", "vehicle_depth"] + (["true_pose"] if self.true_pose is not None else [])
+        for name in names:
+            a = arr(name, 2 if name.endswith("pose") else 1)
+            expected = (k, 3) if name.endswith("pose") else (k,)
+            if a.shape != expected:
+                raise SurveyError(f"survey: {name} has shape {a.shape}, expected {expected} (K = {k} pings)")
+            if not np.all(np.isfinite(a)):
+                raise SurveyError(
+                    f"survey: {name} holds non-finite values at pings "
+                    f"{_first(~np.isfinite(a.reshape(k, -1)).any(axis=1))}"
+                )
+        beams = [arr(n, 2) for n in ("beam_forward", "beam_starboard", "beam_depth")]
+        if any(b.shape != beams[2].shape or b.shape[0] != k for b in beams):
+            raise SurveyError(
+                "survey: beam_forward, beam_starboard, beam_depth must all be (K, B) with K = "
+                f"{k}; got {[b.shape for b in beams]}"
+            )
+        has = np.isfinite(beams[2])
+        if not np.all(np.isfinite(beams[0])[has] & np.isfinite(beams[1])[has]):
+            raise SurveyError("survey: a beam with a depth has no finite footprint (forward/starboard NaN)")
+        if not has.any():
+            raise SurveyError("survey: no ping has any sounding (beam_depth is all NaN)")
+        try:
+            meta = json.loads(json.dumps(dict(self.meta)))
+        except (TypeError, ValueError) as exc:
+            raise SurveyError(f"survey: meta must be JSON-serialisable ({exc})") from None
+        object.__setattr__(self, "meta", meta)
+
+    @property
+    def n_pings(self) -> int:
+        return int(self.time.size)
+
+    @property
+    def n_beams(self) -> int:
+        return int(self.beam_depth.shape[1])
+
+    @property
+    def n_soundings(self) -> int:
+        """Beams with a return."""
+        return int(np.isfinite(self.beam_depth).sum())
+
+    @property
+    def n_empty_pings(self) -> int:
+        """Pings without any return (kept, so the timeline stays whole)."""
+        return int((~np.isfinite(self.beam_depth).any(axis=1)).sum())
+
+    def footprints(self, pose: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """World ``(north, east)`` (K, B) of every beam seen from ``pose`` (default: DR)."""
+        return footprints(self.dr_pose if pose is None else pose, self.beam_forward, self.beam_starboard)
+
+    def replace(self, **changes) -> Survey:
+        return dataclasses.replace(self, **changes)
+
+    def summary(self) -> str:
+        """A few lines for a person: duration, pings, beams, soundings, drift if truth is known."""
+        lines = [
+            f"pings        {self.n_pings} over {self.time[-1] - self.time[0]:.1f} s "
+            f"({self.n_pings / max(self.time[-1] - self.time[0], 1e-9):.3g} Hz)",
+            f"beams        {self.n_beams} per ping; {self.n_soundings} soundings "
+            f"({self.n_soundings / self.beam_depth.size:.1%} of beams returned); "
+            f"{self.n_empty_pings} empty pings",
+            f"track        {np.sum(np.hypot(*np.diff(self.dr_pose[:, :2], axis=0).T)):.1f} m (DR)",
+            f"depth        vehicle {self.vehicle_depth.min():.1f}..{self.vehicle_depth.max():.1f} m, "
+            f"seafloor {np.nanmin(self.beam_depth):.1f}..{np.nanmax(self.beam_depth):.1f} m",
+        ]
+        if self.true_pose is not None:
+            err = np.hypot(*(self.dr_pose[:, :2] - self.true_pose[:, :2]).T)
+            lines.append(f"DR error     final {err[-1]:.1f} m, max {err.max():.1f} m")
+        for key in ("map", "scenario", "seed"):
+            if key in self.meta:
+                lines.append(f"{key:<13}{self.meta[key]}")
+        return "\n".join(lines)
+
+
+def _first(mask: np.ndarray, n: int = 5) -> list[int]:
+    return [int(i) for i in np.flatnonzero(mask)[:n]]
+
+
+# -- NetCDF ------------------------------------------------------------------------------------
+_POSE = ("north", "east", "heading")
+_UNITS = {"north": "m", "east": "m", "heading": "rad"}
+
+
+def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write a survey as NetCDF (schema version 1); atomic, never over an existing file
+    unless ``overwrite``."""
+    import xarray as xr
+
+    import tangraph
+    from tangraph.maps.io import write_atomically
+
+    data: dict[str, Any] = {
+        "time": (("ping",), survey.time, {"units": "s", "long_name": "time from the survey start"}),
+        "vehicle_depth": (
+            ("ping",),
+            survey.vehicle_depth,
+            {"units": "m", "positive": "down", "long_name": "depth of the sonar"},
+        ),
+    }
+    for prefix, pose in (("dr", survey.dr_pose), ("true", survey.true_pose)):
+        if pose is None:
+            continue
+        for k, comp in enumerate(_POSE):
+            data[f"{prefix}_{comp}"] = (
+                ("ping",),
+                pose[:, k],
+                {
+                    "units": _UNITS[comp],
+                    "long_name": f"{'dead-reckoned' if prefix == 'dr' else 'true'} {comp}"
+                    + (" (clockwise from north)" if comp == "heading" else " (local frame)"),
+                },
+            )
+    for name, long_name in (
+        ("beam_forward", "footprint, body x (forward)"),
+        ("beam_starboard", "footprint, body y (starboard)"),
+        ("beam_depth", "measured seafloor depth, NaN = no return"),
+    ):
+        attrs = {"units": "m", "long_name": long_name}
+        if name == "beam_depth":
+            attrs["positive"] = "down"
+        data[name] = (("ping", "beam"), getattr(survey, name), attrs)
+    ds = xr.Dataset(
+        data,
+        attrs={
+            "Conventions": "CF-1.8",
+            "title": "tangraph survey",
+            "tangraph_survey_version": SCHEMA_VERSION,
+            "source": f"tangraph {tangraph.__version__}",
+            "tangraph_meta": json.dumps(survey.meta, sort_keys=True),
+        },
+    )
+    encoding = {k: {"zlib": True, "complevel": 4} for k in data}
+    p = Path(path)
+    write_atomically(p, overwrite, lambda tmp: ds.to_netcdf(tmp, encoding=encoding))
+    return p
+
+
+def read_survey(path: str | os.PathLike) -> Survey:
+    """Read and validate a survey NetCDF file; every error names the file and the variable."""
+    import xarray as xr
+
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"survey file {p} does not exist")
+    try:
+        ds = xr.open_dataset(p, decode_times=False)
+    except Exception as exc:  # netCDF4 raises several types for a bad file
+        raise SurveyError(f"{p}: not a readable NetCDF file ({exc})") from None
+    with ds:
+        version = ds.attrs.get("tangraph_survey_version")
+        if version != SCHEMA_VERSION:
+            raise SurveyError(
+                f"{p}: tangraph_survey_version is {version!r}, this tangraph reads {SCHEMA_VERSION}"
+            )
+        required = [
+            "time",
+            "vehicle_depth",
+            "beam_forward",
+            "beam_starboard",
+            "beam_depth",
+            *(f"dr_{c}" for c in _POSE),
+        ]
+        missing = [v for v in required if v not in ds.variables]
+        if missing:
+            raise SurveyError(f"{p}: missing variables {missing}")
+        for name in required:
+            dims = ("ping", "beam") if name.startswith("beam_") else ("ping",)
+            if ds[name].dims != dims:
+                raise SurveyError(f"{p}: variable {name} has dims {ds[name].dims}, expected {dims}")
+        pose = {
+            prefix: (
+                np.column_stack([ds[f"{prefix}_{c}"].values for c in _POSE])
+                if all(f"{prefix}_{c}" in ds for c in _POSE)
+                else None
+            )
+            for prefix in ("dr", "true")
+        }
+        try:
+            meta = json.loads(ds.attrs.get("tangraph_meta", "{}"))
+        except json.JSONDecodeError as exc:
+            raise SurveyError(f"{p}: attribute tangraph_meta is not JSON ({exc})") from None
+        try:
+            return Survey(
+                time=ds["time"].values,
+                dr_pose=pose["dr"],
+                vehicle_depth=ds["vehicle_depth"].values,
+                beam_forward=ds["beam_forward"].values,
+                beam_starboard=ds["beam_starboard"].values,
+                beam_depth=ds["beam_depth"].values,
+                true_pose=pose["true"],
+                meta=meta,
+            )
+        except SurveyError as exc:
+            raise SurveyError(f"{p}: {exc}") from None
+
+
+# -- a survey recorded by another system --------------------------------------------------------
+def _read_table(path: Path, what: str):
+    import pandas as pd
+
+    if not path.is_file():
+        raise FileNotFoundError(f"{what} {path} does not exist")
+    try:
+        table = pd.read_csv(path, sep=None, engine="python", comment="#")
+    except (ValueError, pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise SurveyError(f"{path}: not a readable table ({exc})") from None
+    table.columns = [str(c).strip().lower() for c in table.columns]
+    return table
+
+
+def import_csv_xyz(
+    navigation: str | os.PathLike,
+    soundings: str | os.PathLike,
+    *,
+    sign: str = "depth",
+    crs: str | None = None,
+    time_tolerance: float = 1e-3,
+) -> Survey:
+    """A survey from a CSV navigation log and an XYZ soundings file.
+
+    Parameters
+    ----------
+    navigation : path
+        CSV (comma, tab or space separated, header row) with columns ``time`` (seconds, the
+        same clock as the soundings), ``north`` and ``east`` in metres (or ``lat`` and ``lon`` in degrees),
+        ``heading`` in degrees clockwise from north, ``depth`` (the vehicle's, metres).
+    soundings : path
+        Rows ``time x y z`` (header optional): the ping time, the footprint's east and north
+        (or longitude and latitude when the log has lat/lon) and its depth.
+    sign : {"depth", "elevation"}
+        Whether ``z`` is a depth (positive down) or an elevation (positive up).
+    crs : str, optional
+        The projected CRS of north/east, recorded in the metadata.
+    time_tolerance : float
+        Soundings whose times differ by less than this (s) belong to one ping.
+
+    Returns
+    -------
+    Survey
+        One ping per distinct sounding time inside the navigation's time span; its pose is
+        the log interpolated at that time (heading on the circle); footprints become body
+        coordinates relative to it. Soundings outside the log's time span are dropped and
+        counted in ``meta["n_dropped_outside_navigation"]``.
+    """
+    from tangraph.maps.projection import local_crs
+
+    nav_path, xyz_path = Path(navigation), Path(soundings)
+    nav = _read_table(nav_path, "navigation log")
+    geographic = {"lat", "lon"} <= set(nav.columns)
+    need = ["time", "heading", "depth", *(("lat", "lon") if geographic else ("north", "east"))]
+    missing = [c for c in need if c not in nav.columns]
+    if missing:
+        raise SurveyError(f"{nav_path}: missing columns {missing}; it has {list(nav.columns)}")
+    t_nav = nav["time"].to_numpy()
+    if not np.issubdtype(t_nav.dtype, np.number):
+        raise SurveyError(f"{nav_path}: column time must hold seconds (numbers), got {t_nav[:1]!r}")
+    t_nav = t_nav.astype(float)
+    order = np.argsort(t_nav, kind="stable")
+    if np.any(np.diff(t_nav[order]) <= 0):
+        raise SurveyError(f"{nav_path}: repeated times in column time")
+    if sign not in ("depth", "elevation"):
+        raise SurveyError(f"sign must be 'depth' or 'elevation', got {sign!r}")
+
+    xyz = np.loadtxt(
+        xyz_path,
+        comments="#",
+        ndmin=2,
+        delimiter="," if "," in _first_line(xyz_path) else None,
+        skiprows=0 if _numeric(_first_line(xyz_path)) else 1,
+    )
+    if xyz.shape[1] < 4:
+        raise SurveyError(f"{xyz_path}: expected columns time x y z, got {xyz.shape[1]} columns")
+    t_s, x_s, y_s, z_s = xyz[:, 0], xyz[:, 1], xyz[:, 2], xyz[:, 3] * (1 if sign == "depth" else -1)
+
+    if geographic:
+        import pyproj
+
+        lat, lon = nav["lat"].to_numpy(float), nav["lon"].to_numpy(float)
+        crs = local_crs(float(np.mean(lat)), float(np.mean(lon)))
+        t = pyproj.Transformer.from_crs("EPSG:4326", crs, always_xy=True)
+        e_nav, n_nav = t.transform(lon, lat)
+        x_s, y_s = t.transform(x_s, y_s)
+        origin = (0.0, 0.0)
+    else:
+        n_nav, e_nav = nav["north"].to_numpy(float), nav["east"].to_numpy(float)
+        origin = (float(np.floor(n_nav.min())), float(np.floor(e_nav.min()))) if crs else (0.0, 0.0)
+    n_nav, e_nav = n_nav - origin[0], e_nav - origin[1]
+    y_s, x_s = y_s - origin[0], x_s - origin[1]
+
+    t_nav = t_nav[order]
+    inside = (t_s >= t_nav[0]) & (t_s <= t_nav[-1]) & np.isfinite(t_s)
+    n_dropped = int((~inside).sum())
+    t_s, x_s, y_s, z_s = t_s[inside], x_s[inside], y_s[inside], z_s[inside]
+    if t_s.size == 0:
+        raise SurveyError(
+            f"{xyz_path}: no sounding lies within the navigation log's time span [{t_nav[0]}, {t_nav[-1]}] s"
+        )
+    s_order = np.argsort(t_s, kind="stable")
+    t_s, x_s, y_s, z_s = t_s[s_order], x_s[s_order], y_s[s_order], z_s[s_order]
+    new_ping = np.concatenate([[True], np.diff(t_s) > time_tolerance])
+    ping = np.cumsum(new_ping) - 1
+    ping_time = t_s[new_ping]
+    slot = np.arange(t_s.size) - np.flatnonzero(new_ping)[ping]
+    n_beams = int(slot.max()) + 1
+
+    heading = np.unwrap(np.radians(nav["heading"].to_numpy(float)[order]))
+    pose = np.column_stack(
+        [
+            np.interp(ping_time, t_nav, n_nav[order]),
+            np.interp(ping_time, t_nav, e_nav[order]),
+            np.mod(np.interp(ping_time, t_nav, heading), 2 * np.pi),
+        ]
+    )
+    north = np.full((ping_time.size, n_beams), np.nan)
+    east = north.copy()
+    depth = north.copy()
+    north[ping, slot], east[ping, slot], depth[ping, slot] = y_s, x_s, z_s
+    forward, starboard = to_body(pose, north, east)
+    meta = {
+        "source": {"navigation": str(nav_path), "soundings": str(xyz_path)},
+        "crs": crs,
+        "origin": list(origin),
+        "n_dropped_outside_navigation": n_dropped,
+    }
+    return Survey(
+        time=ping_time,
+        dr_pose=pose,
+        vehicle_depth=np.interp(ping_time, t_nav, nav["depth"].to_numpy(float)[order]),
+        beam_forward=forward,
+        beam_starboard=starboard,
+        beam_depth=depth,
+        meta=meta,
+    )
+
+
+def _first_line(path: Path) -> str:
+    with open(path, encoding="utf-8", errors="replace") as f:
+        return next((line for line in f if line.strip() and not line.startswith("#")), "")
+
+
+def _numeric(line: str) -> bool:
+    try:
+        [float(v) for v in line.replace(",", " ").split()]
+    except ValueError:
+        return False
+    return True
