@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # for tests.maps.reference
 
-from tangraph.maps import BathymetryMap  # noqa: E402
-from tests.maps.reference import interpolate as numpy_reference  # noqa: E402
+from tangraph.maps import BathymetryMap
+from tests.maps.reference import interpolate as numpy_reference
 
 
 def best_time(fn, repeat: int) -> float:
@@ -53,11 +53,12 @@ def main() -> None:
     for cloud, (qn, qe) in clouds.items():
         for label, order, grad in (("bilinear", 1, False), ("bicubic", 3, False),
                                    ("bilinear + gradient", 1, True), ("bicubic + gradient", 3, True)):
-            fast = (lambda o=order: m.gradient_at(qn, qe, order=o)) if grad else \
-                (lambda o=order: m.depth_at(qn, qe, order=o))
-            t_fast = best_time(fast, args.repeat)
-            t_ref = best_time(lambda o=order, g=grad: numpy_reference(m.north, m.east, m.depth, qn, qe, o, g),
-                              max(1, args.repeat // 2))
+            query = m.gradient_at if grad else m.depth_at
+            t_fast = best_time(lambda q=query, a=qn, b=qe, o=order: q(a, b, order=o), args.repeat)
+            t_ref = best_time(
+                lambda a=qn, b=qe, o=order, g=grad: numpy_reference(m.north, m.east, m.depth, a, b, o, g),
+                max(1, args.repeat // 2),
+            )
             print(f"{label:<22}{cloud:<11}{n / t_fast / 1e6:>15.1f}{n / t_ref / 1e6:>17.2f}"
                   f"{t_ref / t_fast:>7.0f}x")
 

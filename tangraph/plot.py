@@ -10,7 +10,7 @@ from matplotlib.figure import Figure
 
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["hillshade_rgb", "plot_map"]
+__all__ = ["hillshade_rgb", "plot_map", "plot_survey"]
 
 
 def hillshade_rgb(bathymetry: BathymetryMap, *, cmap: str = "viridis_r",
@@ -70,4 +70,37 @@ def plot_map(bathymetry: BathymetryMap, ax: Axes | None = None, *, title: str | 
     if colorbar:
         mappable = cm.ScalarMappable(norm=colors.Normalize(vmin, vmax), cmap=cmap)
         ax.figure.colorbar(mappable, ax=ax, label="depth (m, positive down)", shrink=0.85)
+    return ax
+
+
+def plot_survey(survey, bathymetry: BathymetryMap | None = None, ax: Axes | None = None, *,
+                title: str | None = None, swath_every: int | None = None) -> Axes:
+    """Truth and dead reckoning over the hill-shaded map, with swath footprints.
+
+    ``swath_every`` draws the footprints (as seen from the true pose, else DR) of every n-th ping;
+    by default about 40 pings across the survey.
+    """
+    if ax is None:
+        fig = Figure(figsize=(8, 7), layout="constrained")
+        ax = fig.add_subplot()
+    if bathymetry is not None:
+        plot_map(bathymetry, ax, title="")
+    pose = survey.true_pose if survey.true_pose is not None else survey.dr_pose
+    step = swath_every or max(1, survey.n_pings // 40)
+    north, east = survey.footprints(pose)
+    valid = np.isfinite(survey.beam_depth)
+    sel = np.zeros(survey.n_pings, bool)
+    sel[::step] = True
+    mask = valid & sel[:, None]
+    ax.scatter(east[mask], north[mask], s=2, c="white", edgecolors="none", alpha=0.7,
+               label="swath footprints")
+    if survey.true_pose is not None:
+        ax.plot(survey.true_pose[:, 1], survey.true_pose[:, 0], "k-", lw=1.5, label="truth")
+    ax.plot(survey.dr_pose[:, 1], survey.dr_pose[:, 0], "r--", lw=1.5, label="dead reckoning")
+    ax.plot(pose[0, 1], pose[0, 0], "ko", ms=5, label="start")
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.legend(loc="best", fontsize="small", framealpha=0.8)
+    ax.set_title(title if title is not None else f"survey on {survey.meta.get('map', 'unknown map')}")
     return ax

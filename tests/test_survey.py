@@ -12,15 +12,22 @@ from tangraph.survey import Survey, SurveyError, footprints, import_csv_xyz, rea
 def make_survey(k=20, b=7, seed=0, truth=True):
     rng = np.random.default_rng(seed)
     time = np.cumsum(rng.uniform(0.5, 1.5, k))
-    pose = np.column_stack([np.cumsum(rng.normal(1, 0.1, k)), np.cumsum(rng.normal(0.5, 0.1, k)),
-                            rng.uniform(0, 2 * np.pi, k)])
+    pose = np.column_stack(
+        [np.cumsum(rng.normal(1, 0.1, k)), np.cumsum(rng.normal(0.5, 0.1, k)), rng.uniform(0, 2 * np.pi, k)]
+    )
     depth = rng.uniform(40, 60, (k, b))
     depth[rng.random((k, b)) < 0.1] = np.nan
     depth[3] = np.nan  # an empty ping
-    return Survey(time=time, dr_pose=pose, vehicle_depth=rng.uniform(5, 10, k),
-                  beam_forward=rng.normal(0, 1, (k, b)), beam_starboard=np.tile(np.linspace(-30, 30, b), (k, 1)),
-                  beam_depth=depth, true_pose=pose + rng.normal(0, 1, (k, 3)) if truth else None,
-                  meta={"map": "merimbula", "seed": seed, "sonar": {"n_beams": b}})
+    return Survey(
+        time=time,
+        dr_pose=pose,
+        vehicle_depth=rng.uniform(5, 10, k),
+        beam_forward=rng.normal(0, 1, (k, b)),
+        beam_starboard=np.tile(np.linspace(-30, 30, b), (k, 1)),
+        beam_depth=depth,
+        true_pose=pose + rng.normal(0, 1, (k, 3)) if truth else None,
+        meta={"map": "merimbula", "seed": seed, "sonar": {"n_beams": b}},
+    )
 
 
 @pytest.mark.parametrize("truth", [True, False])
@@ -93,10 +100,15 @@ def test_import_csv_xyz_recovers_body_footprints(tmp_path):
     # the log at twice the ping rate: pings at log times, so interpolation is exact
     log_time = np.sort(np.r_[s.time, s.time[:-1] + np.diff(s.time) / 3])
     heading = np.degrees(np.unwrap(s.dr_pose[:, 2]))
-    nav = np.column_stack([
-        log_time, *(np.interp(log_time, s.time, v) for v in (s.dr_pose[:, 0], s.dr_pose[:, 1], heading,
-                                                               s.vehicle_depth)),
-    ])
+    nav = np.column_stack(
+        [
+            log_time,
+            *(
+                np.interp(log_time, s.time, v)
+                for v in (s.dr_pose[:, 0], s.dr_pose[:, 1], heading, s.vehicle_depth)
+            ),
+        ]
+    )
     np.savetxt(tmp_path / "nav.csv", nav, delimiter=",", header="time,north,east,heading,depth", comments="")
     rows = np.column_stack([np.repeat(s.time, s.n_beams), east.ravel(), north.ravel(), s.beam_depth.ravel()])
     rows = np.vstack([rows, [s.time[-1] + 100, 0, 0, 10]])  # a sounding after the log ends
