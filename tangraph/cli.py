@@ -58,8 +58,10 @@ def cmd_maps_info(args: argparse.Namespace) -> None:
     print(f"name         {m.name}")
     print(f"shape        {m.shape[0]} x {m.shape[1]} cells of {dn:g} x {de:g} m")
     print(f"extent       north {n_lo:g} .. {n_hi:g} m, east {e_lo:g} .. {e_hi:g} m")
-    print(f"depth        {np.nanmin(m.depth):.2f} .. {np.nanmax(m.depth):.2f} m "
-          f"(mean {np.nanmean(m.depth):.2f}), {m.valid_fraction:.1%} of cells hold data")
+    print(
+        f"depth        {np.nanmin(m.depth):.2f} .. {np.nanmax(m.depth):.2f} m "
+        f"(mean {np.nanmean(m.depth):.2f}), {m.valid_fraction:.1%} of cells hold data"
+    )
     print(f"crs          {m.crs}")
     print(f"origin       northing {m.origin[0]:.3f}, easting {m.origin[1]:.3f}")
     if m.crs is not None:
@@ -67,8 +69,10 @@ def cmd_maps_info(args: argparse.Namespace) -> None:
         print(f"centre       {float(lat):.5f} N, {float(lon):.5f} E")
     print(f"slope        median {np.nanmedian(slope(m)):.2f} deg")
     window = 5
-    print(f"roughness    median {np.nanmedian(roughness(m, window)):.3f} m "
-          f"(plane-fit residual std, {window} x {window} cells)")
+    print(
+        f"roughness    median {np.nanmedian(roughness(m, window)):.3f} m "
+        f"(plane-fit residual std, {window} x {window} cells)"
+    )
 
 
 def cmd_maps_plot(args: argparse.Namespace) -> None:
@@ -80,8 +84,9 @@ def cmd_maps_plot(args: argparse.Namespace) -> None:
     m = _load(args)
     fig = Figure(figsize=(8, 6.5), layout="constrained")
     plot_map(m, fig.add_subplot(), title=args.title)
-    write_atomically(args.output, args.force, lambda tmp: fig.savefig(tmp, dpi=args.dpi,
-                                                                     format=args.output.suffix[1:]))
+    write_atomically(
+        args.output, args.force, lambda tmp: fig.savefig(tmp, dpi=args.dpi, format=args.output.suffix[1:])
+    )
     print(f"wrote {args.output}")
 
 
@@ -98,13 +103,55 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
     from tangraph.maps.mesh import grid_soundings
 
     soundings = read_soundings(args.soundings, sign=args.sign, crs=args.crs)
-    grid = grid_soundings(soundings.points, cell=args.cell, name=args.output.stem,
-                          crs=soundings.crs, origin=soundings.origin)
+    grid = grid_soundings(
+        soundings.points, cell=args.cell, name=args.output.stem, crs=soundings.crs, origin=soundings.origin
+    )
     write_sounding_grid(grid, args.output, overwrite=args.force)
     filled = int(np.count_nonzero(grid.count))
-    print(f"gridded {len(soundings.points) - grid.n_dropped} soundings into {filled} of "
-          f"{grid.count.size} cells ({args.cell:g} m); dropped {grid.n_dropped} without depth; "
-          f"wrote {args.output}")
+    print(
+        f"gridded {len(soundings.points) - grid.n_dropped} soundings into {filled} of "
+        f"{grid.count.size} cells ({args.cell:g} m); dropped {grid.n_dropped} without depth; "
+        f"wrote {args.output}"
+    )
+
+
+def cmd_simulate(args: argparse.Namespace) -> None:
+    from tangraph.maps import load_any
+    from tangraph.sim.scenario import load_scenario, simulate
+    from tangraph.survey import write_survey
+
+    scenario = load_scenario(args.scenario)
+    bathymetry = load_any(args.map or scenario.map)
+    seed = scenario.seed if args.seed is None else args.seed
+    survey = simulate(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry, seed=seed)
+    write_survey(survey, args.output, overwrite=args.force)
+    print(survey.summary())
+    print(f"wrote {args.output}")
+
+
+def cmd_survey_info(args: argparse.Namespace) -> None:
+    from tangraph.survey import read_survey
+
+    print(read_survey(args.survey).summary())
+
+
+def cmd_survey_plot(args: argparse.Namespace) -> None:
+    from matplotlib.figure import Figure
+
+    from tangraph.maps import load_any
+    from tangraph.maps.io import write_atomically
+    from tangraph.plot import plot_survey
+    from tangraph.survey import read_survey
+
+    survey = read_survey(args.survey)
+    name = args.map or survey.meta.get("map")
+    bathymetry = load_any(name) if name else None
+    fig = Figure(figsize=(8, 7), layout="constrained")
+    plot_survey(survey, bathymetry, fig.add_subplot())
+    write_atomically(
+        args.output, args.force, lambda tmp: fig.savefig(tmp, dpi=150, format=args.output.suffix[1:])
+    )
+    print(f"wrote {args.output}")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -136,11 +183,37 @@ def build_parser() -> argparse.ArgumentParser:
     p = maps_sub.add_parser("grid", help="grid scattered soundings (x y z text) into a map")
     p.add_argument("soundings", type=Path, help="x/east y/north z text file")
     p.add_argument("--cell", type=float, required=True, help="cell size (m)")
-    p.add_argument("--sign", choices=["depth", "elevation"], required=True,
-                   help="what z is: depth (positive down) or elevation (positive up)")
+    p.add_argument(
+        "--sign",
+        choices=["depth", "elevation"],
+        required=True,
+        help="what z is: depth (positive down) or elevation (positive up)",
+    )
     p.add_argument("--crs", help="CRS of x, y (e.g. EPSG:4326 for lon/lat); default local metres")
     _output(p, "NetCDF file with depth, count and std per cell")
     p.set_defaults(func=cmd_maps_grid)
+
+    p = sub.add_parser("simulate", help="simulate a survey from a scenario")
+    p.add_argument(
+        "scenario", metavar="SCENARIO.toml|NAME", help="a scenario file or a shipped scenario name"
+    )
+    p.add_argument("--map", metavar="NAME|PATH", help="run on this map instead of the scenario's")
+    p.add_argument("--seed", type=int, help="seed (default: the scenario's)")
+    _output(p, "survey file (.nc)")
+    p.set_defaults(func=cmd_simulate)
+
+    survey = sub.add_parser("survey", help="survey files: info, plot")
+    survey_sub = survey.add_subparsers(dest="survey_command", required=True)
+    p = survey_sub.add_parser("info", help="describe a survey file")
+    p.add_argument("survey", type=Path, help="survey file (.nc)")
+    p.set_defaults(func=cmd_survey_info)
+    p = survey_sub.add_parser(
+        "plot", help="truth vs dead reckoning over the hill-shaded map, swath footprints"
+    )
+    p.add_argument("survey", type=Path, help="survey file (.nc)")
+    p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
+    _output(p, "figure file (.png, .pdf, .svg)")
+    p.set_defaults(func=cmd_survey_plot)
     return parser
 
 
@@ -148,8 +221,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``tangraph`` command; returns the exit status."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
     try:
         args.func(args)
     except (TangraphError, FileNotFoundError, FileExistsError) as exc:

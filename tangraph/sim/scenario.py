@@ -1,0 +1,292 @@
+"""Scenarios: a map, a trajectory, a dead-reckoning model and a sonar, as a TOML file.
+
+``experiments/scenarios/NAME.toml`` (packed into the wheel as ``tangraph/_scenarios``)::
+
+    name = "wang2019"
+    description = "..."
+    map = "merimbula"            # catalogue name or file; `tangraph simulate --map` overrides
+    seed = 2019                  # default seed; `--seed` overrides
+    vehicle_depth = 0.5          # metres, depth of the sonar
+    [trajectory]                 # positions in metres from the map's south-west cell centre
+    kind = "waypoints"           # "line" | "waypoints" | "lawnmower"
+    ...
+    [dead_reckoning]             # DeadReckoningModel fields, or preset = "..." plus overrides;
+                                 # an angle field may be given in degrees as NAME_deg
+    [sonar]                      # kind = "multibeam" | "singlebeam", preset, and config fields
+    [study]                      # free-form settings for the studies (e.g. window lengths)
+
+Unknown keys anywhere are refused, naming the key and the keys allowed there.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import (
+    DeadReckoningModel,
+    MultibeamConfig,
+    SingleBeamConfig,
+    simulate_dead_reckoning,
+    simulate_pings,
+)
+from tangraph.sim import trajectories
+from tangraph.survey import Survey
+
+__all__ = ["Scenario", "list_scenarios", "load_scenario", "scenario_path", "simulate"]
+
+_TOP = {
+    "name",
+    "description",
+    "map",
+    "seed",
+    "vehicle_depth",
+    "trajectory",
+    "dead_reckoning",
+    "sonar",
+    "study",
+}
+_TRAJECTORY = {
+    "line": {"start", "heading_deg", "speed", "duration"},
+    "waypoints": {"points", "speed", "turn_radius"},
+    "lawnmower": {"origin", "heading_deg", "line_length", "line_spacing", "n_lines", "speed", "turn_radius"},
+}
+_SONARS = {"multibeam": MultibeamConfig, "singlebeam": SingleBeamConfig}
+
+
+class ScenarioError(TangraphError):
+    """A scenario file is not valid."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Scenario:
+    """A simulation setting; see the module docstring for the TOML form."""
+
+    name: str
+    map: str
+    seed: int
+    vehicle_depth: float
+    trajectory: dict[str, Any]
+    dead_reckoning: DeadReckoningModel
+    sonar: MultibeamConfig | SingleBeamConfig
+    description: str = ""
+    study: dict[str, Any] = dataclasses.field(default_factory=dict)
+    source: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form, stored in a simulated survey's metadata."""
+        return {
+            "name": self.name,
+            "map": self.map,
+            "seed": self.seed,
+            "vehicle_depth": self.vehicle_depth,
+            "trajectory": self.trajectory,
+            "dead_reckoning": dataclasses.asdict(self.dead_reckoning),
+            "sonar": {"kind": _sonar_kind(self.sonar), **dataclasses.asdict(self.sonar)},
+            "study": self.study,
+            "source": self.source,
+        }
+
+
+def _sonar_kind(sonar) -> str:
+    return next(k for k, cls in _SONARS.items() if isinstance(sonar, cls))
+
+
+def scenario_path() -> Path:
+    """The folder of the shipped scenarios."""
+    here = Path(__file__).resolve().parent
+    for folder in (here.parent / "_scenarios", here.parents[1] / "experiments" / "scenarios"):
+        if folder.is_dir():
+            return folder
+    raise TangraphError("the scenario folder is missing (experiments/scenarios)")
+
+
+def list_scenarios() -> list[str]:
+    """Names of the shipped scenarios."""
+    return sorted(p.stem for p in scenario_path().glob("*.toml"))
+
+
+def _check_keys(table: dict, allowed: set[str], where: str) -> None:
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise ScenarioError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+
+
+def _config(cls, table: dict, presets: dict, where: str):
+    table = dict(table)
+    preset = table.pop("preset", None)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    for key in [k for k in table if k.endswith("_deg") and k[:-4] in fields]:  # angles in degrees
+        value = table.pop(key)
+        if not isinstance(value, (int, float)):
+            raise ScenarioError(f"{where}: {key} must be a number, got {value!r}")
+        table[key[:-4]] = float(np.radians(value))
+    _check_keys(table, fields, where)
+    if preset is not None:
+        if preset not in presets:
+            raise ScenarioError(f"{where}: unknown preset {preset!r}; known: {sorted(presets)}")
+        base = presets[preset]()
+    else:
+        base = cls()
+    try:
+        return dataclasses.replace(base, **table)
+    except (TangraphError, TypeError) as exc:
+        raise ScenarioError(f"{where}: {exc}") from None
+
+
+def _presets(cls) -> dict:
+    return {
+        name: getattr(cls, name)
+        for name in dir(cls)
+        if not name.startswith("_") and isinstance(cls.__dict__.get(name), classmethod)
+    }
+
+
+def load_scenario(name_or_path: str | os.PathLike) -> Scenario:
+    """A scenario from a TOML file, or a shipped one by name (``list_scenarios()``)."""
+    path = Path(name_or_path)
+    if not path.suffix and not path.exists():
+        path = scenario_path() / f"{name_or_path}.toml"
+        if not path.is_file():
+            raise ScenarioError(
+                f"no scenario named {str(name_or_path)!r}; known: {', '.join(list_scenarios())}"
+            )
+    if not path.is_file():
+        raise FileNotFoundError(f"scenario file {path} does not exist")
+    try:
+        with open(path, "rb") as f:
+            table = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
+    where = str(path)
+    _check_keys(table, _TOP, where)
+    missing = sorted({"map", "vehicle_depth", "trajectory", "sonar"} - set(table))
+    if missing:
+        raise ScenarioError(f"{where}: missing keys {missing}")
+    traj = dict(table["trajectory"])
+    kind = traj.pop("kind", None)
+    if kind not in _TRAJECTORY:
+        raise ScenarioError(f"{where} [trajectory]: kind must be one of {sorted(_TRAJECTORY)}, got {kind!r}")
+    _check_keys(traj, _TRAJECTORY[kind], f"{where} [trajectory]")
+    sonar = dict(table["sonar"])
+    sonar_kind = sonar.pop("kind", "multibeam")
+    if sonar_kind not in _SONARS:
+        raise ScenarioError(f"{where} [sonar]: kind must be one of {sorted(_SONARS)}, got {sonar_kind!r}")
+    depth = table["vehicle_depth"]
+    if not isinstance(depth, (int, float)) or not np.isfinite(depth) or depth < 0:
+        raise ScenarioError(f"{where}: vehicle_depth must be a number >= 0, got {depth!r}")
+    seed = table.get("seed", 0)
+    if not isinstance(seed, int) or seed < 0:
+        raise ScenarioError(f"{where}: seed must be a non-negative integer, got {seed!r}")
+    return Scenario(
+        name=str(table.get("name", path.stem)),
+        map=str(table["map"]),
+        seed=seed,
+        vehicle_depth=float(depth),
+        trajectory={"kind": kind, **traj},
+        dead_reckoning=_config(
+            DeadReckoningModel,
+            table.get("dead_reckoning", {}),
+            _presets(DeadReckoningModel),
+            f"{where} [dead_reckoning]",
+        ),
+        sonar=_config(_SONARS[sonar_kind], sonar, _presets(_SONARS[sonar_kind]), f"{where} [sonar]"),
+        description=str(table.get("description", "")),
+        study=dict(table.get("study", {})),
+        source=str(path),
+    )
+
+
+def true_trajectory(scenario: Scenario, bathymetry: BathymetryMap) -> tuple[np.ndarray, np.ndarray]:
+    """``(time, pose)`` of the scenario on a map, sampled at the sonar's ping rate."""
+    t = dict(scenario.trajectory)
+    kind = t.pop("kind")
+    corner = np.array([bathymetry.north[0], bathymetry.east[0]])
+    rate = scenario.sonar.ping_rate
+    try:
+        if kind == "line":
+            return trajectories.straight_line(
+                corner + np.asarray(t["start"], float),
+                np.radians(t["heading_deg"]),
+                t["speed"],
+                t["duration"],
+                rate,
+            )
+        if kind == "waypoints":
+            return trajectories.waypoint_route(
+                corner + np.asarray(t["points"], float),
+                t["speed"],
+                rate,
+                turn_radius=t.get("turn_radius", 0.0),
+            )
+        return trajectories.lawnmower(
+            corner + np.asarray(t["origin"], float),
+            np.radians(t["heading_deg"]),
+            t["line_length"],
+            t["line_spacing"],
+            t["n_lines"],
+            t["speed"],
+            rate,
+            turn_radius=t.get("turn_radius"),
+        )
+    except KeyError as exc:
+        raise ScenarioError(
+            f"{scenario.source} [trajectory]: missing key {exc.args[0]!r} for kind {kind!r}"
+        ) from None
+
+
+def simulate(
+    scenario: Scenario,
+    *,
+    rng: np.random.Generator,
+    bathymetry: BathymetryMap | None = None,
+    seed: int | None = None,
+) -> Survey:
+    """Simulate a survey: truth, dead reckoning and ray-cast soundings on the scenario's map.
+
+    ``seed`` is only recorded (pass the generator built from it as ``rng``).
+    The trajectory leaving the map is allowed: its pings have no returns, counted in
+    ``meta["sonar_counts"]``.
+    """
+    from tangraph.maps import load_any
+    from tangraph.maps.mesh import raycasting_scene
+
+    bathymetry = bathymetry if bathymetry is not None else load_any(scenario.map)
+    time, true_pose = true_trajectory(scenario, bathymetry)
+    dr = simulate_dead_reckoning(time, true_pose, scenario.dead_reckoning, rng=rng)
+    vehicle_depth = np.full(time.size, scenario.vehicle_depth)
+    pings = simulate_pings(raycasting_scene(bathymetry), true_pose, vehicle_depth, scenario.sonar, rng=rng)
+    import tangraph
+
+    meta = {
+        "map": bathymetry.name,
+        "scenario": scenario.name,
+        "seed": seed,
+        "software": f"tangraph {tangraph.__version__}",
+        "crs": bathymetry.crs,
+        "origin": list(bathymetry.origin),
+        "settings": scenario.as_dict(),
+        "sonar_counts": {
+            "missing": int(pings.n_missing),
+            "outliers": int(pings.n_outliers),
+            "off_map": int(pings.n_off_map),
+        },
+        "dvl_dropouts": int(dr.n_dropouts),
+    }
+    return Survey(
+        time=time,
+        dr_pose=dr.pose,
+        vehicle_depth=vehicle_depth,
+        beam_forward=pings.beam_forward,
+        beam_starboard=pings.beam_starboard,
+        beam_depth=pings.beam_depth,
+        true_pose=true_pose,
+        meta=meta,
+    )

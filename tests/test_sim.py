@@ -1,0 +1,134 @@
+"""Trajectories, scenarios and simulated surveys."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.cli import main
+from tangraph.maps import BathymetryMap
+from tangraph.sim import lawnmower, straight_line, waypoint_route
+from tangraph.sim.scenario import ScenarioError, list_scenarios, load_scenario, simulate
+from tangraph.survey import read_survey
+
+
+def test_straight_line_and_route_speed_and_heading():
+    t, pose = straight_line((10.0, 20.0), np.radians(30), 2.0, 50.0, 2.0)
+    assert t.size == 101
+    np.testing.assert_allclose(
+        pose[-1, :2], [10 + 100 * np.cos(np.radians(30)), 20 + 100 * np.sin(np.radians(30))]
+    )
+    t, pose = waypoint_route([(0, 0), (0, 100), (100, 100)], 1.0, 1.0, turn_radius=20.0)
+    step = np.hypot(*np.diff(pose[:, :2], axis=0).T)
+    np.testing.assert_allclose(step, 1.0, atol=2e-3)  # constant speed through the arc
+    turn = np.angle(np.exp(1j * np.diff(pose[:, 2])))
+    assert np.abs(turn).max() <= 1.0 / 20.0 + 1e-9  # heading rate = speed / radius at most
+    assert pose[0, 2] == pytest.approx(np.pi / 2) and pose[-1, 2] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_lawnmower_lines_and_spacing():
+    _, pose = lawnmower((0.0, 0.0), 0.0, 300.0, 50.0, 4, 2.0, 1.0)
+    north_legs = pose[np.abs(np.cos(pose[:, 2])) > 0.9999]
+    assert set(np.round(north_legs[:, 1]).astype(int)) == {0, 50, 100, 150}
+
+
+def test_shipped_scenarios_load_with_the_papers_settings():
+    assert set(list_scenarios()) >= {"wang2019", "han2020", "han2020_1m", "chen2022"}
+    chen = load_scenario("chen2022")
+    assert chen.sonar.ping_rate == 0.01
+    assert chen.sonar.depth_noise == pytest.approx(5.0)  # variance 25 m^2
+    assert chen.dead_reckoning.heading_bias == pytest.approx(np.radians(2.0))
+    assert chen.dead_reckoning.speed_noise == pytest.approx(0.1)
+    wang = load_scenario("wang2019")
+    assert wang.study["windows"] == [10, 20, 30]
+    assert wang.sonar.swath == pytest.approx(np.radians(140.0))
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (
+            'map = "m"\nvehicle_depth = 1\ncolour = "red"\n[trajectory]\nkind = "line"\n[sonar]\n',
+            "unknown keys",
+        ),
+        ('map = "m"\nvehicle_depth = -1\n[trajectory]\nkind = "line"\n[sonar]\n', "vehicle_depth must be"),
+        ('map = "m"\nvehicle_depth = 1\n[trajectory]\nkind = "spiral"\n[sonar]\n', "kind must be one of"),
+        ('map = "m"\nvehicle_depth = 1\n[trajectory]\nkind = "line"\n[sonar]\nn_beams = -3\n', r"\[sonar\]"),
+        ('map = "m"\nvehicle_depth = 1\n[trajectory]\nkind = "line"\n[sonar]\nbeams = 3\n', "unknown keys"),
+        (
+            'map = "m"\nvehicle_depth = 1\n[trajectory]\nkind = "line"\n[sonar]\npreset = "x"\n',
+            "unknown preset",
+        ),
+        ("map = [", "not valid TOML"),
+    ],
+)
+def test_bad_scenarios_are_named(tmp_path, text, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(ScenarioError, match=message):
+        load_scenario(path)
+
+
+def flat_map(depth=40.0):
+    return BathymetryMap(
+        north=np.arange(0, 2000.0, 10),
+        east=np.arange(0, 2000.0, 10),
+        depth=np.full((200, 200), depth),
+        name="flat",
+    )
+
+
+def test_simulated_survey_on_a_flat_map_is_exact_without_noise():
+    scenario = load_scenario("han2020")
+    quiet = dataclasses.replace(scenario.sonar, depth_noise=0.0, range_noise=0.0, tide=0.0)
+    scenario = dataclasses.replace(
+        scenario,
+        sonar=quiet,
+        trajectory={
+            "kind": "line",
+            "start": [1000.0, 100.0],
+            "heading_deg": 90.0,
+            "speed": 2.0,
+            "duration": 500.0,
+        },
+    )
+    s = simulate(scenario, rng=np.random.default_rng(0), bathymetry=flat_map(), seed=0)
+    assert s.n_soundings == s.beam_depth.size
+    np.testing.assert_allclose(s.beam_depth, 40.0, atol=1e-6)
+    np.testing.assert_allclose(
+        np.abs(s.beam_starboard).max(), 10.0 * np.tan(scenario.sonar.swath / 2), rtol=1e-6
+    )
+    assert s.meta["map"] == "flat" and s.meta["settings"]["sonar"]["kind"] == "multibeam"
+
+
+def test_leaving_the_map_gives_counted_missing_returns():
+    scenario = load_scenario("han2020")
+    scenario = dataclasses.replace(
+        scenario,
+        trajectory={
+            "kind": "line",
+            "start": [1000.0, 1500.0],
+            "heading_deg": 90.0,
+            "speed": 2.0,
+            "duration": 500.0,
+        },
+    )
+    s = simulate(scenario, rng=np.random.default_rng(0), bathymetry=flat_map(), seed=0)
+    assert s.n_empty_pings > 0
+    assert s.meta["sonar_counts"]["off_map"] == int(np.isnan(s.beam_depth).sum())
+
+
+def test_simulate_cli_same_seed_same_survey(tmp_path, capsys):
+    a, b = tmp_path / "a.nc", tmp_path / "b.nc"
+    assert main(["simulate", "han2020_1m", "--seed", "7", "-o", str(a)]) == 0
+    assert main(["simulate", "han2020_1m", "--seed", "7", "-o", str(b)]) == 0
+    sa, sb = read_survey(a), read_survey(b)
+    np.testing.assert_array_equal(sa.beam_depth, sb.beam_depth)
+    np.testing.assert_array_equal(sa.dr_pose, sb.dr_pose)
+    assert sa.meta["seed"] == 7
+    assert main(["survey", "info", str(a)]) == 0
+    assert "lidar-dem" in capsys.readouterr().out
+    assert main(["survey", "plot", str(a), "-o", str(tmp_path / "a.png")]) == 0
+    assert (tmp_path / "a.png").read_bytes()[:4] == b"\x89PNG"
