@@ -33,6 +33,8 @@ def footprints(pose: np.ndarray, forward: np.ndarray, starboard: np.ndarray) -> 
     ``pose`` is (K, 3) ``(north, east, psi)``; ``forward``, ``starboard`` are (K, B).
     """
     pose = np.asarray(pose, float)
+    forward = np.asarray(forward, float)
+    starboard = np.asarray(starboard, float)
     c = np.cos(pose[:, 2])[:, None]
     s = np.sin(pose[:, 2])[:, None]
     north = pose[:, 0:1] + c * forward - s * starboard

@@ -1,0 +1,29 @@
+"""Sensors: the dead-reckoning (INS/DVL) error model and multibeam / single-beam sonar."""
+
+from tangraph.sensors.dead_reckoning import (
+    DeadReckoning,
+    DeadReckoningModel,
+    increment_covariance,
+    odometry,
+    simulate_dead_reckoning,
+)
+from tangraph.sensors.sonar import (
+    MultibeamConfig,
+    Pings,
+    SingleBeamConfig,
+    beam_angles,
+    simulate_pings,
+)
+
+__all__ = [
+    "DeadReckoning",
+    "DeadReckoningModel",
+    "MultibeamConfig",
+    "Pings",
+    "SingleBeamConfig",
+    "beam_angles",
+    "increment_covariance",
+    "odometry",
+    "simulate_dead_reckoning",
+    "simulate_pings",
+]
