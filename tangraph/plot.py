@@ -10,12 +10,17 @@ from matplotlib.figure import Figure
 
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["hillshade_rgb", "plot_map", "plot_survey"]
+__all__ = ["covariance_ellipse", "hillshade_rgb", "plot_fix", "plot_map", "plot_survey"]
 
 
-def hillshade_rgb(bathymetry: BathymetryMap, *, cmap: str = "viridis_r",
-                  exaggeration: float | None = None, vmin: float | None = None,
-                  vmax: float | None = None) -> np.ndarray:
+def hillshade_rgb(
+    bathymetry: BathymetryMap,
+    *,
+    cmap: str = "viridis_r",
+    exaggeration: float | None = None,
+    vmin: float | None = None,
+    vmax: float | None = None,
+) -> np.ndarray:
     """RGBA image (ny, nx, 4) of the depth, coloured and lit from the north-west; NaN clear.
 
     ``exaggeration`` is the vertical exaggeration of the shading; by default it is chosen so
@@ -33,15 +38,27 @@ def hillshade_rgb(bathymetry: BathymetryMap, *, cmap: str = "viridis_r",
     light = colors.LightSource(azdeg=315, altdeg=45)
     # shade the elevation (-depth): rows run south to north, hence the flip for LightSource
     rgb = light.shade(
-        -filled[::-1], cmap=matplotlib.colormaps[cmap].reversed(), blend_mode="soft", dx=de, dy=dn,
-        vert_exag=exaggeration, vmin=-vmax, vmax=-vmin,
+        -filled[::-1],
+        cmap=matplotlib.colormaps[cmap].reversed(),
+        blend_mode="soft",
+        dx=de,
+        dy=dn,
+        vert_exag=exaggeration,
+        vmin=-vmax,
+        vmax=-vmin,
     )[::-1]
     rgb[..., 3] = valid
     return rgb
 
 
-def plot_map(bathymetry: BathymetryMap, ax: Axes | None = None, *, title: str | None = None,
-             cmap: str = "viridis_r", colorbar: bool = True) -> Axes:
+def plot_map(
+    bathymetry: BathymetryMap,
+    ax: Axes | None = None,
+    *,
+    title: str | None = None,
+    cmap: str = "viridis_r",
+    colorbar: bool = True,
+) -> Axes:
     """Hill-shaded depth with a colour bar, local north/east in metres on the axes.
 
     Examples
@@ -60,8 +77,10 @@ def plot_map(bathymetry: BathymetryMap, ax: Axes | None = None, *, title: str | 
     vmin, vmax = float(np.nanmin(bathymetry.depth)), float(np.nanmax(bathymetry.depth))
     ax.set_facecolor("0.85")
     ax.imshow(
-        hillshade_rgb(bathymetry, cmap=cmap, vmin=vmin, vmax=vmax), origin="lower",
-        extent=(e_lo - de / 2, e_hi + de / 2, n_lo - dn / 2, n_hi + dn / 2), interpolation="nearest",
+        hillshade_rgb(bathymetry, cmap=cmap, vmin=vmin, vmax=vmax),
+        origin="lower",
+        extent=(e_lo - de / 2, e_hi + de / 2, n_lo - dn / 2, n_hi + dn / 2),
+        interpolation="nearest",
     )
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
@@ -73,8 +92,14 @@ def plot_map(bathymetry: BathymetryMap, ax: Axes | None = None, *, title: str | 
     return ax
 
 
-def plot_survey(survey, bathymetry: BathymetryMap | None = None, ax: Axes | None = None, *,
-                title: str | None = None, swath_every: int | None = None) -> Axes:
+def plot_survey(
+    survey,
+    bathymetry: BathymetryMap | None = None,
+    ax: Axes | None = None,
+    *,
+    title: str | None = None,
+    swath_every: int | None = None,
+) -> Axes:
     """Truth and dead reckoning over the hill-shaded map, with swath footprints.
 
     ``swath_every`` draws the footprints (as seen from the true pose, else DR) of every n-th ping;
@@ -92,8 +117,9 @@ def plot_survey(survey, bathymetry: BathymetryMap | None = None, ax: Axes | None
     sel = np.zeros(survey.n_pings, bool)
     sel[::step] = True
     mask = valid & sel[:, None]
-    ax.scatter(east[mask], north[mask], s=2, c="white", edgecolors="none", alpha=0.7,
-               label="swath footprints")
+    ax.scatter(
+        east[mask], north[mask], s=2, c="white", edgecolors="none", alpha=0.7, label="swath footprints"
+    )
     if survey.true_pose is not None:
         ax.plot(survey.true_pose[:, 1], survey.true_pose[:, 0], "k-", lw=1.5, label="truth")
     ax.plot(survey.dr_pose[:, 1], survey.dr_pose[:, 0], "r--", lw=1.5, label="dead reckoning")
@@ -103,4 +129,71 @@ def plot_survey(survey, bathymetry: BathymetryMap | None = None, ax: Axes | None
     ax.set_aspect("equal")
     ax.legend(loc="best", fontsize="small", framealpha=0.8)
     ax.set_title(title if title is not None else f"survey on {survey.meta.get('map', 'unknown map')}")
+    return ax
+
+
+def covariance_ellipse(covariance: np.ndarray, probability: float = 0.95, n: int = 100) -> np.ndarray:
+    """Points ``(n, 2)`` (north, east offsets) of the ``probability`` ellipse of a 2-D Gaussian."""
+    from scipy import stats
+
+    values, vectors = np.linalg.eigh(np.asarray(covariance, float))
+    radius = np.sqrt(stats.chi2.ppf(probability, 2) * np.clip(values, 0, None))
+    angle = np.linspace(0, 2 * np.pi, n)
+    return (vectors @ (radius[:, None] * np.vstack([np.cos(angle), np.sin(angle)]))).T
+
+
+def plot_fix(fix, ax: Axes | None = None, *, truth=None, title: str | None = None) -> Axes:
+    """A TAP fix like Wang et al.'s figures: the criterion surface, the fix (and truth), each
+    confidence region's outline and the 95 % ellipse of the fix's covariance."""
+    from matplotlib.lines import Line2D
+
+    if ax is None:
+        fig = Figure(figsize=(7, 6), layout="constrained")
+        ax = fig.add_subplot()
+    grid = fix.grid
+    q = fix.surface
+    step_n = grid.north[1] - grid.north[0] if grid.north.size > 1 else 1.0
+    step_e = grid.east[1] - grid.east[0] if grid.east.size > 1 else 1.0
+    extent = (
+        grid.east[0] - step_e / 2,
+        grid.east[-1] + step_e / 2,
+        grid.north[0] - step_n / 2,
+        grid.north[-1] + step_n / 2,
+    )
+    image = ax.imshow(
+        np.log10(q - np.nanmin(q) + 1e-3 * np.nanmin(q) + 1e-12),
+        origin="lower",
+        extent=extent,
+        cmap="Greys_r",
+        interpolation="nearest",
+    )
+    ax.figure.colorbar(image, ax=ax, label="log10(Q - Q_min + eps), Q = (n-1) sigma^2", shrink=0.85)
+    handles = []
+    for (method, region), colour in zip(
+        fix.regions.items(), ("tab:orange", "tab:blue", "tab:green"), strict=False
+    ):
+        if region.mask.any():
+            ax.contour(grid.east, grid.north, region.mask.astype(float), levels=[0.5], colors=colour)
+        handles.append(
+            Line2D(
+                [], [], color=colour, label=f"{method.value} {1 - region.alpha:.0%} ({region.area:.0f} m²)"
+            )
+        )
+    ellipse = fix.position + covariance_ellipse(fix.covariance)
+    ax.plot(ellipse[:, 1], ellipse[:, 0], "m--", lw=1.2)
+    handles.append(Line2D([], [], color="m", ls="--", label="95% covariance ellipse"))
+    ax.plot(fix.position[1], fix.position[0], "r+", ms=12, mew=2)
+    handles.append(Line2D([], [], color="r", marker="+", ls="", ms=10, label="fix"))
+    if truth is not None:
+        ax.plot(truth[1], truth[0], "cx", ms=10, mew=2)
+        handles.append(Line2D([], [], color="c", marker="x", ls="", ms=10, label="truth"))
+    ax.legend(handles=handles, fontsize="small", loc="upper right", framealpha=0.85)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.set_title(
+        title
+        if title is not None
+        else f"TAP fix of pings {fix.first}..{fix.index}: sigma {fix.sigma:.3f} m, tide {fix.tide:.2f} m"
+    )
     return ax

@@ -1,0 +1,35 @@
+"""Batch terrain matching: TAP fixes with confidence regions and covariances (no gtsam here)."""
+
+from tangraph.matching.patch import MatchingError, Patch, window_patch
+from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
+from tangraph.matching.tap import (
+    Criterion,
+    FixQuality,
+    Region,
+    RegionMethod,
+    TapConfig,
+    TapFix,
+    criterion_at,
+    nees,
+    tap_fix,
+    tap_fix_patch,
+)
+
+__all__ = [
+    "CandidateGrid",
+    "Criterion",
+    "CriterionSums",
+    "FixQuality",
+    "MatchingError",
+    "Patch",
+    "Region",
+    "RegionMethod",
+    "TapConfig",
+    "TapFix",
+    "criterion_at",
+    "criterion_sums",
+    "nees",
+    "tap_fix",
+    "tap_fix_patch",
+    "window_patch",
+]

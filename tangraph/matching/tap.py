@@ -1,0 +1,382 @@
+"""Terrain-aided position fixes (TAP): batch match, confidence regions, covariance, quality.
+
+The fix follows Wang et al. (2019, eqs. 3-6): for each candidate position X of the patch the
+tide ``t(X)`` is the mean residual and ``sigma^2(X)`` the residual variance; the fix minimises
+``sigma^2``. With ``Q(X) = (n - 1) sigma^2(X)`` and ``S(X) = sum (d - t_p)^2`` (tide of the fix):
+
+- **Xie** (eq. 2): ``Q(X) <= Q(X_p) chi2_{1-a}(n-1) / (n-1)``;
+- **Wang** (eq. 18): ``S(X) <= S(X_p) [1 + chi2_{1-a}(n-1) / (n-1)]``;
+- **calibrated** (ours): the profile-likelihood-ratio region ``Q(X) - Q(X_p) <= c s^2
+  chi2_{1-a}(2)`` with ``s^2 = Q(X_p) / (n - 3)`` (two position parameters and the tide
+  estimated) and ``c >= 1`` the variance inflation of spatially correlated residuals (lag-one
+  correlations along beams and along pings, each an AR(1) factor ``(1 + r) / (1 - r)``).
+
+Covariances: from the curvature of ``Q`` at the fix (``2 c s^2 H^-1``, the inverse Fisher
+information of eq. 14), from the second moments of the normalised likelihood over the search
+grid (``exp(-(Q - Q_p) / (2 c s^2))``; honest for flat or multimodal surfaces), and the
+Cramér-Rao bound of the window from the map gradients.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+
+import numpy as np
+from scipy import ndimage, stats
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching.patch import MatchingError, Patch, window_patch
+from tangraph.matching.search import CandidateGrid, criterion_sums
+from tangraph.survey import Survey
+
+__all__ = [
+    "Criterion",
+    "FixQuality",
+    "Region",
+    "RegionMethod",
+    "TapConfig",
+    "TapFix",
+    "criterion_at",
+    "nees",
+    "rotate",
+    "tap_fix",
+    "tap_fix_patch",
+]
+
+
+class Criterion(enum.StrEnum):
+    """What the fix minimises (or, for correlation, maximises)."""
+
+    MLE = "mle"  # sigma^2 with the tide removed (Wang et al. eqs. 3-6)
+    MSD = "msd"
+    MAD = "mad"
+    CORRELATION = "correlation"
+
+
+class RegionMethod(enum.StrEnum):
+    XIE = "xie"
+    WANG = "wang"
+    CALIBRATED = "calibrated"
+
+
+@dataclasses.dataclass(frozen=True)
+class TapConfig:
+    """Settings of a fix. ``step`` defaults to the map's cell size; angles in radians."""
+
+    half_width: float = 50.0
+    step: float | None = None
+    headings: tuple[float, ...] = (0.0,)
+    criterion: Criterion = Criterion.MLE
+    alpha: float = 0.05
+    covariance: str = "region"  # "region" | "curvature" | "crlb"
+    calibrate: bool = True
+    min_soundings: int = 10
+    search_method: str = "auto"
+    max_area_fraction: float = 0.5
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.alpha < 1.0:
+            raise TangraphError(f"TapConfig: alpha must lie in (0, 1), got {self.alpha!r}")
+        if not (np.isfinite(self.half_width) and self.half_width > 0):
+            raise TangraphError(f"TapConfig: half_width must be positive, got {self.half_width!r}")
+        if self.step is not None and not (np.isfinite(self.step) and self.step > 0):
+            raise TangraphError(f"TapConfig: step must be positive, got {self.step!r}")
+        if self.covariance not in ("region", "curvature", "crlb"):
+            raise TangraphError(
+                f"TapConfig: covariance must be region, curvature or crlb, got {self.covariance!r}"
+            )
+        object.__setattr__(self, "criterion", Criterion(self.criterion))
+        object.__setattr__(self, "headings", tuple(float(h) for h in self.headings))
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Region:
+    """A confidence region as a mask over the candidate grid (at the fix's heading)."""
+
+    method: RegionMethod
+    alpha: float
+    mask: np.ndarray  # (nn, ne) bool
+    threshold: float  # on Q (Xie, calibrated) or on S (Wang)
+    area: float  # m^2
+
+
+@dataclasses.dataclass(frozen=True)
+class FixQuality:
+    """Figures that say whether the graph may trust a fix."""
+
+    peak_ratio: float  # criterion of the best separate basin / criterion at the fix (inf if none)
+    n_basins: int  # connected parts of the calibrated region
+    area_fraction: float  # calibrated region area / search area
+    touches_edge: bool  # the calibrated region reaches the edge of the search grid
+    reasons: tuple[str, ...]  # why the fix is flagged; empty if it is not
+
+    @property
+    def informative(self) -> bool:
+        return not any(r.startswith("uninformative") for r in self.reasons)
+
+    @property
+    def multimodal(self) -> bool:
+        return any(r.startswith("multimodal") for r in self.reasons)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class TapFix:
+    """A terrain-aided position fix of the window of pings ``first .. index``."""
+
+    index: int
+    first: int
+    position: np.ndarray  # (2,) north, east
+    covariance: np.ndarray  # (2, 2), the one chosen by TapConfig.covariance
+    tide: float  # mean of h - z at the fix (measured = map + tide  =>  this is -tide)
+    sigma: float  # std of the sounding error, sqrt of Wang's eq. 4 at the fix
+    n_soundings: int
+    method: Criterion
+    heading_offset: float
+    covariances: dict[str, np.ndarray]
+    regions: dict[RegionMethod, Region]
+    quality: FixQuality
+    grid: CandidateGrid
+    surface: np.ndarray  # Q over the grid at the fix's heading, NaN where invalid
+    variance_inflation: float
+    prior: np.ndarray
+
+    @property
+    def accepted(self) -> bool:
+        """Informative and unimodal: fit to become a prior factor."""
+        return self.quality.informative and not self.quality.multimodal
+
+    @property
+    def region(self) -> Region:
+        return self.regions[RegionMethod.CALIBRATED]
+
+
+def rotate(offsets: np.ndarray, angle: float) -> np.ndarray:
+    """Offsets ``(N, 2)`` (north, east) rotated clockwise (as headings grow) by ``angle``."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.column_stack([c * offsets[:, 0] - s * offsets[:, 1], s * offsets[:, 0] + c * offsets[:, 1]])
+
+
+def criterion_at(
+    bathymetry: BathymetryMap, patch: Patch, positions, heading: float = 0.0, tide: float | None = None
+) -> np.ndarray:
+    """``Q`` (tide profiled) or, given ``tide``, ``S`` at a few positions ``(M, 2)``: the slow,
+    exact evaluation used to test the truth against the regions."""
+    positions = np.atleast_2d(np.asarray(positions, float))
+    offsets = rotate(patch.offsets, heading)
+    h = bathymetry.depth_at(positions[:, 0:1] + offsets[:, 0], positions[:, 1:2] + offsets[:, 1])
+    d = h - patch.depths
+    t = d.mean(axis=1, keepdims=True) if tide is None else tide
+    return np.sum((d - t) ** 2, axis=1)
+
+
+def nees(error, covariance) -> float:
+    """Normalised estimation error squared ``e^T P^-1 e``."""
+    error = np.asarray(error, float)
+    return float(error @ np.linalg.solve(covariance, error))
+
+
+def tap_fix(
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    end: int,
+    n_pings: int,
+    config: TapConfig | None = None,
+    *,
+    prior=None,
+) -> TapFix:
+    """A fix of the window of ``n_pings`` pings ending at ``end``, searched around ``prior``
+    (default: the dead-reckoned position of ping ``end``).
+
+    Raises
+    ------
+    MatchingError
+        An empty or too sparse window, a prior off the map, or no candidate with every
+        sounding on the map.
+    """
+    config = config or TapConfig()
+    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings)
+    return tap_fix_patch(patch, bathymetry, config, prior=prior)
+
+
+def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *, prior=None) -> TapFix:
+    """:func:`tap_fix` of a prepared :class:`Patch`."""
+    prior = patch.reference_position if prior is None else np.asarray(prior, float)
+    if not bathymetry.contains(prior[0], prior[1]):
+        raise MatchingError(f"prior position {prior.tolist()} is off the map {bathymetry.name!r}")
+    step = config.step or min(bathymetry.cell_size)
+    grid = CandidateGrid.around(prior, config.half_width, step, np.asarray(config.headings))
+    method = (
+        "direct"
+        if config.criterion is Criterion.MAD and config.search_method == "auto"
+        else config.search_method
+    )
+    sums = criterion_sums(bathymetry, patch.offsets, patch.depths, grid, method=method)
+    if not np.any(sums.valid):
+        raise MatchingError(
+            f"window {patch.first}..{patch.reference}: no candidate within {config.half_width} m of "
+            f"{prior.tolist()} has every sounding on the map"
+        )
+    n = patch.n_soundings
+    sigma2 = sums.sigma2()
+    score = {
+        Criterion.MLE: sigma2,
+        Criterion.MSD: sums.msd(),
+        Criterion.MAD: sums.mad(),
+        Criterion.CORRELATION: -sums.correlation(),
+    }[config.criterion]
+    if not np.any(np.isfinite(score)):
+        raise MatchingError(
+            f"criterion {config.criterion.value} is not available from search {sums.method!r}"
+        )
+    k_h, i, j = np.unravel_index(np.nanargmin(score), score.shape)
+    heading = float(grid.headings[k_h])
+    q = (n - 1) * sigma2[k_h]
+    q_min = float(q[i, j])
+    tide = float(sums.tide()[k_h, i, j])
+    node = np.array([grid.north[i], grid.east[j]])
+    shift, _ = _quadric(score[k_h], i, j, step)
+    position = node + shift
+    if config.criterion is Criterion.MLE and np.any(shift):  # keep the refinement only if it helps
+        q_node, q_refined = criterion_at(bathymetry, patch, np.vstack([node, position]), heading)
+        if not q_refined < q_node:
+            position = node
+
+    inflation = _variance_inflation(bathymetry, patch, position, heading, tide) if config.calibrate else 1.0
+    s2 = q_min / max(n - 3, 1)
+    regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, s2 * inflation, config.alpha, step)
+    covariances = _covariances(
+        q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position, heading
+    )
+    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config)
+    return TapFix(
+        index=patch.reference,
+        first=patch.first,
+        position=position,
+        covariance=covariances[config.covariance],
+        tide=tide,
+        sigma=float(np.sqrt(sigma2[k_h, i, j])),
+        n_soundings=n,
+        method=config.criterion,
+        heading_offset=heading,
+        covariances=covariances,
+        regions=regions,
+        quality=quality,
+        grid=grid,
+        surface=q,
+        variance_inflation=float(inflation),
+        prior=prior,
+    )
+
+
+def _quadric(surface: np.ndarray, i: int, j: int, step: float) -> tuple[np.ndarray, np.ndarray | None]:
+    """Sub-cell minimum and Hessian (per m^2) of a quadric fitted to the 3 x 3 cells around (i, j)."""
+    nn, ne = surface.shape
+    if not (0 < i < nn - 1 and 0 < j < ne - 1):
+        return np.zeros(2), None
+    z = surface[i - 1 : i + 2, j - 1 : j + 2]
+    if not np.all(np.isfinite(z)):
+        return np.zeros(2), None
+    y, x = np.mgrid[-1:2, -1:2].astype(float)
+    design = np.column_stack(
+        [np.ones(9), y.ravel(), x.ravel(), y.ravel() ** 2, y.ravel() * x.ravel(), x.ravel() ** 2]
+    )
+    c = np.linalg.lstsq(design, z.ravel(), rcond=None)[0]
+    hessian = np.array([[2 * c[3], c[4]], [c[4], 2 * c[5]]])
+    if np.any(np.linalg.eigvalsh(hessian) <= 0):
+        return np.zeros(2), None
+    shift = np.clip(-np.linalg.solve(hessian, c[1:3]), -0.5, 0.5)
+    return shift * step, hessian / step**2
+
+
+def _residuals(bathymetry, patch, position, heading, tide):
+    offsets = rotate(patch.offsets, heading)
+    return bathymetry.depth_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1]) - patch.depths - tide
+
+
+def _lag_one(r: np.ndarray, major: np.ndarray, minor: np.ndarray) -> float:
+    """Lag-one correlation of residuals ordered by (major, minor), pairs with minor + 1."""
+    order = np.lexsort((minor, major))
+    r, major, minor = r[order], major[order], minor[order]
+    pair = (major[1:] == major[:-1]) & (minor[1:] == minor[:-1] + 1)
+    if pair.sum() < 3:
+        return 0.0
+    return float(np.sum(r[1:][pair] * r[:-1][pair]) / np.sum(r**2))
+
+
+def _variance_inflation(bathymetry, patch, position, heading, tide) -> float:
+    r = _residuals(bathymetry, patch, position, heading, tide)
+    if not np.all(np.isfinite(r)) or not np.any(r):
+        return 1.0
+    factor = 1.0
+    for rho in (_lag_one(r, patch.ping, patch.beam), _lag_one(r, patch.beam, patch.ping)):
+        rho = float(np.clip(rho, 0.0, 0.95))
+        factor *= (1 + rho) / (1 - rho)
+    return factor
+
+
+def _regions(q, s_fixed, q_min, n, s2_calibrated, alpha, step) -> dict[RegionMethod, Region]:
+    valid = np.isfinite(q)
+    ratio = stats.chi2.ppf(1 - alpha, n - 1) / (n - 1)
+    thresholds = {
+        RegionMethod.XIE: (q, q_min * ratio),
+        RegionMethod.WANG: (s_fixed, q_min * (1 + ratio)),
+        RegionMethod.CALIBRATED: (q, q_min + s2_calibrated * stats.chi2.ppf(1 - alpha, 2)),
+    }
+    out = {}
+    for method, (surface, threshold) in thresholds.items():
+        mask = valid & (np.where(valid, surface, np.inf) <= threshold)
+        out[method] = Region(method, alpha, mask, float(threshold), float(mask.sum() * step * step))
+    return out
+
+
+def _covariances(
+    q, q_min, s2, grid, i, j, step, bathymetry, patch, position, heading
+) -> dict[str, np.ndarray]:
+    valid = np.isfinite(q)
+    weight = np.where(valid, np.exp(-(np.where(valid, q, q_min) - q_min) / (2 * s2)), 0.0)
+    weight /= weight.sum()
+    nn, ee = np.meshgrid(grid.north, grid.east, indexing="ij")
+    mean = np.array([np.sum(weight * nn), np.sum(weight * ee)])
+    dn, de = nn - mean[0], ee - mean[1]
+    region = (
+        np.array(
+            [
+                [np.sum(weight * dn * dn), np.sum(weight * dn * de)],
+                [np.sum(weight * dn * de), np.sum(weight * de * de)],
+            ]
+        )
+        + np.eye(2) * step**2 / 12
+    )
+    _, hessian = _quadric(q, i, j, step)
+    curvature = 2 * s2 * np.linalg.inv(hessian) if hessian is not None else region
+    offsets = rotate(patch.offsets, heading)
+    g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
+    g = g[np.all(np.isfinite(g), axis=1)]
+    g = g - g.mean(axis=0)  # the tide absorbs the mean gradient
+    information = g.T @ g / s2
+    crlb = np.linalg.inv(information) if np.linalg.cond(information) < 1e12 else np.full((2, 2), np.inf)
+    return {"region": region, "curvature": curvature, "crlb": crlb}
+
+
+def _quality(q, q_min, region: Region, config: TapConfig) -> FixQuality:
+    labels, n_basins = ndimage.label(region.mask)
+    mask = region.mask
+    touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
+    area_fraction = float(mask.mean())
+    filled = np.where(np.isfinite(q), q, np.inf)
+    minima = (filled == ndimage.minimum_filter(filled, size=3)) & np.isfinite(filled)
+    main = ndimage.binary_dilation(
+        labels == labels[np.unravel_index(np.argmin(filled), q.shape)], iterations=2
+    )
+    others = minima & ~main
+    peak_ratio = float(filled[others].min() / q_min) if others.any() and q_min > 0 else np.inf
+    reasons = []
+    if n_basins > 1:
+        reasons.append(f"multimodal: the calibrated region has {n_basins} separate parts")
+    if touches:
+        reasons.append("uninformative: the calibrated region reaches the edge of the search grid")
+    if area_fraction > config.max_area_fraction:
+        reasons.append(f"uninformative: the calibrated region covers {area_fraction:.0%} of the search area")
+    return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons))

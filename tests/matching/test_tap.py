@@ -1,0 +1,140 @@
+"""TAP fixes: known answers, regions' nesting, covariance against the CRLB, flags and bad input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.maps import BathymetryMap, fractal, ridges
+from tangraph.matching.patch import MatchingError
+from tangraph.matching.tap import RegionMethod, TapConfig, criterion_at, nees, tap_fix
+from tangraph.survey import Survey, footprints
+
+CELL = 5.0
+
+
+def bowl(a=2e-4, b=1e-4, c=5e-5):
+    """A paraboloid seabed: its gradient is linear in position, so with the tide removed the
+    residuals are exactly linear in the shift and the curvature covariance is the CRLB."""
+    north = np.arange(0, 1500.0, CELL)
+    east = np.arange(0, 1500.0, CELL)
+    nn, ee = np.meshgrid(north - 700, east - 800, indexing="ij")
+    return BathymetryMap(north=north, east=east, depth=100 + a * nn**2 + b * ee**2 + c * nn * ee, name="bowl")
+
+
+def rough_map(seed=0):
+    return fractal((300, 300), CELL, rng=np.random.default_rng(seed), beta=3.0, relief=5.0, mean_depth=80.0)
+
+
+def survey_on(
+    bathymetry,
+    *,
+    offset=(15.0, -10.0),
+    noise=0.0,
+    tide=1.5,
+    seed=0,
+    pings=10,
+    beams=41,
+    start=(500.0, 400.0),
+    heading=np.pi / 2,
+    spacing=5.0,
+):
+    """Soundings of a straight run sampled from the map itself; DR = truth + ``offset``."""
+    rng = np.random.default_rng(seed)
+    k = np.arange(pings)
+    truth = np.column_stack(
+        [
+            start[0] + k * spacing * np.cos(heading),
+            start[1] + k * spacing * np.sin(heading),
+            np.full(pings, heading),
+        ]
+    )
+    forward = np.zeros((pings, beams))
+    starboard = np.tile(np.linspace(-60, 60, beams), (pings, 1))
+    north, east = footprints(truth, forward, starboard)
+    depth = bathymetry.depth_at(north, east) + tide + noise * rng.normal(size=forward.shape)
+    dr = truth + np.array([*offset, 0.0])
+    return Survey(
+        time=k.astype(float),
+        dr_pose=dr,
+        vehicle_depth=np.full(pings, 10.0),
+        beam_forward=forward,
+        beam_starboard=starboard,
+        beam_depth=depth,
+        true_pose=truth,
+    )
+
+
+def test_noise_free_fix_lands_on_the_truth_with_the_tide():
+    m = rough_map()
+    s = survey_on(m)
+    fix = tap_fix(s, m, end=9, n_pings=10, config=TapConfig(half_width=40.0))
+    np.testing.assert_allclose(fix.position, s.true_pose[9, :2], atol=1e-6)
+    assert fix.tide == pytest.approx(-1.5, abs=1e-9)  # measured = map + tide  =>  mean(h - z) = -tide
+    assert fix.sigma == pytest.approx(0.0, abs=1e-6)
+    assert fix.n_soundings == 410
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_noisy_fix_recovers_the_truth_and_regions_nest(seed):
+    m = rough_map(seed)
+    s = survey_on(m, noise=0.3, seed=seed)
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0, step=2.5))
+    assert np.hypot(*(fix.position - s.true_pose[9, :2])) < 2 * CELL
+    assert fix.sigma == pytest.approx(0.3, rel=0.25)
+    xie, wang = fix.regions[RegionMethod.XIE], fix.regions[RegionMethod.WANG]
+    assert np.all(wang.mask[xie.mask])  # Xie inside Wang
+    assert wang.area >= xie.area > 0
+    assert fix.accepted, fix.quality.reasons
+
+
+def test_curvature_covariance_equals_the_crlb_on_a_paraboloid():
+    m = bowl()
+    s = survey_on(m, noise=0.2, seed=4, start=(600.0, 700.0))
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=30.0, calibrate=False))
+    np.testing.assert_allclose(fix.covariances["curvature"], fix.covariances["crlb"], rtol=0.05)
+
+
+def test_the_truth_is_inside_the_calibrated_region_and_nees_is_finite():
+    m = rough_map(5)
+    s = survey_on(m, noise=0.3, seed=5)
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0))
+    patch_truth = s.true_pose[9, :2]
+    from tangraph.matching.patch import window_patch
+
+    q_truth = criterion_at(m, window_patch(s, 9, 10), patch_truth)[0]
+    assert q_truth <= fix.regions[RegionMethod.CALIBRATED].threshold
+    assert np.isfinite(nees(fix.position - patch_truth, fix.covariance))
+
+
+def test_flat_terrain_is_flagged_uninformative_with_a_large_covariance():
+    north = east = np.arange(0, 1500.0, CELL)
+    flat = BathymetryMap(
+        north=north, east=east, depth=80 + 1e-3 * np.random.default_rng(0).normal(size=(300, 300))
+    )
+    s = survey_on(flat, noise=0.3)
+    fix = tap_fix(s, flat, 9, 10, TapConfig(half_width=40.0))
+    assert not fix.quality.informative and not fix.accepted
+    assert np.sqrt(np.linalg.eigvalsh(fix.covariance).max()) > 15.0  # of the order of the search box
+
+
+def test_periodic_ridges_are_flagged_multimodal():
+    m = ridges((300, 300), CELL, rng=np.random.default_rng(0), spacing=30.0, height=4.0, orientation=0.0)
+    s = survey_on(m, noise=0.1, heading=0.0, start=(500.0, 700.0))  # running along the ridges
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=60.0))
+    assert fix.quality.multimodal or not fix.quality.informative
+    assert not fix.accepted
+
+
+def test_bad_input_is_refused_with_a_reason():
+    m = rough_map()
+    s = survey_on(m)
+    with pytest.raises(TangraphError, match="alpha must lie in"):
+        TapConfig(alpha=1.5)
+    with pytest.raises(MatchingError, match="starts before the survey"):
+        tap_fix(s, m, 3, 10)
+    with pytest.raises(MatchingError, match="fewer than min_soundings"):
+        tap_fix(s.replace(beam_depth=np.where(np.arange(41) < 1, s.beam_depth, np.nan)), m, 9, 5)
+    with pytest.raises(MatchingError, match="off the map"):
+        tap_fix(s, m, 9, 10, prior=(-500.0, 0.0))
