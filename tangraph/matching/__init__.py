@@ -11,6 +11,7 @@ from tangraph.matching.tap import (
     TapFix,
     criterion_at,
     nees,
+    region_thresholds,
     tap_fix,
     tap_fix_patch,
 )
@@ -29,6 +30,7 @@ __all__ = [
     "criterion_at",
     "criterion_sums",
     "nees",
+    "region_thresholds",
     "tap_fix",
     "tap_fix_patch",
     "window_patch",

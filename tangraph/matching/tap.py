@@ -40,6 +40,7 @@ __all__ = [
     "TapFix",
     "criterion_at",
     "nees",
+    "region_thresholds",
     "rotate",
     "tap_fix",
     "tap_fix_patch",
@@ -245,7 +246,7 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, heading, tide) if config.calibrate else 1.0
     s2 = q_min / max(n - 3, 1)
-    regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, s2 * inflation, config.alpha, step)
+    regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position, heading
     )
@@ -316,16 +317,25 @@ def _variance_inflation(bathymetry, patch, position, heading, tide) -> float:
     return factor
 
 
-def _regions(q, s_fixed, q_min, n, s2_calibrated, alpha, step) -> dict[RegionMethod, Region]:
-    valid = np.isfinite(q)
+def region_thresholds(
+    q_min: float, n: int, alpha: float, inflation: float = 1.0
+) -> dict[RegionMethod, float]:
+    """Thresholds of the three regions at level ``1 - alpha``: on ``Q`` for Xie and calibrated,
+    on ``S`` (tide fixed at the fix's) for Wang; see the module docstring."""
     ratio = stats.chi2.ppf(1 - alpha, n - 1) / (n - 1)
-    thresholds = {
-        RegionMethod.XIE: (q, q_min * ratio),
-        RegionMethod.WANG: (s_fixed, q_min * (1 + ratio)),
-        RegionMethod.CALIBRATED: (q, q_min + s2_calibrated * stats.chi2.ppf(1 - alpha, 2)),
+    s2 = q_min / max(n - 3, 1)
+    return {
+        RegionMethod.XIE: q_min * ratio,
+        RegionMethod.WANG: q_min * (1 + ratio),
+        RegionMethod.CALIBRATED: q_min + inflation * s2 * stats.chi2.ppf(1 - alpha, 2),
     }
+
+
+def _regions(q, s_fixed, q_min, n, inflation, alpha, step) -> dict[RegionMethod, Region]:
+    valid = np.isfinite(q)
     out = {}
-    for method, (surface, threshold) in thresholds.items():
+    for method, threshold in region_thresholds(q_min, n, alpha, inflation).items():
+        surface = s_fixed if method is RegionMethod.WANG else q
         mask = valid & (np.where(valid, surface, np.inf) <= threshold)
         out[method] = Region(method, alpha, mask, float(threshold), float(mask.sum() * step * step))
     return out
