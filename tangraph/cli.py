@@ -154,6 +154,17 @@ def cmd_survey_plot(args: argparse.Namespace) -> None:
     print(f"wrote {args.output}")
 
 
+def cmd_experiment(args: argparse.Namespace) -> None:
+    from tangraph.experiments.registry import list_experiments, run_experiment
+
+    if args.name is None:
+        print("\n".join(list_experiments()))
+        return
+    status = run_experiment(args.name, args.study_args)
+    if status:
+        raise SystemExit(status)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (also used to document the CLI)."""
     from tangraph import __version__
@@ -214,6 +225,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
     _output(p, "figure file (.png, .pdf, .svg)")
     p.set_defaults(func=cmd_survey_plot)
+
+    p = sub.add_parser(
+        "experiment",
+        help="run a study of experiments/ (no name: list them)",
+        description="Run experiments/NAME/run.py; arguments after NAME go to the study "
+        "(e.g. --runs 200 --scheduler ADDR --quick; NAME --help lists them).",
+    )
+    p.add_argument("name", nargs="?", help="the study")
+    p.add_argument("study_args", nargs=argparse.REMAINDER, help="arguments of the study")
+    p.set_defaults(func=cmd_experiment)
     return parser
 
 
@@ -224,6 +245,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
+    if not args.verbose:  # Dask logs every worker's start and stop at INFO
+        for name in ("distributed", "tornado"):
+            logging.getLogger(name).setLevel(logging.WARNING)
     try:
         args.func(args)
     except (TangraphError, FileNotFoundError, FileExistsError) as exc:

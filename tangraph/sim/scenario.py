@@ -1,6 +1,6 @@
 """Scenarios: a map, a trajectory, a dead-reckoning model and a sonar, as a TOML file.
 
-``experiments/scenarios/NAME.toml`` (packed into the wheel as ``tangraph/_scenarios``)::
+``experiments/scenarios/NAME.toml`` (packed into the wheel under ``tangraph/_experiments``)::
 
     name = "wang2019"
     description = "..."
@@ -102,7 +102,7 @@ def _sonar_kind(sonar) -> str:
 def scenario_path() -> Path:
     """The folder of the shipped scenarios."""
     here = Path(__file__).resolve().parent
-    for folder in (here.parent / "_scenarios", here.parents[1] / "experiments" / "scenarios"):
+    for folder in (here.parent / "_experiments" / "scenarios", here.parents[1] / "experiments" / "scenarios"):
         if folder.is_dir():
             return folder
     raise TangraphError("the scenario folder is missing (experiments/scenarios)")
