@@ -135,6 +135,16 @@ def cmd_survey_info(args: argparse.Namespace) -> None:
     print(read_survey(args.survey).summary())
 
 
+def cmd_survey_import(args: argparse.Namespace) -> None:
+    from tangraph.survey import import_csv_xyz, write_survey
+
+    survey = import_csv_xyz(args.navigation, args.soundings, sign=args.sign, crs=args.crs)
+    write_survey(survey, args.output, overwrite=args.force)
+    print(survey.summary())
+    dropped = survey.meta["n_dropped_outside_navigation"]
+    print(f"dropped {dropped} soundings outside the log's time span; wrote {args.output}")
+
+
 def cmd_survey_plot(args: argparse.Namespace) -> None:
     from matplotlib.figure import Figure
 
@@ -213,11 +223,18 @@ def build_parser() -> argparse.ArgumentParser:
     _output(p, "survey file (.nc)")
     p.set_defaults(func=cmd_simulate)
 
-    survey = sub.add_parser("survey", help="survey files: info, plot")
+    survey = sub.add_parser("survey", help="survey files: info, import, plot")
     survey_sub = survey.add_subparsers(dest="survey_command", required=True)
     p = survey_sub.add_parser("info", help="describe a survey file")
     p.add_argument("survey", type=Path, help="survey file (.nc)")
     p.set_defaults(func=cmd_survey_info)
+    p = survey_sub.add_parser("import", help="a survey from a CSV navigation log and XYZ soundings")
+    p.add_argument("navigation", type=Path, help="CSV: time, north, east (or lat, lon), heading (deg), depth")
+    p.add_argument("soundings", type=Path, help="rows: time x/east y/north z")
+    p.add_argument("--sign", choices=["depth", "elevation"], default="depth", help="what z is")
+    p.add_argument("--crs", help="projected CRS of north/east, recorded in the survey")
+    _output(p, "survey file (.nc)")
+    p.set_defaults(func=cmd_survey_import)
     p = survey_sub.add_parser(
         "plot", help="truth vs dead reckoning over the hill-shaded map, swath footprints"
     )

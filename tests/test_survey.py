@@ -122,6 +122,15 @@ def test_import_csv_xyz_recovers_body_footprints(tmp_path):
         np.testing.assert_allclose(np.sort(got, axis=1), np.sort(want, axis=1), atol=1e-6)
     assert imported.meta["n_dropped_outside_navigation"] == 1
 
+    from tangraph.cli import main
+
+    out = tmp_path / "imported.nc"
+    assert (
+        main(["survey", "import", str(tmp_path / "nav.csv"), str(tmp_path / "soundings.xyz"), "-o", str(out)])
+        == 0
+    )
+    np.testing.assert_array_equal(read_survey(out).beam_depth, imported.beam_depth)
+
 
 def test_import_names_missing_columns(tmp_path):
     (tmp_path / "nav.csv").write_text("time,north,east,depth\n0,0,0,5\n1,1,0,5\n")

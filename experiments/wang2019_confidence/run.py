@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import functools
 import json
 import tomllib
 from pathlib import Path
@@ -35,23 +34,28 @@ def load_config() -> dict:
         return tomllib.load(f)
 
 
-@functools.cache
+_TERRAINS: dict = {}  # per process; a plain dict, as functools.cache cannot travel by value
+
+
 def terrain(name: str):
     """A catalogue map, or a seeded fractal terrain of graded roughness ("fractal-<relief>")."""
     from tangraph.maps import fractal, load
 
-    if name.startswith("fractal-"):
-        relief = float(name.split("-")[1])
-        return fractal(
-            (420, 420),
-            10.0,
-            rng=np.random.default_rng(7),
-            beta=3.5,
-            relief=relief,
-            mean_depth=8.0 + 3 * relief,
-            name=name,
-        )
-    return load(name)
+    if name not in _TERRAINS:
+        if name.startswith("fractal-"):
+            relief = float(name.split("-")[1])
+            _TERRAINS[name] = fractal(
+                (420, 420),
+                10.0,
+                rng=np.random.default_rng(7),
+                beta=3.5,
+                relief=relief,
+                mean_depth=8.0 + 3 * relief,
+                name=name,
+            )
+        else:
+            _TERRAINS[name] = load(name)
+    return _TERRAINS[name]
 
 
 def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
@@ -96,7 +100,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                 "n": fix.n_soundings,
                 "sigma": fix.sigma,
                 "tide": fix.tide,
-                "error": float(np.hypot(*(fix.position - truth))),
+                "fix_error": float(np.hypot(*(fix.position - truth))),
                 "accepted": fix.accepted,
                 "inflation": fix.variance_inflation,
             }
@@ -159,6 +163,46 @@ def summarise(table, truth_sigma: dict, truth_tide: float) -> str:
     return "\n".join(out)
 
 
+def figures(table, out: Path, tag: str) -> list[Path]:
+    """Coverage at 0.95 against window length per method, and one fix drawn like Wang's figures."""
+    from matplotlib.figure import Figure
+
+    from tangraph.matching import TapConfig, tap_fix
+    from tangraph.plot import plot_fix
+    from tangraph.sensors import DeadReckoningModel
+    from tangraph.sim import load_scenario, simulate
+
+    ok = table[(table["error"].isna()) & (table["failed"] == "")]
+    maps, noises = list(dict.fromkeys(ok["map"])), list(dict.fromkeys(ok["noise"]))
+    fig = Figure(figsize=(3.6 * len(noises), 3.0 * len(maps)), layout="constrained")
+    grid = fig.subplots(len(maps), len(noises), squeeze=False, sharex=True, sharey=True)
+    for (m, noise), g in ok.groupby(["map", "noise"], sort=False):
+        ax = grid[maps.index(m), noises.index(noise)]
+        for method in METHODS:
+            cover = g.groupby("window")[f"in_{method}_0.95"].mean()
+            ax.plot(cover.index, cover.values, "o-", label=method)
+        ax.axhline(0.95, color="k", lw=0.8, ls=":")
+        ax.set_ylim(0, 1.02)
+        ax.set_xlabel("pings per window")
+        ax.set_title(f"{m}, {noise}", fontsize="medium")
+    for row in grid:
+        row[0].set_ylabel("coverage at 0.95")
+    grid[0, 0].legend(fontsize="small")
+    paths = [out / f"coverage_{tag}.png"]
+    fig.savefig(paths[0], dpi=120)
+
+    scenario = load_scenario("wang2019")
+    scenario = dataclasses.replace(scenario, dead_reckoning=DeadReckoningModel.ideal())
+    survey = simulate(scenario, rng=np.random.default_rng(5), bathymetry=terrain("merimbula"))
+    fix = tap_fix(survey, terrain("merimbula"), 119, 10, TapConfig(half_width=40.0, step=2.0),
+                  prior=survey.true_pose[119, :2] + np.array([12.0, -8.0]))
+    fig = Figure(figsize=(7, 6), layout="constrained")
+    plot_fix(fix, fig.add_subplot(), truth=survey.true_pose[119, :2])
+    paths.append(out / f"example_fix_{tag}.png")
+    fig.savefig(paths[1], dpi=120)
+    return paths
+
+
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
 
@@ -183,6 +227,9 @@ def main(argv=None) -> int:
                 {"map": m, "noise": noise, "sonar": sonar, "windows": cfg["windows"], **cfg["search"]}
             )
     table = run_many(one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers)
+    if table["error"].notna().all():
+        print(f"every run failed; the first: {table['error'].iloc[0]}")
+        return 1
     args.out.mkdir(parents=True, exist_ok=True)
     tag = f"seed{args.seed}_runs{runs}{'_quick' if args.quick else ''}"
     table.to_csv(args.out / f"fixes_{tag}.csv", index=False)
@@ -193,6 +240,8 @@ def main(argv=None) -> int:
         f"{' --quick' if args.quick else ''}`  \nConfig: `config.toml` (recorded in config_{tag}.json)\n\n"
     )
     (args.out / f"summary_{tag}.md").write_text(header + text + "\n")
+    for path in figures(table, args.out, tag):
+        print(f"wrote {path}")
     (args.out / f"config_{tag}.json").write_text(
         json.dumps({"runs": runs, "seed": args.seed, **cfg}, indent=2)
     )

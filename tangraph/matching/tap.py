@@ -8,13 +8,15 @@ tide ``t(X)`` is the mean residual and ``sigma^2(X)`` the residual variance; the
 - **Wang** (eq. 18): ``S(X) <= S(X_p) [1 + chi2_{1-a}(n-1) / (n-1)]``;
 - **calibrated** (ours): the profile-likelihood-ratio region ``Q(X) - Q(X_p) <= c s^2
   chi2_{1-a}(2)`` with ``s^2 = Q(X_p) / (n - 3)`` (two position parameters and the tide
-  estimated) and ``c >= 1`` the variance inflation of spatially correlated residuals (lag-one
-  correlations along beams and along pings, each an AR(1) factor ``(1 + r) / (1 - r)``).
+  estimated) and ``c >= 1`` the variance inflation of spatially correlated residuals: a
+  cluster-robust (per ping) sandwich ratio of the score's variance for errors shared by a ping's
+  beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track.
 
 Covariances: from the curvature of ``Q`` at the fix (``2 c s^2 H^-1``, the inverse Fisher
 information of eq. 14), from the second moments of the normalised likelihood over the search
-grid (``exp(-(Q - Q_p) / (2 c s^2))``; honest for flat or multimodal surfaces), and the
-Cramér-Rao bound of the window from the map gradients.
+grid (``exp(-(Q - Q_p) / (2 c s^2))``; honest for flat or multimodal surfaces; where the
+likelihood is narrower than the grid step, the Cramér-Rao bound's), and the Cramér-Rao bound of the
+window from the map gradients.
 """
 
 from __future__ import annotations
@@ -297,24 +299,53 @@ def _residuals(bathymetry, patch, position, heading, tide):
 
 
 def _lag_one(r: np.ndarray, major: np.ndarray, minor: np.ndarray) -> float:
-    """Lag-one correlation of residuals ordered by (major, minor), pairs with minor + 1."""
+    """Lag-one correlation of residuals ordered by (major, minor), pairs with minor + 1; 0 unless
+    it is significant (above two standard errors, 2 / sqrt(pairs)), so white noise is not
+    inflated by the estimate's own scatter."""
     order = np.lexsort((minor, major))
     r, major, minor = r[order], major[order], minor[order]
     pair = (major[1:] == major[:-1]) & (minor[1:] == minor[:-1] + 1)
     if pair.sum() < 3:
         return 0.0
-    return float(np.sum(r[1:][pair] * r[:-1][pair]) / np.sum(r**2))
+    rho = float(np.sum(r[1:][pair] * r[:-1][pair]) / np.sum(r**2))
+    return rho if rho > 2.0 / np.sqrt(pair.sum()) else 0.0
+
+
+def _ping_sandwich(r: np.ndarray, gradient: np.ndarray, ping: np.ndarray) -> float | None:
+    """Cluster-robust (per ping) over i.i.d. variance of the position score, averaged over the two
+    directions; None with fewer than 5 pings (too few clusters to estimate it)."""
+    pings, cluster = np.unique(ping, return_inverse=True)
+    if pings.size < 5:
+        return None
+    g = gradient - gradient.mean(axis=0)
+    iid = (g.T @ g) * np.sum(r**2) / max(r.size - 3, 1)
+    score = np.zeros((pings.size, 2))
+    np.add.at(score, cluster, g * r[:, None])
+    robust = score.T @ score * pings.size / (pings.size - 1)
+    try:
+        ratio = float(np.trace(np.linalg.solve(iid, robust)) / 2)
+    except np.linalg.LinAlgError:
+        return None
+    # the ratio of white noise scatters by about sqrt(2 / (pings - 1)): count only a clear excess
+    return ratio if ratio > 1.0 + 2.0 * np.sqrt(2.0 / (pings.size - 1)) else 1.0
 
 
 def _variance_inflation(bathymetry, patch, position, heading, tide) -> float:
+    """How much spatially correlated residuals widen the likelihood: within a ping a
+    cluster-robust (sandwich) ratio of the score's variance (any error shared by a ping's beams,
+    such as an attitude error), or the lag-one AR(1) factor along the beams when the window has too
+    few pings; across pings the lag-one AR(1) factor along each beam's track."""
     r = _residuals(bathymetry, patch, position, heading, tide)
     if not np.all(np.isfinite(r)) or not np.any(r):
         return 1.0
-    factor = 1.0
-    for rho in (_lag_one(r, patch.ping, patch.beam), _lag_one(r, patch.beam, patch.ping)):
-        rho = float(np.clip(rho, 0.0, 0.95))
-        factor *= (1 + rho) / (1 - rho)
-    return factor
+    offsets = rotate(patch.offsets, heading)
+    gradient = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
+    within = _ping_sandwich(r, gradient, patch.ping) if np.all(np.isfinite(gradient)) else None
+    if within is None:
+        rho = float(np.clip(_lag_one(r, patch.ping, patch.beam), 0.0, 0.95))
+        within = (1 + rho) / (1 - rho)
+    rho = float(np.clip(_lag_one(r, patch.beam, patch.ping), 0.0, 0.95))
+    return max(1.0, within) * (1 + rho) / (1 - rho)
 
 
 def region_thresholds(
@@ -350,24 +381,38 @@ def _covariances(
     nn, ee = np.meshgrid(grid.north, grid.east, indexing="ij")
     mean = np.array([np.sum(weight * nn), np.sum(weight * ee)])
     dn, de = nn - mean[0], ee - mean[1]
-    region = (
-        np.array(
-            [
-                [np.sum(weight * dn * dn), np.sum(weight * dn * de)],
-                [np.sum(weight * dn * de), np.sum(weight * de * de)],
-            ]
-        )
-        + np.eye(2) * step**2 / 12
+    moments = np.array(
+        [
+            [np.sum(weight * dn * dn), np.sum(weight * dn * de)],
+            [np.sum(weight * dn * de), np.sum(weight * de * de)],
+        ]
     )
     _, hessian = _quadric(q, i, j, step)
-    curvature = 2 * s2 * np.linalg.inv(hessian) if hessian is not None else region
+    curvature = 2 * s2 * np.linalg.inv(hessian) if hessian is not None else None
+    # A likelihood narrower than the grid step is not resolved by its moments on the grid: there
+    # the Fisher information at the fix says more; without it, the grid's quantisation bounds it.
+    crlb = _crlb(bathymetry, patch, position, heading, s2)
+    if np.linalg.eigvalsh(moments).max() >= step**2:
+        region = moments
+    elif np.all(np.isfinite(crlb)):  # locally linear: the Fisher information at the fix
+        region = crlb
+    else:
+        region = moments + np.eye(2) * step**2 / 12
+    curvature = region if curvature is None else curvature
+    return {"region": region, "curvature": curvature, "crlb": crlb}
+
+
+def _crlb(bathymetry, patch, position, heading, s2) -> np.ndarray:
+    """Inverse Fisher information of the window's soundings at ``position`` (the tide absorbs the
+    mean gradient); infinite where it is singular."""
     offsets = rotate(patch.offsets, heading)
     g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
     g = g[np.all(np.isfinite(g), axis=1)]
-    g = g - g.mean(axis=0)  # the tide absorbs the mean gradient
+    g = g - g.mean(axis=0)
     information = g.T @ g / s2
-    crlb = np.linalg.inv(information) if np.linalg.cond(information) < 1e12 else np.full((2, 2), np.inf)
-    return {"region": region, "curvature": curvature, "crlb": crlb}
+    if g.shape[0] < 3 or np.linalg.cond(information) > 1e12:
+        return np.full((2, 2), np.inf)
+    return np.linalg.inv(information)
 
 
 def _quality(q, q_min, region: Region, config: TapConfig) -> FixQuality:
