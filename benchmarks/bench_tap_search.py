@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import time
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
+from _timing import best_time
 
 from tangraph.maps import BathymetryMap, fractal
 from tangraph.matching.search import CandidateGrid, criterion_sums
@@ -59,13 +59,7 @@ def numpy_search(bathymetry: BathymetryMap, offsets, depths, grid: CandidateGrid
 
 
 def best_ms(fn, repeat: int) -> float:
-    fn()  # warm up (and compile)
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * min(times)
+    return 1e3 * best_time(fn, repeat)
 
 
 def main() -> None:
