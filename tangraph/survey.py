@@ -18,7 +18,16 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 
-__all__ = ["SCHEMA_VERSION", "Survey", "footprints", "import_csv_xyz", "read_survey", "write_survey"]
+__all__ = [
+    "SCHEMA_VERSION",
+    "Survey",
+    "SurveyError",
+    "footprints",
+    "import_csv_xyz",
+    "read_survey",
+    "to_body",
+    "write_survey",
+]
 
 SCHEMA_VERSION = 1
 
