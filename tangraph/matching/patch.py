@@ -46,7 +46,7 @@ class Patch:
 
 
 def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10) -> Patch:
-    """The patch of pings ``end - n_pings + 1 .. end`` of a survey (NaN soundings dropped, counted).
+    """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted).
 
     Raises
     ------

@@ -126,7 +126,7 @@ class FixQuality:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TapFix:
-    """A terrain-aided position fix of the window of pings ``first .. index``."""
+    """A terrain-aided position fix of the window of pings from ``first`` to ``index``."""
 
     index: int
     first: int
