@@ -118,7 +118,7 @@ def plot_survey(
     sel[::step] = True
     mask = valid & sel[:, None]
     ax.scatter(
-        east[mask], north[mask], s=2, c="white", edgecolors="none", alpha=0.7, label="swath footprints"
+        east[mask], north[mask], s=2, c="tab:cyan", edgecolors="none", alpha=0.6, label="swath footprints"
     )
     if survey.true_pose is not None:
         ax.plot(survey.true_pose[:, 1], survey.true_pose[:, 0], "k-", lw=1.5, label="truth")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+from typing import Literal
 
 import numpy as np
 from scipy import ndimage, stats
@@ -73,10 +74,10 @@ class TapConfig:
     headings: tuple[float, ...] = (0.0,)
     criterion: Criterion = Criterion.MLE
     alpha: float = 0.05
-    covariance: str = "region"  # "region" | "curvature" | "crlb"
+    covariance: Literal["region", "curvature", "crlb"] = "region"
     calibrate: bool = True
     min_soundings: int = 10
-    search_method: str = "auto"
+    search_method: Literal["auto", "direct", "fft"] = "auto"
     max_area_fraction: float = 0.5
 
     def __post_init__(self) -> None:
@@ -89,6 +90,10 @@ class TapConfig:
         if self.covariance not in ("region", "curvature", "crlb"):
             raise TangraphError(
                 f"TapConfig: covariance must be region, curvature or crlb, got {self.covariance!r}"
+            )
+        if self.search_method not in ("auto", "direct", "fft"):
+            raise TangraphError(
+                f"TapConfig: search_method must be auto, direct or fft, got {self.search_method!r}"
             )
         object.__setattr__(self, "criterion", Criterion(self.criterion))
         object.__setattr__(self, "headings", tuple(float(h) for h in self.headings))
@@ -236,7 +241,7 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
     k_h, i, j = np.unravel_index(np.nanargmin(score), score.shape)
     heading = float(grid.headings[k_h])
     q = (n - 1) * sigma2[k_h]
-    q_min = float(q[i, j])
+    q_min = float(np.nanmin(q))  # regions and covariances live on Q, whatever picked the fix
     tide = float(sums.tide()[k_h, i, j])
     node = np.array([grid.north[i], grid.east[j]])
     shift, _ = _quadric(score[k_h], i, j, step)
