@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -114,6 +116,9 @@ def test_write_refuses_to_overwrite_and_leaves_no_temporary(tmp_path):
     write_map(m.replace(depth=m.depth + 1), path, overwrite=True)
     assert read_map(path).depth[0, 0] == m.depth[0, 0] + 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.nc"]
+    umask = os.umask(0)
+    os.umask(umask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~umask  # not mkstemp's private 0600
 
 
 def test_scattered_xyz_is_refused_as_a_grid_and_read_as_soundings(tmp_path):
