@@ -1,0 +1,52 @@
+"""Track: validation, errors against the truth, CSV (with lat/lon) and TUM files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.track import Track, position_errors, write_track_csv, write_track_tum
+
+
+def make_track(k=5):
+    time = np.arange(k, dtype=float)
+    pose = np.column_stack([10.0 * time, 5.0 * time, np.full(k, np.pi / 2)])
+    cov = np.tile(np.diag([4.0, 9.0, 0.01]), (k, 1, 1))
+    return Track(time=time, pose=pose, covariance=cov, method="test")
+
+
+def test_validation_names_the_problem():
+    with pytest.raises(TangraphError, match="strictly increasing"):
+        Track(time=[0.0, 0.0], pose=np.zeros((2, 3)))
+    with pytest.raises(TangraphError, match=r"pose has shape \(2, 2\)"):
+        Track(time=[0.0, 1.0], pose=np.zeros((2, 2)))
+    t = Track(time=[0.0, 1.0], pose=np.zeros((2, 3)))
+    assert np.all(np.isnan(t.covariance))
+
+
+def test_position_errors():
+    t = make_track()
+    truth = t.pose + np.array([3.0, 4.0, 0.0])
+    np.testing.assert_allclose(position_errors(t, truth), 5.0)
+
+
+def test_csv_with_latitude_longitude(tmp_path):
+    t = make_track()
+    path = write_track_csv(t, tmp_path / "t.csv", crs="EPSG:32755", origin=(5.9e6, 7.5e5))
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    assert data.dtype.names[:4] == ("time", "lat", "lon", "north")
+    np.testing.assert_allclose(data["north"], t.pose[:, 0])
+    np.testing.assert_allclose(data["heading_deg"], 90.0)
+    np.testing.assert_allclose(data["var_east"], 9.0)
+    assert -38 < data["lat"][0] < -36 and 149 < data["lon"][0] < 151  # 250 km east of 147 E
+    with pytest.raises(FileExistsError):
+        write_track_csv(t, path)
+
+
+def test_tum_quaternion_is_the_heading(tmp_path):
+    t = make_track()
+    data = np.loadtxt(write_track_tum(t, tmp_path / "t.tum"))
+    assert data.shape == (5, 8)
+    qz, qw = data[:, 6], data[:, 7]
+    np.testing.assert_allclose(2 * np.arctan2(qz, qw), np.pi / 2)
