@@ -1,0 +1,81 @@
+"""The bootstrap PF against an exact Kalman filter on a linear-Gaussian sloped seabed."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.filters.pf import PFConfig, bootstrap_pf
+from tangraph.maps import BathymetryMap
+from tangraph.survey import Survey
+
+GRADIENT = np.array([0.05, -0.02])  # depth = 500 + g . (north, east): bilinear is exact on it
+
+
+def sloped_seabed():
+    north = np.arange(-5000.0, 5001.0, 50.0)
+    east = np.arange(-5000.0, 5001.0, 50.0)
+    nn, ee = np.meshgrid(north, east, indexing="ij")
+    return BathymetryMap(north=north, east=east, depth=500 + GRADIENT[0] * nn + GRADIENT[1] * ee)
+
+
+def linear_gaussian_run(seed, *, k=30, q=2.0, sigma=1.0, p0=30.0):
+    """Truth moves by known steps plus N(0, q^2) per axis; one vertical sounding per ping with
+    N(0, sigma^2) noise; DR = the known steps from the true start (so DR increments are exact and
+    the process noise is what the filters model)."""
+    rng = np.random.default_rng(seed)
+    steps = np.column_stack([np.full(k - 1, 20.0), np.full(k - 1, 5.0)])
+    start = rng.normal(0.0, p0, 2)
+    truth = np.vstack([start, start + np.cumsum(steps + q * rng.standard_normal((k - 1, 2)), axis=0)])
+    dr = np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+    depth = 500 + truth @ GRADIENT + sigma * rng.standard_normal(k)
+    survey = Survey(
+        time=np.arange(k, dtype=float),
+        dr_pose=np.column_stack([dr, np.zeros(k)]),
+        vehicle_depth=np.full(k, 10.0),
+        beam_forward=np.zeros((k, 1)),
+        beam_starboard=np.zeros((k, 1)),
+        beam_depth=depth[:, None],
+        true_pose=np.column_stack([truth, np.zeros(k)]),
+    )
+    return survey
+
+
+def kalman(survey, *, q, sigma, p0):
+    """The exact filter: x_k = x_{k-1} + u_k + w, z_k = 500 + g . x_k + v."""
+    x = survey.dr_pose[0, :2].copy()
+    p = np.eye(2) * p0**2
+    for k in range(survey.n_pings):
+        if k > 0:
+            x = x + survey.dr_pose[k, :2] - survey.dr_pose[k - 1, :2]
+            p = p + np.eye(2) * q**2
+        h = GRADIENT[None, :]
+        s = h @ p @ h.T + sigma**2
+        gain = p @ h.T / s
+        x = x + (gain * (survey.beam_depth[k, 0] - 500 - h @ x)).ravel()
+        p = (np.eye(2) - gain @ h) @ p
+    return x, p
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_bootstrap_pf_matches_the_kalman_filter(seed):
+    q, sigma, p0, n = 2.0, 1.0, 30.0, 20000
+    survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0)
+    x_kf, p_kf = kalman(survey, q=q, sigma=sigma, p0=p0)
+    config = PFConfig(n_particles=n, init_std=p0, process_std=q, sounding_std=sigma)
+    track = bootstrap_pf(survey, sloped_seabed(), config, rng=np.random.default_rng(100 + seed))
+    x_pf, p_pf = track.pose[-1, :2], track.covariance[-1, :2, :2]
+    # Monte Carlo error of a weighted mean: about sqrt(P / ESS); ESS >= N/2 after resampling
+    ess = track.meta["ess"][-1]
+    tolerance = 5 * np.sqrt(np.diag(p_kf) / ess)
+    assert np.all(np.abs(x_pf - x_kf) < tolerance), (x_pf, x_kf, tolerance)
+    # sample covariance: relative standard error sqrt(2 / ESS) on the variances
+    np.testing.assert_allclose(np.diag(p_pf), np.diag(p_kf), rtol=5 * np.sqrt(2 / ess) + 0.02)
+
+
+def test_bad_configuration_is_named():
+    with pytest.raises(TangraphError, match="n_particles"):
+        PFConfig(n_particles=0)
+    with pytest.raises(TangraphError, match="sounding_std"):
+        PFConfig(sounding_std=0.0)
