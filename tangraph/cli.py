@@ -175,6 +175,105 @@ def cmd_experiment(args: argparse.Namespace) -> None:
         raise SystemExit(status)
 
 
+def _survey_and_map(args: argparse.Namespace):
+    from tangraph.maps import load_any
+    from tangraph.survey import read_survey
+
+    survey = read_survey(args.survey)
+    name = args.map or survey.meta.get("map")
+    if not name:
+        raise TangraphError(f"{args.survey} names no map: pass --map NAME|PATH")
+    return survey, load_any(name)
+
+
+def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
+    from tangraph.track import write_track_csv, write_track_tum
+
+    inputs = {Path(args.survey).resolve()}
+    for path in (args.output, args.tum, args.plot):
+        if path is not None and path.resolve() in inputs:
+            raise TangraphError(f"refusing to write over the input survey {args.survey}")
+    if args.output.suffix.lower() == ".tum":
+        write_track_tum(track, args.output, overwrite=args.force)
+    else:
+        write_track_csv(
+            track, args.output, crs=bathymetry.crs, origin=bathymetry.origin, overwrite=args.force
+        )
+    written = [args.output]
+    if args.tum is not None:
+        written.append(write_track_tum(track, args.tum, overwrite=args.force))
+    if args.plot is not None:
+        from matplotlib.figure import Figure
+
+        from tangraph.maps.io import write_atomically
+        from tangraph.navigation import dead_reckoning_track
+        from tangraph.plot import plot_tracks
+
+        fig = Figure(figsize=(8, 7.5), layout="constrained")
+        tracks = {"dead reckoning": dead_reckoning_track(survey), track.method: track}
+        plot_tracks(
+            tracks,
+            bathymetry,
+            fig.add_subplot(),
+            truth=survey.true_pose,
+            ellipses=track.method,
+            title=f"{track.method} on {bathymetry.name}",
+        )
+        write_atomically(
+            args.plot, args.force, lambda tmp: fig.savefig(tmp, dpi=130, format=args.plot.suffix[1:])
+        )
+        written.append(args.plot)
+    print("wrote " + ", ".join(str(p) for p in written))
+
+
+def cmd_navigate(args: argparse.Namespace) -> None:
+    import dataclasses
+
+    from tangraph.navigation import Method, navigate, track_summary
+
+    survey, bathymetry = _survey_and_map(args)
+    method = Method(args.method)
+    config = None
+    if args.particles is not None:
+        if method.is_graph or method is Method.MLE:
+            raise TangraphError(f"--particles does not apply to method {method.value!r}")
+        from tangraph.filters import default_config
+
+        config = dataclasses.replace(default_config(method.value), n_particles=args.particles)
+    track = navigate(
+        survey, bathymetry, method, config, rng=np.random.default_rng(args.seed), progress=not args.quiet
+    )
+    print(track_summary(track, survey))
+    _write_track(args, track, survey, bathymetry)
+
+
+def cmd_smooth(args: argparse.Namespace) -> None:
+    from tangraph.navigation import navigate, track_summary
+
+    survey, bathymetry = _survey_and_map(args)
+    track = navigate(survey, bathymetry, "smoother", progress=not args.quiet)
+    print(track_summary(track, survey))
+    for fix in track.meta.get("fixes", []):
+        if not fix.get("accepted"):
+            log.info("fix at ping %s refused: %s", fix.get("index"), fix.get("reason"))
+    _write_track(args, track, survey, bathymetry)
+
+
+def cmd_demo(args: argparse.Namespace) -> None:
+    from tangraph.demo import format_table, run_demo
+
+    result = run_demo(
+        args.out,
+        map_name=args.map,
+        seed=args.seed,
+        quick=args.quick,
+        force=args.force,
+        progress=not args.quiet,
+    )
+    print(format_table(result.rows))
+    print(f"wrote {result.report} and {len(result.figures)} figures in {result.seconds:.0f} s")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (also used to document the CLI)."""
     from tangraph import __version__
@@ -252,6 +351,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("name", nargs="?", help="the study")
     p.add_argument("study_args", nargs=argparse.REMAINDER, help="arguments of the study")
     p.set_defaults(func=cmd_experiment)
+
+    from tangraph.navigation import Method
+
+    def track_outputs(p: argparse.ArgumentParser) -> None:
+        p.add_argument("survey", type=Path, help="survey file (.nc)")
+        p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
+        _output(p, "track file: .csv (time, lat, lon, north, east, heading, covariance) or .tum")
+        p.add_argument("--tum", type=Path, help="also write the track in TUM format here")
+        p.add_argument("--plot", type=Path, help="figure of the track vs DR (and truth) over the map")
+        p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+
+    p = sub.add_parser("navigate", help="estimate a survey's track with one method (filters or online graph)")
+    track_outputs(p)
+    p.add_argument("--method", choices=[m.value for m in Method], default="isam2", help="the estimator")
+    p.add_argument("--seed", type=int, default=0, help="seed of a particle filter")
+    p.add_argument("--particles", type=int, help="particle count (default: the filter's)")
+    p.set_defaults(func=cmd_navigate)
+
+    p = sub.add_parser("smooth", help="re-navigate a recorded survey with the batch factor-graph smoother")
+    track_outputs(p)
+    p.set_defaults(func=cmd_smooth)
+
+    p = sub.add_parser("demo", help="simulate, navigate with every method, and write a report")
+    p.add_argument("--map", default="merimbula", help="map with a demo survey (default: merimbula)")
+    p.add_argument("--out", type=Path, default=Path("demo"), help="report folder (default: ./demo)")
+    p.add_argument("--seed", type=int, default=7, help="seed of the simulation and the filters")
+    p.add_argument("--quick", action="store_true", help="half the survey, fewer particles")
+    p.add_argument("--force", action="store_true", help="replace the report folder if it exists")
+    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=cmd_demo)
     return parser
 
 

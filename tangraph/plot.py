@@ -10,7 +10,15 @@ from matplotlib.figure import Figure
 
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["covariance_ellipse", "hillshade_rgb", "plot_fix", "plot_map", "plot_survey"]
+__all__ = [
+    "covariance_ellipse",
+    "hillshade_rgb",
+    "plot_errors",
+    "plot_fix",
+    "plot_map",
+    "plot_survey",
+    "plot_tracks",
+]
 
 
 def hillshade_rgb(
@@ -196,4 +204,106 @@ def plot_fix(fix, ax: Axes | None = None, *, truth=None, title: str | None = Non
         if title is not None
         else f"TAP fix of pings {fix.first}..{fix.index}: sigma {fix.sigma:.3f} m, tide {fix.tide:.2f} m"
     )
+    return ax
+
+
+_STYLE = {
+    "truth": ("k", "-", 1.6),
+    "dr": ("tab:red", "--", 1.4),
+    "smoother": ("tab:blue", "-", 1.4),
+    "isam2": ("tab:cyan", "-", 1.1),
+    "pf": ("tab:orange", "-", 0.9),
+    "ipf": ("tab:green", "-", 0.9),
+    "sjcpf": ("tab:purple", "-", 0.9),
+    "jbpf": ("tab:brown", "-", 0.9),
+    "tercom-pf": ("tab:olive", "-", 0.9),
+    "mle": ("tab:pink", "-", 0.9),
+}
+
+
+def _style(name: str) -> dict:
+    colour, ls, lw = _STYLE.get(name, ("tab:gray", "-", 1.0))
+    return {"color": colour, "ls": ls, "lw": lw}
+
+
+def plot_tracks(
+    tracks: dict,
+    bathymetry: BathymetryMap | None = None,
+    ax: Axes | None = None,
+    *,
+    truth: np.ndarray | None = None,
+    ellipses: str | None = None,
+    n_ellipses: int = 12,
+    title: str | None = None,
+    zoom: bool = True,
+) -> Axes:
+    """Estimated tracks (``{label: Track}``) over the hill-shaded map, with the truth and the
+    95 % ellipses of the track named by ``ellipses`` at ``n_ellipses`` poses."""
+    if ax is None:
+        fig = Figure(figsize=(8, 7), layout="constrained")
+        ax = fig.add_subplot()
+    if bathymetry is not None:
+        plot_map(bathymetry, ax, title="", colorbar=False)
+    if truth is not None:
+        ax.plot(truth[:, 1], truth[:, 0], label="truth", **_style("truth"))
+    for label, track in tracks.items():
+        ax.plot(track.pose[:, 1], track.pose[:, 0], label=label, **_style(track.method))
+    if ellipses is not None:
+        track = tracks[ellipses]
+        known = np.flatnonzero(np.all(np.isfinite(track.covariance[:, :2, :2]), axis=(1, 2)))
+        for k in known[:: max(1, known.size // n_ellipses)] if known.size else []:
+            e = track.pose[k, :2] + covariance_ellipse(track.covariance[k, :2, :2])
+            ax.plot(e[:, 1], e[:, 0], color=_style(track.method)["color"], lw=0.8, alpha=0.9)
+        ax.plot([], [], color=_style(track.method)["color"], lw=0.8, label=f"{ellipses}: 95% ellipses")
+    if zoom:
+        everything = [t.pose[:, :2] for t in tracks.values()] + ([truth[:, :2]] if truth is not None else [])
+        points = np.vstack(everything)
+        lo, hi = points.min(axis=0), points.max(axis=0)
+        pad = 0.08 * np.max(hi - lo) + 20.0
+        ax.set_xlim(lo[1] - pad, hi[1] + pad)
+        ax.set_ylim(lo[0] - pad, hi[0] + pad)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    ax.set_aspect("equal")
+    ax.legend(loc="best", fontsize="small", framealpha=0.85)
+    if title is not None:
+        ax.set_title(title)
+    return ax
+
+
+def plot_errors(
+    tracks: dict,
+    truth: np.ndarray,
+    ax: Axes | None = None,
+    *,
+    bound: str | None = None,
+    title: str | None = None,
+) -> Axes:
+    """Horizontal position error against time of each track (``{label: Track}``), with the
+    2-sigma bound of the track named by ``bound`` (twice the standard deviation along the worst
+    axis of its position covariance)."""
+    from tangraph.track import position_errors
+
+    if ax is None:
+        fig = Figure(figsize=(9, 4.5), layout="constrained")
+        ax = fig.add_subplot()
+    for label, track in tracks.items():
+        ax.plot(track.time, position_errors(track, truth), label=label, **_style(track.method))
+    if bound is not None:
+        track = tracks[bound]
+        cov = track.covariance[:, :2, :2]
+        known = np.all(np.isfinite(cov), axis=(1, 2))
+        radius = np.full(track.n_poses, np.nan)
+        if known.any():
+            radius[known] = 2.0 * np.sqrt(np.linalg.eigvalsh(cov[known])[:, -1])
+        ax.fill_between(
+            track.time, 0, radius, color=_style(track.method)["color"], alpha=0.15, label=f"{bound}: 2-sigma"
+        )
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("horizontal error (m)")
+    ax.set_ylim(bottom=0)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper left", fontsize="small", ncols=2, framealpha=0.85)
+    if title is not None:
+        ax.set_title(title)
     return ax

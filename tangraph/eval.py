@@ -1,0 +1,76 @@
+"""Metrics of estimated tracks against the truth: RMSE, final error, NEES and its chi-square band.
+
+Every estimator returns a :class:`~tangraph.track.Track`; these functions compare one with the
+true poses of a simulated survey (or a GPS-surveyed ship track). They never touch files.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import stats
+
+from tangraph.errors import TangraphError
+from tangraph.track import Track, position_errors
+
+__all__ = ["anees_band", "position_nees", "track_metrics"]
+
+
+def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
+    """Normalised estimation error squared ``e^T P^-1 e`` of each horizontal position, shape (K,).
+
+    NaN where the track's position covariance is unknown (NaN) or not positive definite.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from tangraph.track import Track
+    >>> cov = np.tile(np.diag([4.0, 1.0, np.nan]), (2, 1, 1))
+    >>> t = Track(time=[0.0, 1.0], pose=[[2.0, 0.0, 0.0], [0.0, 1.0, 0.0]], covariance=cov)
+    >>> position_nees(t, np.zeros((2, 3))).tolist()
+    [1.0, 1.0]
+    """
+    true_pose = np.asarray(true_pose, float)
+    if true_pose.shape != track.pose.shape:
+        raise TangraphError(f"truth has shape {true_pose.shape}, the track {track.pose.shape}")
+    e = track.pose[:, :2] - true_pose[:, :2]
+    p = track.covariance[:, :2, :2]
+    a, b, d = p[:, 0, 0], p[:, 0, 1], p[:, 1, 1]
+    det = a * d - b * b
+    ok = np.isfinite(det) & (det > 0) & (a > 0)
+    safe = np.where(ok, det, 1.0)
+    out = (d * e[:, 0] ** 2 - 2 * b * e[:, 0] * e[:, 1] + a * e[:, 1] ** 2) / safe
+    return np.where(ok, out, np.nan)
+
+
+def anees_band(n: int, dof: int = 2, probability: float = 0.95) -> tuple[float, float]:
+    """Two-sided ``probability`` band of the average of ``n`` independent chi-square(``dof``) NEES.
+
+    A consistent estimator's ANEES over ``n`` independent samples lies inside it with that
+    probability: ``chi2.ppf([a/2, 1 - a/2], n dof) / n``. (Consecutive poses of one track are
+    correlated, so over a single track the band is only a guide; over independent runs it is exact.)
+    """
+    if n < 1:
+        raise TangraphError(f"anees_band: n must be at least 1, got {n}")
+    a = 1.0 - probability
+    lo, hi = stats.chi2.ppf([a / 2, 1 - a / 2], n * dof) / n
+    return float(lo), float(hi)
+
+
+def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict[str, float]:
+    """RMSE, mean, final and maximum horizontal error (m), and ANEES of a track.
+
+    ``skip`` leaves out the first poses (a filter's convergence) from every figure.
+    """
+    errors = position_errors(track, true_pose)[skip:]
+    if errors.size == 0:
+        raise TangraphError(f"track_metrics: skip={skip} leaves no pose of {track.n_poses}")
+    nees = position_nees(track, true_pose)[skip:]
+    known = np.isfinite(nees)
+    return {
+        "rmse": float(np.sqrt(np.mean(errors**2))),
+        "mean_error": float(np.mean(errors)),
+        "final_error": float(errors[-1]),
+        "max_error": float(np.max(errors)),
+        "anees": float(np.mean(nees[known])) if known.any() else float("nan"),
+        "nees_fraction_known": float(np.mean(known)),
+    }

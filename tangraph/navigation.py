@@ -1,0 +1,133 @@
+"""One entry point over every estimator: the particle filters and the factor graph.
+
+:func:`navigate` runs the method named (``pf``, ``ipf``, ``sjcpf``, ``jbpf``, ``tercom-pf``,
+``mle``, ``isam2`` or ``smoother``) on a survey and a map and returns its
+:class:`~tangraph.track.Track`; :func:`dead_reckoning_track` is the baseline every estimator
+must beat; :func:`track_summary` is the text the CLI and the demo print.
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.survey import Survey
+from tangraph.track import Track
+
+__all__ = ["Method", "dead_reckoning_track", "navigate", "track_summary"]
+
+
+class Method(enum.StrEnum):
+    """Every estimator of tangraph, by the name the CLI uses."""
+
+    PF = "pf"
+    IPF = "ipf"
+    SJCPF = "sjcpf"
+    JBPF = "jbpf"
+    TERCOM_PF = "tercom-pf"
+    MLE = "mle"
+    ISAM2 = "isam2"
+    SMOOTHER = "smoother"
+
+    @property
+    def is_graph(self) -> bool:
+        return self in (Method.ISAM2, Method.SMOOTHER)
+
+
+def _method(method: Method | str) -> Method:
+    try:
+        return Method(method)
+    except ValueError:
+        known = ", ".join(m.value for m in Method)
+        raise TangraphError(f"unknown navigation method {method!r}; known: {known}") from None
+
+
+def navigate(
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    method: Method | str,
+    config=None,
+    *,
+    rng: np.random.Generator | None = None,
+    dr_model=None,
+    progress: bool = False,
+) -> Track:
+    """Run one estimator on a survey.
+
+    Parameters
+    ----------
+    survey, bathymetry
+        The run and the prior map.
+    method : Method or str
+        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"``, ``"mle"`` (the particle
+        family, :mod:`tangraph.filters`) or ``"isam2"``, ``"smoother"`` (the factor graph,
+        :mod:`tangraph.graph`).
+    config
+        The method's own configuration (``tangraph.filters.*Config`` or
+        ``tangraph.graph.GraphConfig``); ``None`` for its defaults.
+    rng : numpy.random.Generator
+        Required by the particle filters; unused by the graph, which is deterministic.
+    dr_model : DeadReckoningModel, optional
+        The graph's odometry error model; by default the one a simulated survey records.
+    progress : bool
+        Show a progress bar over the pings.
+    """
+    method = _method(method)
+    if method is Method.ISAM2 or method is Method.SMOOTHER:
+        from tangraph import graph
+
+        run = graph.navigate_online if method is Method.ISAM2 else graph.smooth_survey
+        return run(survey, bathymetry, config, dr_model=dr_model, progress=progress)
+    if rng is None:
+        raise TangraphError(
+            f"navigation method {method.value!r} is random: pass rng=np.random.default_rng(seed)"
+        )
+    from tangraph import filters
+
+    return filters.run_filter(method.value, survey, bathymetry, config, rng=rng, progress=progress)
+
+
+def dead_reckoning_track(survey: Survey) -> Track:
+    """The dead-reckoned poses as a track (no covariance): the baseline."""
+    return Track(time=survey.time, pose=survey.dr_pose, method="dr")
+
+
+def track_summary(track: Track, survey: Survey) -> str:
+    """A few lines on a track: fixes used and refused (graph), divergences (filters), run time,
+    and the errors against the truth where the survey has one."""
+    lines = [
+        f"method       {track.method}: {track.n_poses} poses over {track.time[-1] - track.time[0]:.1f} s"
+    ]
+    meta = track.meta
+    if "fixes" in meta:
+        reasons: dict[str, int] = {}
+        for fix in meta["fixes"]:
+            reason = str(fix.get("reason", "accepted")).split(":")[0]
+            reasons[reason] = reasons.get(reason, 0) + 1
+        detail = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
+        lines.append(
+            f"fixes        {meta.get('n_fixes_accepted', 0)} accepted, {meta.get('n_fixes_rejected', 0)} "
+            f"rejected ({detail})"
+        )
+    if "n_divergences" in meta:
+        lines.append(f"divergences  {meta['n_divergences']} (re-initialised from dead reckoning)")
+    if track.timings:
+        total = track.timings.get("total", float("nan"))
+        per_step = track.timings.get("per_step", float("nan"))
+        lines.append(f"run time     {total:.2f} s in all, {1e3 * per_step:.2f} ms per step")
+    if survey.true_pose is not None:
+        from tangraph.eval import track_metrics
+
+        m = track_metrics(track, survey.true_pose)
+        d = track_metrics(dead_reckoning_track(survey), survey.true_pose)
+        lines.append(
+            f"error        RMSE {m['rmse']:.2f} m, final {m['final_error']:.2f} m, "
+            f"max {m['max_error']:.2f} m "
+            f"(dead reckoning: RMSE {d['rmse']:.2f} m, final {d['final_error']:.2f} m)"
+        )
+        if np.isfinite(m["anees"]):
+            lines.append(f"consistency  ANEES {m['anees']:.2f} (2 for an honest covariance)")
+    return "\n".join(lines)
