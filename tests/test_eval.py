@@ -1,0 +1,54 @@
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.eval import anees_band, position_nees, track_metrics
+from tangraph.track import Track
+
+
+def _track(pose, cov=None):
+    pose = np.asarray(pose, float)
+    return Track(time=np.arange(len(pose), dtype=float), pose=pose, covariance=cov)
+
+
+def test_position_nees_matches_the_direct_solve_and_is_nan_where_unknown():
+    rng = np.random.default_rng(1)
+    a = rng.normal(size=(5, 2, 2))
+    cov = np.full((5, 3, 3), np.nan)
+    cov[:, :2, :2] = a @ np.swapaxes(a, 1, 2) + 0.1 * np.eye(2)
+    cov[3, :2, :2] = np.nan  # unknown
+    cov[4, :2, :2] = [[1.0, 1.0], [1.0, 1.0]]  # singular
+    pose = rng.normal(size=(5, 3))
+    got = position_nees(_track(pose, cov), np.zeros((5, 3)))
+    for k in range(3):
+        e = pose[k, :2]
+        assert got[k] == pytest.approx(e @ np.linalg.solve(cov[k, :2, :2], e), rel=1e-12)
+    assert np.isnan(got[3]) and np.isnan(got[4])
+
+
+def test_track_metrics_on_a_known_error():
+    truth = np.zeros((4, 3))
+    pose = np.array([[3.0, 4.0, 0], [0, 0, 0], [0, 0, 0], [0, 1.0, 0]])
+    m = track_metrics(_track(pose), truth)
+    assert m["rmse"] == pytest.approx(np.sqrt((25 + 1) / 4))
+    assert m["final_error"] == 1.0 and m["max_error"] == 5.0 and np.isnan(m["anees"])
+    assert track_metrics(_track(pose), truth, skip=1)["max_error"] == 1.0
+    with pytest.raises(TangraphError, match="skip=4"):
+        track_metrics(_track(pose), truth, skip=4)
+    with pytest.raises(TangraphError, match="shape"):
+        track_metrics(_track(pose), np.zeros((3, 3)))
+
+
+def test_anees_band_covers_an_honest_covariance_at_its_probability():
+    # 4000 seeded repetitions of an ANEES over 20 honest 2-D errors: the band must hold 95 % of them
+    # within three Monte Carlo standard errors (sqrt(0.95 * 0.05 / 4000) = 0.0034).
+    rng = np.random.default_rng(7)
+    lo, hi = anees_band(20)
+    cov = np.array([[4.0, 1.5], [1.5, 2.0]])
+    errors = rng.multivariate_normal([0, 0], cov, size=(4000, 20))
+    nees = np.einsum("rka,ab,rkb->rk", errors, np.linalg.inv(cov), errors)
+    inside = np.mean((nees.mean(axis=1) >= lo) & (nees.mean(axis=1) <= hi))
+    assert abs(inside - 0.95) < 3 * np.sqrt(0.95 * 0.05 / 4000)
+    assert lo < 2 < hi
+    with pytest.raises(TangraphError):
+        anees_band(0)
