@@ -57,7 +57,11 @@ def anees_band(n: int, dof: int = 2, probability: float = 0.95) -> tuple[float, 
 
 
 def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict[str, float]:
-    """RMSE, mean, final and maximum horizontal error (m), and ANEES of a track.
+    """RMSE, mean, final and maximum horizontal error (m), ANEES and final NEES of a track.
+
+    Over independent runs, the final NEES values are independent chi-square(2) samples, so their
+    mean can be checked against :func:`anees_band` exactly; the ANEES of one track averages
+    correlated poses and is a guide only.
 
     ``skip`` leaves out the first poses (a filter's convergence) from every figure.
     """
@@ -72,5 +76,6 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict
         "final_error": float(errors[-1]),
         "max_error": float(np.max(errors)),
         "anees": float(np.mean(nees[known])) if known.any() else float("nan"),
+        "final_nees": float(nees[-1]),
         "nees_fraction_known": float(np.mean(known)),
     }
