@@ -1,21 +1,95 @@
-"""Particle-filter front ends on one shared terrain likelihood (no gtsam here)."""
+"""Particle-filter front ends on one shared motion model and terrain likelihood (no gtsam here).
 
+:func:`run_filter` runs any of them by :class:`FilterMethod`: the bootstrap PF, Han et al.'s IPF,
+Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF and grid-search MLE fixes.
+"""
+
+from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
+from tangraph.filters.core import (
+    Belief,
+    FilterModel,
+    ParticleConfig,
+    StepResult,
+    initial_belief,
+    jitter,
+    measure,
+    resample_belief,
+    resample_if_needed,
+    reweight,
+    run_particle_filter,
+    weighted_moments,
+)
+from tangraph.filters.correlation import (
+    Correlation,
+    correlate_rows,
+    kendall_rows,
+    pearson_rows,
+    spearman_rows,
+)
+from tangraph.filters.ipf import IPFConfig, ipf, ipf_step
+from tangraph.filters.jbpf import JBPFConfig, jbpf, jbpf_step
 from tangraph.filters.likelihood import (
     FilterDivergence,
     TerrainLikelihood,
     effective_sample_size,
     log_normalise,
 )
-from tangraph.filters.pf import PFConfig, bootstrap_pf
+from tangraph.filters.mle import MLEConfig, mle_filter
+from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
+from tangraph.filters.pf import PFConfig, bootstrap_pf, pf_step
 from tangraph.filters.resampling import Resampler, resample
+from tangraph.filters.sjcpf import SJCPFConfig, correlation_log_weight, sjcpf, sjcpf_step
+from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf, tercom_pf_step
 
 __all__ = [
+    "Belief",
+    "Correlation",
     "FilterDivergence",
+    "FilterMethod",
+    "FilterModel",
+    "IPFConfig",
+    "JBPFConfig",
+    "MLEConfig",
+    "MotionModel",
     "PFConfig",
+    "ParticleConfig",
+    "Ping",
     "Resampler",
+    "SJCPFConfig",
+    "StepResult",
+    "TercomPFConfig",
     "TerrainLikelihood",
+    "TerrainModel",
+    "TerrainUpdate",
     "bootstrap_pf",
+    "config_type",
+    "correlate_rows",
+    "correlation_log_weight",
+    "default_config",
     "effective_sample_size",
+    "initial_belief",
+    "ipf",
+    "ipf_step",
+    "jbpf",
+    "jbpf_step",
+    "jitter",
+    "kendall_rows",
     "log_normalise",
+    "measure",
+    "mle_filter",
+    "pearson_rows",
+    "pf_step",
     "resample",
+    "resample_belief",
+    "resample_if_needed",
+    "reweight",
+    "run_filter",
+    "run_particle_filter",
+    "sjcpf",
+    "sjcpf_step",
+    "spearman_rows",
+    "survey_pings",
+    "tercom_pf",
+    "tercom_pf_step",
+    "weighted_moments",
 ]

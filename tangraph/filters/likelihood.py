@@ -50,6 +50,36 @@ def _log_likelihood_kernel(depth, north0, east0, inv_dn, inv_de, particles, offs
         out[p] = total
 
 
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
+def _residual_sums_kernel(depth, north0, east0, inv_dn, inv_de, particles, offsets, measured, out):
+    """``out[p] = (sum r, sum r^2)`` of ``r = z - h(x_p + o_b)``; NaN for a particle with any
+    sounding off the map or by a NaN cell."""
+    for p in range(particles.shape[0]):
+        s1 = 0.0
+        s2 = 0.0
+        for b in range(offsets.shape[0]):
+            ok, i, j, ty, tx = _locate(
+                depth,
+                north0,
+                east0,
+                inv_dn,
+                inv_de,
+                particles[p, 0] + offsets[b, 0],
+                particles[p, 1] + offsets[b, 1],
+            )
+            if not ok:
+                s1 = np.nan
+                break
+            r = measured[b] - _bilinear(depth, i, j, ty, tx)[0]
+            if r != r:
+                s1 = np.nan
+                break
+            s1 += r
+            s2 += r * r
+        out[p, 0] = s1
+        out[p, 1] = s2 if s1 == s1 else np.nan
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class TerrainLikelihood:
     """Gaussian sounding errors of std ``sigma`` (m) around the map depth plus ``tide``."""
@@ -88,6 +118,33 @@ class TerrainLikelihood:
             depths[keep] - self.tide,
             1.0 / self.sigma**2,
             out,
+        )
+        return out
+
+    def residual_sums(self, particles, offsets, depths) -> np.ndarray:
+        """``(N, 2)``: per particle the sum and the sum of squares of the residuals
+        ``r = z - h(x + o)`` (measured minus map depth, ``tide`` not removed) of the finite
+        soundings; NaN rows for particles with a sounding off the map or by a NaN cell.
+
+        One compiled pass over particles x soundings; the filters build their likelihood (with
+        a known or an estimated tide) from these sums.
+        """
+        particles = np.ascontiguousarray(particles, dtype=np.float64)
+        offsets = np.ascontiguousarray(offsets, dtype=np.float64)
+        depths = np.asarray(depths, dtype=np.float64)
+        if particles.ndim != 2 or particles.shape[1] != 2:
+            raise TangraphError(f"particles must have shape (N, 2), got {particles.shape}")
+        if offsets.ndim != 2 or offsets.shape[1] != 2 or depths.shape != (offsets.shape[0],):
+            raise TangraphError(
+                f"offsets (B, 2) and depths (B,) do not match: {offsets.shape}, {depths.shape}"
+            )
+        keep = np.isfinite(depths)
+        if not keep.all():
+            offsets, depths = np.ascontiguousarray(offsets[keep]), depths[keep]
+        out = np.empty((particles.shape[0], 2))
+        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
+        _residual_sums_kernel(
+            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, offsets, depths, out
         )
         return out
 

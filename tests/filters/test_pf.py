@@ -63,7 +63,9 @@ def test_bootstrap_pf_matches_the_kalman_filter(seed):
     q, sigma, p0, n = 2.0, 1.0, 30.0, 20000
     survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0)
     x_kf, p_kf = kalman(survey, q=q, sigma=sigma, p0=p0)
-    config = PFConfig(n_particles=n, init_std=p0, process_std=q, sounding_std=sigma)
+    config = PFConfig(
+        n_particles=n, init_std=p0, process_std=q, process_fraction=0.0, sounding_std=sigma, tide_std=0.0
+    )
     track = bootstrap_pf(survey, sloped_seabed(), config, rng=np.random.default_rng(100 + seed))
     x_pf, p_pf = track.pose[-1, :2], track.covariance[-1, :2, :2]
     # Monte Carlo error of a weighted mean: about sqrt(P / ESS); ESS >= N/2 after resampling

@@ -1,0 +1,115 @@
+"""One entry point over the particle family: :func:`run_filter` by :class:`FilterMethod`."""
+
+from __future__ import annotations
+
+import enum
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.filters.ipf import IPFConfig, ipf
+from tangraph.filters.jbpf import JBPFConfig, jbpf
+from tangraph.filters.mle import MLEConfig, mle_filter
+from tangraph.filters.pf import PFConfig, bootstrap_pf
+from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
+from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
+from tangraph.maps.grid import BathymetryMap
+from tangraph.survey import Survey
+from tangraph.track import Track
+
+__all__ = ["FilterMethod", "config_type", "default_config", "run_filter"]
+
+
+class FilterMethod(enum.StrEnum):
+    """The filters, by the names the CLI uses (``Track.method`` is the value)."""
+
+    PF = "pf"
+    IPF = "ipf"
+    SJCPF = "sjcpf"
+    JBPF = "jbpf"
+    TERCOM_PF = "tercom-pf"
+    MLE = "mle"
+
+
+_RUNNERS: dict[FilterMethod, tuple[type, Any]] = {
+    FilterMethod.PF: (PFConfig, bootstrap_pf),
+    FilterMethod.IPF: (IPFConfig, ipf),
+    FilterMethod.SJCPF: (SJCPFConfig, sjcpf),
+    FilterMethod.JBPF: (JBPFConfig, jbpf),
+    FilterMethod.TERCOM_PF: (TercomPFConfig, tercom_pf),
+    FilterMethod.MLE: (MLEConfig, mle_filter),
+}
+
+
+def _method(method: FilterMethod | str) -> FilterMethod:
+    try:
+        return FilterMethod(method)
+    except ValueError:
+        known = ", ".join(m.value for m in FilterMethod)
+        raise TangraphError(f"unknown filter method {method!r}; known: {known}") from None
+
+
+def config_type(method: FilterMethod | str) -> type:
+    """The config dataclass of a method (``PFConfig`` for ``"pf"``, ...)."""
+    return _RUNNERS[_method(method)][0]
+
+
+def default_config(method: FilterMethod | str):
+    """The default configuration of a method.
+
+    Examples
+    --------
+    >>> default_config("sjcpf").jitter_std
+    15.0
+    """
+    return config_type(method)()
+
+
+def run_filter(
+    method: FilterMethod | str,
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    config=None,
+    *,
+    rng: np.random.Generator,
+    progress: bool = False,
+) -> Track:
+    """Run one filter of the particle family over a survey.
+
+    Parameters
+    ----------
+    method : FilterMethod or str
+        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"`` or ``"mle"``.
+    survey, bathymetry
+        The run and the prior map.
+    config
+        The method's own config (``PFConfig``, ``IPFConfig``, ``SJCPFConfig``, ``JBPFConfig``,
+        ``TercomPFConfig``, ``MLEConfig``); None for its defaults.
+    rng : numpy.random.Generator
+        The source of randomness (the MLE filter does not use it).
+    progress : bool
+        Show a progress bar over the pings.
+
+    Returns
+    -------
+    Track
+        Weighted mean poses (heading: dead reckoning), covariances ``(K, 3, 3)`` with NaN heading
+        terms, ``method`` the method's value; ``meta``: ``ess`` (per ping), ``n_resampled``,
+        ``n_divergences``, ``divergence_steps``, ``config`` and the method's counts;
+        ``timings``: ``total``, ``per_step`` (s).
+
+    Raises
+    ------
+    TangraphError
+        An unknown method, or a config of another method's type.
+    """
+    method = _method(method)
+    cls, runner = _RUNNERS[method]
+    if config is None:
+        config = cls()
+    elif type(config) is not cls:
+        raise TangraphError(
+            f"filter {method.value!r} takes a {cls.__name__} (or None), got {type(config).__name__}"
+        )
+    return runner(survey, bathymetry, config, rng=rng, progress=progress)

@@ -1,0 +1,447 @@
+"""What every particle filter shares: its configuration, the belief, the loop pieces, the runner.
+
+A filter is a pure step ``step(belief, ping, model, config, *, rng) -> StepResult`` (it returns a
+new :class:`Belief` and never writes into its inputs: a belief's arrays are read-only) plus a
+call of :func:`run_particle_filter`, which loops over the pings, records the weighted mean and
+covariance, the effective sample size and the resampling count, and recovers from divergence:
+when every particle has zero likelihood (all off the map, or a ping no particle explains) the
+step raises :class:`~tangraph.filters.likelihood.FilterDivergence`; the runner logs it, draws a
+fresh cloud around the dead-reckoned position of that ping with a wider spread
+(``reinit_std``, times ``reinit_growth`` for each further consecutive divergence), weights it by
+the ping if any particle can explain it, and goes on. ``meta["n_divergences"]`` and
+``meta["divergence_steps"]`` record it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import operator
+import time as _time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.filters.likelihood import FilterDivergence, log_normalise
+from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
+from tangraph.filters.resampling import Resampler, resample
+from tangraph.maps.grid import BathymetryMap
+from tangraph.survey import Survey
+from tangraph.track import Track
+
+__all__ = [
+    "Belief",
+    "FilterModel",
+    "ParticleConfig",
+    "StepResult",
+    "initial_belief",
+    "jitter",
+    "measure",
+    "resample_belief",
+    "resample_if_needed",
+    "reweight",
+    "run_particle_filter",
+    "weighted_moments",
+]
+
+_log = logging.getLogger(__name__)
+
+
+def check_number(
+    obj, name: str, *, low: float | None = 0.0, open_low: bool = False, high: float | None = None
+):
+    """``obj.name`` as a finite float in ``[low, high]`` (``(low, high]`` if ``open_low``), else a
+    :class:`TangraphError` naming the class, field and value."""
+    value = getattr(obj, name)
+    where = f"{type(obj).__name__}: {name}"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TangraphError(f"{where} must be a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise TangraphError(f"{where} must be finite, got {value!r}")
+    if low is not None and (v < low or (open_low and v == low)):
+        raise TangraphError(f"{where} must be {'>' if open_low else '>='} {low:g}, got {value!r}")
+    if high is not None and v > high:
+        raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
+    object.__setattr__(obj, name, v)
+    return v
+
+
+def check_count(obj, name: str, *, low: int = 1) -> int:
+    """``obj.name`` as an int ``>= low``, else a :class:`TangraphError` naming it."""
+    value = getattr(obj, name)
+    where = f"{type(obj).__name__}: {name}"
+    if isinstance(value, bool):
+        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}")
+    try:
+        v = operator.index(value)
+    except TypeError:
+        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}") from None
+    if v < low:
+        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}")
+    object.__setattr__(obj, name, int(v))
+    return int(v)
+
+
+@dataclasses.dataclass(frozen=True)
+class ParticleConfig:
+    """Settings shared by the particle filters (each filter's config adds its own).
+
+    Parameters
+    ----------
+    n_particles : int
+        Number of particles.
+    init_std : float
+        Std (m, per axis) of the initial Gaussian cloud around the first dead-reckoned position.
+    process_std, process_fraction : float
+        Process noise per ping and axis: ``sqrt(process_std^2 + (process_fraction d)^2)`` m for a
+        dead-reckoned displacement of ``d`` m (:class:`~tangraph.filters.model.MotionModel`).
+    sounding_std : float
+        Std (m) of a sounding's error in the likelihood.
+    tide, tide_std : float
+        Prior of the tide (m, measured = map + tide): mean and std. ``tide_std = 0``: the tide
+        is known; otherwise it is estimated per particle (Rao-Blackwellised, see
+        :mod:`tangraph.filters.model`).
+    resampler : Resampler
+        Resampling scheme.
+    ess_threshold : float
+        Resample when the effective sample size falls below ``ess_threshold * n_particles``.
+    reinit_std : float or None
+        Spread (m) of the cloud drawn after a divergence; None: ``3 * init_std``.
+    reinit_growth : float
+        Factor on that spread for each further consecutive divergence.
+    """
+
+    n_particles: int = 1000
+    init_std: float = 50.0
+    process_std: float = 0.5
+    process_fraction: float = 0.1
+    sounding_std: float = 1.0
+    tide: float = 0.0
+    tide_std: float = 3.0
+    resampler: Resampler = Resampler.SYSTEMATIC
+    ess_threshold: float = 0.5
+    reinit_std: float | None = None
+    reinit_growth: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_count(self, "n_particles")
+        for name in ("init_std", "process_std", "process_fraction", "tide_std"):
+            check_number(self, name)
+        check_number(self, "sounding_std", open_low=True)
+        check_number(self, "tide", low=None)
+        check_number(self, "ess_threshold", high=1.0)
+        check_number(self, "reinit_growth", low=1.0)
+        if self.reinit_std is not None:
+            check_number(self, "reinit_std", open_low=True)
+        try:
+            object.__setattr__(self, "resampler", Resampler(self.resampler))
+        except ValueError:
+            known = ", ".join(r.value for r in Resampler)
+            raise TangraphError(
+                f"{type(self).__name__}: resampler must be one of {known}, got {self.resampler!r}"
+            ) from None
+
+    @property
+    def reinit_spread(self) -> float:
+        """Spread (m) of the first re-initialisation after a divergence."""
+        return float(self.reinit_std) if self.reinit_std is not None else 3.0 * max(self.init_std, 1.0)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-ready form (enums as their values), as stored in ``Track.meta["config"]``."""
+        return {k: (v.value if hasattr(v, "value") else v) for k, v in dataclasses.asdict(self).items()}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FilterModel:
+    """The state-space model of a run: motion and terrain measurement."""
+
+    motion: MotionModel
+    terrain: TerrainModel
+
+    @classmethod
+    def from_config(cls, config: ParticleConfig, bathymetry: BathymetryMap) -> FilterModel:
+        return cls(
+            MotionModel(config.process_std, config.process_fraction),
+            TerrainModel(bathymetry, config.sounding_std, config.tide_std),
+        )
+
+
+def _frozen(a, dtype=np.float64) -> np.ndarray:
+    a = np.asarray(a, dtype=dtype)
+    if a.flags.writeable:
+        a = a.view()
+        a.setflags(write=False)
+    return a
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Belief:
+    """A weighted particle cloud (read-only arrays).
+
+    ``particles (N, 2)`` positions; ``log_weights (N,)`` normalised log weights; ``tide (N,)``
+    and ``tide_var`` the per-particle tide posterior; ``history (N, L)`` the last ``L`` predicted
+    depths of each particle and ``measured (L,)`` the measured ones (SJCPF; ``L = 0`` otherwise),
+    of which the last ``n_history`` are filled; ``n_fixes`` batch fixes absorbed (TERCOM-PF).
+    """
+
+    particles: np.ndarray
+    log_weights: np.ndarray
+    tide: np.ndarray
+    tide_var: float
+    history: np.ndarray
+    measured: np.ndarray
+    n_history: int = 0
+    n_fixes: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("particles", "log_weights", "tide", "history", "measured"):
+            object.__setattr__(self, name, _frozen(getattr(self, name)))
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.particles.shape[0])
+
+    @property
+    def weights(self) -> np.ndarray:
+        """Normalised weights ``(N,)``."""
+        return np.exp(self.log_weights)
+
+    def take(self, index: np.ndarray) -> Belief:
+        """The particles ``index`` (with their tides and histories), equally weighted."""
+        n = index.size
+        return dataclasses.replace(
+            self,
+            particles=self.particles[index],
+            log_weights=np.full(n, -np.log(n)),
+            tide=self.tide[index],
+            history=self.history[index],
+        )
+
+    def replace(self, **changes) -> Belief:
+        return dataclasses.replace(self, **changes)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class StepResult:
+    """One step's output: the new belief, the estimate (mean, covariance) and ESS of the step,
+    whether it resampled, counts summed into the track's metadata, fix records (TERCOM-PF) and
+    ``info`` for inspection (not recorded)."""
+
+    belief: Belief
+    mean: np.ndarray
+    covariance: np.ndarray
+    ess: float
+    resampled: bool = False
+    counts: dict[str, int] = dataclasses.field(default_factory=dict)
+    fixes: tuple[dict[str, Any], ...] = ()
+    info: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+
+Step = Callable[..., StepResult]
+
+
+def initial_belief(
+    centre,
+    std: float,
+    n: int,
+    *,
+    rng: np.random.Generator,
+    tide: float = 0.0,
+    tide_var: float = 0.0,
+    history_length: int = 0,
+) -> Belief:
+    """``n`` equally weighted particles drawn from ``N(centre, std^2 I)``."""
+    centre = np.asarray(centre, dtype=np.float64)
+    return Belief(
+        particles=centre + std * rng.standard_normal((n, 2)),
+        log_weights=np.full(n, -np.log(n)),
+        tide=np.full(n, float(tide)),
+        tide_var=float(tide_var),
+        history=np.full((n, history_length), np.nan),
+        measured=np.full(history_length, np.nan),
+    )
+
+
+def weighted_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean ``(2,)`` and covariance ``(2, 2)`` (second moment about the mean)."""
+    w = belief.weights
+    mean = w @ belief.particles
+    d = belief.particles - mean
+    return mean, (w[:, None] * d).T @ d
+
+
+def effective_size(belief: Belief) -> float:
+    """``1 / sum(w^2)``."""
+    return float(1.0 / np.sum(np.exp(2.0 * belief.log_weights)))
+
+
+def reweight(belief: Belief, log_factor: np.ndarray, *, where: str) -> Belief:
+    """The belief with its weights multiplied by ``exp(log_factor)`` and renormalised.
+
+    Raises
+    ------
+    FilterDivergence
+        Every new weight is zero.
+    """
+    logw = belief.log_weights + log_factor
+    _, log_total = log_normalise(logw, where=where)
+    return belief.replace(log_weights=logw - log_total)
+
+
+def measure(belief: Belief, ping: Ping, model: FilterModel) -> tuple[Belief, TerrainUpdate | None]:
+    """The terrain update of a ping (weights and tide posterior); a ping without soundings
+    changes nothing (``None`` update)."""
+    if ping.n_soundings == 0:
+        return belief, None
+    update = model.terrain.evaluate(belief.particles, belief.tide, belief.tide_var, ping)
+    new = reweight(belief, update.log_likelihood, where=f"ping {ping.index}")
+    return new.replace(tide=update.tide, tide_var=update.tide_var), update
+
+
+def resample_belief(
+    belief: Belief, scheme: Resampler, *, rng: np.random.Generator
+) -> tuple[Belief, np.ndarray]:
+    """Resampled belief (equal weights) and the indices of the particles kept."""
+    index = resample(belief.weights, scheme, rng=rng)
+    return belief.take(index), index
+
+
+def resample_if_needed(
+    belief: Belief, config: ParticleConfig, *, rng: np.random.Generator
+) -> tuple[Belief, np.ndarray | None, float]:
+    """Resample when ESS < ``ess_threshold * N``; returns the belief, the indices kept (None if
+    it did not resample) and the ESS before."""
+    ess = effective_size(belief)
+    if ess < config.ess_threshold * belief.n_particles:
+        new, index = resample_belief(belief, config.resampler, rng=rng)
+        return new, index, ess
+    return belief, None, ess
+
+
+def jitter(belief: Belief, std: float, *, rng: np.random.Generator) -> Belief:
+    """Every particle moved by independent ``N(0, std^2 I)``."""
+    if std <= 0:
+        return belief
+    return belief.replace(particles=belief.particles + std * rng.standard_normal(belief.particles.shape))
+
+
+def _recover(
+    survey: Survey,
+    ping: Ping,
+    model: FilterModel,
+    config: ParticleConfig,
+    spread: float,
+    history_length: int,
+    rng: np.random.Generator,
+) -> StepResult:
+    fresh = initial_belief(
+        survey.dr_pose[ping.index, :2],
+        spread,
+        config.n_particles,
+        rng=rng,
+        tide=config.tide,
+        tide_var=config.tide_std**2,
+        history_length=history_length,
+    )
+    try:
+        fresh, _ = measure(fresh, ping, model)
+    except FilterDivergence:
+        pass  # nobody explains this ping either: keep the prior cloud
+    mean, cov = weighted_moments(fresh)
+    return StepResult(fresh, mean, cov, effective_size(fresh))
+
+
+def run_particle_filter(
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    config: ParticleConfig,
+    step: Step,
+    *,
+    method: str,
+    rng: np.random.Generator,
+    progress: bool = False,
+    history_length: int = 0,
+    count_keys: tuple[str, ...] = (),
+) -> Track:
+    """Run ``step`` over every ping of a survey and return the weighted-mean track.
+
+    The track's heading is the dead-reckoned one (its variance NaN). ``meta`` holds ``ess``
+    (per step), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_particles``,
+    ``config`` and the step's counts; ``timings`` ``total``, ``per_step`` (mean), ``per_step_p99``
+    and ``per_step_max`` (seconds).
+    """
+    from tqdm.auto import tqdm
+
+    model = FilterModel.from_config(config, bathymetry)
+    pings = survey_pings(survey)
+    k_total = survey.n_pings
+    belief = initial_belief(
+        survey.dr_pose[0, :2],
+        config.init_std,
+        config.n_particles,
+        rng=rng,
+        tide=config.tide,
+        tide_var=config.tide_std**2,
+        history_length=history_length,
+    )
+    mean = np.empty((k_total, 2))
+    cov = np.full((k_total, 3, 3), np.nan)
+    ess = np.empty(k_total)
+    seconds = np.empty(k_total)
+    counts: dict[str, int] = dict.fromkeys(count_keys, 0)
+    fixes: list[dict[str, Any]] = []
+    divergence_steps: list[int] = []
+    n_resampled = consecutive = 0
+    started = _time.perf_counter()
+    for k in tqdm(range(k_total), disable=not progress, desc=method, unit="ping", leave=False):
+        t0 = _time.perf_counter()
+        try:
+            result = step(belief, pings[k], model, config, rng=rng)
+            consecutive = 0
+        except FilterDivergence as exc:
+            consecutive += 1
+            spread = config.reinit_spread * config.reinit_growth ** (consecutive - 1)
+            divergence_steps.append(k)
+            _log.warning("%s: %s; re-initialised around dead reckoning, spread %.1f m", method, exc, spread)
+            result = _recover(survey, pings[k], model, config, spread, history_length, rng)
+        belief = result.belief
+        mean[k], cov[k, :2, :2], ess[k] = result.mean, result.covariance, result.ess
+        n_resampled += bool(result.resampled)
+        for key, value in result.counts.items():
+            counts[key] = counts.get(key, 0) + int(value)
+        fixes.extend(result.fixes)
+        seconds[k] = _time.perf_counter() - t0
+    elapsed = _time.perf_counter() - started
+    meta: dict[str, Any] = {
+        "ess": ess.tolist(),
+        "n_resampled": n_resampled,
+        "n_divergences": len(divergence_steps),
+        "divergence_steps": divergence_steps,
+        "n_particles": config.n_particles,
+        "config": config.as_dict(),
+        **counts,
+    }
+    if fixes or count_keys:
+        meta["fixes"] = fixes
+    return Track(
+        time=survey.time,
+        pose=np.column_stack([mean, survey.dr_pose[:, 2]]),
+        covariance=cov,
+        method=method,
+        timings=step_timings(elapsed, seconds),
+        meta=meta,
+    )
+
+
+def step_timings(elapsed: float, seconds: np.ndarray) -> dict[str, float]:
+    """``total``, ``per_step`` (mean), ``per_step_p99`` and ``per_step_max`` in seconds."""
+    return {
+        "total": float(elapsed),
+        "per_step": float(elapsed / seconds.size),
+        "per_step_p99": float(np.percentile(seconds, 99)),
+        "per_step_max": float(seconds.max()),
+    }

@@ -1,0 +1,97 @@
+"""Batch terrain fixes (TERCOM / grid-search MLE) as the TERCOM-PF and MLE filters use them.
+
+A fix matches the window of the last ``window`` pings against the map by
+:func:`tangraph.matching.tap_fix` (the TAP grid search, criterion MSD or MLE) over a square of
+half-width ``search_sigmas`` times the predicted position std (the largest axis of the
+predicted covariance), clipped to ``[min_half_width, max_half_width]``, around the predicted
+position. Each attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``,
+``position``, ``accepted``, ``reason``: ``"accepted"``, the fix's quality reasons, or
+``"failed: ..."`` when no match could be made).
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.filters.core import check_count, check_number
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
+from tangraph.survey import Survey
+
+__all__ = ["attempt_fix", "check_fix_search", "fix_due"]
+
+_log = logging.getLogger(__name__)
+
+
+FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_width", "max_half_width")
+
+
+def check_fix_search(config) -> None:
+    """Validate (in ``__post_init__``) the fix-search fields of a config: ``window`` (pings per
+    fix), ``fix_interval`` (pings between fixes; None: ``window``), ``criterion`` (mle or msd),
+    ``search_sigmas``, ``min_half_width`` (None: 3 map cells), ``max_half_width``."""
+    check_count(config, "window")
+    if config.fix_interval is not None:
+        check_count(config, "fix_interval")
+    check_number(config, "search_sigmas", open_low=True)
+    check_number(config, "max_half_width", open_low=True)
+    if config.min_half_width is not None:
+        check_number(config, "min_half_width", open_low=True)
+    if not hasattr(config, "criterion"):
+        return
+    try:
+        criterion = Criterion(config.criterion)
+    except ValueError:
+        criterion = None
+    if criterion not in (Criterion.MLE, Criterion.MSD):
+        raise TangraphError(
+            f"{type(config).__name__}: criterion must be mle or msd, got {config.criterion!r}"
+        )
+    object.__setattr__(config, "criterion", criterion)
+
+
+def fix_due(config, index: int) -> bool:
+    """Whether a fix is searched at ping ``index``: the first full window, then every
+    ``fix_interval`` pings (default: ``window``, so windows do not overlap)."""
+    first = config.window - 1
+    return index >= first and (index - first) % int(config.fix_interval or config.window) == 0
+
+
+def attempt_fix(
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    index: int,
+    prior: np.ndarray,
+    covariance: np.ndarray,
+    search,
+) -> tuple[TapFix | None, dict[str, Any]]:
+    """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
+    ``None`` (and a ``"failed: ..."`` reason) when no match can be made."""
+    cell = min(bathymetry.cell_size)
+    spread = np.sqrt(np.max(np.linalg.eigvalsh(covariance))) if np.all(np.isfinite(covariance)) else np.inf
+    low = search.min_half_width if search.min_half_width is not None else 3.0 * cell
+    half_width = float(np.clip(search.search_sigmas * spread, low, max(low, search.max_half_width)))
+    record: dict[str, Any] = {
+        "index": int(index),
+        "first": int(index - search.window + 1),
+        "prior": [float(v) for v in prior],
+        "half_width": half_width,
+    }
+    config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
+    try:
+        fix = tap_fix(survey, bathymetry, index, search.window, config, prior=prior)
+    except MatchingError as exc:
+        _log.info("fix at ping %d: %s", index, exc)
+        record.update(accepted=False, reason=f"failed: {exc}")
+        return None, record
+    record.update(
+        position=[float(v) for v in fix.position],
+        covariance=fix.covariance.tolist(),
+        accepted=bool(fix.accepted),
+        reason="accepted" if fix.accepted else "; ".join(fix.quality.reasons),
+    )
+    return fix, record
