@@ -1,0 +1,40 @@
+"""Factor-graph terrain-aided navigation: key poses, DR odometry and TAP fixes solved by GTSAM.
+
+The only package of tangraph that imports gtsam. Online: :class:`GraphNavigator` and
+:func:`navigate_online` (iSAM2); recorded surveys: :func:`smooth_survey` (batch smoother).
+"""
+
+from tangraph.graph.config import GraphConfig
+from tangraph.graph.factors import (
+    between_noise,
+    check_fix_covariance,
+    compose,
+    propagate,
+    tangent_to_world,
+    world_to_tangent,
+)
+from tangraph.graph.fixes import search_half_width
+from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
+from tangraph.graph.online import GraphNavigator, navigate_online
+from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
+
+__all__ = [
+    "GraphConfig",
+    "GraphNavigator",
+    "PoseGraph",
+    "SmootherSolution",
+    "between_noise",
+    "check_fix_covariance",
+    "compose",
+    "dense_track",
+    "increments",
+    "key_indices",
+    "navigate_online",
+    "propagate",
+    "search_half_width",
+    "smooth_pose_graph",
+    "smooth_survey",
+    "tangent_to_world",
+    "window_ends",
+    "world_to_tangent",
+]

@@ -1,0 +1,166 @@
+"""`GraphConfig`: every setting of the factor-graph navigators (online iSAM2 and batch smoother)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.matching import TapConfig
+
+__all__ = ["GraphConfig"]
+
+
+def _number(config, name: str, *, positive: bool = True, allow_zero: bool = False) -> None:
+    value = getattr(config, name)
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TangraphError(f"GraphConfig.{name} must be a number, got {value!r}") from None
+    if not np.isfinite(v) or (positive and (v < 0 or (v == 0 and not allow_zero))):
+        bound = "finite and non-negative" if allow_zero else "finite and positive"
+        raise TangraphError(f"GraphConfig.{name} must be {bound}, got {value!r}")
+    object.__setattr__(config, name, v)
+
+
+@dataclasses.dataclass(frozen=True)
+class GraphConfig:
+    """Settings of :class:`~tangraph.graph.GraphNavigator`, :func:`~tangraph.graph.navigate_online`
+    and :func:`~tangraph.graph.smooth_survey`.
+
+    Parameters
+    ----------
+    key_interval : float
+        Seconds: a key pose at least this often; there is also one at every TAP window end, at the
+        first and at the last ping.
+    n_pings : int
+        Pings per TAP window.
+    fix_spacing : int or None
+        Pings between consecutive window ends; None: ``n_pings`` (windows that do not overlap).
+    tap : TapConfig
+        Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
+        ``"marginal"``.
+    robust_kernel : {"huber", "cauchy", "none"}
+        M-estimator on the whitened error of each position fix.
+    robust_parameter : float
+        Its threshold on the whitened error norm (default 2.45, the 95 % point of a 2-D
+        Gaussian's norm).
+    gate_probability : float or None
+        A fix is refused when its NIS ``e^T (P_fix + P_pred)^-1 e`` against the predicted
+        marginal exceeds the ``chi2(2)`` quantile of this probability; None: no gate.
+    initial_position_std, initial_heading_std : float
+        Std of the prior on the first pose around its DR pose (m, rad). The dead-reckoning
+        model's constant ``heading_bias`` is added in quadrature to the heading std: the bias
+        cancels in the odometry and is carried by the first pose's heading.
+    odometry_min_std, odometry_min_heading_std : float
+        Floors (m, rad) added as variances to every odometry covariance, so it stays positive
+        definite (a model without heading noise gives a singular one).
+    odometry_scale_noise : bool
+        Add the DVL scale-factor error (``speed_scale``) as a variance along each increment:
+        it is constant within a run and the graph has no state for it.
+    window_noise : bool
+        Grow each fix's covariance by the DR error of its patch (the patch is laid with the DR;
+        its heading bias and scale error distort it): the increment covariance, constant errors
+        included, from the window's middle ping to its end.
+    half_width_rule : {"marginal", "fixed"}
+        ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
+        square root of the largest eigenvalue of the predicted position covariance, clipped to
+        ``[min_half_width_cells, max_half_width_cells]`` search steps (``tap.step`` or the map's
+        cell size); ``"fixed"``: ``tap.half_width``.
+    half_width_sigmas, min_half_width_cells, max_half_width_cells : float
+    relinearize_threshold : float
+        iSAM2's relinearisation threshold (on every coordinate of a pose's update).
+    relinearize_skip : int
+        iSAM2 checks for relinearisation every this many updates.
+    optimizer : {"lm", "gn", "dogleg"}
+        Batch optimiser (Levenberg-Marquardt, Gauss-Newton, Powell's dogleg), METIS ordering.
+    max_iterations : int
+        Of the batch optimiser.
+    smoother_covariance : {"all", "none"}
+        Marginal covariances of every key pose after the batch solve (about 3 s per 100 000
+        key poses), or none (the track's covariance is NaN).
+    rematch_iterations : int
+        After the batch solve, re-run TAP around the smoothed track (patches laid with the
+        smoothed poses, search half-widths from the smoothed marginals) and re-solve, at most
+        this many times, until no fix moves by more than ``rematch_tolerance`` metres and the
+        set of accepted fixes stays the same.
+    rematch_tolerance : float
+    """
+
+    key_interval: float = 60.0
+    n_pings: int = 10
+    fix_spacing: int | None = None
+    tap: TapConfig = dataclasses.field(default_factory=TapConfig)
+    robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
+    robust_parameter: float = 2.45
+    gate_probability: float | None = 0.999
+    initial_position_std: float = 10.0
+    initial_heading_std: float = 0.02
+    odometry_min_std: float = 0.01
+    odometry_min_heading_std: float = 1e-4
+    odometry_scale_noise: bool = True
+    window_noise: bool = True
+    half_width_rule: Literal["marginal", "fixed"] = "marginal"
+    half_width_sigmas: float = 4.0
+    min_half_width_cells: float = 5.0
+    max_half_width_cells: float = 200.0
+    relinearize_threshold: float = 0.01
+    relinearize_skip: int = 1
+    optimizer: Literal["lm", "gn", "dogleg"] = "lm"
+    max_iterations: int = 100
+    smoother_covariance: Literal["all", "none"] = "all"
+    rematch_iterations: int = 0
+    rematch_tolerance: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("key_interval", "robust_parameter", "initial_position_std", "initial_heading_std",
+                     "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
+                     "min_half_width_cells", "max_half_width_cells", "relinearize_threshold"):
+            _number(self, name)
+        _number(self, "rematch_tolerance", allow_zero=True)
+        if self.max_half_width_cells < self.min_half_width_cells:
+            raise TangraphError(
+                f"GraphConfig: max_half_width_cells ({self.max_half_width_cells}) is below "
+                f"min_half_width_cells ({self.min_half_width_cells})"
+            )
+        for name, low in (("n_pings", 1), ("relinearize_skip", 1), ("max_iterations", 1),
+                          ("rematch_iterations", 0)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+                raise TangraphError(f"GraphConfig.{name} must be an integer >= {low}, got {value!r}")
+            object.__setattr__(self, name, int(value))
+        if self.fix_spacing is not None:
+            if isinstance(self.fix_spacing, bool) or not isinstance(self.fix_spacing, int | np.integer) \
+                    or self.fix_spacing < 1:
+                raise TangraphError(
+                    f"GraphConfig.fix_spacing must be None or an integer >= 1, got {self.fix_spacing!r}"
+                )
+            object.__setattr__(self, "fix_spacing", int(self.fix_spacing))
+        if self.gate_probability is not None and not 0.0 < float(self.gate_probability) < 1.0:
+            raise TangraphError(
+                f"GraphConfig.gate_probability must be None or lie in (0, 1), got {self.gate_probability!r}"
+            )
+        if not isinstance(self.tap, TapConfig):
+            raise TangraphError(f"GraphConfig.tap must be a TapConfig, got {type(self.tap).__name__}")
+        for name, allowed in (("robust_kernel", ("huber", "cauchy", "none")),
+                              ("half_width_rule", ("marginal", "fixed")),
+                              ("optimizer", ("lm", "gn", "dogleg")),
+                              ("smoother_covariance", ("all", "none"))):
+            if getattr(self, name) not in allowed:
+                raise TangraphError(
+                    f"GraphConfig.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}"
+                )
+
+    @property
+    def spacing(self) -> int:
+        """Pings between consecutive TAP window ends."""
+        return self.n_pings if self.fix_spacing is None else self.fix_spacing
+
+    def as_dict(self) -> dict:
+        """JSON-ready form, kept in a track's metadata."""
+        out = dataclasses.asdict(self)
+        out["tap"] = {k: (v.value if hasattr(v, "value") else v) for k, v in out["tap"].items()}
+        out["tap"]["headings"] = list(out["tap"]["headings"])
+        return out

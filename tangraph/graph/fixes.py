@@ -1,0 +1,144 @@
+"""TAP fixes for the graph: the search region from the marginal, the gate, and the fix records.
+
+Each fix is made on the pings of its window only (a slice of the survey), so its cost does not
+grow with the length of the mission. It is refused when TAP flags it (``TapFix.accepted`` false:
+``"multimodal"`` or ``"uninformative"``), when the match fails (``"match failed: ..."``) or when
+its NIS against the predicted marginal exceeds the gate (``"gate"``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from tangraph.graph.config import GraphConfig
+from tangraph.graph.factors import check_fix_covariance, gate_threshold, nis
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching import MatchingError, TapFix, tap_fix_patch, window_patch
+from tangraph.sensors import DeadReckoningModel, increment_covariance
+from tangraph.survey import Survey
+
+__all__ = ["FixOutcome", "fix_name", "judge_fix", "make_fix", "search_half_width", "window_noise"]
+
+
+def fix_name(fix: TapFix) -> str:
+    return f"fix at ping {fix.index} (window {fix.first}..{fix.index})"
+
+
+@dataclasses.dataclass(frozen=True)
+class FixOutcome:
+    """What became of one fix: its record for ``Track.meta["fixes"]`` and, if accepted, the fix."""
+
+    record: dict
+    fix: TapFix | None
+    accepted: bool
+
+
+def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_cov) -> float:
+    """Half-width (m) of the TAP search around the predicted position (``GraphConfig.half_width_rule``)."""
+    if config.half_width_rule == "fixed":
+        return float(config.tap.half_width)
+    step = config.tap.step or float(min(bathymetry.cell_size))
+    sigma = float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(position_cov, float)).max(), 0.0)))
+    return float(np.clip(config.half_width_sigmas * sigma, config.min_half_width_cells * step,
+                         config.max_half_width_cells * step))
+
+
+def window_noise(fix: TapFix, survey: Survey, dr_model: DeadReckoningModel) -> TapFix:
+    """``fix`` with its covariance grown by the DR error of its patch: the patch is laid with the DR,
+    whose errors (the constant heading bias and speed scale included, as in
+    ``increment_covariance(include_bias=True)``) move the window's middle ping relative to its
+    reference ping by about this much."""
+    first, end = int(fix.first), int(fix.index)
+    mid = (first + end) // 2
+    if mid == end:
+        return fix
+    w = slice(first, end + 1)
+    cov = increment_covariance(dr_model, survey.time[w], survey.dr_pose[w], mid - first, end - first,
+                               include_bias=True)[:2, :2]
+    c, s = np.cos(survey.dr_pose[mid, 2]), np.sin(survey.dr_pose[mid, 2])
+    rot = np.array([[c, -s], [s, c]])
+    grown = np.asarray(fix.covariance, float) + rot @ cov @ rot.T
+    return dataclasses.replace(fix, covariance=grown)
+
+
+def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:
+    w = slice(first, end + 1)
+    return Survey(
+        time=survey.time[w],
+        dr_pose=survey.dr_pose[w] if poses is None else np.asarray(poses, float)[w],
+        vehicle_depth=survey.vehicle_depth[w],
+        beam_forward=survey.beam_forward[w],
+        beam_starboard=survey.beam_starboard[w],
+        beam_depth=survey.beam_depth[w],
+    )
+
+
+def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
+             half_width: float, *, poses=None) -> TapFix:
+    """The TAP fix of the window of ``config.n_pings`` pings ending at ``end``, searched within
+    ``half_width`` of ``prior``; the patch is laid with ``poses`` (default: the DR poses).
+
+    Raises
+    ------
+    MatchingError
+        As :func:`tangraph.matching.tap_fix`.
+    """
+    first = end - config.n_pings + 1
+    if first < 0:
+        raise MatchingError(f"window of {config.n_pings} pings ending at ping {end} starts before the survey")
+    patch = window_patch(_window(survey, first, end, poses), end - first, config.n_pings,
+                         min_soundings=config.tap.min_soundings)
+    patch = dataclasses.replace(patch, reference=end, first=first, ping=patch.ping + first)
+    tap = dataclasses.replace(config.tap, half_width=float(half_width))
+    return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
+
+
+def _record(index: int, fix: TapFix | None, accepted: bool, reason: str, nis_value: float,
+            half_width: float) -> dict:
+    pos = np.full(2, np.nan) if fix is None else np.asarray(fix.position, float)
+    cov = np.full((2, 2), np.nan) if fix is None else np.asarray(fix.covariance, float)
+    return {
+        "index": int(index),
+        "north": float(pos[0]),
+        "east": float(pos[1]),
+        "cov_nn": float(cov[0, 0]),
+        "cov_ne": float(cov[0, 1]),
+        "cov_ee": float(cov[1, 1]),
+        "accepted": bool(accepted),
+        "reason": reason,
+        "nis": float(nis_value),
+        "half_width": float(half_width),
+    }
+
+
+def failed(index: int, error: Exception, half_width: float) -> FixOutcome:
+    """The record of a window whose match failed."""
+    return FixOutcome(_record(index, None, False, f"match failed: {error}", np.nan, half_width), None, False)
+
+
+def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float) -> FixOutcome:
+    """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
+
+    Raises
+    ------
+    TangraphError
+        The fix's covariance is not finite, symmetric and positive definite (the fix is named).
+    """
+    cov = check_fix_covariance(fix.covariance, fix_name(fix))
+    value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
+                cov + np.asarray(predicted_cov, float)[:2, :2])
+    if fix.quality.multimodal:
+        reason = "multimodal"
+    elif not fix.quality.informative:
+        reason = "uninformative"
+    elif not fix.accepted:
+        reason = "refused: " + "; ".join(fix.quality.reasons)
+    elif value > gate_threshold(config.gate_probability):
+        reason = "gate"
+    else:
+        reason = "accepted"
+    accepted = reason == "accepted"
+    return FixOutcome(_record(fix.index, fix, accepted, reason, value, half_width), fix if accepted else None,
+                      accepted)

@@ -1,0 +1,183 @@
+"""Key poses, the odometry between them, and :class:`PoseGraph`, the factors of one run.
+
+Key poses are a subset of the pings (the pose graph does not hold every ping): the first and last
+ping, every TAP window end, and a ping whenever ``key_interval`` seconds have passed since the
+previous key. The odometry between consecutive keys is the DR increment
+(:func:`tangraph.sensors.odometry`) with the covariance of the DR error model
+(:func:`tangraph.sensors.increment_covariance`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.graph.factors import between_noise, pose_prior_factor, position_fix_factor
+from tangraph.sensors import DeadReckoningModel, increment_covariance, odometry
+
+__all__ = ["PoseGraph", "increments", "key_indices", "window_ends"]
+
+_MAX_PAD = 2_000_000  # pairs x longest pair held at once by increment_covariance
+
+
+def window_ends(n_pings: int, window: int, spacing: int) -> np.ndarray:
+    """Last ping of every TAP window: ``window - 1``, then every ``spacing`` pings."""
+    return np.arange(window - 1, n_pings, spacing, dtype=np.int64)
+
+
+def key_indices(time, fix_ends, key_interval: float) -> np.ndarray:
+    """Pings that are key poses: the first and last, every fix window end, and one whenever
+    ``key_interval`` seconds have passed since the previous key."""
+    time = np.asarray(time, float)
+    is_end = np.zeros(time.size, bool)
+    is_end[np.asarray(fix_ends, np.int64)] = True
+    is_end[[0, -1]] = True
+    keys = [0]
+    last = time[0]
+    for k in range(1, time.size):
+        if is_end[k] or time[k] - last >= key_interval:
+            keys.append(k)
+            last = time[k]
+    return np.asarray(keys, np.int64)
+
+
+def increments(model: DeadReckoningModel, time, dr_pose, i, j, *, scale_noise: bool = True
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """DR increments ``(n, 3)`` from ping ``i`` to ping ``j`` and their covariances ``(n, 3, 3)``
+    (frame of ping ``i``), in chunks so that long gaps do not need a huge padded array.
+
+    With ``scale_noise`` the constant DVL scale error is added as a variance along each chord.
+    """
+    i, j = np.asarray(i, np.int64).ravel(), np.asarray(j, np.int64).ravel()
+    delta = odometry(dr_pose, i, j) if i.size else np.zeros((0, 3))
+    cov = np.zeros((i.size, 3, 3))
+    start = 0
+    while start < i.size:
+        stop = start + 1
+        longest = max(int(j[start] - i[start]), 1)
+        while stop < i.size and (stop - start + 1) * max(longest, int(j[stop] - i[stop]), 1) <= _MAX_PAD:
+            longest = max(longest, int(j[stop] - i[stop]))
+            stop += 1
+        cov[start:stop] = increment_covariance(model, time, dr_pose, i[start:stop], j[start:stop])
+        start = stop
+    if scale_noise and model.speed_scale:
+        d = delta[:, :2]
+        cov[:, :2, :2] += model.speed_scale**2 * d[:, :, None] * d[:, None, :]
+    return delta, cov
+
+
+@dataclasses.dataclass
+class PoseGraph:
+    """The key poses and factors of one run, keyed by ping index (the GTSAM key is the ping index).
+
+    A plain container: :class:`~tangraph.graph.GraphNavigator` fills it while it runs, the batch
+    smoother (:func:`~tangraph.graph.smooth_pose_graph`) solves all of it at once.
+    """
+
+    robust_kernel: str = "huber"
+    robust_parameter: float = 2.45
+    min_std: float = 0.01
+    min_heading_std: float = 1e-4
+    keys: list[int] = dataclasses.field(default_factory=list)
+    times: list[float] = dataclasses.field(default_factory=list)
+    initial: list[np.ndarray] = dataclasses.field(default_factory=list)
+    odometry: list[tuple[int, int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
+    pose_priors: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
+    fixes: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
+
+    def add_pose(self, key: int, time: float, initial_pose) -> None:
+        """A key pose at ping ``key`` with its initial estimate ``(north, east, psi)``."""
+        if self.keys and key <= self.keys[-1]:
+            raise TangraphError(
+                f"key poses must be added in increasing ping order: {key} after {self.keys[-1]}"
+            )
+        self.keys.append(int(key))
+        self.times.append(float(time))
+        self.initial.append(np.asarray(initial_pose, float).copy())
+
+    def add_pose_prior(self, key: int, pose, cov_world) -> gtsam.NonlinearFactor:
+        """A prior on a whole pose (world-frame covariance); returns the GTSAM factor."""
+        self.pose_priors.append((int(key), np.asarray(pose, float), np.asarray(cov_world, float)))
+        return pose_prior_factor(key, pose, cov_world)
+
+    def add_odometry(self, i: int, j: int, increment, increment_cov) -> gtsam.NonlinearFactor:
+        """The DR increment from pose ``i`` to pose ``j`` with its covariance (frame of ``i``)."""
+        increment = np.asarray(increment, float)
+        cov = between_noise(increment, increment_cov, self.min_std, self.min_heading_std)
+        self.odometry.append((int(i), int(j), increment, cov))
+        return gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
+                                        gtsam.noiseModel.Gaussian.Covariance(cov))
+
+    def add_position_fix(self, key: int, position, cov) -> gtsam.NonlinearFactor:
+        """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model."""
+        self.fixes.append((int(key), np.asarray(position, float), np.asarray(cov, float)))
+        return position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
+
+    def factor_graph(self) -> gtsam.NonlinearFactorGraph:
+        """Every factor, as one GTSAM graph."""
+        graph = gtsam.NonlinearFactorGraph()
+        for key, pose, cov in self.pose_priors:
+            graph.add(pose_prior_factor(key, pose, cov))
+        for i, j, z, cov in self.odometry:
+            noise = gtsam.noiseModel.Gaussian.Covariance(cov)
+            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*z), noise))
+        for key, position, cov in self.fixes:
+            graph.add(position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter))
+        return graph
+
+    def values(self, poses=None) -> gtsam.Values:
+        """Initial values (or ``poses (n_keys, 3)``) of every key pose."""
+        values = gtsam.Values()
+        for key, pose in zip(self.keys, self.initial if poses is None else poses, strict=True):
+            values.insert(key, gtsam.Pose2(*pose))
+        return values
+
+    def unconstrained(self) -> list[list[int]]:
+        """Groups of key poses (pings) that nothing ties to the map or to the first pose: parts of
+        the chain linked by odometry with neither a pose prior nor fixes on two different poses."""
+        index = {k: n for n, k in enumerate(self.keys)}
+        parent = list(range(len(self.keys)))
+
+        def root(n: int) -> int:
+            while parent[n] != n:
+                parent[n] = parent[parent[n]]
+                n = parent[n]
+            return n
+
+        for i, j, _, _ in self.odometry:
+            a, b = root(index[i]), root(index[j])
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+        anchored: dict[int, int] = {}
+        for key, _, _ in self.pose_priors:
+            anchored[root(index[key])] = 2
+        fixed: dict[int, set[int]] = {}
+        for key, _, _ in self.fixes:
+            fixed.setdefault(root(index[key]), set()).add(key)
+        groups: dict[int, list[int]] = {}
+        for n, k in enumerate(self.keys):
+            r = root(n)
+            if anchored.get(r, 0) < 2 and len(fixed.get(r, ())) < 2:
+                groups.setdefault(r, []).append(k)
+        return list(groups.values())
+
+    def check_determined(self) -> None:
+        """Raise a TangraphError naming the key poses that are not constrained."""
+        groups = self.unconstrained()
+        if groups:
+            parts = "; ".join(_describe(g, self) for g in groups[:5])
+            raise TangraphError(
+                f"the pose graph is indeterminant: {sum(map(len, groups))} key poses are not tied by "
+                f"odometry to a pose with a prior (nor fixed by two position fixes): {parts}"
+                + (f"; and {len(groups) - 5} more groups" if len(groups) > 5 else "")
+            )
+
+
+def _describe(group: list[int], graph: PoseGraph) -> str:
+    times = dict(zip(graph.keys, graph.times, strict=True))
+    first, last = group[0], group[-1]
+    where = f"ping {first}" if first == last else f"pings {first}..{last} ({len(group)} key poses)"
+    return f"{where} at t = {times[first]:.1f}..{times[last]:.1f} s"

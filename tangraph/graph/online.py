@@ -1,0 +1,329 @@
+"""`GraphNavigator`: online terrain-aided navigation on a pose graph, solved by iSAM2.
+
+Each ping is a step. At a key pose (see :func:`~tangraph.graph.keyposes.key_indices`) the step
+adds the odometry factor from the previous key, and at a TAP window end it makes the fix: the
+search is centred on the predicted position (the latest key estimate composed with the DR
+increment) with a half-width from its covariance, the fix is gated against that prediction, and
+an accepted one becomes a robust translation prior. iSAM2 is then updated with only these new
+factors and values (the containers are emptied after each update), and the marginal covariance
+of the latest key only is read. Between key poses the output is the latest key estimate composed
+with the DR increment, its covariance grown by the increment's.
+"""
+
+from __future__ import annotations
+
+import logging
+import time as _time
+
+import gtsam
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.graph.config import GraphConfig
+from tangraph.graph.factors import check_fix_covariance, compose, propagate, tangent_to_world
+from tangraph.graph.fixes import (
+    FixOutcome,
+    failed,
+    fix_name,
+    judge_fix,
+    make_fix,
+    search_half_width,
+    window_noise,
+)
+from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching import MatchingError, TapFix
+from tangraph.sensors import DeadReckoningModel
+from tangraph.survey import Survey
+from tangraph.track import Track
+
+__all__ = ["GraphNavigator", "navigate_online", "survey_dr_model"]
+
+log = logging.getLogger(__name__)
+
+
+def survey_dr_model(survey: Survey, dr_model: DeadReckoningModel | None) -> DeadReckoningModel:
+    """``dr_model``, or the one a simulated survey records in ``meta["settings"]["dead_reckoning"]``."""
+    if dr_model is not None:
+        if not isinstance(dr_model, DeadReckoningModel):
+            raise TangraphError(f"dr_model must be a DeadReckoningModel, got {type(dr_model).__name__}")
+        return dr_model
+    try:
+        settings = survey.meta["settings"]["dead_reckoning"]
+    except (KeyError, TypeError):
+        raise TangraphError(
+            "this survey does not record its dead-reckoning error model (meta['settings']"
+            "['dead_reckoning']); pass dr_model=DeadReckoningModel(...) with the INS/DVL's errors"
+        ) from None
+    try:
+        return DeadReckoningModel(**settings)
+    except TypeError as exc:
+        raise TangraphError(f"survey meta['settings']['dead_reckoning'] is not a DR model: {exc}") from None
+
+
+class GraphNavigator:
+    """Online navigator: one :meth:`step` per ping, iSAM2 updated at key poses only.
+
+    Parameters
+    ----------
+    survey : Survey
+    bathymetry : BathymetryMap
+    config : GraphConfig, optional
+    dr_model : DeadReckoningModel, optional
+        The INS/DVL error model; by default the one a simulated survey records.
+
+    Examples
+    --------
+    >>> nav = GraphNavigator(survey, bathymetry)          # doctest: +SKIP
+    >>> for k in range(survey.n_pings):                   # doctest: +SKIP
+    ...     pose, cov = nav.step()
+    >>> track = nav.track()                               # doctest: +SKIP
+    """
+
+    def __init__(self, survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
+                 dr_model: DeadReckoningModel | None = None) -> None:
+        self.survey = survey
+        self.bathymetry = bathymetry
+        self.config = config or GraphConfig()
+        if not isinstance(self.config, GraphConfig):
+            raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
+        self.dr_model = survey_dr_model(survey, dr_model)
+        c = self.config
+        n = survey.n_pings
+        self.fix_ends = window_ends(n, c.n_pings, c.spacing)
+        self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
+        self._is_end = np.zeros(n, bool)
+        self._is_end[self.fix_ends] = True
+        self._is_key = np.zeros(n, bool)
+        self._is_key[self.keys] = True
+        # The previous key of every ping, and the DR increment (and covariance) from it.
+        self._prev_key = self.keys[np.searchsorted(self.keys, np.arange(n), side="right") - 1]
+        self._prev_key[self.keys[1:]] = self.keys[:-1]
+        self._delta, self._delta_cov = increments(self.dr_model, survey.time, survey.dr_pose,
+                                                  self._prev_key, np.arange(n),
+                                                  scale_noise=c.odometry_scale_noise)
+        self.graph = PoseGraph(c.robust_kernel, c.robust_parameter, c.odometry_min_std,
+                               c.odometry_min_heading_std)
+        params = gtsam.ISAM2Params()
+        params.setRelinearizeThreshold(c.relinearize_threshold)
+        params.relinearizeSkip = c.relinearize_skip
+        self.isam = gtsam.ISAM2(params)
+        self._new_factors = gtsam.NonlinearFactorGraph()
+        self._new_values = gtsam.Values()
+        self.index = -1  # last ping processed
+        self._key_pose = np.zeros(3)
+        self._key_cov = np.zeros((3, 3))
+        self.pose = np.full((n, 3), np.nan)
+        self.covariance = np.full((n, 3, 3), np.nan)
+        self.fixes: list[dict] = []
+        self.step_times: list[float] = []
+        self.update_times: list[float] = []
+        self.tap_times: list[float] = []
+
+    # -- one step ------------------------------------------------------------------------------
+    def predicted(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Pose and world covariance of ping ``k`` from the latest key estimate and the DR increment."""
+        return (compose(self._key_pose, self._delta[k]),
+                propagate(self._key_pose, self._key_cov, self._delta[k], self._delta_cov[k]))
+
+    def step(self, fix: TapFix | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Process the next ping; returns its pose ``(3,)`` and world covariance ``(3, 3)``.
+
+        Parameters
+        ----------
+        fix : TapFix, optional
+            Use this fix of the ping (its ``index``) instead of making one; the ping becomes a key
+            pose. It is judged like any other (quality flags, gate); a covariance that is not
+            finite and positive definite raises a TangraphError naming the fix.
+        """
+        started = _time.perf_counter()
+        k = self.index + 1
+        if k >= self.survey.n_pings:
+            raise TangraphError(f"the survey has {self.survey.n_pings} pings; all have been processed")
+        if fix is not None and int(fix.index) != k:
+            raise TangraphError(f"step of ping {k} was given a fix of ping {fix.index}")
+        if k == 0:
+            self._start()
+        elif self._is_key[k] or fix is not None:
+            self._key_step(k, fix)
+        else:
+            self.pose[k], self.covariance[k] = self.predicted(k)
+        self.index = k
+        self.step_times.append(_time.perf_counter() - started)
+        return self.pose[k], self.covariance[k]
+
+    def _start(self) -> None:
+        c, dr = self.config, self.survey.dr_pose[0]
+        heading_std = float(np.hypot(c.initial_heading_std, self.dr_model.heading_bias))
+        cov0 = np.diag([c.initial_position_std**2, c.initial_position_std**2, heading_std**2])
+        self.graph.add_pose(0, self.survey.time[0], dr)
+        self._new_factors.add(self.graph.add_pose_prior(0, dr, cov0))
+        self._new_values.insert(0, gtsam.Pose2(*dr))
+        self._update(0)
+        self._rebase(0)
+        if self._is_end[0]:
+            log.debug("a fix window cannot end at the first ping")
+
+    def _key_step(self, k: int, fix: TapFix | None) -> None:
+        prev = self.graph.keys[-1]
+        pose, cov = self.predicted(k)
+        self.graph.add_pose(k, self.survey.time[k], pose)
+        self._new_values.insert(k, gtsam.Pose2(*pose))
+        self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k]))
+        if fix is not None or self._is_end[k]:
+            outcome = self._judge(k, pose, cov, fix)
+            self.fixes.append(outcome.record)
+            if outcome.accepted:
+                self._new_factors.add(self.graph.add_position_fix(k, outcome.fix.position,
+                                                                  outcome.fix.covariance))
+        self._update(k)
+        self._rebase(k)
+
+    def _rebase(self, k: int) -> None:
+        """Make the pings up to the next planned key take their increments from key ``k`` (a
+        fix given to :meth:`step` can add a key that was not planned)."""
+        n = self.survey.n_pings
+        if k + 1 >= n:
+            return
+        nxt = self.keys[np.searchsorted(self.keys, k, side="right")] if k < self.keys[-1] else n - 1
+        idx = np.arange(k + 1, nxt + 1)
+        idx = idx[self._prev_key[idx] != k]
+        if idx.size:
+            self._prev_key[idx] = k
+            self._delta[idx], self._delta_cov[idx] = increments(
+                self.dr_model, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx,
+                scale_noise=self.config.odometry_scale_noise)
+
+    def _judge(self, k: int, pose, cov, fix: TapFix | None) -> FixOutcome:
+        half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
+        if fix is not None:
+            return judge_fix(self._grown(fix), pose, cov, self.config, half_width)
+        started = _time.perf_counter()
+        try:
+            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width)
+        except MatchingError as exc:
+            return failed(k, exc, half_width)
+        finally:
+            self.tap_times.append(_time.perf_counter() - started)
+        try:
+            return judge_fix(self._grown(made), pose, cov, self.config, half_width)
+        except TangraphError as exc:
+            log.warning("%s", exc)
+            outcome = failed(k, exc, half_width)
+            outcome.record["reason"] = f"invalid covariance: {exc}"
+            return outcome
+
+    def _grown(self, fix: TapFix) -> TapFix:
+        if not self.config.window_noise:
+            return fix
+        check_fix_covariance(fix.covariance, fix_name(fix))
+        return window_noise(fix, self.survey, self.dr_model)
+
+    def _update(self, k: int) -> None:
+        started = _time.perf_counter()
+        try:
+            self.isam.update(self._new_factors, self._new_values)
+        except RuntimeError as exc:
+            raise _translate(exc, self.graph) from None
+        self._new_factors = gtsam.NonlinearFactorGraph()
+        self._new_values = gtsam.Values()
+        estimate = self.isam.calculateEstimatePose2(k)
+        self._key_pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
+        self._key_pose[2] = self.survey.dr_pose[k, 2] + _wrap(self._key_pose[2] - self.survey.dr_pose[k, 2])
+        self._key_cov = tangent_to_world(self._key_pose[2], self.isam.marginalCovariance(k))
+        self.update_times.append(_time.perf_counter() - started)
+        self.pose[k], self.covariance[k] = self._key_pose, self._key_cov
+
+    @property
+    def pending(self) -> tuple[int, int]:
+        """Factors and values waiting for the next iSAM2 update (both 0 after every step)."""
+        return int(self._new_factors.size()), int(self._new_values.size())
+
+    # -- results -------------------------------------------------------------------------------
+    def run(self, progress: bool = False) -> GraphNavigator:
+        """Step through every remaining ping."""
+        pings = range(self.index + 1, self.survey.n_pings)
+        if progress:
+            from tqdm import tqdm
+
+            pings = tqdm(pings, desc="isam2", unit="ping")
+        for _ in pings:
+            self.step()
+        return self
+
+    def meta(self) -> dict:
+        """``fixes``, their counts, ``key_indices`` and the configuration."""
+        accepted = sum(f["accepted"] for f in self.fixes)
+        return {
+            "fixes": list(self.fixes),
+            "n_fixes_accepted": int(accepted),
+            "n_fixes_rejected": len(self.fixes) - int(accepted),
+            "key_indices": [int(k) for k in self.graph.keys],
+            "config": self.config.as_dict(),
+            "dr_model": {k: float(v) for k, v in vars(self.dr_model).items()},
+        }
+
+    def track(self) -> Track:
+        """The online (causal) track of the pings processed so far (``method="isam2"``)."""
+        done = self.index + 1
+        if done < 1:
+            raise TangraphError("no ping has been processed yet")
+        steps = np.asarray(self.step_times)
+        updates = np.asarray(self.update_times)
+        timings = {
+            "total": float(steps.sum()),
+            "per_step": float(steps.mean()),
+            "per_step_p99": float(np.percentile(steps, 99)),
+            "update_mean": float(updates.mean()),
+            "update_p99": float(np.percentile(updates, 99)),
+            "tap_total": float(np.sum(self.tap_times)),
+        }
+        return Track(time=self.survey.time[:done], pose=self.pose[:done], covariance=self.covariance[:done],
+                     method="isam2", timings=timings, meta=self.meta())
+
+
+def _wrap(angle):
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _translate(exc: RuntimeError, graph: PoseGraph) -> Exception:
+    """A TangraphError naming the unconstrained poses for GTSAM's indeterminant-system error."""
+    text = str(exc)
+    if "ndetermina" not in text:
+        return exc
+    try:
+        graph.check_determined()
+    except TangraphError as named:
+        return named
+    import re
+
+    near = re.search(r"near variable\s+(\d+)", text)
+    where = f" near key pose {near.group(1)} (ping {near.group(1)})" if near else ""
+    return TangraphError(f"the pose graph is indeterminant (ill-conditioned){where}")
+
+
+def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
+                    dr_model: DeadReckoningModel | None = None, progress: bool = False) -> Track:
+    """Online terrain-aided navigation of a survey on a pose graph solved by iSAM2.
+
+    Parameters
+    ----------
+    survey : Survey
+    bathymetry : BathymetryMap
+    config : GraphConfig, optional
+    dr_model : DeadReckoningModel, optional
+        The INS/DVL error model; by default the one a simulated survey records in
+        ``meta["settings"]["dead_reckoning"]`` (a TangraphError asks for one otherwise).
+    progress : bool
+        Show a progress bar.
+
+    Returns
+    -------
+    Track
+        ``method="isam2"``, one causal pose per ping with its covariance; ``timings`` has
+        ``total``, ``per_step``, ``per_step_p99`` (whole steps, TAP included), ``update_mean``,
+        ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``meta`` has
+        ``fixes`` (one dict per window), ``n_fixes_accepted``, ``n_fixes_rejected`` and
+        ``key_indices``.
+    """
+    return GraphNavigator(survey, bathymetry, config, dr_model=dr_model).run(progress).track()

@@ -1,0 +1,42 @@
+"""A small simulated survey on a rough synthetic map, shared by the graph tests."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.maps import fractal
+from tangraph.sensors import DeadReckoningModel, MultibeamConfig
+from tangraph.sim.scenario import Scenario, simulate
+
+
+def small_scenario(duration: float = 400.0, **dr) -> Scenario:
+    model = DeadReckoningModel(**{"heading_bias": float(np.deg2rad(1.0)), "speed_scale": 0.01,
+                                  "speed_noise": 0.05, **dr})
+    return Scenario(
+        name="graph-test",
+        map="fractal",
+        seed=6,
+        vehicle_depth=5.0,
+        trajectory={"kind": "line", "start": [300.0, 300.0], "heading_deg": 45.0, "speed": 2.0,
+                    "duration": duration},
+        dead_reckoning=model,
+        sonar=MultibeamConfig(n_beams=40, swath=float(np.deg2rad(120.0)), ping_rate=0.5, depth_noise=0.2),
+    )
+
+
+@pytest.fixture(scope="session")
+def rough_map():
+    return fractal((300, 300), 5.0, rng=np.random.default_rng(60), beta=3.0, relief=15.0, mean_depth=60.0)
+
+
+@pytest.fixture(scope="session")
+def small_survey(rough_map):
+    return simulate(small_scenario(), rng=np.random.default_rng(61), bathymetry=rough_map, seed=61)
+
+
+def with_dr(scenario: Scenario, **changes) -> Scenario:
+    model = dataclasses.replace(scenario.dead_reckoning, **changes)
+    return dataclasses.replace(scenario, dead_reckoning=model)
