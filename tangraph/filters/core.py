@@ -213,16 +213,24 @@ class Belief:
     def take(self, index: np.ndarray) -> Belief:
         """The particles ``index`` (with their tides and histories), equally weighted."""
         n = index.size
-        return dataclasses.replace(
-            self,
+        return self.replace(
             particles=self.particles[index],
             log_weights=np.full(n, -np.log(n)),
             tide=self.tide[index],
-            history=self.history[index],
+            history=self.history[index] if self.history.shape[1] else np.empty((n, 0)),
         )
 
     def replace(self, **changes) -> Belief:
-        return dataclasses.replace(self, **changes)
+        """A copy with some fields changed (new arrays are made read-only; no other checks, as
+        this runs several times per step)."""
+        new = object.__new__(Belief)
+        fields = dict(self.__dict__)
+        for name, value in changes.items():
+            if name not in fields:
+                raise TypeError(f"Belief has no field {name!r}")
+            fields[name] = _frozen(value) if isinstance(value, np.ndarray) else value
+        new.__dict__.update(fields)
+        return new
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

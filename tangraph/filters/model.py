@@ -133,6 +133,9 @@ class TerrainModel:
         quadratic = sum_e2 - shrink * sum_e**2
         log_likelihood = np.where(np.isfinite(quadratic), -0.5 * quadratic / s2_noise, -np.inf)
         new_var = tide_var * s2_noise / (s2_noise + b * tide_var)
-        new_tide = tide + (new_var / s2_noise) * np.nan_to_num(sum_e) if tide_var > 0 else tide
+        if tide_var > 0:
+            new_tide = tide + (new_var / s2_noise) * np.where(np.isfinite(sum_e), sum_e, 0.0)
+        else:
+            new_tide = tide
         predicted = (np.sum(ping.depths) - sums[:, 0]) / b + tide  # mean of h + tide
         return TerrainUpdate(log_likelihood, new_tide, float(new_var), predicted)

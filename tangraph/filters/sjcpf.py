@@ -106,7 +106,8 @@ def correlation_log_weight(rho: np.ndarray, kernel: str, constant: float) -> np.
     >>> correlation_log_weight(np.array([1.0, 0.0, np.nan]), "exponential", 5.0).tolist()
     [5.0, 0.0, 0.0]
     """
-    rho = np.nan_to_num(np.asarray(rho, dtype=np.float64), nan=0.0)
+    rho = np.asarray(rho, dtype=np.float64)
+    rho = np.where(np.isnan(rho), 0.0, rho)
     if kernel == "exponential":
         return constant * rho
     with np.errstate(divide="ignore"):
@@ -137,7 +138,7 @@ def sjcpf_step(
             weighted = reweight(weighted, log_f, where=f"ping {ping.index} (correlation)")
     mean, cov = weighted_moments(weighted)
     new, index, ess = resample_if_needed(weighted, config, rng=rng)
-    return StepResult(new, mean, cov, ess, resampled=index is not None)
+    return StepResult(new, mean, cov, ess, resampled=index is not None, info={"ancestors": index})
 
 
 def sjcpf(

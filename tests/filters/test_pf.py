@@ -1,4 +1,6 @@
-"""The bootstrap PF against an exact Kalman filter on a linear-Gaussian sloped seabed."""
+"""The bootstrap PF and the IPF against an exact Kalman filter on a linear-Gaussian sloped seabed,
+with a known tide and with an unknown one (a third Kalman state, the filters' Rao-Blackwellised
+tide)."""
 
 from __future__ import annotations
 
@@ -6,7 +8,7 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters.pf import PFConfig, bootstrap_pf
+from tangraph.filters import IPFConfig, PFConfig, bootstrap_pf, ipf
 from tangraph.maps import BathymetryMap
 from tangraph.survey import Survey
 
@@ -20,7 +22,7 @@ def sloped_seabed():
     return BathymetryMap(north=north, east=east, depth=500 + GRADIENT[0] * nn + GRADIENT[1] * ee)
 
 
-def linear_gaussian_run(seed, *, k=30, q=2.0, sigma=1.0, p0=30.0):
+def linear_gaussian_run(seed, *, k=30, q=2.0, sigma=1.0, p0=30.0, tide_sd=0.0):
     """Truth moves by known steps plus N(0, q^2) per axis; one vertical sounding per ping with
     N(0, sigma^2) noise; DR = the known steps from the true start (so DR increments are exact and
     the process noise is what the filters model)."""
@@ -29,7 +31,8 @@ def linear_gaussian_run(seed, *, k=30, q=2.0, sigma=1.0, p0=30.0):
     start = rng.normal(0.0, p0, 2)
     truth = np.vstack([start, start + np.cumsum(steps + q * rng.standard_normal((k - 1, 2)), axis=0)])
     dr = np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
-    depth = 500 + truth @ GRADIENT + sigma * rng.standard_normal(k)
+    tide = tide_sd * rng.standard_normal()
+    depth = 500 + truth @ GRADIENT + tide + sigma * rng.standard_normal(k)
     survey = Survey(
         time=np.arange(k, dtype=float),
         dr_pose=np.column_stack([dr, np.zeros(k)]),
@@ -42,34 +45,44 @@ def linear_gaussian_run(seed, *, k=30, q=2.0, sigma=1.0, p0=30.0):
     return survey
 
 
-def kalman(survey, *, q, sigma, p0):
-    """The exact filter: x_k = x_{k-1} + u_k + w, z_k = 500 + g . x_k + v."""
-    x = survey.dr_pose[0, :2].copy()
-    p = np.eye(2) * p0**2
+def kalman(survey, *, q, sigma, p0, tide_sd=0.0):
+    """The exact filter on (north, east, tide): x_k = x_{k-1} + u_k + w, z_k = 500 + g . x_k + t + v."""
+    x = np.append(survey.dr_pose[0, :2], 0.0)
+    p = np.diag([p0**2, p0**2, tide_sd**2])
+    h = np.append(GRADIENT, 1.0)[None, :]
     for k in range(survey.n_pings):
         if k > 0:
-            x = x + survey.dr_pose[k, :2] - survey.dr_pose[k - 1, :2]
-            p = p + np.eye(2) * q**2
-        h = GRADIENT[None, :]
+            x[:2] = x[:2] + survey.dr_pose[k, :2] - survey.dr_pose[k - 1, :2]
+            p = p + np.diag([q**2, q**2, 0.0])
         s = h @ p @ h.T + sigma**2
         gain = p @ h.T / s
         x = x + (gain * (survey.beam_depth[k, 0] - 500 - h @ x)).ravel()
-        p = (np.eye(2) - gain @ h) @ p
-    return x, p
+        p = (np.eye(3) - gain @ h) @ p
+    return x[:2], p[:2, :2]
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_bootstrap_pf_matches_the_kalman_filter(seed):
+@pytest.mark.parametrize(
+    ("seed", "method", "tide_sd"),
+    [(0, "pf", 0.0), (1, "pf", 0.0), (2, "pf", 3.0), (3, "ipf", 0.0), (4, "ipf", 3.0)],
+)
+def test_filter_matches_the_kalman_filter(seed, method, tide_sd):
     q, sigma, p0, n = 2.0, 1.0, 30.0, 20000
-    survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0)
-    x_kf, p_kf = kalman(survey, q=q, sigma=sigma, p0=p0)
-    config = PFConfig(
-        n_particles=n, init_std=p0, process_std=q, process_fraction=0.0, sounding_std=sigma, tide_std=0.0
+    survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
+    x_kf, p_kf = kalman(survey, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
+    settings = dict(
+        n_particles=n, init_std=p0, process_std=q, process_fraction=0.0, sounding_std=sigma, tide_std=tide_sd
     )
-    track = bootstrap_pf(survey, sloped_seabed(), config, rng=np.random.default_rng(100 + seed))
+    if method == "pf":
+        track = bootstrap_pf(
+            survey, sloped_seabed(), PFConfig(**settings), rng=np.random.default_rng(100 + seed)
+        )
+    else:  # the auxiliary resampling at every ping
+        track = ipf(
+            survey, sloped_seabed(), IPFConfig(**settings, ess_threshold=1.0), rng=np.random.default_rng(seed)
+        )
     x_pf, p_pf = track.pose[-1, :2], track.covariance[-1, :2, :2]
     # Monte Carlo error of a weighted mean: about sqrt(P / ESS); ESS >= N/2 after resampling
-    ess = track.meta["ess"][-1]
+    ess = track.meta["ess"][-1] if method == "pf" else n / 2
     tolerance = 5 * np.sqrt(np.diag(p_kf) / ess)
     assert np.all(np.abs(x_pf - x_kf) < tolerance), (x_pf, x_kf, tolerance)
     # sample covariance: relative standard error sqrt(2 / ESS) on the variances

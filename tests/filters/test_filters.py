@@ -1,0 +1,124 @@
+"""Every filter recovers a known truth from seeded noise; run_filter dispatches and checks its config."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.filters import (
+    FilterMethod,
+    MLEConfig,
+    PFConfig,
+    SJCPFConfig,
+    config_type,
+    default_config,
+    run_filter,
+)
+from tangraph.maps import fractal
+from tangraph.sensors import DeadReckoningModel, simulate_dead_reckoning
+from tangraph.sim import trajectories
+from tangraph.survey import Survey
+from tests.filters.synthetic import dr_final_error, final_error, multibeam_survey, rough_map
+
+MAP = rough_map(0)
+SURVEY = multibeam_survey(MAP, seed=1, pings=50)
+
+MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is ~25 m off at the end
+    "pf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
+    "ipf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
+    "sjcpf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5, jitter_std=1.0),
+    "jbpf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
+    "tercom-pf": dict(n_particles=1000, init_std=20.0),
+    "mle": dict(init_std=20.0),
+}
+
+
+@pytest.mark.parametrize("method", list(FilterMethod))
+def test_every_filter_recovers_the_truth_on_a_multibeam_survey(method):
+    config = config_type(method)(**MULTIBEAM[method])
+    track = run_filter(method, SURVEY, MAP, config, rng=np.random.default_rng(2))
+    assert dr_final_error(SURVEY) > 20
+    errors = np.hypot(*(track.pose[:, :2] - SURVEY.true_pose[:, :2]).T)
+    assert errors[25:].mean() < 4.0, errors[25:].mean()
+    assert final_error(track, SURVEY) < 6.0
+    assert track.method == FilterMethod(method).value
+    assert track.meta["n_divergences"] == 0
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf"])
+def test_an_unknown_tide_is_estimated(method):
+    """Soundings 2.5 m deeper than the map: a filter told the tide is exactly 0 is misled (it
+    shifts to where the map is deeper), one that estimates it (tide_std > 0) is not."""
+    survey = multibeam_survey(MAP, seed=3, pings=40, tide=2.5)
+    cls = config_type(method)
+    known = run_filter(
+        method, survey, MAP, cls(**MULTIBEAM[method], tide_std=0.0), rng=np.random.default_rng(4)
+    )
+    estimated = run_filter(
+        method, survey, MAP, cls(**MULTIBEAM[method], tide_std=5.0), rng=np.random.default_rng(4)
+    )
+
+    def late(track):
+        return np.hypot(*(track.pose[20:, :2] - survey.true_pose[20:, :2]).T).mean()
+
+    assert late(estimated) < 1.5 < 3.0 < late(known), (late(estimated), late(known))
+
+
+def test_sjcpf_recovers_the_truth_from_a_single_beam_on_a_coarse_chart():
+    """Chen & Che's setting, scaled down: 500 m cells, one sounding per 100 m, 5 m depth noise,
+    2 deg heading bias and 0.1 m/s speed noise; 300 pings."""
+    rng = np.random.default_rng(0)
+    chart = fractal((120, 120), 500.0, rng=rng, beta=3.0, relief=300.0, mean_depth=2000.0)
+    k = 300
+    time, truth = trajectories.straight_line(
+        np.array([5000.0, 5000.0]), np.radians(45.0), 1.0, (k - 1) * 100.0, 0.01
+    )
+    dr = simulate_dead_reckoning(time, truth, DeadReckoningModel.chen2022(), rng=rng).pose
+    depth = chart.depth_at(truth[:, 0], truth[:, 1])[:, None] + 5.0 * rng.standard_normal((k, 1))
+    zeros = np.zeros((k, 1))
+    survey = Survey(time, dr, np.full(k, 100.0), zeros, zeros, depth, true_pose=truth)
+    track = run_filter("sjcpf", survey, chart, SJCPFConfig(init_std=300.0), rng=np.random.default_rng(1))
+    rmse = np.sqrt(np.mean(np.sum((track.pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    dr_rmse = np.sqrt(np.mean(np.sum((dr[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    assert rmse < dr_rmse / 4, (rmse, dr_rmse)
+
+
+@pytest.mark.parametrize("method", list(FilterMethod))
+def test_the_track_carries_what_the_api_promises(method):
+    survey = multibeam_survey(MAP, seed=5, pings=12)
+    config = config_type(method)(
+        **{k: (200 if k == "n_particles" else v) for k, v in MULTIBEAM[method].items()}
+    )
+    track = run_filter(FilterMethod(method), survey, MAP, config, rng=np.random.default_rng(6))
+    assert track.method == method and track.pose.shape == (12, 3)
+    np.testing.assert_array_equal(track.pose[:, 2], survey.dr_pose[:, 2])
+    assert np.all(np.isnan(track.covariance[:, 2, :])) and np.all(np.isnan(track.covariance[:, :, 2]))
+    assert np.all(np.linalg.eigvalsh(track.covariance[:, :2, :2]) >= -1e-9)
+    for key in ("ess", "n_resampled", "n_divergences", "divergence_steps", "config"):
+        assert key in track.meta, key
+    assert len(track.meta["ess"]) == 12
+    assert set(track.timings) >= {"total", "per_step"} and track.timings["total"] > 0
+    assert track.meta["config"] == dataclasses.asdict(config) | {
+        k: v.value for k, v in dataclasses.asdict(config).items() if hasattr(v, "value")
+    }
+
+
+def test_run_filter_refuses_another_methods_config_and_unknown_methods():
+    with pytest.raises(TangraphError, match="'ipf' takes a IPFConfig.*got PFConfig"):
+        run_filter("ipf", SURVEY, MAP, PFConfig(), rng=np.random.default_rng(0))
+    with pytest.raises(TangraphError, match="MLEConfig"):
+        run_filter("mle", SURVEY, MAP, {"window": 3}, rng=np.random.default_rng(0))
+    with pytest.raises(TangraphError, match="unknown filter method 'ukf'"):
+        run_filter("ukf", SURVEY, MAP, rng=np.random.default_rng(0))
+
+
+def test_default_configs():
+    assert [m.value for m in FilterMethod] == ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle"]
+    for method in FilterMethod:
+        assert type(default_config(method)) is config_type(method)
+    assert default_config("sjcpf").jitter_std == 15.0  # Chen & Che: variance 225 m^2
+    assert default_config("ipf").n_particles == 2000  # Han et al.'s replay
+    assert isinstance(default_config("mle"), MLEConfig)

@@ -1,0 +1,142 @@
+"""IPF's auxiliary resampling and SJCPF's correlation correction, step by step."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tangraph.filters import (
+    Belief,
+    FilterModel,
+    IPFConfig,
+    MotionModel,
+    SJCPFConfig,
+    initial_belief,
+    ipf_step,
+    pearson_rows,
+    resample,
+    sjcpf_step,
+    survey_pings,
+)
+from tests.filters.synthetic import multibeam_survey, rough_map
+
+MAP = rough_map(0)
+SURVEY = multibeam_survey(MAP, pings=6)
+
+
+def test_ipf_children_are_redrawn_from_their_parents_and_weighted_by_the_likelihood_ratio():
+    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0, tide_std=1.0)
+    model = FilterModel.from_config(config, MAP)
+    ping = survey_pings(SURVEY)[1]
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0), tide_var=1.0)
+    result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(7))
+    # replay the step's random draws: prediction, resampling, then the children's noise
+    rng = np.random.default_rng(7)
+    moved = model.motion.predict(belief.particles, ping, rng=rng)
+    parent = model.terrain.evaluate(moved, belief.tide, belief.tide_var, ping)
+    w = np.exp(
+        belief.log_weights + parent.log_likelihood - np.max(belief.log_weights + parent.log_likelihood)
+    )
+    ancestors = resample(w / w.sum(), config.resampler, rng=rng)
+    np.testing.assert_array_equal(result.info["ancestors"], ancestors)
+    parents, copies = result.info["parents"], result.info["copies"]
+    assert copies.sum() == 300 and copies.max() > 1  # some parents have several children
+    np.testing.assert_array_equal(np.repeat(parents, copies), np.sort(ancestors))
+    children = result.belief.particles
+    assert np.unique(children, axis=0).shape[0] == 300  # all distinct: no copies
+    assert not np.any(np.all(children == moved[ancestors], axis=1))  # none is its parent
+    np.testing.assert_allclose(children, model.motion.predict(belief.particles[ancestors], ping, rng=rng))
+    child = model.terrain.evaluate(children, belief.tide[ancestors], belief.tide_var, ping)
+    ratio = np.exp(child.log_likelihood - parent.log_likelihood[ancestors])
+    np.testing.assert_allclose(result.belief.weights, ratio / ratio.sum(), rtol=1e-9)
+    np.testing.assert_allclose(result.belief.tide, child.tide)
+
+
+def test_ipf_without_resampling_is_the_bootstrap_update():
+    config = IPFConfig(n_particles=200, init_std=5.0, sounding_std=3.0, ess_threshold=0.0)
+    model = FilterModel.from_config(config, MAP)
+    ping = survey_pings(SURVEY)[1]
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 5.0, 200, rng=np.random.default_rng(1))
+    result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(2))
+    assert not result.resampled and "ancestors" not in result.info
+    moved = model.motion.predict(belief.particles, ping, rng=np.random.default_rng(2))
+    np.testing.assert_allclose(result.belief.particles, moved)
+
+
+def sjcpf_belief(n=6, window=4, filled=3):
+    rng = np.random.default_rng(3)
+    particles = SURVEY.true_pose[1, :2] + rng.normal(0, 8, (n, 2))
+    history = np.arange(n * window, dtype=float).reshape(n, window) ** 1.5
+    measured = np.array([1.0, 4.0, 2.0, 8.0])[:window]
+    return Belief(particles, np.full(n, -np.log(n)), np.zeros(n), 0.0, history, measured, n_history=filled)
+
+
+def test_sjcpf_weights_by_likelihood_times_the_correlation_kernel():
+    config = SJCPFConfig(
+        n_particles=6,
+        window=4,
+        sounding_std=2.0,
+        jitter_std=0.0,
+        process_std=0.0,
+        process_fraction=0.0,
+        tide_std=0.0,
+        ess_threshold=0.0,
+        kernel_constant=3.0,
+    )
+    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    belief = sjcpf_belief()
+    ping = survey_pings(SURVEY)[1]
+    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
+    moved = belief.particles + ping.increment
+    update = model.terrain.evaluate(moved, belief.tide, 0.0, ping)
+    history = np.column_stack([belief.history[:, 1:], update.predicted])
+    measured = np.append(belief.measured[1:], np.mean(ping.depths))
+    rho = pearson_rows(history, measured)
+    logw = update.log_likelihood + 3.0 * rho
+    np.testing.assert_allclose(
+        result.belief.log_weights, logw - np.log(np.sum(np.exp(logw - logw.max()))) - logw.max()
+    )
+    np.testing.assert_allclose(result.belief.history, history)
+    np.testing.assert_allclose(result.belief.measured, measured)
+    assert result.belief.n_history == 4 and not result.resampled
+
+
+def model_terrain(config):
+    return FilterModel.from_config(config, MAP).terrain
+
+
+def test_sjcpf_does_not_correct_before_the_window_is_full():
+    config = SJCPFConfig(
+        n_particles=6, window=4, sounding_std=2.0, jitter_std=0.0, tide_std=0.0, ess_threshold=0.0
+    )
+    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    belief = sjcpf_belief(filled=1)
+    ping = survey_pings(SURVEY)[1]
+    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
+    update = model.terrain.evaluate(belief.particles + ping.increment, belief.tide, 0.0, ping)
+    expected = update.log_likelihood - np.max(update.log_likelihood)
+    expected -= np.log(np.exp(expected).sum())
+    np.testing.assert_allclose(result.belief.log_weights, expected)
+    assert result.belief.n_history == 2
+
+
+def test_sjcpf_history_follows_the_particles_through_resampling():
+    config = SJCPFConfig(
+        n_particles=6,
+        window=4,
+        sounding_std=0.5,
+        jitter_std=0.0,
+        process_std=0.0,
+        process_fraction=0.0,
+        tide_std=0.0,
+        ess_threshold=1.0,
+    )
+    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    belief = sjcpf_belief()
+    ping = survey_pings(SURVEY)[1]
+    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(4))
+    ancestors = result.info["ancestors"]
+    assert result.resampled and len(set(ancestors.tolist())) < 6  # some particles were copied
+    update = model.terrain.evaluate(belief.particles + ping.increment, belief.tide, 0.0, ping)
+    np.testing.assert_array_equal(result.belief.particles, (belief.particles + ping.increment)[ancestors])
+    np.testing.assert_array_equal(result.belief.history[:, :-1], belief.history[ancestors, 1:])
+    np.testing.assert_array_equal(result.belief.history[:, -1], update.predicted[ancestors])
