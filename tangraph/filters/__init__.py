@@ -17,6 +17,7 @@ from tangraph.filters.core import (
     resample_if_needed,
     reweight,
     run_particle_filter,
+    survey_sounding_std,
     weighted_moments,
 )
 from tangraph.filters.correlation import (
@@ -89,6 +90,7 @@ __all__ = [
     "sjcpf_step",
     "spearman_rows",
     "survey_pings",
+    "survey_sounding_std",
     "tercom_pf",
     "tercom_pf_step",
     "weighted_moments",

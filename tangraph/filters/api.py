@@ -60,8 +60,8 @@ def default_config(method: FilterMethod | str):
 
     Examples
     --------
-    >>> default_config("sjcpf").jitter_std
-    15.0
+    >>> default_config("sjcpf").window
+    10
     """
     return config_type(method)()
 

@@ -43,6 +43,7 @@ __all__ = [
     "resample_if_needed",
     "reweight",
     "run_particle_filter",
+    "survey_sounding_std",
     "weighted_moments",
 ]
 
@@ -99,8 +100,10 @@ class ParticleConfig:
     process_std, process_fraction : float
         Process noise per ping and axis: ``sqrt(process_std^2 + (process_fraction d)^2)`` m for a
         dead-reckoned displacement of ``d`` m (:class:`~tangraph.filters.model.MotionModel`).
-    sounding_std : float
-        Std (m) of a sounding's error in the likelihood.
+    sounding_std : float or None
+        Std (m) of a sounding's error in the likelihood. None: from the survey
+        (:func:`survey_sounding_std`: 1.5 times the sonar's ``depth_noise`` a simulated survey
+        records, at least 0.2 m; 1 m when it records none).
     tide, tide_std : float
         Prior of the tide (m, measured = map + tide): mean and std. ``tide_std = 0``: the tide
         is known; otherwise it is estimated per particle (Rao-Blackwellised, see
@@ -119,7 +122,7 @@ class ParticleConfig:
     init_std: float = 50.0
     process_std: float = 0.5
     process_fraction: float = 0.1
-    sounding_std: float = 1.0
+    sounding_std: float | None = None
     tide: float = 0.0
     tide_std: float = 3.0
     resampler: Resampler = Resampler.SYSTEMATIC
@@ -131,7 +134,8 @@ class ParticleConfig:
         check_count(self, "n_particles")
         for name in ("init_std", "process_std", "process_fraction", "tide_std"):
             check_number(self, name)
-        check_number(self, "sounding_std", open_low=True)
+        if self.sounding_std is not None:
+            check_number(self, "sounding_std", open_low=True)
         check_number(self, "tide", low=None)
         check_number(self, "ess_threshold", high=1.0)
         check_number(self, "reinit_growth", low=1.0)
@@ -163,11 +167,32 @@ class FilterModel:
     terrain: TerrainModel
 
     @classmethod
-    def from_config(cls, config: ParticleConfig, bathymetry: BathymetryMap) -> FilterModel:
+    def from_config(
+        cls, config: ParticleConfig, bathymetry: BathymetryMap, survey: Survey | None = None
+    ) -> FilterModel:
+        """The model of a config; a ``sounding_std`` of None is resolved from ``survey``."""
+        sigma = config.sounding_std if config.sounding_std is not None else survey_sounding_std(survey)
         return cls(
             MotionModel(config.process_std, config.process_fraction),
-            TerrainModel(bathymetry, config.sounding_std, config.tide_std),
+            TerrainModel(bathymetry, sigma, config.tide_std),
         )
+
+
+def survey_sounding_std(survey: Survey | None) -> float:
+    """The likelihood's sounding std for a survey: 1.5 times the sonar ``depth_noise`` recorded in
+    ``survey.meta["settings"]["sonar"]`` (simulated surveys; the margin covers map interpolation
+    and attitude errors), at least 0.2 m; 1 m when the survey records none.
+
+    Examples
+    --------
+    >>> survey_sounding_std(None)
+    1.0
+    """
+    try:
+        noise = float(survey.meta["settings"]["sonar"]["depth_noise"])  # type: ignore[union-attr]
+    except (AttributeError, KeyError, TypeError, ValueError):
+        return 1.0
+    return max(1.5 * noise, 0.2) if np.isfinite(noise) and noise >= 0 else 1.0
 
 
 def _frozen(a, dtype=np.float64) -> np.ndarray:
@@ -384,7 +409,7 @@ def run_particle_filter(
     """
     from tqdm.auto import tqdm
 
-    model = FilterModel.from_config(config, bathymetry)
+    model = FilterModel.from_config(config, bathymetry, survey)
     pings = survey_pings(survey)
     k_total = survey.n_pings
     belief = initial_belief(
@@ -430,6 +455,7 @@ def run_particle_filter(
         "n_divergences": len(divergence_steps),
         "divergence_steps": divergence_steps,
         "n_particles": config.n_particles,
+        "sounding_std": model.terrain.sounding_std,
         "config": config.as_dict(),
         **counts,
     }

@@ -22,7 +22,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
 from tangraph.survey import Survey
 
-__all__ = ["attempt_fix", "check_fix_search", "fix_due"]
+__all__ = ["attempt_fix", "check_fix_search", "fix_due", "fix_window"]
 
 _log = logging.getLogger(__name__)
 
@@ -32,9 +32,11 @@ FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_
 
 def check_fix_search(config) -> None:
     """Validate (in ``__post_init__``) the fix-search fields of a config: ``window`` (pings per
-    fix), ``fix_interval`` (pings between fixes; None: ``window``), ``criterion`` (mle or msd),
-    ``search_sigmas``, ``min_half_width`` (None: 3 map cells), ``max_half_width``."""
-    check_count(config, "window")
+    fix; None: :func:`fix_window`), ``fix_interval`` (pings between fixes; None: ``window``),
+    ``criterion`` (mle or msd), ``search_sigmas``, ``min_half_width`` (None: 3 map cells),
+    ``max_half_width``."""
+    if config.window is not None:
+        check_count(config, "window")
     if config.fix_interval is not None:
         check_count(config, "fix_interval")
     check_number(config, "search_sigmas", open_low=True)
@@ -54,11 +56,21 @@ def check_fix_search(config) -> None:
     object.__setattr__(config, "criterion", criterion)
 
 
-def fix_due(config, index: int) -> bool:
+def fix_window(config, survey: Survey) -> int:
+    """Pings per fix: ``config.window``, or if None enough pings for about 30 soundings and at
+    least 5 (Han et al.'s 5 pings of multibeam; 30 pings of a single beam)."""
+    if config.window is not None:
+        return int(config.window)
+    has = np.isfinite(survey.beam_depth)
+    per_ping = has.sum() / max(int(has.any(axis=1).sum()), 1)
+    return int(max(5, np.ceil(30.0 / per_ping)))
+
+
+def fix_due(config, index: int, window: int) -> bool:
     """Whether a fix is searched at ping ``index``: the first full window, then every
     ``fix_interval`` pings (default: ``window``, so windows do not overlap)."""
-    first = config.window - 1
-    return index >= first and (index - first) % int(config.fix_interval or config.window) == 0
+    first = window - 1
+    return index >= first and (index - first) % int(config.fix_interval or window) == 0
 
 
 def attempt_fix(
@@ -68,6 +80,7 @@ def attempt_fix(
     prior: np.ndarray,
     covariance: np.ndarray,
     search,
+    window: int,
 ) -> tuple[TapFix | None, dict[str, Any]]:
     """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
     ``None`` (and a ``"failed: ..."`` reason) when no match can be made."""
@@ -77,13 +90,13 @@ def attempt_fix(
     half_width = float(np.clip(search.search_sigmas * spread, low, max(low, search.max_half_width)))
     record: dict[str, Any] = {
         "index": int(index),
-        "first": int(index - search.window + 1),
+        "first": int(index - window + 1),
         "prior": [float(v) for v in prior],
         "half_width": half_width,
     }
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
-        fix = tap_fix(survey, bathymetry, index, search.window, config, prior=prior)
+        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
         record.update(accepted=False, reason=f"failed: {exc}")

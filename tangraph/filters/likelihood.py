@@ -51,29 +51,25 @@ def _log_likelihood_kernel(depth, north0, east0, inv_dn, inv_de, particles, offs
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
-def _residual_sums_kernel(depth, north0, east0, inv_dn, inv_de, particles, offsets, measured, out):
+def _residual_sums_kernel(depth, north0, east0, inv_dn, inv_de, particles, offsets_cells, measured, out):
     """``out[p] = (sum r, sum r^2)`` of ``r = z - h(x_p + o_b)``; NaN for a particle with any
-    sounding off the map or by a NaN cell."""
+    sounding off the map or by a NaN cell. ``offsets_cells`` are the offsets in cells, so that
+    a particle's grid coordinates are computed once (the rules of ``_interp._locate``)."""
+    ny, nx = depth.shape
     for p in range(particles.shape[0]):
         s1 = 0.0
         s2 = 0.0
-        for b in range(offsets.shape[0]):
-            ok, i, j, ty, tx = _locate(
-                depth,
-                north0,
-                east0,
-                inv_dn,
-                inv_de,
-                particles[p, 0] + offsets[b, 0],
-                particles[p, 1] + offsets[b, 1],
-            )
-            if not ok:
+        pn = (particles[p, 0] - north0) * inv_dn
+        pe = (particles[p, 1] - east0) * inv_de
+        for b in range(offsets_cells.shape[0]):
+            fy = pn + offsets_cells[b, 0]
+            fx = pe + offsets_cells[b, 1]
+            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
                 s1 = np.nan
                 break
-            r = measured[b] - _bilinear(depth, i, j, ty, tx)[0]
-            if r != r:
-                s1 = np.nan
-                break
+            i = min(int(fy), ny - 2)
+            j = min(int(fx), nx - 2)
+            r = measured[b] - _bilinear(depth, i, j, fy - i, fx - j)[0]
             s1 += r
             s2 += r * r
         out[p, 0] = s1
@@ -143,8 +139,9 @@ class TerrainLikelihood:
             offsets, depths = np.ascontiguousarray(offsets[keep]), depths[keep]
         out = np.empty((particles.shape[0], 2))
         n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
+        cells = np.ascontiguousarray(offsets * np.array([1.0 / dn, 1.0 / de]))
         _residual_sums_kernel(
-            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, offsets, depths, out
+            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, cells, depths, out
         )
         return out
 

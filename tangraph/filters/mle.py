@@ -8,8 +8,10 @@ current estimate over ``search_sigmas`` times its std (see :mod:`tangraph.filter
 estimate jumps to the fix, with the fix's covariance; between fixes it moves by the dead-reckoned
 increments and its covariance grows by the motion model's process noise
 (:class:`~tangraph.filters.model.MotionModel`). Before the first fix the estimate is dead
-reckoning from ``N(DR_0, init_std^2 I)``. A fix is taken whatever its quality, as plain MLE does
-(``require_accepted=True`` keeps only accepted fixes); a window that cannot be matched is skipped.
+reckoning from ``N(DR_0, init_std^2 I)``. Only accepted fixes (informative and unimodal,
+``TapFix.accepted``) are used by default; ``require_accepted=False`` takes every fix whatever its
+quality, as plain MLE does (it can then jump to a wrong basin on flat terrain and search around it
+from there on). A window that cannot be matched is skipped.
 No particles: ``meta["ess"]`` is NaN and ``n_resampled``, ``n_divergences`` are 0.
 """
 
@@ -22,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.filters.core import check_number, step_timings
-from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due
+from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
 from tangraph.filters.model import MotionModel, survey_pings
 from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
@@ -41,24 +43,25 @@ class MLEConfig:
         Std (m, per axis) of the initial position around the first dead-reckoned one.
     process_std, process_fraction : float
         Growth of the covariance between fixes (as :class:`~tangraph.filters.model.MotionModel`).
-    window, fix_interval : int
-        Pings per fix and between fixes (None: ``window``).
+    window, fix_interval : int or None
+        Pings per fix (None: enough for about 30 soundings, at least 5;
+        :func:`~tangraph.filters.fixes.fix_window`) and between fixes (None: ``window``).
     search_sigmas, min_half_width, max_half_width : float
         Search half-width: ``search_sigmas`` times the estimate's std, within
         ``[min_half_width (None: 3 map cells), max_half_width]`` metres.
     require_accepted : bool
-        Use only accepted fixes (informative and unimodal); default False (plain MLE).
+        Use only accepted fixes (informative and unimodal); False: every fix (plain MLE).
     """
 
     init_std: float = 50.0
     process_std: float = 0.5
     process_fraction: float = 0.1
-    window: int = 5
+    window: int | None = None
     fix_interval: int | None = None
     search_sigmas: float = 3.0
     min_half_width: float | None = None
     max_half_width: float = 1000.0
-    require_accepted: bool = False
+    require_accepted: bool = True
 
     def __post_init__(self) -> None:
         for name in ("init_std", "process_std", "process_fraction"):
@@ -92,6 +95,7 @@ def mle_filter(
     seconds = np.empty(k_total)
     fixes: list[dict[str, Any]] = []
     accepted = rejected = 0
+    window = fix_window(config, survey)
     started = _time.perf_counter()
     for ping in tqdm(survey_pings(survey), disable=not progress, desc="mle", unit="ping", leave=False):
         t0 = _time.perf_counter()
@@ -99,8 +103,8 @@ def mle_filter(
         if not ping.first:
             position = position + ping.increment
             p = p + np.eye(2) * motion.noise_std(ping.increment) ** 2
-        if fix_due(config, k):
-            fix, record = attempt_fix(survey, bathymetry, k, position, p, config)
+        if fix_due(config, k, window):
+            fix, record = attempt_fix(survey, bathymetry, k, position, p, config, window)
             used = fix is not None and (fix.accepted or not config.require_accepted)
             record["used"] = bool(used)
             fixes.append(record)

@@ -3,7 +3,9 @@
 Each ping (SEEDS.md section 3):
 
 1. move every particle by the dead-reckoned increment plus the process noise **and** a Gaussian
-   jitter of std ``jitter_std`` (the paper's extra process noise of variance 225 m^2: 15 m),
+   jitter of std ``jitter_std`` (the paper's extra process noise of variance 225 m^2: 15 m; by
+   default ``jitter_fraction`` = 15 % of the dead-reckoned distance of the ping, which is the
+   paper's 15 m at its 100 m between soundings and scales to multibeam pings a few metres apart),
    every particle, every ping;
 2. weight by the terrain likelihood of the ping, as the bootstrap PF;
 3. append each particle's predicted depth (the mean over the ping's soundings of map depth plus
@@ -20,9 +22,10 @@ Each ping (SEEDS.md section 3):
    resampling (indexed by the resampling indices).
 
 The paper gives no particle count, kernel constant or window for its Table 1; the defaults here
-(1000 particles, ``exp(5 rho)``, ``L = 10``) are choices to sweep. Defaults follow the paper's
-single-beam setting: ``sounding_std`` 5 m (its depth variance 25 m^2), ``init_std`` 500 m (its
-initialisation radius 1000 m read as two standard deviations).
+(1000 particles, ``exp(2 rho)``, ``L = 10``) are choices to sweep (the null scatter of rho over 10
+points is about 1/3, so ``exp(2 rho)`` changes a weight by about a factor 2 per standard error).
+The other defaults are those of every filter (``sounding_std`` from the survey: on the chen2022
+scenario 1.5 x its 5 m depth noise).
 """
 
 from __future__ import annotations
@@ -61,8 +64,11 @@ class SJCPFConfig(ParticleConfig):
 
     Parameters
     ----------
-    jitter_std : float
+    jitter_std : float or None
         Std (m, per axis) of the jitter added to every particle at every ping (paper: 15 m).
+        None: ``jitter_fraction`` times the ping's dead-reckoned distance.
+    jitter_fraction : float
+        See ``jitter_std``.
     window : int
         Length ``L`` of the depth sequences correlated (>= 3).
     correlation : Correlation
@@ -74,18 +80,19 @@ class SJCPFConfig(ParticleConfig):
     """
 
     n_particles: int = 1000
-    init_std: float = 500.0
-    sounding_std: float = 5.0
     ess_threshold: float = 1.0
-    jitter_std: float = 15.0
+    jitter_std: float | None = None
+    jitter_fraction: float = 0.15
     window: int = 10
     correlation: Correlation = Correlation.PEARSON
     kernel: Literal["exponential", "power"] = "exponential"
-    kernel_constant: float = 5.0
+    kernel_constant: float = 2.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        check_number(self, "jitter_std")
+        if self.jitter_std is not None:
+            check_number(self, "jitter_std")
+        check_number(self, "jitter_fraction")
         check_number(self, "kernel_constant")
         check_count(self, "window", low=3)
         if self.kernel not in ("exponential", "power"):
@@ -122,9 +129,10 @@ def sjcpf_step(
     belief: Belief, ping: Ping, model: FilterModel, config: SJCPFConfig, *, rng: np.random.Generator
 ) -> StepResult:
     """One SJCPF step (see the module docstring)."""
-    moved = belief.replace(
-        particles=model.motion.predict(belief.particles, ping, rng=rng, extra_std=config.jitter_std)
-    )
+    jitter = config.jitter_std
+    if jitter is None:
+        jitter = config.jitter_fraction * float(np.hypot(*ping.increment))
+    moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng, extra_std=jitter))
     weighted, update = measure(moved, ping, model)
     if update is not None:
         weighted = weighted.replace(

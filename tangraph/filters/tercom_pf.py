@@ -39,7 +39,7 @@ from tangraph.filters.core import (
     run_particle_filter,
     weighted_moments,
 )
-from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due
+from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
 from tangraph.filters.model import Ping
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion
@@ -55,8 +55,9 @@ class TercomPFConfig(ParticleConfig):
 
     Parameters
     ----------
-    window : int
-        Pings per fix (Han et al.: 5).
+    window : int or None
+        Pings per fix (Han et al.: 5). None: enough for about 30 soundings, at least 5
+        (:func:`~tangraph.filters.fixes.fix_window`).
     fix_interval : int or None
         Pings between fixes; None: ``window``.
     criterion : Criterion
@@ -68,7 +69,7 @@ class TercomPFConfig(ParticleConfig):
         Squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
     """
 
-    window: int = 5
+    window: int | None = None
     fix_interval: int | None = None
     criterion: Criterion = Criterion.MLE
     search_sigmas: float = 3.0
@@ -96,15 +97,18 @@ def tercom_pf_step(
     rng: np.random.Generator,
     survey: Survey,
     bathymetry: BathymetryMap,
+    window: int | None = None,
 ) -> StepResult:
-    """One TERCOM-PF step (see the module docstring)."""
+    """One TERCOM-PF step (see the module docstring); ``window`` defaults to
+    :func:`~tangraph.filters.fixes.fix_window` of the config and survey."""
+    window = window or fix_window(config, survey)
     moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng))
-    if not fix_due(config, ping.index):
+    if not fix_due(config, ping.index, window):
         mean, cov = weighted_moments(moved)
         new, index, ess = resample_if_needed(moved, config, rng=rng)
         return StepResult(new, mean, cov, ess, resampled=index is not None)
     prior_mean, prior_cov = weighted_moments(moved)
-    fix, record = attempt_fix(survey, bathymetry, ping.index, prior_mean, prior_cov, config)
+    fix, record = attempt_fix(survey, bathymetry, ping.index, prior_mean, prior_cov, config, window)
     counts = {"n_fixes_accepted": 0, "n_fixes_rejected": 0, "n_recentred": 0}
     if fix is None or not fix.accepted:
         counts["n_fixes_rejected"] = 1
@@ -148,11 +152,13 @@ def tercom_pf(
 ) -> Track:
     """Run TERCOM-PF over a survey; see the module docstring. ``meta["fixes"]`` records every
     fix attempted."""
-    step = functools.partial(tercom_pf_step, survey=survey, bathymetry=bathymetry)
+    config = config or TercomPFConfig()
+    window = fix_window(config, survey)
+    step = functools.partial(tercom_pf_step, survey=survey, bathymetry=bathymetry, window=window)
     return run_particle_filter(
         survey,
         bathymetry,
-        config or TercomPFConfig(),
+        config,
         step,
         method="tercom-pf",
         rng=rng,

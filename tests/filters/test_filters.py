@@ -119,6 +119,7 @@ def test_default_configs():
     assert [m.value for m in FilterMethod] == ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle"]
     for method in FilterMethod:
         assert type(default_config(method)) is config_type(method)
-    assert default_config("sjcpf").jitter_std == 15.0  # Chen & Che: variance 225 m^2
+    sjcpf = default_config("sjcpf")  # Chen & Che's 15 m (variance 225 m^2) at 100 m per sounding
+    assert sjcpf.jitter_std is None and sjcpf.jitter_fraction * 100.0 == pytest.approx(15.0)
     assert default_config("ipf").n_particles == 2000  # Han et al.'s replay
     assert isinstance(default_config("mle"), MLEConfig)
