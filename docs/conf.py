@@ -36,6 +36,7 @@ extensions = [
     "sphinx_gallery.gen_gallery",
     "cliref",
     "catalogue_table",
+    "study_readme",
 ]
 exclude_patterns = ["_build", "tutorials_src", "**.ipynb_checkpoints"]
 templates_path = ["_templates"]
@@ -53,7 +54,9 @@ numpydoc_xref_param_type = False
 sphinx_gallery_conf = {
     "examples_dirs": "tutorials_src",
     "gallery_dirs": "tutorials",
-    "filename_pattern": r"/plot_",  # every plot_*.py tutorial is executed at build time
+    # every plot_*.py tutorial is executed at build time; TANGRAPH_DOCS_TUTORIALS (a regex, say
+    # "plot_07") executes only some, to check a tutorial without waiting for the others
+    "filename_pattern": os.environ.get("TANGRAPH_DOCS_TUTORIALS", r"/plot_"),
     "within_subsection_order": "FileNameSortKey",
     "image_scrapers": ("matplotlib",),
     "matplotlib_animations": False,
@@ -71,5 +74,7 @@ html_theme_options = {
     "description": "Terrain-aided navigation of AUVs on bathymetry maps",
     "fixed_sidebar": True,
     "show_relbars": True,
+    "page_width": "1100px",
 }
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["tangraph.css"]
