@@ -70,10 +70,16 @@ class GraphConfig:
         ``[min_half_width_cells, max_half_width_cells]`` search steps (``tap.step`` or the map's
         cell size); ``"fixed"``: ``tap.half_width``.
     half_width_sigmas, min_half_width_cells, max_half_width_cells : float
-    relinearize_threshold : float
-        iSAM2's relinearisation threshold (on every coordinate of a pose's update).
+    relinearize_threshold, relinearize_position : float
+        iSAM2 relinearises a pose whose update exceeds this in heading (rad) or in position (m);
+        a Pose2 chain is nonlinear in the heading only.
     relinearize_skip : int
         iSAM2 checks for relinearisation every this many updates.
+    isam_window : int or None
+        Key poses kept in iSAM2: once there are twice as many, the oldest are marginalised (their
+        information stays as a linear marginal factor), so the time per update does not grow
+        with the mission; None keeps all (the update then slows as the chain grows, since every
+        new fix moves the whole past). The batch smoother always uses every key pose.
     optimizer : {"lm", "gn", "dogleg"}
         Batch optimiser (Levenberg-Marquardt, Gauss-Newton, Powell's dogleg), METIS ordering.
     max_iterations : int
@@ -106,8 +112,10 @@ class GraphConfig:
     half_width_sigmas: float = 4.0
     min_half_width_cells: float = 5.0
     max_half_width_cells: float = 200.0
-    relinearize_threshold: float = 0.01
+    relinearize_threshold: float = 0.005
+    relinearize_position: float = 1.0
     relinearize_skip: int = 1
+    isam_window: int | None = 100
     optimizer: Literal["lm", "gn", "dogleg"] = "lm"
     max_iterations: int = 100
     smoother_covariance: Literal["all", "none"] = "all"
@@ -117,7 +125,8 @@ class GraphConfig:
     def __post_init__(self) -> None:
         for name in ("key_interval", "robust_parameter", "initial_position_std", "initial_heading_std",
                      "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
-                     "min_half_width_cells", "max_half_width_cells", "relinearize_threshold"):
+                     "min_half_width_cells", "max_half_width_cells", "relinearize_threshold",
+                     "relinearize_position"):
             _number(self, name)
         _number(self, "rematch_tolerance", allow_zero=True)
         if self.max_half_width_cells < self.min_half_width_cells:
@@ -138,6 +147,11 @@ class GraphConfig:
                     f"GraphConfig.fix_spacing must be None or an integer >= 1, got {self.fix_spacing!r}"
                 )
             object.__setattr__(self, "fix_spacing", int(self.fix_spacing))
+        if self.isam_window is not None and (isinstance(self.isam_window, bool) or not isinstance(
+                self.isam_window, int | np.integer) or self.isam_window < 2):
+            raise TangraphError(
+                f"GraphConfig.isam_window must be None or an integer >= 2, got {self.isam_window!r}"
+            )
         if self.gate_probability is not None and not 0.0 < float(self.gate_probability) < 1.0:
             raise TangraphError(
                 f"GraphConfig.gate_probability must be None or lie in (0, 1), got {self.gate_probability!r}"

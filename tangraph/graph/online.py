@@ -105,9 +105,14 @@ class GraphNavigator:
         self.graph = PoseGraph(c.robust_kernel, c.robust_parameter, c.odometry_min_std,
                                c.odometry_min_heading_std)
         params = gtsam.ISAM2Params()
-        params.setRelinearizeThreshold(c.relinearize_threshold)
+        threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the GTSAM keys are plain integers
+        threshold.insert(("\x00", np.array([c.relinearize_position, c.relinearize_position,
+                                              c.relinearize_threshold])))
+        params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = c.relinearize_skip
+        params.enablePartialRelinearizationCheck = True
         self.isam = gtsam.ISAM2(params)
+        self._oldest = 0  # index in graph.keys of the oldest key pose still in iSAM2
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
         self.index = -1  # last ping processed
@@ -227,12 +232,30 @@ class GraphNavigator:
             raise _translate(exc, self.graph) from None
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
+        self._marginalise_old()
         estimate = self.isam.calculateEstimatePose2(k)
         self._key_pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
         self._key_pose[2] = self.survey.dr_pose[k, 2] + _wrap(self._key_pose[2] - self.survey.dr_pose[k, 2])
         self._key_cov = tangent_to_world(self._key_pose[2], self.isam.marginalCovariance(k))
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._key_pose, self._key_cov
+
+    def _marginalise_old(self) -> None:
+        """Keep at most ``2 * isam_window`` key poses in iSAM2: marginalise the oldest ones (leaves
+        of the Bayes tree of a chain), so that the work per update stays bounded."""
+        window = self.config.isam_window
+        n = len(self.graph.keys)
+        if window is None or n - self._oldest <= 2 * window:
+            return
+        leaves = gtsam.KeyList()
+        for key in self.graph.keys[self._oldest : n - window]:
+            leaves.push_back(key)
+        try:
+            self.isam.marginalizeLeaves(leaves)
+        except RuntimeError as exc:  # not leaves (a graph that is not a chain): keep them
+            log.debug("could not marginalise key poses: %s", exc)
+            return
+        self._oldest = n - window
 
     @property
     def pending(self) -> tuple[int, int]:

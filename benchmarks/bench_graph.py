@@ -1,0 +1,105 @@
+"""Speed of the factor graph (tangraph.graph): online iSAM2 per key pose, batch smoother on long chains.
+
+    python benchmarks/bench_graph.py [--online-only | --batch-only] [--sizes 100000 300000]
+
+Online: the chen2022 scenario (100 000 s at 1 m/s, a single-beam sounding every 100 s, on the
+500 m polar chart), navigated by :func:`tangraph.graph.navigate_online`; prints the mean and p99
+time of an iSAM2 key-pose update (update plus the latest key's marginal), the same for whole
+steps (TAP included), and the ratio of the mean update time over the last 10 % of the key poses
+to the first 10 % (targets: p99 <= 10 ms, ratio <= 2). Batch: a synthetic chain of N poses (1 m
+steps with a slight turn, odometry plus a position prior every 100 poses) solved by
+:func:`tangraph.graph.smooth_pose_graph` (LM, METIS), with and without the marginal covariance of
+every pose (target: 100 000 poses in <= 15 s; 300 000 without a crash). Nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+from tangraph.graph import GraphConfig, GraphNavigator, PoseGraph, smooth_pose_graph
+from tangraph.maps import load_any
+from tangraph.sim.scenario import load_scenario, simulate
+
+
+def online() -> None:
+    scenario = load_scenario("chen2022")
+    bathymetry = load_any(scenario.map)
+    t0 = time.perf_counter()
+    survey = simulate(scenario, rng=np.random.default_rng(scenario.seed), bathymetry=bathymetry,
+                      seed=scenario.seed)
+    print(f"chen2022: {survey.n_pings} pings over {survey.time[-1]:.0f} s, simulated in "
+          f"{time.perf_counter() - t0:.1f} s")
+    config = GraphConfig(n_pings=10, key_interval=60.0)
+    nav = GraphNavigator(survey, bathymetry, config).run()
+    track = nav.track()
+    updates = np.asarray(nav.update_times) * 1e3
+    tenth = max(updates.size // 10, 1)
+    ratio = updates[-tenth:].mean() / updates[:tenth].mean()
+    err = np.hypot(*(track.pose[:, :2] - survey.true_pose[:, :2]).T)
+    dr = np.hypot(*(survey.dr_pose[:, :2] - survey.true_pose[:, :2]).T)
+    print(f"online isam2: {len(nav.graph.keys)} key poses, {track.meta['n_fixes_accepted']} fixes accepted, "
+          f"{track.meta['n_fixes_rejected']} refused")
+    print(f"  key-pose update   mean {updates.mean():.2f} ms   p99 {np.percentile(updates, 99):.2f} ms   "
+          f"last 10 % / first 10 % = {ratio:.2f}")
+    timings = track.timings
+    print(f"  whole step        mean {1e3 * timings['per_step']:.2f} ms   "
+          f"p99 {1e3 * timings['per_step_p99']:.2f} ms   (TAP {timings['tap_total']:.1f} s in all)")
+    print(f"  RMSE  DR {np.sqrt(np.mean(dr**2)):.0f} m   isam2 {np.sqrt(np.mean(err**2)):.0f} m")
+
+
+def chain(n: int, prior_every: int = 100) -> PoseGraph:
+    """A synthetic chain: 1 m steps turning 0.0001 rad each, position priors every ``prior_every``."""
+    graph = PoseGraph()
+    step = np.array([1.0, 0.0, 1e-4])
+    odo_cov = np.diag([0.01, 0.01, 1e-6])
+    pose = np.zeros(3)
+    graph.add_pose(0, 0.0, pose)
+    graph.add_pose_prior(0, pose, np.diag([1.0, 1.0, 0.01]))
+    rng = np.random.default_rng(1)
+    for k in range(1, n):
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        pose = pose + np.array([c * step[0], s * step[0], step[2]])
+        graph.add_pose(k, float(k), pose + np.array([0.5, -0.5, 0.0]))
+        graph.add_odometry(k - 1, k, step, odo_cov)
+        if k % prior_every == 0:
+            graph.add_position_fix(k, pose[:2] + rng.normal(0.0, 2.0, 2), np.eye(2) * 4.0)
+    return graph
+
+
+def batch(sizes: list[int]) -> None:
+    for n in sizes:
+        t0 = time.perf_counter()
+        graph = chain(n)
+        built = time.perf_counter() - t0
+        for covariance in ("none", "all"):
+            t0 = time.perf_counter()
+            solution = smooth_pose_graph(graph, GraphConfig(smoother_covariance=covariance))
+            total = time.perf_counter() - t0
+            parts = solution.timings
+            print(f"batch {n:>7} poses, covariance {covariance:<4}: {total:6.1f} s "
+                  f"(solve {parts['solve']:.1f} s, marginals {parts['marginals']:.1f} s, "
+                  f"{solution.iterations} LM iterations; graph built in {built:.1f} s)")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--online-only", action="store_true")
+    parser.add_argument("--batch-only", action="store_true")
+    parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 300_000])
+    args = parser.parse_args()
+    print(f"pid {os.getpid()}")
+    if not args.batch_only:
+        online()
+    if not args.online_only:
+        batch(args.sizes)
+
+
+if __name__ == "__main__":
+    main()
