@@ -21,6 +21,7 @@ import time as _time
 from collections.abc import Callable
 from typing import Any
 
+import numba
 import numpy as np
 
 from tangraph.errors import TangraphError
@@ -299,12 +300,33 @@ def initial_belief(
     )
 
 
+@numba.njit(cache=True, nogil=True)
+def _moments(log_weights, particles):
+    """Weighted mean (2,), covariance (2, 2) and ``1 / sum w^2`` of normalised log weights."""
+    n = log_weights.size
+    mean = np.zeros(2)
+    sum_w2 = 0.0
+    for p in range(n):
+        w = np.exp(log_weights[p])
+        mean[0] += w * particles[p, 0]
+        mean[1] += w * particles[p, 1]
+        sum_w2 += w * w
+    cov = np.zeros((2, 2))
+    for p in range(n):
+        w = np.exp(log_weights[p])
+        dn = particles[p, 0] - mean[0]
+        de = particles[p, 1] - mean[1]
+        cov[0, 0] += w * dn * dn
+        cov[0, 1] += w * dn * de
+        cov[1, 1] += w * de * de
+    cov[1, 0] = cov[0, 1]
+    return mean, cov, 1.0 / sum_w2
+
+
 def weighted_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean ``(2,)`` and covariance ``(2, 2)`` (second moment about the mean)."""
-    w = belief.weights
-    mean = w @ belief.particles
-    d = belief.particles - mean
-    return mean, (w[:, None] * d).T @ d
+    mean, cov, _ = _moments(belief.log_weights, belief.particles)
+    return mean, cov
 
 
 def effective_size(belief: Belief) -> float:

@@ -50,30 +50,74 @@ def _log_likelihood_kernel(depth, north0, east0, inv_dn, inv_de, particles, offs
         out[p] = total
 
 
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
+def _particle_sums(depth, pn, pe, offsets_cells, measured):
+    """``(sum r, sum r^2)`` of ``r = z - h`` for one particle at grid coordinates ``(pn, pe)``;
+    ``sum r`` is NaN if a sounding falls off the map or by a NaN cell (``_interp._locate``)."""
+    ny, nx = depth.shape
+    s1 = 0.0
+    s2 = 0.0
+    for b in range(offsets_cells.shape[0]):
+        fy = pn + offsets_cells[b, 0]
+        fx = pe + offsets_cells[b, 1]
+        if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+            return np.nan, np.nan
+        i = min(int(fy), ny - 2)
+        j = min(int(fx), nx - 2)
+        r = measured[b] - _bilinear(depth, i, j, fy - i, fx - j)[0]
+        s1 += r
+        s2 += r * r
+    return s1, s2
+
+
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
 def _residual_sums_kernel(depth, north0, east0, inv_dn, inv_de, particles, offsets_cells, measured, out):
-    """``out[p] = (sum r, sum r^2)`` of ``r = z - h(x_p + o_b)``; NaN for a particle with any
-    sounding off the map or by a NaN cell. ``offsets_cells`` are the offsets in cells, so that
-    a particle's grid coordinates are computed once (the rules of ``_interp._locate``)."""
-    ny, nx = depth.shape
+    """``out[p] = (sum r, sum r^2)`` of ``r = z - h(x_p + o_b)``, NaN rows where a sounding has
+    no map depth. ``offsets_cells`` are the offsets in cells: a particle's grid coordinates are
+    computed once."""
     for p in range(particles.shape[0]):
-        s1 = 0.0
-        s2 = 0.0
-        pn = (particles[p, 0] - north0) * inv_dn
-        pe = (particles[p, 1] - east0) * inv_de
-        for b in range(offsets_cells.shape[0]):
-            fy = pn + offsets_cells[b, 0]
-            fx = pe + offsets_cells[b, 1]
-            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
-                s1 = np.nan
-                break
-            i = min(int(fy), ny - 2)
-            j = min(int(fx), nx - 2)
-            r = measured[b] - _bilinear(depth, i, j, fy - i, fx - j)[0]
-            s1 += r
-            s2 += r * r
+        s1, s2 = _particle_sums(
+            depth,
+            (particles[p, 0] - north0) * inv_dn,
+            (particles[p, 1] - east0) * inv_de,
+            offsets_cells,
+            measured,
+        )
         out[p, 0] = s1
         out[p, 1] = s2 if s1 == s1 else np.nan
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
+def _tide_update_kernel(
+    depth, north0, east0, inv_dn, inv_de, particles, offsets_cells, measured, tide, tide_var, noise_var,
+    log_likelihood, new_tide, predicted,
+):  # fmt: skip
+    """The ping's log-likelihood with a Gaussian tide posterior ``N(tide[p], tide_var)``, the
+    updated tide means and the mean predicted depth, per particle (see ``filters.model``)."""
+    nb = offsets_cells.shape[0]
+    gain = tide_var / (noise_var + nb * tide_var)
+    sum_z = 0.0
+    for b in range(nb):
+        sum_z += measured[b]
+    for p in range(particles.shape[0]):
+        s1, s2 = _particle_sums(
+            depth,
+            (particles[p, 0] - north0) * inv_dn,
+            (particles[p, 1] - east0) * inv_de,
+            offsets_cells,
+            measured,
+        )
+        m = tide[p]
+        if s1 != s1:
+            log_likelihood[p] = -np.inf
+            new_tide[p] = m
+            predicted[p] = np.nan
+            continue
+        se = s1 - nb * m
+        se2 = s2 - 2.0 * m * s1 + nb * m * m
+        log_likelihood[p] = -0.5 * (se2 - gain * se * se) / noise_var
+        new_tide[p] = m + gain * se
+        predicted[p] = (sum_z - s1) / nb + m
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -144,6 +188,27 @@ class TerrainLikelihood:
             self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, cells, depths, out
         )
         return out
+
+    def tide_update(
+        self, particles, offsets, depths, tide, tide_var: float
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """With finite soundings only, in one compiled pass: per particle the log-likelihood
+        (up to a constant) of the soundings under a Gaussian tide posterior ``N(tide (N,),
+        tide_var)`` (``tide_var = 0``: a known tide, the plain Gaussian likelihood), the
+        posterior tide mean after them and the mean predicted depth (map plus tide); ``-inf``,
+        the old tide and NaN for particles with a sounding off the map. See
+        :mod:`tangraph.filters.model` for the algebra; ``self.tide`` is not used."""
+        particles = np.ascontiguousarray(particles, dtype=np.float64)
+        n = particles.shape[0]
+        log_likelihood, new_tide, predicted = np.empty(n), np.empty(n), np.empty(n)
+        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
+        cells = np.ascontiguousarray(np.asarray(offsets, dtype=np.float64) * np.array([1.0 / dn, 1.0 / de]))
+        _tide_update_kernel(
+            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, cells,
+            np.ascontiguousarray(depths, dtype=np.float64), np.ascontiguousarray(tide, dtype=np.float64),
+            float(tide_var), self.sigma**2, log_likelihood, new_tide, predicted,
+        )  # fmt: skip
+        return log_likelihood, new_tide, predicted
 
 
 def log_normalise(logw: np.ndarray, *, where: str = "") -> tuple[np.ndarray, float]:

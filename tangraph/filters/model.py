@@ -125,17 +125,9 @@ class TerrainModel:
         """Likelihood of ``ping`` at ``particles (N, 2)`` whose tide posteriors are ``N(tide (N,),
         tide_var)``; see the module docstring."""
         b = ping.n_soundings
-        sums = self.likelihood.residual_sums(particles, ping.offsets, ping.depths)
         s2_noise = self.sounding_std**2
-        sum_e = sums[:, 0] - b * tide
-        sum_e2 = sums[:, 1] - 2.0 * tide * sums[:, 0] + b * tide**2
-        shrink = tide_var / (s2_noise + b * tide_var)
-        quadratic = sum_e2 - shrink * sum_e**2
-        log_likelihood = np.where(np.isfinite(quadratic), -0.5 * quadratic / s2_noise, -np.inf)
+        log_likelihood, new_tide, predicted = self.likelihood.tide_update(
+            particles, ping.offsets, ping.depths, tide, tide_var
+        )
         new_var = tide_var * s2_noise / (s2_noise + b * tide_var)
-        if tide_var > 0:
-            new_tide = tide + (new_var / s2_noise) * np.where(np.isfinite(sum_e), sum_e, 0.0)
-        else:
-            new_tide = tide
-        predicted = (np.sum(ping.depths) - sums[:, 0]) / b + tide  # mean of h + tide
         return TerrainUpdate(log_likelihood, new_tide, float(new_var), predicted)
