@@ -98,8 +98,10 @@ def likelihood_case(repeat: int) -> None:
         ("Gaussian log-likelihood", lambda: like.log_likelihood(particles, offsets, depths)),
         ("numpy reference", lambda: numpy_log_likelihood(m, particles, offsets, depths, 0.5)),
     ]
-    print(f"\n1. one likelihood update, {n} particles x {b} soundings, 1000 x 1000 map "
-          f"(target <= 40 ms), best of {repeat}")
+    print(
+        f"\n1. one likelihood update, {n} particles x {b} soundings, 1000 x 1000 map "
+        f"(target <= 40 ms), best of {repeat}"
+    )
     print(f"   {'':<32}{'wall ms':>9}{'cpu ms':>9}{'vs numpy':>10}{'ns/particle/sounding':>22}")
     rows = []
     for label, fn in cases:
@@ -137,13 +139,17 @@ def per_loop(method, survey, chart, config, repeat: int) -> tuple[float, float, 
 def sjcpf_case(repeat: int) -> None:
     survey, chart = chen2022_survey()
     dr_error = np.hypot(*(survey.dr_pose[:, :2] - survey.true_pose[:, :2]).T)
-    print(f"\n2. SJCPF per loop, chen2022 ({survey.n_pings} pings, {survey.n_soundings} soundings, "
-          f"polar500), 1000 particles, best of {repeat} runs; DR RMSE {np.sqrt(np.mean(dr_error**2)):.0f} m")
+    print(
+        f"\n2. SJCPF per loop, chen2022 ({survey.n_pings} pings, {survey.n_soundings} soundings, "
+        f"polar500), 1000 particles, best of {repeat} runs; DR RMSE {np.sqrt(np.mean(dr_error**2)):.0f} m"
+    )
     print(f"   {'':<20}{'wall ms':>9}{'cpu ms':>9}{'paper ms':>10}{'speed-up (cpu)':>16}{'RMSE m':>9}")
     for kind in ("pearson", "spearman", "kendall"):
         wall, cpu, rmse = per_loop("sjcpf", survey, chart, SJCPFConfig(correlation=kind), repeat)
-        print(f"   {'sjcpf ' + kind:<20}{1e3 * wall:>9.3f}{1e3 * cpu:>9.3f}{PAPER_MS[kind]:>10.2f}"
-              f"{PAPER_MS[kind] / (1e3 * cpu):>15.0f}x{rmse:>9.0f}")
+        print(
+            f"   {'sjcpf ' + kind:<20}{1e3 * wall:>9.3f}{1e3 * cpu:>9.3f}{PAPER_MS[kind]:>10.2f}"
+            f"{PAPER_MS[kind] / (1e3 * cpu):>15.0f}x{rmse:>9.0f}"
+        )
     wall, cpu, rmse = per_loop("pf", survey, chart, default_config("pf"), repeat)
     print(f"   {'pf (same survey)':<20}{1e3 * wall:>9.3f}{1e3 * cpu:>9.3f}{'':>10}{'':>16}{rmse:>9.0f}")
 
@@ -165,8 +171,10 @@ def multibeam_survey(pings: int) -> tuple[Survey, BathymetryMap]:
 def filters_case(pings: int, repeat: int) -> None:
     survey, m = multibeam_survey(pings)
     dr_error = np.hypot(*(survey.dr_pose[:, :2] - survey.true_pose[:, :2]).T)
-    print(f"\n3. every filter, default config, {pings} pings x 60 beams on a 600 x 600 map (5 m), "
-          f"best of {repeat}; DR RMSE {np.sqrt(np.mean(dr_error**2)):.1f} m")
+    print(
+        f"\n3. every filter, default config, {pings} pings x 60 beams on a 600 x 600 map (5 m), "
+        f"best of {repeat}; DR RMSE {np.sqrt(np.mean(dr_error**2)):.1f} m"
+    )
     print(f"   {'method':<12}{'particles':>10}{'wall ms':>9}{'cpu ms':>9}{'RMSE m':>8}")
     for method in FilterMethod:
         config = default_config(method)

@@ -48,7 +48,7 @@ class MLEConfig:
         :func:`~tangraph.filters.fixes.fix_window`) and between fixes (None: ``window``).
     search_sigmas, min_half_width, max_half_width : float
         Search half-width: ``search_sigmas`` times the estimate's std, within
-        ``[min_half_width (None: 3 map cells), max_half_width]`` metres.
+        ``[min_half_width (None: the larger of 3 map cells and init_std), max_half_width]`` metres.
     require_accepted : bool
         Use only accepted fixes (informative and unimodal); False: every fix (plain MLE).
     """

@@ -64,7 +64,7 @@ class TercomPFConfig(ParticleConfig):
         ``"mle"`` or ``"msd"``.
     search_sigmas, min_half_width, max_half_width : float
         Search half-width: ``search_sigmas`` times the cloud's std, within
-        ``[min_half_width (None: 3 map cells), max_half_width]`` metres.
+        ``[min_half_width (None: the larger of 3 map cells and init_std), max_half_width]`` metres.
     gate : float
         Squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
     """

@@ -1,0 +1,148 @@
+"""TERCOM-PF and MLE (batch fixes inside a filter), JBPF's jitter, the progress bar."""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import pytest
+
+from tangraph.filters import (
+    FilterModel,
+    JBPFConfig,
+    MLEConfig,
+    PFConfig,
+    TercomPFConfig,
+    initial_belief,
+    jbpf_step,
+    run_filter,
+    survey_pings,
+    survey_sounding_std,
+    tercom_pf_step,
+)
+from tangraph.filters.fixes import fix_due, fix_window
+from tests.filters.synthetic import multibeam_survey, rough_map
+
+MAP = rough_map(0)
+SURVEY = multibeam_survey(MAP, seed=1, pings=30)
+
+
+def tercom_steps(config, belief, upto):
+    model = FilterModel.from_config(config, MAP)
+    step = functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP)
+    rng = np.random.default_rng(0)
+    results = []
+    for ping in survey_pings(SURVEY)[:upto]:
+        results.append(step(belief, ping, model, config, rng=rng))
+        belief = results[-1].belief
+    return results
+
+
+def test_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
+    config = TercomPFConfig(n_particles=500, init_std=20.0, window=5)
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
+    results = tercom_steps(config, belief, 15)
+    fixes = [r.fixes for r in results]
+    assert [i for i, f in enumerate(fixes) if f] == [4, 9, 14]  # non-overlapping windows of 5
+    first = fixes[4][0]
+    assert first["accepted"] and first["action"] == "initialise"
+    cloud = results[4].belief.particles
+    np.testing.assert_allclose(
+        cloud.mean(axis=0), first["position"], atol=4 * np.sqrt(np.max(first["covariance"]))
+    )
+    assert np.hypot(*(results[4].mean - SURVEY.true_pose[4, :2])) < 5.0
+    assert fixes[9][0]["action"] == "reweight" and fixes[14][0]["action"] == "reweight"
+    assert results[0].belief.n_fixes == 0 and results[14].belief.n_fixes == 3
+
+
+def test_tercom_pf_recentres_on_a_fix_far_from_the_cloud():
+    config = TercomPFConfig(n_particles=500, init_std=20.0, window=5, gate=13.8, min_half_width=100.0)
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
+    results = tercom_steps(config, belief, 5)
+    # move the cloud 40 m away after the first fix: the next fix is far outside its gate
+    shifted = results[4].belief.replace(particles=results[4].belief.particles + np.array([40.0, 0.0]))
+    model = FilterModel.from_config(config, MAP)
+    step = functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP)
+    rng = np.random.default_rng(2)
+    belief = shifted
+    for ping in survey_pings(SURVEY)[5:10]:
+        result = step(belief, ping, model, config, rng=rng)
+        belief = result.belief
+    record = result.fixes[0]
+    assert record["accepted"] and record["action"] == "recentre" and record["mahalanobis2"] > 13.8
+    assert result.counts["n_recentred"] == 1
+    assert np.hypot(*(result.mean - SURVEY.true_pose[9, :2])) < 5.0
+
+
+@pytest.mark.parametrize("criterion", ["mle", "msd"])
+def test_tercom_pf_records_its_fixes(criterion):
+    track = run_filter(
+        "tercom-pf",
+        SURVEY,
+        MAP,
+        TercomPFConfig(n_particles=300, init_std=20.0, criterion=criterion),
+        rng=np.random.default_rng(3),
+    )
+    meta = track.meta
+    assert len(meta["fixes"]) == 6 == meta["n_fixes_accepted"] + meta["n_fixes_rejected"]
+    assert meta["n_fixes_accepted"] >= 4
+    assert np.hypot(*(track.pose[-1, :2] - SURVEY.true_pose[-1, :2])) < 5.0
+
+
+def test_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_between():
+    track = run_filter(
+        "mle", SURVEY, MAP, MLEConfig(init_std=20.0, require_accepted=False), rng=np.random.default_rng(0)
+    )
+    fixes = track.meta["fixes"]
+    assert [f["index"] for f in fixes] == [4, 9, 14, 19, 24, 29]
+    for f in fixes:
+        k = f["index"]
+        np.testing.assert_allclose(track.pose[k, :2], f["position"])
+        np.testing.assert_allclose(track.covariance[k, :2, :2], f["covariance"])
+        if k + 1 < SURVEY.n_pings:  # then dead reckoning, with a growing covariance
+            step = SURVEY.dr_pose[k + 1, :2] - SURVEY.dr_pose[k, :2]
+            np.testing.assert_allclose(track.pose[k + 1, :2] - track.pose[k, :2], step)
+            assert np.all(np.diag(track.covariance[k + 1, :2, :2]) > np.diag(track.covariance[k, :2, :2]))
+    np.testing.assert_allclose(track.pose[:4, :2], SURVEY.dr_pose[:4, :2])  # before the first fix
+    assert np.isnan(track.meta["ess"]).all() and track.meta["n_divergences"] == 0
+
+
+def test_fix_windows_and_schedule():
+    assert fix_window(MLEConfig(), SURVEY) == 5  # 30 beams per ping
+    single = SURVEY.replace(
+        beam_forward=SURVEY.beam_forward[:, :1],
+        beam_starboard=SURVEY.beam_starboard[:, :1],
+        beam_depth=SURVEY.beam_depth[:, :1],
+    )
+    assert fix_window(MLEConfig(), single) == 30  # about 30 soundings
+    assert fix_window(MLEConfig(window=7), single) == 7
+    assert [k for k in range(20) if fix_due(MLEConfig(fix_interval=3), k, 5)] == [4, 7, 10, 13, 16, 19]
+
+
+def test_sounding_std_from_the_survey():
+    assert survey_sounding_std(SURVEY) == 1.0  # nothing recorded
+    recorded = SURVEY.replace(meta={"settings": {"sonar": {"depth_noise": 0.5}}})
+    assert survey_sounding_std(recorded) == 0.75
+    track = run_filter("pf", recorded, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
+    assert track.meta["sounding_std"] == 0.75 and track.meta["config"]["sounding_std"] is None
+
+
+def test_jbpf_jitters_only_the_pings_it_resamples():
+    model = FilterModel.from_config(JBPFConfig(), MAP)
+    ping = survey_pings(SURVEY)[1]
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 10.0, 300, rng=np.random.default_rng(0))
+    kept = jbpf_step(
+        belief, ping, model, JBPFConfig(n_particles=300, ess_threshold=0.0), rng=np.random.default_rng(1)
+    )
+    moved = model.motion.predict(belief.particles, ping, rng=np.random.default_rng(1))
+    assert not kept.resampled
+    np.testing.assert_array_equal(kept.belief.particles, moved)
+    config = JBPFConfig(n_particles=300, ess_threshold=1.0, jitter_std=2.0, sounding_std=0.5)
+    jittered = jbpf_step(belief, ping, model, config, rng=np.random.default_rng(1))
+    assert jittered.resampled
+    assert np.unique(jittered.belief.particles, axis=0).shape[0] == 300  # copies pulled apart
+
+
+def test_progress_bar(capsys):
+    run_filter("pf", SURVEY, MAP, PFConfig(n_particles=50), rng=np.random.default_rng(0), progress=True)
+    assert "pf" in capsys.readouterr().err
