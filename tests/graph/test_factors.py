@@ -1,0 +1,199 @@
+"""Factors, frames and the pose graph: Jacobians against numerical derivatives, least squares by hand."""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.graph import (
+    GraphConfig,
+    PoseGraph,
+    between_noise,
+    check_fix_covariance,
+    compose,
+    key_indices,
+    propagate,
+    smooth_pose_graph,
+    tangent_to_world,
+    window_ends,
+    world_to_tangent,
+)
+from tangraph.graph.factors import position_fix_factor
+from tangraph.graph.online import _translate
+from tangraph.sensors import odometry
+
+
+def numerical_jacobian(factor, pose: gtsam.Pose2, key: int = 0, h: float = 1e-6) -> np.ndarray:
+    """d unwhitened error / d local perturbation of the pose (central differences)."""
+    columns = []
+    for axis in range(3):
+        delta = np.zeros(3)
+        delta[axis] = h
+        errors = []
+        for sign in (1.0, -1.0):
+            values = gtsam.Values()
+            values.insert(key, pose.retract(sign * delta))
+            errors.append(factor.unwhitenedError(values))
+        columns.append((errors[0] - errors[1]) / (2 * h))
+    return np.column_stack(columns)
+
+
+def analytic_jacobian(factor, pose: gtsam.Pose2, key: int = 0) -> np.ndarray:
+    values = gtsam.Values()
+    values.insert(key, pose)
+    a, _ = factor.linearize(values).jacobian()
+    return a
+
+
+def test_translation_prior_jacobian_matches_numerical_and_is_world_frame():
+    pose = gtsam.Pose2(120.0, -40.0, 0.7)
+    factor = position_fix_factor(0, [121.0, -38.0], np.eye(2), "none", 1.0)
+    values = gtsam.Values()
+    values.insert(0, pose)
+    np.testing.assert_allclose(factor.unwhitenedError(values), [-1.0, -2.0], atol=1e-12)
+    numeric = numerical_jacobian(factor, pose)
+    np.testing.assert_allclose(analytic_jacobian(factor, pose), numeric, atol=1e-6)
+    c, s = np.cos(0.7), np.sin(0.7)
+    np.testing.assert_allclose(numeric, [[c, -s, 0.0], [s, c, 0.0]], atol=1e-6)  # [R(psi), 0]
+
+
+def test_robust_translation_prior_whitened_jacobian_is_scaled_copy():
+    pose = gtsam.Pose2(0.0, 0.0, 0.3)
+    cov = np.array([[4.0, 1.0], [1.0, 2.0]])
+    factor = position_fix_factor(0, [30.0, 0.0], cov, "huber", 2.45)  # far: downweighted
+    plain = position_fix_factor(0, [30.0, 0.0], cov, "none", 2.45)
+    robust, gaussian = analytic_jacobian(factor, pose), analytic_jacobian(plain, pose)
+    finite = np.abs(gaussian) > 1e-9
+    ratio = np.divide(robust, gaussian, out=np.zeros_like(robust), where=finite)
+    assert np.allclose(ratio[finite], ratio[finite][0]) and 0 < ratio[finite][0] < 1
+
+
+def test_between_factor_jacobians_and_noise_frame():
+    z = np.array([10.0, 2.0, 0.4])
+    noise = gtsam.noiseModel.Unit.Create(3)
+    factor = gtsam.BetweenFactorPose2(0, 1, gtsam.Pose2(*z), noise)
+    x0 = gtsam.Pose2(5.0, 3.0, 0.2)
+    x1 = gtsam.Pose2(*compose([5.0, 3.0, 0.2], z + np.array([0.1, -0.2, 0.01])))
+    values = gtsam.Values()
+    values.insert(0, x0)
+    values.insert(1, x1)
+    a, _ = factor.linearize(values).jacobian()
+    h = 1e-6
+    for col, key in enumerate((0, 1)):
+        for axis in range(3):
+            delta = np.zeros(3)
+            delta[axis] = h
+            errs = []
+            for sign in (1.0, -1.0):
+                v = gtsam.Values(values)
+                v.update(key, values.atPose2(key).retract(sign * delta))
+                errs.append(factor.unwhitenedError(v))
+            np.testing.assert_allclose(a[:, 3 * col + axis], (errs[0] - errs[1]) / (2 * h), atol=1e-5)
+    # An increment error delta (frame of pose i) appears as blkdiag(R(-dpsi), 1) delta in the factor.
+    delta = np.array([1e-4, -2e-4, 3e-5])
+    v = gtsam.Values()
+    v.insert(0, gtsam.Pose2())
+    v.insert(1, gtsam.Pose2(*(z + delta)))
+    c, s = np.cos(z[2]), np.sin(z[2])
+    expected = np.array([c * delta[0] + s * delta[1], -s * delta[0] + c * delta[1], delta[2]])
+    np.testing.assert_allclose(factor.unwhitenedError(v), expected, rtol=1e-3, atol=1e-9)
+    cov = np.diag([1.0, 4.0, 0.01])
+    rot = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]])
+    np.testing.assert_allclose(between_noise(z, cov, 1e-9, 1e-9), rot @ cov @ rot.T, atol=1e-12)
+
+
+def test_frames_round_trip_and_propagation_matches_numerical():
+    cov = np.array([[2.0, 0.3, 0.01], [0.3, 1.0, -0.02], [0.01, -0.02, 0.004]])
+    np.testing.assert_allclose(world_to_tangent(0.9, tangent_to_world(0.9, cov)), cov, atol=1e-12)
+    pose, inc = np.array([1.0, 2.0, 0.5]), np.array([30.0, -4.0, 0.1])
+    jac = np.zeros((3, 3))
+    for axis in range(3):
+        d = np.zeros(3)
+        d[axis] = 1e-6
+        jac[:, axis] = (compose(pose + d, inc) - compose(pose - d, inc)) / 2e-6
+    np.testing.assert_allclose(propagate(pose, cov, inc, np.zeros((3, 3))), jac @ cov @ jac.T, rtol=1e-6)
+    np.testing.assert_allclose(compose(pose, odometry(np.array([pose, compose(pose, inc)]), 0, 1)),
+                               compose(pose, inc), atol=1e-12)
+
+
+@pytest.mark.parametrize("cov", [np.zeros((2, 2)), -np.eye(2), np.array([[1.0, np.nan], [np.nan, 1.0]]),
+                                 np.array([[1.0, 2.0], [2.0, 1.0]]), np.array([[1.0, 0.5], [0.0, 1.0]]),
+                                 np.full((2, 2), np.inf)])
+def test_bad_fix_covariance_is_refused_naming_the_fix(cov):
+    with pytest.raises(TangraphError, match="fix at ping 17"):
+        check_fix_covariance(cov, "fix at ping 17")
+
+
+def test_key_indices_cover_windows_interval_and_ends():
+    t = np.arange(0.0, 100.0, 2.0)  # 50 pings
+    ends = window_ends(50, 10, 10)
+    np.testing.assert_array_equal(ends, [9, 19, 29, 39, 49])
+    keys = key_indices(t, ends, key_interval=7.0)
+    assert keys[0] == 0 and keys[-1] == 49 and set(ends) <= set(keys)
+    assert np.all(np.diff(t[keys]) < 7.0 + 2.0)  # the first ping at least 7 s after the last key
+
+
+def linear_graph():
+    """Three poses heading north with the heading pinned: a linear problem in the positions."""
+    graph = PoseGraph(robust_kernel="none", min_std=1e-9, min_heading_std=1e-9)
+    truth = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [20.0, 0.0, 0.0]])
+    for k, p in enumerate(truth):
+        graph.add_pose(k, float(k), p + np.array([1.0, -1.0, 0.0]))
+    p0_cov = np.diag([4.0, 9.0, 1e-12])
+    graph.add_pose_prior(0, [0.5, 0.2, 0.0], p0_cov)
+    q01, q12 = np.diag([1.0, 0.25, 1e-12]), np.array([[0.5, 0.1, 0.0], [0.1, 0.3, 0.0], [0.0, 0.0, 1e-12]])
+    graph.add_odometry(0, 1, [10.2, -0.1, 0.0], q01)
+    graph.add_odometry(1, 2, [9.7, 0.3, 0.0], q12)
+    f1, f2 = np.array([[2.0, 0.5], [0.5, 1.0]]), np.diag([0.8, 1.5])
+    graph.add_position_fix(1, [10.4, 0.6], f1)
+    graph.add_position_fix(2, [19.1, -0.2], f2)
+    # The same problem by hand: unknowns (n0, e0, n1, e1, n2, e2), weighted least squares.
+    eye, zero = np.eye(2), np.zeros((2, 2))
+    rows = [(np.hstack([eye, zero, zero]), [0.5, 0.2], p0_cov[:2, :2]),
+            (np.hstack([-eye, eye, zero]), [10.2, -0.1], q01[:2, :2]),
+            (np.hstack([zero, -eye, eye]), [9.7, 0.3], q12[:2, :2]),
+            (np.hstack([zero, eye, zero]), [10.4, 0.6], f1),
+            (np.hstack([zero, zero, eye]), [19.1, -0.2], f2)]
+    info = sum(a.T @ np.linalg.inv(c) @ a for a, _, c in rows)
+    vector = sum(a.T @ np.linalg.inv(c) @ np.asarray(z) for a, z, c in rows)
+    cov = np.linalg.inv(info)
+    return graph, (cov @ vector).reshape(3, 2), cov
+
+
+@pytest.mark.parametrize("optimizer", ["lm", "gn", "dogleg"])
+def test_smoother_matches_hand_computed_least_squares(optimizer):
+    graph, expected, cov = linear_graph()
+    solution = smooth_pose_graph(graph, GraphConfig(optimizer=optimizer))
+    np.testing.assert_allclose(solution.pose[:, :2], expected, atol=1e-6)
+    for k in range(3):
+        np.testing.assert_allclose(solution.covariance[k, :2, :2], cov[2 * k : 2 * k + 2, 2 * k : 2 * k + 2],
+                                   rtol=1e-5, atol=1e-9)
+
+
+def test_gap_without_odometry_names_the_unconstrained_poses():
+    graph = PoseGraph()
+    for k in range(6):
+        graph.add_pose(k * 10, float(k), [k * 10.0, 0.0, 0.0])
+    graph.add_pose_prior(0, [0.0, 0.0, 0.0], np.diag([1.0, 1.0, 0.01]))
+    for i, j in ((0, 10), (10, 20), (30, 40), (40, 50)):  # no odometry from 20 to 30
+        graph.add_odometry(i, j, [10.0, 0.0, 0.0], np.diag([0.1, 0.1, 1e-4]))
+    graph.add_position_fix(40, [40.0, 0.0], np.eye(2))
+    with pytest.raises(TangraphError, match=r"pings 30\.\.50 \(3 key poses\)"):
+        smooth_pose_graph(graph)
+    graph.add_position_fix(50, [50.0, 0.0], np.eye(2))  # two fixes pin the part after the gap
+    solution = smooth_pose_graph(graph)
+    np.testing.assert_allclose(solution.pose[-1, :2], [50.0, 0.0], atol=1e-6)
+
+
+def test_gtsam_indeterminant_error_is_translated():
+    graph = PoseGraph()
+    graph.add_pose(0, 0.0, [0, 0, 0])
+    graph.add_pose(7, 1.0, [1, 0, 0])
+    graph.add_pose_prior(0, [0, 0, 0], np.eye(3))
+    error = _translate(RuntimeError("Indeterminate linear system detected while working near variable\n"
+                                    "7 (Symbol: 7)."), graph)
+    assert isinstance(error, TangraphError) and "ping 7" in str(error)
+    other = RuntimeError("something else")
+    assert _translate(other, graph) is other

@@ -1,0 +1,189 @@
+"""Online iSAM2 navigator and batch smoother on dead reckoning alone and on a small simulated survey."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.graph import (
+    GraphConfig,
+    GraphNavigator,
+    dense_track,
+    navigate_online,
+    propagate,
+    smooth_pose_graph,
+    smooth_survey,
+)
+from tangraph.matching import tap_fix
+from tangraph.sensors import DeadReckoningModel, increment_covariance, odometry, simulate_dead_reckoning
+from tangraph.survey import Survey
+from tangraph.track import position_errors
+
+
+def rmse(track, truth) -> float:
+    return float(np.sqrt(np.mean(position_errors(track, truth) ** 2)))
+
+
+def mean_nees(track, truth) -> float:
+    err = track.pose[:, :2] - truth[:, :2]
+    cov = track.covariance[:, :2, :2]
+    return float(np.mean([e @ np.linalg.solve(c, e) for e, c in zip(err, cov, strict=True)]))
+
+
+def dr_only_survey(model: DeadReckoningModel, n: int = 300) -> Survey:
+    t = np.arange(n) * 2.0
+    psi = 0.3 + 0.004 * t
+    step = np.column_stack([np.cos(psi), np.sin(psi)]) * 2.0
+    truth = np.column_stack([np.cumsum(step, axis=0) - step[0], psi])
+    dr = simulate_dead_reckoning(t, truth, model, rng=np.random.default_rng(3))
+    ones = np.ones((n, 1))
+    return Survey(time=t, dr_pose=dr.pose, vehicle_depth=ones[:, 0], beam_forward=0 * ones,
+                  beam_starboard=0 * ones, beam_depth=50 * ones, true_pose=truth,
+                  meta={"settings": {"dead_reckoning": dataclasses.asdict(model)}})
+
+
+def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
+    model = DeadReckoningModel(speed_noise=0.05, heading_walk=2e-4)
+    survey = dr_only_survey(model)
+    config = GraphConfig(n_pings=10_000, key_interval=30.0, odometry_min_std=1e-7,
+                         odometry_min_heading_std=1e-8, initial_position_std=1e-3, initial_heading_std=1e-5)
+    nav = GraphNavigator(survey, rough_map, config).run()
+    online = nav.track()
+    assert online.meta["fixes"] == [] and len(online.meta["key_indices"]) > 10
+    np.testing.assert_allclose(online.pose, survey.dr_pose, atol=1e-6)
+    cov0 = np.diag([1e-6, 1e-6, 1e-10])
+    last = survey.n_pings - 1
+    inc = increment_covariance(model, survey.time, survey.dr_pose, 0, last)
+    expected = propagate(survey.dr_pose[0], cov0, odometry(survey.dr_pose, 0, last), inc)
+    np.testing.assert_allclose(online.covariance[last], expected, rtol=2e-3, atol=1e-9)
+    solution = smooth_pose_graph(nav.graph, config)
+    np.testing.assert_allclose(solution.pose, survey.dr_pose[solution.keys], atol=1e-6)
+    np.testing.assert_allclose(solution.covariance[-1], expected, rtol=2e-3, atol=1e-9)
+    pose, cov = dense_track(survey, model, solution.keys, solution.pose, solution.covariance)
+    np.testing.assert_allclose(pose, survey.dr_pose, atol=1e-6)
+    np.testing.assert_allclose(cov[solution.keys], solution.covariance, atol=1e-12)
+
+
+def test_isam2_containers_cleared_and_window_bounded(rough_map):
+    survey = dr_only_survey(DeadReckoningModel(speed_noise=0.05, heading_walk=1e-4), n=120)
+    nav = GraphNavigator(survey, rough_map, GraphConfig(n_pings=10_000, key_interval=1.0, isam_window=None))
+    for _ in range(survey.n_pings):
+        nav.step()
+        assert nav.pending == (0, 0)
+    assert nav.isam.getFactorsUnsafe().size() == 1 + len(nav.graph.odometry)  # each factor added once
+    assert nav.isam.calculateEstimate().size() == survey.n_pings
+    windowed = GraphNavigator(survey, rough_map, GraphConfig(n_pings=10_000, key_interval=1.0,
+                                                             isam_window=5)).run()
+    assert windowed.isam.calculateEstimate().size() <= 10
+    np.testing.assert_allclose(windowed.track().pose, nav.track().pose, atol=1e-6)
+    with pytest.raises(TangraphError, match="all have been processed"):
+        nav.step()
+
+
+def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
+    config = GraphConfig(key_interval=20.0)
+    online = navigate_online(small_survey, rough_map, config)
+    smoothed = smooth_survey(small_survey, rough_map, config)
+    truth = small_survey.true_pose
+    dr = float(np.sqrt(np.mean(np.sum((small_survey.dr_pose[:, :2] - truth[:, :2]) ** 2, axis=1))))
+    assert rmse(online, truth) < dr / 4 and rmse(smoothed, truth) < dr / 4
+    assert rmse(smoothed, truth) <= rmse(online, truth)
+    for track, method in ((online, "isam2"), (smoothed, "smoother")):
+        assert track.method == method and track.n_poses == small_survey.n_pings
+        meta = track.meta
+        assert meta["n_fixes_accepted"] + meta["n_fixes_rejected"] == len(meta["fixes"]) > 10
+        assert meta["n_fixes_accepted"] >= 0.8 * len(meta["fixes"])
+        assert set(meta["fixes"][0]) >= {"index", "north", "east", "cov_nn", "cov_ne", "cov_ee", "accepted",
+                                         "reason"}
+        assert all(f["index"] in meta["key_indices"] for f in meta["fixes"])
+        assert 0.3 < mean_nees(track, truth) < 8.0  # 2 for an honest covariance
+    assert {"total", "per_step", "per_step_p99"} <= set(online.timings)
+    # heading bias (1 deg) is estimated: the smoothed heading error is well below it
+    assert np.abs(np.mean(smoothed.pose[:, 2] - truth[:, 2])) < np.deg2rad(0.5)
+
+
+def test_rematch_converges(small_survey, rough_map):
+    smoothed = smooth_survey(small_survey, rough_map, GraphConfig(key_interval=20.0, rematch_iterations=3))
+    assert 0 <= smoothed.meta["rematch_iterations"] <= 3
+    assert rmse(smoothed, small_survey.true_pose) < 1.5
+
+
+def outlier_fixes(survey, bathymetry, config, rate: float, rng) -> dict:
+    """Wrong but confident fixes at ``rate`` of the window ends: the genuine fix moved 15-40 m."""
+    ends = np.arange(config.n_pings - 1, survey.n_pings, config.spacing)
+    chosen = rng.choice(ends[1:], size=max(1, round(rate * ends.size)), replace=False)
+    fixes = {}
+    for k in chosen:
+        genuine = tap_fix(survey, bathymetry, int(k), config.n_pings,
+                          dataclasses.replace(config.tap, half_width=30.0), prior=survey.true_pose[k, :2])
+        angle, distance = rng.uniform(0, 2 * np.pi), rng.uniform(15.0, 40.0)
+        fixes[int(k)] = dataclasses.replace(
+            genuine, position=genuine.position + distance * np.array([np.cos(angle), np.sin(angle)]))
+    return fixes
+
+
+@pytest.mark.parametrize("rate", [0.1, 0.3])
+def test_outlier_fixes_do_not_pull_the_track(small_survey, rough_map, rate):
+    config = GraphConfig(key_interval=20.0)
+    truth = small_survey.true_pose
+    clean = GraphNavigator(small_survey, rough_map, config).run()
+    bad = outlier_fixes(small_survey, rough_map, config, rate, np.random.default_rng(int(rate * 100)))
+    nav = GraphNavigator(small_survey, rough_map, config)
+    for k in range(small_survey.n_pings):
+        nav.step(fix=bad.get(k))
+    polluted = nav.track()
+    refused = [f for f in polluted.meta["fixes"] if f["index"] in bad]
+    assert all(not f["accepted"] for f in refused)
+    assert rmse(polluted, truth) <= 1.5 * rmse(clean.track(), truth)
+    solve = {n: smooth_pose_graph(x.graph, config) for n, x in (("clean", clean), ("polluted", nav))}
+    errors = {}
+    for name, solution in solve.items():
+        pose, _ = dense_track(small_survey, clean.dr_model, solution.keys, solution.pose, solution.covariance)
+        errors[name] = np.sqrt(np.mean(np.sum((pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    assert errors["polluted"] <= 1.5 * errors["clean"]
+
+
+def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
+    config = GraphConfig(key_interval=20.0, gate_probability=None)
+    truth = small_survey.true_pose
+    bad = outlier_fixes(small_survey, rough_map, config, 0.1, np.random.default_rng(5))
+    tracks = {}
+    for kernel in ("huber", "cauchy", "none"):
+        nav = GraphNavigator(small_survey, rough_map, dataclasses.replace(config, robust_kernel=kernel))
+        for k in range(small_survey.n_pings):
+            nav.step(fix=bad.get(k))
+        tracks[kernel] = rmse(nav.track(), truth)
+    assert tracks["huber"] < tracks["none"] and tracks["cauchy"] < tracks["none"]
+
+
+@pytest.mark.parametrize("cov", [np.zeros((2, 2)), -np.eye(2), np.full((2, 2), np.nan)])
+def test_bad_fix_covariance_in_a_step_is_refused(small_survey, rough_map, cov):
+    config = GraphConfig(key_interval=20.0)
+    nav = GraphNavigator(small_survey, rough_map, config)
+    for _ in range(29):
+        nav.step()
+    fix = tap_fix(small_survey, rough_map, 29, config.n_pings, config.tap,
+                  prior=small_survey.true_pose[29, :2])
+    with pytest.raises(TangraphError, match=r"fix at ping 29 \(window 20\.\.29\)"):
+        nav.step(fix=dataclasses.replace(fix, covariance=cov))
+
+
+def test_dr_model_is_required_when_the_survey_has_none(small_survey, rough_map):
+    bare = small_survey.replace(meta={})
+    with pytest.raises(TangraphError, match="dr_model"):
+        navigate_online(bare, rough_map)
+    track = navigate_online(bare, rough_map, GraphConfig(key_interval=20.0),
+                            dr_model=DeadReckoningModel(**small_survey.meta["settings"]["dead_reckoning"]))
+    assert track.meta["n_fixes_accepted"] > 0
+
+
+@pytest.mark.parametrize("changes", [{"robust_kernel": "tukey"}, {"key_interval": 0.0}, {"n_pings": 0},
+                                     {"gate_probability": 1.5}, {"isam_window": 1},
+                                     {"min_half_width_cells": 10.0, "max_half_width_cells": 5.0},
+                                     {"initial_heading_std": float("nan")}, {"optimizer": "adam"}])
+def test_config_is_validated(changes):
+    with pytest.raises(TangraphError, match="GraphConfig"):
+        GraphConfig(**changes)
