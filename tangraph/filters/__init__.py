@@ -5,10 +5,10 @@ Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF and grid-search MLE fixes.
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
+from tangraph.filters.config import ParticleConfig, survey_sounding_std
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
     initial_belief,
     jitter,
@@ -17,7 +17,6 @@ from tangraph.filters.core import (
     resample_if_needed,
     reweight,
     run_particle_filter,
-    survey_sounding_std,
     weighted_moments,
 )
 from tangraph.filters.correlation import (

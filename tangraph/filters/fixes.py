@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.filters.core import check_count, check_number
+from tangraph.filters.config import check_count, check_number
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
 from tangraph.survey import Survey

@@ -25,10 +25,10 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
     effective_size,
     reweight,

@@ -13,12 +13,11 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.config import ParticleConfig, check_number
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
-    check_number,
     jitter,
     measure,
     resample_if_needed,

@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from tangraph.filters.core import check_number, step_timings
+from tangraph.filters.config import check_number
+from tangraph.filters.core import step_timings
 from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
 from tangraph.filters.model import MotionModel, survey_pings
 from tangraph.maps.grid import BathymetryMap

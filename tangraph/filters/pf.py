@@ -13,10 +13,10 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
     measure,
     resample_if_needed,

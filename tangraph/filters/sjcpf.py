@@ -36,13 +36,11 @@ from typing import Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.config import ParticleConfig, check_count, check_number
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
-    check_count,
-    check_number,
     measure,
     resample_if_needed,
     reweight,

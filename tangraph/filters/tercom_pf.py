@@ -28,12 +28,11 @@ import functools
 
 import numpy as np
 
+from tangraph.filters.config import ParticleConfig, check_number
 from tangraph.filters.core import (
     Belief,
     FilterModel,
-    ParticleConfig,
     StepResult,
-    check_number,
     resample_if_needed,
     reweight,
     run_particle_filter,
