@@ -18,9 +18,9 @@ SCIPY = {
 
 @pytest.mark.parametrize("kind", list(Correlation))
 @pytest.mark.parametrize("ties", [False, True])
-def test_rows_match_scipy(kind, ties):
+@pytest.mark.parametrize("length", [12, 60])  # Spearman ranks by insertion sort, then merge sort
+def test_rows_match_scipy(kind, ties, length):
     rng = np.random.default_rng(3)
-    length = 12
     x = rng.normal(size=(200, length))
     y = rng.normal(size=length) + 0.5 * x[0]
     if ties:  # few distinct values: many ties in both sequences
