@@ -68,7 +68,7 @@ class ParticleConfig:
         Std (m, per axis) of the initial Gaussian cloud around the first dead-reckoned position.
     process_std, process_fraction : float
         Process noise per ping and axis: ``sqrt(process_std^2 + (process_fraction d)^2)`` m for a
-        dead-reckoned displacement of ``d`` m (:class:`~tangraph.filters.model.MotionModel`).
+        dead-reckoned displacement of ``d`` m (:class:`~tangraph.filters.MotionModel`).
     sounding_std : float or None
         Std (m) of a sounding's error in the likelihood. None: from the survey
         (:func:`survey_sounding_std`: 1.5 times the sonar's ``depth_noise`` a simulated survey

@@ -5,7 +5,7 @@ new :class:`Belief` and never writes into its inputs: a belief's arrays are read
 call of :func:`run_particle_filter`, which loops over the pings, records the weighted mean and
 covariance, the effective sample size and the resampling count, and recovers from divergence:
 when every particle has zero likelihood (all off the map, or a ping no particle explains) the
-step raises :class:`~tangraph.filters.likelihood.FilterDivergence`; the runner logs it, draws a
+step raises :class:`~tangraph.filters.FilterDivergence`; the runner logs it, draws a
 fresh cloud around the dead-reckoned position of that ping with a wider spread
 (``reinit_std``, times ``reinit_growth`` for each further consecutive divergence), weights it by
 the ping if any particle can explain it, and goes on. ``meta["n_divergences"]`` and

@@ -47,7 +47,7 @@ __all__ = ["IPFConfig", "ipf", "ipf_step"]
 
 @dataclasses.dataclass(frozen=True)
 class IPFConfig(ParticleConfig):
-    """Settings of the IPF: those of :class:`~tangraph.filters.core.ParticleConfig`, with Han et
+    """Settings of the IPF: those of :class:`~tangraph.filters.ParticleConfig`, with Han et
     al.'s replay particle count (2000) as default."""
 
     n_particles: int = 2000

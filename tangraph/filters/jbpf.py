@@ -1,6 +1,6 @@
 """The jittered bootstrap particle filter (JBPF): roughening after resampling only.
 
-A bootstrap PF (:func:`~tangraph.filters.pf.pf_step`) that, on the pings where it resamples,
+A bootstrap PF (:func:`~tangraph.filters.pf_step`) that, on the pings where it resamples,
 moves every resampled particle by an independent Gaussian jitter of std ``jitter_std`` (m, per
 axis) so that copies of one parent separate; pings without resampling are plain bootstrap steps.
 The estimate is taken before resampling and jitter, as in the bootstrap PF. It is the control
@@ -34,7 +34,7 @@ __all__ = ["JBPFConfig", "jbpf", "jbpf_step"]
 
 @dataclasses.dataclass(frozen=True)
 class JBPFConfig(ParticleConfig):
-    """Settings of the JBPF: those of :class:`~tangraph.filters.core.ParticleConfig` plus
+    """Settings of the JBPF: those of :class:`~tangraph.filters.ParticleConfig` plus
     ``jitter_std`` (m per axis, applied after each resampling)."""
 
     jitter_std: float = 2.0

@@ -7,7 +7,7 @@ removed: the maximum of the Gaussian likelihood over the search grid), searched 
 current estimate over ``search_sigmas`` times its std (see :mod:`tangraph.filters.fixes`). The
 estimate jumps to the fix, with the fix's covariance; between fixes it moves by the dead-reckoned
 increments and its covariance grows by the motion model's process noise
-(:class:`~tangraph.filters.model.MotionModel`). Before the first fix the estimate is dead
+(:class:`~tangraph.filters.MotionModel`). Before the first fix the estimate is dead
 reckoning from ``N(DR_0, init_std^2 I)``. Only accepted fixes (informative and unimodal,
 ``TapFix.accepted``) are used by default; ``require_accepted=False`` takes every fix whatever its
 quality, as plain MLE does (it can then jump to a wrong basin on flat terrain and search around it
@@ -43,7 +43,7 @@ class MLEConfig:
     init_std : float
         Std (m, per axis) of the initial position around the first dead-reckoned one.
     process_std, process_fraction : float
-        Growth of the covariance between fixes (as :class:`~tangraph.filters.model.MotionModel`).
+        Growth of the covariance between fixes (as :class:`~tangraph.filters.MotionModel`).
     window, fix_interval : int or None
         Pings per fix (None: enough for about 30 soundings, at least 5;
         :func:`~tangraph.filters.fixes.fix_window`) and between fixes (None: ``window``).

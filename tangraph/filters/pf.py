@@ -1,8 +1,8 @@
 """The bootstrap particle filter on the shared model.
 
 Each ping: move every particle by the dead-reckoned increment plus process noise
-(:class:`~tangraph.filters.model.MotionModel`), multiply its weight by the terrain likelihood of
-the ping's soundings (:class:`~tangraph.filters.model.TerrainModel`), take the weighted mean and
+(:class:`~tangraph.filters.MotionModel`), multiply its weight by the terrain likelihood of
+the ping's soundings (:class:`~tangraph.filters.TerrainModel`), take the weighted mean and
 covariance, and resample when the effective sample size falls below ``ess_threshold * N``.
 The loop runs over time only; every step is vectorised over particles and soundings.
 """
@@ -33,7 +33,7 @@ __all__ = ["PFConfig", "bootstrap_pf", "pf_step"]
 
 @dataclasses.dataclass(frozen=True)
 class PFConfig(ParticleConfig):
-    """Settings of the bootstrap PF: those of :class:`~tangraph.filters.core.ParticleConfig`.
+    """Settings of the bootstrap PF: those of :class:`~tangraph.filters.ParticleConfig`.
 
     Examples
     --------
@@ -69,7 +69,7 @@ def bootstrap_pf(
 
     The heading is the dead-reckoned one (its variance is NaN in the track). A step where every
     particle has zero likelihood is a divergence: the cloud is re-drawn around dead reckoning
-    (see :func:`~tangraph.filters.core.run_particle_filter`).
+    (see :func:`~tangraph.filters.run_particle_filter`).
     """
     return run_particle_filter(
         survey, bathymetry, config or PFConfig(), pf_step, method="pf", rng=rng, progress=progress

@@ -58,7 +58,7 @@ __all__ = ["SJCPFConfig", "correlation_log_weight", "sjcpf", "sjcpf_step"]
 
 @dataclasses.dataclass(frozen=True)
 class SJCPFConfig(ParticleConfig):
-    """Settings of the SJCPF: those of :class:`~tangraph.filters.core.ParticleConfig` plus
+    """Settings of the SJCPF: those of :class:`~tangraph.filters.ParticleConfig` plus
 
     Parameters
     ----------

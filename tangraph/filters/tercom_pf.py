@@ -50,7 +50,7 @@ __all__ = ["TercomPFConfig", "tercom_pf", "tercom_pf_step"]
 
 @dataclasses.dataclass(frozen=True)
 class TercomPFConfig(ParticleConfig):
-    """Settings of TERCOM-PF: those of :class:`~tangraph.filters.core.ParticleConfig` plus
+    """Settings of TERCOM-PF: those of :class:`~tangraph.filters.ParticleConfig` plus
 
     Parameters
     ----------
