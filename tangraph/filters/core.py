@@ -7,7 +7,8 @@ covariance, the effective sample size and the resampling count, and recovers fro
 when every particle has zero likelihood (all off the map, or a ping no particle explains) the
 step raises :class:`~tangraph.filters.FilterDivergence`; the runner logs it, draws a
 fresh cloud around the dead-reckoned position of that ping with a wider spread
-(``reinit_std``, times ``reinit_growth`` for each further consecutive divergence), weights it by
+(``reinit_std``, times ``reinit_growth`` for each further consecutive divergence, at most the
+map's diagonal), weights it by
 the ping if any particle can explain it, and goes on. ``meta["n_divergences"]`` and
 ``meta["divergence_steps"]`` record it.
 """
@@ -322,6 +323,8 @@ def run_particle_filter(
     fixes: list[dict[str, Any]] = []
     divergence_steps: list[int] = []
     n_resampled = consecutive = 0
+    n_min, n_max, e_min, e_max = bathymetry.extent
+    largest = max(float(np.hypot(n_max - n_min, e_max - e_min)), config.reinit_spread)  # cap on the spread
     started = _time.perf_counter()
     for k in tqdm(range(k_total), disable=not progress, desc=method, unit="ping", leave=False):
         t0 = _time.perf_counter()
@@ -330,7 +333,7 @@ def run_particle_filter(
             consecutive = 0
         except FilterDivergence as exc:
             consecutive += 1
-            spread = config.reinit_spread * config.reinit_growth ** (consecutive - 1)
+            spread = min(config.reinit_spread * config.reinit_growth ** (consecutive - 1), largest)
             divergence_steps.append(k)
             _log.warning("%s: %s; re-initialised around dead reckoning, spread %.1f m", method, exc, spread)
             result = _recover(survey, pings[k], model, config, spread, history_length, rng)

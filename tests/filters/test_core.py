@@ -169,3 +169,17 @@ def test_bad_particle_count_is_named(value):
 def test_bad_configuration_is_named(cls, field, value):
     with pytest.raises(TangraphError, match=f"{cls.__name__}: {field}"):
         cls(**{field: value})
+
+
+def test_a_vehicle_never_on_the_map_diverges_at_every_ping_with_a_capped_spread(caplog):
+    survey = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([1e5, 0.0, 0.0]))
+    config = PFConfig(n_particles=200, init_std=10.0, reinit_growth=10.0)
+    with caplog.at_level("WARNING", logger="tangraph.filters.core"):
+        track = run_filter("pf", survey, MAP, config, rng=np.random.default_rng(6))
+    assert track.meta["divergence_steps"] == list(range(survey.n_pings))
+    assert np.all(np.isfinite(track.pose))
+    spreads = [float(r.getMessage().rsplit("spread ", 1)[1].split()[0]) for r in caplog.records]
+    diagonal = np.hypot(MAP.north[-1] - MAP.north[0], MAP.east[-1] - MAP.east[0])
+    assert diagonal < 3000.0  # so the third spread (3 init_std x 10^2) is capped
+    assert spreads[:2] == [30.0, 300.0]
+    np.testing.assert_allclose(spreads[2:], diagonal, atol=0.1)
