@@ -3,7 +3,9 @@
 ``log p(z | x) = -1/2 sum_b (h(x + o_b) - (z_b - tide))^2 / sigma^2`` (up to a constant) over a
 ping's soundings, with ``h`` the map's bilinear depth (the rules of
 :mod:`tangraph.maps._interp`). A particle for which any sounding falls off the map or next to a
-NaN cell gets ``-inf``: zero weight.
+NaN cell gets ``-inf``: zero weight. One compiled kernel serves the known tide and the
+Gaussian tide posterior of :mod:`tangraph.filters.model` (:meth:`TerrainLikelihood.tide_update`);
+each particle's grid coordinates are computed once and the soundings' offsets are taken in cells.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import numba
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.maps._interp import _FASTMATH, _bilinear, _locate
+from tangraph.maps._interp import _FASTMATH, _bilinear
 from tangraph.maps.grid import BathymetryMap
 
 __all__ = ["FilterDivergence", "TerrainLikelihood", "effective_sample_size", "log_normalise"]
@@ -24,36 +26,10 @@ class FilterDivergence(TangraphError):
     """Every particle has zero likelihood: the filter has lost the vehicle."""
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
-def _log_likelihood_kernel(depth, north0, east0, inv_dn, inv_de, particles, offsets, target, inv_var, out):
-    for p in range(particles.shape[0]):
-        total = 0.0
-        for b in range(offsets.shape[0]):
-            ok, i, j, ty, tx = _locate(
-                depth,
-                north0,
-                east0,
-                inv_dn,
-                inv_de,
-                particles[p, 0] + offsets[b, 0],
-                particles[p, 1] + offsets[b, 1],
-            )
-            if not ok:
-                total = -np.inf
-                break
-            h = _bilinear(depth, i, j, ty, tx)[0]
-            if h != h:
-                total = -np.inf
-                break
-            r = h - target[b]
-            total -= 0.5 * r * r * inv_var
-        out[p] = total
-
-
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
-def _particle_sums(depth, pn, pe, offsets_cells, measured):
-    """``(sum r, sum r^2)`` of ``r = z - h`` for one particle at grid coordinates ``(pn, pe)``;
-    ``sum r`` is NaN if a sounding falls off the map or by a NaN cell (``_interp._locate``)."""
+def _particle_sums(depth, pn, pe, offsets_cells, measured, shift):
+    """``(sum r, sum r^2)`` of ``r = z - shift - h`` for one particle at grid coordinates
+    ``(pn, pe)``; NaN if a sounding falls off the map or by a NaN cell (``_interp._locate``)."""
     ny, nx = depth.shape
     s1 = 0.0
     s2 = 0.0
@@ -64,7 +40,7 @@ def _particle_sums(depth, pn, pe, offsets_cells, measured):
             return np.nan, np.nan
         i = min(int(fy), ny - 2)
         j = min(int(fx), nx - 2)
-        r = measured[b] - _bilinear(depth, i, j, fy - i, fx - j)[0]
+        r = measured[b] - shift - _bilinear(depth, i, j, fy - i, fx - j)[0]
         s1 += r
         s2 += r * r
     return s1, s2
@@ -82,6 +58,7 @@ def _residual_sums_kernel(depth, north0, east0, inv_dn, inv_de, particles, offse
             (particles[p, 1] - east0) * inv_de,
             offsets_cells,
             measured,
+            0.0,
         )
         out[p, 0] = s1
         out[p, 1] = s2 if s1 == s1 else np.nan
@@ -100,24 +77,23 @@ def _tide_update_kernel(
     for b in range(nb):
         sum_z += measured[b]
     for p in range(particles.shape[0]):
-        s1, s2 = _particle_sums(
+        se, se2 = _particle_sums(
             depth,
             (particles[p, 0] - north0) * inv_dn,
             (particles[p, 1] - east0) * inv_de,
             offsets_cells,
             measured,
+            tide[p],
         )
         m = tide[p]
-        if s1 != s1:
+        if se != se:
             log_likelihood[p] = -np.inf
             new_tide[p] = m
             predicted[p] = np.nan
             continue
-        se = s1 - nb * m
-        se2 = s2 - 2.0 * m * s1 + nb * m * m
         log_likelihood[p] = -0.5 * (se2 - gain * se * se) / noise_var
         new_tide[p] = m + gain * se
-        predicted[p] = (sum_z - s1) / nb + m
+        predicted[p] = (sum_z - se) / nb  # mean of h + m: sum h = sum z - se - nb m
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -134,41 +110,16 @@ class TerrainLikelihood:
 
     def log_likelihood(self, particles, offsets, depths) -> np.ndarray:
         """Log-likelihood (N,) of particles (N, 2) for soundings at ``offsets`` (B, 2) (world
-        north/east from the vehicle) with measured ``depths`` (B,); NaN depths are skipped."""
-        particles = np.ascontiguousarray(particles, dtype=np.float64)
-        offsets = np.ascontiguousarray(offsets, dtype=np.float64)
-        depths = np.asarray(depths, dtype=np.float64)
-        if particles.ndim != 2 or particles.shape[1] != 2:
-            raise TangraphError(f"particles must have shape (N, 2), got {particles.shape}")
-        if offsets.ndim != 2 or offsets.shape[1] != 2 or depths.shape != (offsets.shape[0],):
-            raise TangraphError(
-                f"offsets (B, 2) and depths (B,) do not match: {offsets.shape}, {depths.shape}"
-            )
-        keep = np.isfinite(depths)
-        out = np.empty(particles.shape[0])
-        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
-        _log_likelihood_kernel(
-            self.bathymetry.depth,
-            n0,
-            e0,
-            1.0 / dn,
-            1.0 / de,
-            particles,
-            np.ascontiguousarray(offsets[keep]),
-            depths[keep] - self.tide,
-            1.0 / self.sigma**2,
-            out,
-        )
-        return out
+        north/east from the vehicle) with measured ``depths`` (B,); NaN depths are skipped.
 
-    def residual_sums(self, particles, offsets, depths) -> np.ndarray:
-        """``(N, 2)``: per particle the sum and the sum of squares of the residuals
-        ``r = z - h(x + o)`` (measured minus map depth, ``tide`` not removed) of the finite
-        soundings; NaN rows for particles with a sounding off the map or by a NaN cell.
-
-        One compiled pass over particles x soundings; the filters build their likelihood (with
-        a known or an estimated tide) from these sums.
+        ``-1/2 sum_b (z_b - tide - h(x + o_b))^2 / sigma^2``; ``-inf`` where a sounding has no map
+        depth. One compiled pass (the known-tide case of :meth:`tide_update`).
         """
+        particles, offsets, depths = self._checked(particles, offsets, depths)
+        tide = np.full(particles.shape[0], float(self.tide))
+        return self.tide_update(particles, offsets, depths, tide, 0.0)[0]
+
+    def _checked(self, particles, offsets, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         particles = np.ascontiguousarray(particles, dtype=np.float64)
         offsets = np.ascontiguousarray(offsets, dtype=np.float64)
         depths = np.asarray(depths, dtype=np.float64)
@@ -181,6 +132,17 @@ class TerrainLikelihood:
         keep = np.isfinite(depths)
         if not keep.all():
             offsets, depths = np.ascontiguousarray(offsets[keep]), depths[keep]
+        return particles, offsets, depths
+
+    def residual_sums(self, particles, offsets, depths) -> np.ndarray:
+        """``(N, 2)``: per particle the sum and the sum of squares of the residuals
+        ``r = z - h(x + o)`` (measured minus map depth, ``tide`` not removed) of the finite
+        soundings; NaN rows for particles with a sounding off the map or by a NaN cell.
+
+        One compiled pass over particles x soundings; the filters build their likelihood (with
+        a known or an estimated tide) from these sums.
+        """
+        particles, offsets, depths = self._checked(particles, offsets, depths)
         out = np.empty((particles.shape[0], 2))
         n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
         cells = np.ascontiguousarray(offsets * np.array([1.0 / dn, 1.0 / de]))
@@ -200,6 +162,8 @@ class TerrainLikelihood:
         :mod:`tangraph.filters.model` for the algebra; ``self.tide`` is not used."""
         particles = np.ascontiguousarray(particles, dtype=np.float64)
         n = particles.shape[0]
+        if len(depths) == 0:  # nothing measured: no information
+            return np.zeros(n), np.array(tide, dtype=np.float64), np.full(n, np.nan)
         log_likelihood, new_tide, predicted = np.empty(n), np.empty(n), np.empty(n)
         n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
         cells = np.ascontiguousarray(np.asarray(offsets, dtype=np.float64) * np.array([1.0 / dn, 1.0 / de]))

@@ -84,3 +84,10 @@ def test_mean_counts_are_n_times_the_weights(scheme):
         assert np.all(counts >= np.floor(n * w)) and np.all(counts <= np.ceil(n * w))
     standard_error = np.sqrt(n * w * (1 - w) / runs)  # multinomial bound on the others' scatter
     assert np.all(np.abs(counts.mean(axis=0) - n * w) < 4 * standard_error)
+
+
+def test_no_finite_sounding_carries_no_information():
+    ll = TerrainLikelihood(rough(), sigma=1.0).log_likelihood(
+        np.zeros((3, 2)) + 100, np.zeros((2, 2)), [np.nan] * 2
+    )
+    assert ll.tolist() == [0.0, 0.0, 0.0]
