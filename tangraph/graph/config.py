@@ -42,6 +42,10 @@ class GraphConfig:
     tap : TapConfig
         Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
         ``"marginal"``.
+    tap_step_cells : float
+        Without ``tap.step``, the search step in map cells (default half a cell: on whole-cell
+        steps a fix is quantised to the grid around its prior and follows the prior by up to
+        half a cell, which the graph would then count twice).
     robust_kernel : {"huber", "cauchy", "none"}
         M-estimator on the whitened error of each position fix.
     robust_parameter : float
@@ -99,6 +103,7 @@ class GraphConfig:
     n_pings: int = 10
     fix_spacing: int | None = None
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
+    tap_step_cells: float = 0.5
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
     robust_parameter: float = 2.45
     gate_probability: float | None = 0.999
@@ -123,7 +128,8 @@ class GraphConfig:
     rematch_tolerance: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("key_interval", "robust_parameter", "initial_position_std", "initial_heading_std",
+        for name in ("key_interval", "tap_step_cells", "robust_parameter", "initial_position_std",
+                     "initial_heading_std",
                      "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
                      "min_half_width_cells", "max_half_width_cells", "relinearize_threshold",
                      "relinearize_position"):

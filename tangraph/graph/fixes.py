@@ -19,7 +19,15 @@ from tangraph.matching import MatchingError, TapFix, tap_fix_patch, window_patch
 from tangraph.sensors import DeadReckoningModel, increment_covariance
 from tangraph.survey import Survey
 
-__all__ = ["FixOutcome", "fix_name", "judge_fix", "make_fix", "search_half_width", "window_noise"]
+__all__ = [
+    "FixOutcome",
+    "fix_name",
+    "judge_fix",
+    "make_fix",
+    "search_half_width",
+    "search_step",
+    "window_noise",
+]
 
 
 def fix_name(fix: TapFix) -> str:
@@ -35,11 +43,18 @@ class FixOutcome:
     accepted: bool
 
 
+def search_step(config: GraphConfig, bathymetry: BathymetryMap) -> float:
+    """Step (m) of the TAP candidate grid: ``tap.step``, else ``tap_step_cells`` map cells."""
+    if config.tap.step is not None:
+        return float(config.tap.step)
+    return float(config.tap_step_cells * min(bathymetry.cell_size))
+
+
 def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_cov) -> float:
     """Half-width (m) of the TAP search around the predicted position (``GraphConfig.half_width_rule``)."""
     if config.half_width_rule == "fixed":
         return float(config.tap.half_width)
-    step = config.tap.step or float(min(bathymetry.cell_size))
+    step = search_step(config, bathymetry)
     sigma = float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(position_cov, float)).max(), 0.0)))
     return float(np.clip(config.half_width_sigmas * sigma, config.min_half_width_cells * step,
                          config.max_half_width_cells * step))
@@ -91,7 +106,7 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     patch = window_patch(_window(survey, first, end, poses), end - first, config.n_pings,
                          min_soundings=config.tap.min_soundings)
     patch = dataclasses.replace(patch, reference=end, first=first, ping=patch.ping + first)
-    tap = dataclasses.replace(config.tap, half_width=float(half_width))
+    tap = dataclasses.replace(config.tap, half_width=float(half_width), step=search_step(config, bathymetry))
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 
 

@@ -87,6 +87,8 @@ class PoseGraph:
     odometry: list[tuple[int, int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     pose_priors: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     fixes: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
+    _factors: dict = dataclasses.field(default_factory=lambda: {"prior": [], "odometry": [], "fix": []},
+                                       repr=False)
 
     def add_pose(self, key: int, time: float, initial_pose) -> None:
         """A key pose at ping ``key`` with its initial estimate ``(north, east, psi)``."""
@@ -101,31 +103,40 @@ class PoseGraph:
     def add_pose_prior(self, key: int, pose, cov_world) -> gtsam.NonlinearFactor:
         """A prior on a whole pose (world-frame covariance); returns the GTSAM factor."""
         self.pose_priors.append((int(key), np.asarray(pose, float), np.asarray(cov_world, float)))
-        return pose_prior_factor(key, pose, cov_world)
+        factor = pose_prior_factor(key, pose, cov_world)
+        self._factors["prior"].append(factor)
+        return factor
 
     def add_odometry(self, i: int, j: int, increment, increment_cov) -> gtsam.NonlinearFactor:
         """The DR increment from pose ``i`` to pose ``j`` with its covariance (frame of ``i``)."""
         increment = np.asarray(increment, float)
         cov = between_noise(increment, increment_cov, self.min_std, self.min_heading_std)
         self.odometry.append((int(i), int(j), increment, cov))
-        return gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
-                                        gtsam.noiseModel.Gaussian.Covariance(cov))
+        factor = gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
+                                          gtsam.noiseModel.Gaussian.Covariance(cov))
+        self._factors["odometry"].append(factor)
+        return factor
 
     def add_position_fix(self, key: int, position, cov) -> gtsam.NonlinearFactor:
         """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model."""
         self.fixes.append((int(key), np.asarray(position, float), np.asarray(cov, float)))
-        return position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
+        factor = position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
+        self._factors["fix"].append(factor)
+        return factor
+
+    def with_fixes(self, fixes) -> PoseGraph:
+        """A copy with the position fixes replaced by ``fixes``, ``(key, position, covariance)`` each."""
+        graph = dataclasses.replace(self, fixes=[], _factors={**self._factors, "fix": []})
+        for key, position, cov in fixes:
+            graph.add_position_fix(key, position, cov)
+        return graph
 
     def factor_graph(self) -> gtsam.NonlinearFactorGraph:
         """Every factor, as one GTSAM graph."""
         graph = gtsam.NonlinearFactorGraph()
-        for key, pose, cov in self.pose_priors:
-            graph.add(pose_prior_factor(key, pose, cov))
-        for i, j, z, cov in self.odometry:
-            noise = gtsam.noiseModel.Gaussian.Covariance(cov)
-            graph.add(gtsam.BetweenFactorPose2(i, j, gtsam.Pose2(*z), noise))
-        for key, position, cov in self.fixes:
-            graph.add(position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter))
+        for kind in ("prior", "odometry", "fix"):
+            for factor in self._factors[kind]:
+                graph.add(factor)
         return graph
 
     def values(self, poses=None) -> gtsam.Values:

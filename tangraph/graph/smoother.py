@@ -51,7 +51,7 @@ class SmootherSolution:
     timings: dict
 
 
-def _optimizer(graph, values, config: GraphConfig):
+def _optimizer(graph, values, config: GraphConfig, ordering):
     if config.optimizer == "lm":
         params = gtsam.LevenbergMarquardtParams()
         cls = gtsam.LevenbergMarquardtOptimizer
@@ -61,7 +61,7 @@ def _optimizer(graph, values, config: GraphConfig):
     else:
         params = gtsam.DoglegParams()
         cls = gtsam.DoglegOptimizer
-    params.setOrderingType("METIS")
+    params.setOrdering(ordering)  # METIS, computed once for every iteration
     params.setMaxIterations(config.max_iterations)
     return cls(graph, values, params)
 
@@ -88,29 +88,30 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     factors, values = graph.factor_graph(), graph.values(initial)
     started = _time.perf_counter()
     try:
-        optimizer = _optimizer(factors, values, config)
+        ordering = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
+        optimizer = _optimizer(factors, values, config, ordering)
         result = optimizer.optimize()
     except RuntimeError as exc:
         raise _translate(exc, graph) from None
     solved = _time.perf_counter()
     keys = np.asarray(graph.keys, np.int64)
-    pose = np.array([[p.x(), p.y(), p.theta()] for p in (result.atPose2(int(k)) for k in keys)])
+    pose = np.array(gtsam.utilities.extractPose2(result), float)  # in key order: the pings ascending
     if initial is None:
         initial = np.asarray(graph.initial)
     pose[:, 2] = np.asarray(initial)[:, 2] + _wrap(pose[:, 2] - np.asarray(initial)[:, 2])
     cov = np.full((keys.size, 3, 3), np.nan)
     if config.smoother_covariance == "all":
-        cov = tangent_to_world(pose[:, 2], _marginals(factors, result, keys))
+        cov = tangent_to_world(pose[:, 2], _marginals(factors, result, keys, ordering))
     done = _time.perf_counter()
     return SmootherSolution(keys, pose, cov, int(optimizer.iterations()), float(factors.error(result)),
                             {"solve": solved - started, "marginals": done - solved})
 
 
-def _marginals(factors, result, keys) -> np.ndarray:
+def _marginals(factors, result, keys, ordering) -> np.ndarray:
     """Marginal covariances (tangent) of ``keys`` from one METIS-ordered multifrontal elimination."""
     linear = factors.linearize(result)
     try:
-        tree = linear.eliminateMultifrontal(gtsam.Ordering.MetisGaussianFactorGraph(linear))
+        tree = linear.eliminateMultifrontal(ordering)
     except RuntimeError as exc:
         raise TangraphError(f"marginal covariances failed: {str(exc).strip().splitlines()[0]}") from None
     return np.array([tree.marginalCovariance(int(k)) for k in keys])
@@ -221,7 +222,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
             rounds -= 1
             break
         records = new_records
-        graph = dataclasses.replace(graph, fixes=accepted)
+        graph = graph.with_fixes(accepted)
         solution = smooth_pose_graph(graph, config, initial=solution.pose)
         dense = dense_track(survey, nav.dr_model, solution.keys, solution.pose, _usable(solution.covariance),
                             scale_noise=config.odometry_scale_noise)
