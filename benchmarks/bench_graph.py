@@ -1,6 +1,6 @@
 """Speed of the factor graph (tangraph.graph): online iSAM2 per key pose, batch smoother on long chains.
 
-    python benchmarks/bench_graph.py [--online-only | --batch-only] [--sizes 100000 300000]
+    python benchmarks/bench_graph.py [--online-only | --batch-only] [--sizes 100000 300000] [--long 100000]
 
 Online: the chen2022 scenario (100 000 s at 1 m/s, a single-beam sounding every 100 s, on the
 500 m polar chart), navigated by :func:`tangraph.graph.navigate_online`; prints the mean and p99
@@ -9,7 +9,9 @@ steps (TAP included), and the ratio of the mean update time over the last 10 % o
 to the first 10 % (targets: p99 <= 10 ms, ratio <= 2). Batch: a synthetic chain of N poses (1 m
 steps with a slight turn, odometry plus a position prior every 100 poses) solved by
 :func:`tangraph.graph.smooth_pose_graph` (LM, METIS), with and without the marginal covariance of
-every pose (target: 100 000 poses in <= 15 s; 300 000 without a crash). Nothing is asserted.
+every pose (target: 100 000 poses in <= 15 s; 300 000 without a crash). ``--long N``: the
+navigator over N key poses with a given fix every 10 (no TAP), to show the update time stays
+flat as the chain grows. Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -54,6 +56,55 @@ def online() -> None:
     print(f"  RMSE  DR {np.sqrt(np.mean(dr**2)):.0f} m   isam2 {np.sqrt(np.mean(err**2)):.0f} m")
 
 
+def long_online(n: int) -> None:
+    """GraphNavigator over ``n`` pings at 1 Hz, every ping a key pose, a fix every 10 pings: the
+    TAP is left out (each fix is the truth plus noise, made from one real fix as a template), so
+    the figures are those of the graph alone."""
+    import dataclasses
+
+    from tangraph.maps import fractal
+    from tangraph.matching import TapConfig, tap_fix
+    from tangraph.sensors import DeadReckoningModel, simulate_dead_reckoning
+    from tangraph.survey import Survey
+
+    rng = np.random.default_rng(2)
+    t = np.arange(n, dtype=float)
+    psi = 0.3 + 0.2 * np.sin(t / 2000.0)
+    step = np.column_stack([np.cos(psi), np.sin(psi)])
+    truth = np.column_stack([200.0 + np.cumsum(step, axis=0) - step[0], psi])
+    model = DeadReckoningModel(heading_bias=float(np.deg2rad(1.0)), speed_noise=0.05, heading_walk=1e-5)
+    dr = simulate_dead_reckoning(t, truth, model, rng=rng)
+    beams = np.linspace(-30.0, 30.0, 20)[None, :].repeat(n, axis=0)
+    bathymetry = fractal((200, 200), 5.0, rng=rng, relief=15.0)
+    depth = np.full((n, 20), 60.0)
+    survey = Survey(time=t, dr_pose=dr.pose, vehicle_depth=np.zeros(n), beam_forward=0 * beams,
+                    beam_starboard=beams, beam_depth=depth, true_pose=truth)
+    window = slice(0, 10)
+    north, east = survey.footprints(truth)
+    measured = bathymetry.depth_at(north[window], east[window]) + rng.normal(0.0, 0.1, (10, 20))
+    first = Survey(time=t[window], dr_pose=truth[window], vehicle_depth=np.zeros(10),
+                   beam_forward=0 * beams[window], beam_starboard=beams[window], beam_depth=measured)
+    template = tap_fix(first, bathymetry, 9, 10, TapConfig(half_width=20.0), prior=truth[9, :2])
+    assert template.accepted, template.quality.reasons
+    config = GraphConfig(key_interval=1.0, n_pings=10, window_noise=False)
+    nav = GraphNavigator(survey, bathymetry, config, dr_model=model)
+    cov = np.diag([4.0, 4.0])
+    t0 = time.perf_counter()
+    for k in range(n):
+        fix = None
+        if k % 10 == 9:
+            fix = dataclasses.replace(template, index=k, first=k - 9, covariance=cov,
+                                      position=truth[k, :2] + rng.normal(0.0, 2.0, 2))
+        nav.step(fix=fix)
+    total = time.perf_counter() - t0
+    updates = np.asarray(nav.update_times) * 1e3
+    tenth = updates.size // 10
+    accepted = sum(f["accepted"] for f in nav.fixes)
+    print(f"online, {n} key poses, {accepted} fixes (graph only): {total:.1f} s; "
+          f"update mean {updates.mean():.2f} ms, p99 {np.percentile(updates, 99):.2f} ms, "
+          f"last 10 % / first 10 % = {updates[-tenth:].mean() / updates[:tenth].mean():.2f}")
+
+
 def chain(n: int, prior_every: int = 100) -> PoseGraph:
     """A synthetic chain: 1 m steps turning 0.0001 rad each, position priors every ``prior_every``."""
     graph = PoseGraph()
@@ -93,10 +144,14 @@ def main() -> None:
     parser.add_argument("--online-only", action="store_true")
     parser.add_argument("--batch-only", action="store_true")
     parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 300_000])
+    parser.add_argument("--long", type=int, default=0,
+                        help="also a graph-only online run of this many key poses")
     args = parser.parse_args()
     print(f"pid {os.getpid()}")
     if not args.batch_only:
         online()
+        if args.long:
+            long_online(args.long)
     if not args.online_only:
         batch(args.sizes)
 

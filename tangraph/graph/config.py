@@ -124,7 +124,7 @@ class GraphConfig:
     optimizer: Literal["lm", "gn", "dogleg"] = "lm"
     max_iterations: int = 100
     smoother_covariance: Literal["all", "none"] = "all"
-    rematch_iterations: int = 0
+    rematch_iterations: int = 2
     rematch_tolerance: float = 0.5
 
     def __post_init__(self) -> None:
