@@ -1,0 +1,80 @@
+"""One dispatch over every estimator, and the navigate / smooth commands end to end."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.cli import main
+from tangraph.errors import TangraphError
+from tangraph.maps import load
+from tangraph.navigation import Method, dead_reckoning_track, navigate, track_summary
+from tangraph.sim.scenario import load_scenario, simulate
+from tangraph.survey import write_survey
+
+
+@pytest.fixture(scope="module")
+def wang_survey():
+    """The wang2019 scenario on the real Merimbula map: 280 pings over 1.7 km."""
+    bathymetry = load("merimbula")
+    survey = simulate(load_scenario("wang2019"), rng=np.random.default_rng(3), bathymetry=bathymetry, seed=3)
+    return survey, bathymetry
+
+
+@pytest.fixture(scope="module")
+def survey_file(wang_survey, tmp_path_factory):
+    path = tmp_path_factory.mktemp("nav") / "wang.nc"
+    write_survey(wang_survey[0], path)
+    return path
+
+
+def test_unknown_method_and_missing_rng_are_named(wang_survey):
+    survey, bathymetry = wang_survey
+    with pytest.raises(TangraphError, match="unknown navigation method 'kalman'.*tercom-pf"):
+        navigate(survey, bathymetry, "kalman")
+    with pytest.raises(TangraphError, match="'pf' is random: pass rng"):
+        navigate(survey, bathymetry, "pf")
+
+
+@pytest.mark.parametrize("method", [m.value for m in Method])
+def test_every_method_beats_dead_reckoning_on_a_real_map(wang_survey, method):
+    survey, bathymetry = wang_survey
+    track = navigate(survey, bathymetry, method, rng=np.random.default_rng(11))
+    assert track.method == method and track.n_poses == survey.n_pings
+    np.testing.assert_array_equal(track.time, survey.time)
+    from tangraph.eval import track_metrics
+
+    got = track_metrics(track, survey.true_pose, skip=30)
+    dr = track_metrics(dead_reckoning_track(survey), survey.true_pose, skip=30)
+    assert got["rmse"] < dr["rmse"], (got, dr)
+    text = track_summary(track, survey)
+    assert f"method       {method}" in text and "dead reckoning: RMSE" in text
+
+
+def test_navigate_command_writes_lat_lon_and_refuses_to_clobber(survey_file, tmp_path, capsys):
+    out = tmp_path / "pf.csv"
+    args = ["navigate", str(survey_file), "--method", "pf", "--particles", "300", "-q", "-o", str(out)]
+    assert main(args) == 0
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[:4] == ["time", "lat", "lon", "north"]
+    assert "RMSE" in capsys.readouterr().out
+    before = out.read_bytes()
+    assert main(args) == 2 and "--force" in capsys.readouterr().err
+    assert out.read_bytes() == before
+    assert main(["navigate", str(survey_file), "--method", "isam2", "--particles", "10", "-o", str(out)]) == 2
+    assert "--particles does not apply" in capsys.readouterr().err
+    assert main(["navigate", str(survey_file), "-o", str(survey_file), "--force", "-q"]) == 2
+    assert "over the input survey" in capsys.readouterr().err
+
+
+def test_smooth_command_writes_csv_tum_and_figure(wang_survey, survey_file, tmp_path, capsys):
+    k = wang_survey[0].n_pings
+    out, tum, fig = tmp_path / "s.csv", tmp_path / "s.tum", tmp_path / "s.png"
+    args = ["smooth", str(survey_file), "-q", "-o", str(out), "--tum", str(tum), "--plot", str(fig)]
+    assert main(args) == 0
+    printed = capsys.readouterr().out
+    assert "fixes" in printed and "accepted" in printed
+    rows = np.loadtxt(out, delimiter=",", skiprows=1)
+    assert rows.shape[0] == k and np.all(np.isfinite(rows[:, :6]))
+    assert np.loadtxt(tum).shape == (k, 8)
+    assert fig.read_bytes()[:4] == b"\x89PNG"
