@@ -97,6 +97,16 @@ class GraphConfig:
         this many times, until no fix moves by more than ``rematch_tolerance`` metres and the
         set of accepted fixes stays the same.
     rematch_tolerance : float
+
+    Examples
+    --------
+    >>> config = GraphConfig(n_pings=20, robust_kernel="cauchy")
+    >>> config.spacing, config.gate_probability
+    (20, 0.999)
+    >>> GraphConfig(robust_kernel="tukey")
+    Traceback (most recent call last):
+    ...
+    tangraph.errors.TangraphError: GraphConfig.robust_kernel must be one of huber, cauchy, none, got 'tukey'
     """
 
     key_interval: float = 60.0

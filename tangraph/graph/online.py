@@ -6,8 +6,11 @@ search is centred on the predicted position (the latest key estimate composed wi
 increment) with a half-width from its covariance, the fix is gated against that prediction, and
 an accepted one becomes a robust translation prior. iSAM2 is then updated with only these new
 factors and values (the containers are emptied after each update), and the marginal covariance
-of the latest key only is read. Between key poses the output is the latest key estimate composed
-with the DR increment, its covariance grown by the increment's.
+of the latest key only is read. Once iSAM2 holds ``2 * GraphConfig.isam_window`` key poses the
+oldest are marginalised (iSAM2's ``marginalizeLeaves``; the oldest poses of a chain are leaves of
+its Bayes tree), so the work per update stays bounded as the mission grows: without it each new
+fix moves the whole past and the update time grows with the chain. Between key poses the output
+is the latest key estimate composed with the DR increment, its covariance grown by the increment's.
 """
 
 from __future__ import annotations
@@ -346,7 +349,10 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         ``method="isam2"``, one causal pose per ping with its covariance; ``timings`` has
         ``total``, ``per_step``, ``per_step_p99`` (whole steps, TAP included), ``update_mean``,
         ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``meta`` has
-        ``fixes`` (one dict per window), ``n_fixes_accepted``, ``n_fixes_rejected`` and
-        ``key_indices``.
+        ``fixes`` (one dict per window: ``index``, ``north``, ``east``, ``cov_nn``, ``cov_ne``,
+        ``cov_ee`` (the covariance given to the graph, TAP's grown by
+        ``GraphConfig.window_noise``), ``accepted``, ``reason`` (``"accepted"``, ``"gate"``,
+        ``"multimodal"``, ``"uninformative"``, ``"match failed: ..."``), ``nis`` and
+        ``half_width``), ``n_fixes_accepted``, ``n_fixes_rejected`` and ``key_indices``.
     """
     return GraphNavigator(survey, bathymetry, config, dr_model=dr_model).run(progress).track()

@@ -82,6 +82,19 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     ------
     TangraphError
         Key poses that nothing constrains (a gap with no odometry), named by ping.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> graph = PoseGraph()
+    >>> graph.add_pose(0, 0.0, [0.0, 0.0, 0.0])
+    >>> graph.add_pose(10, 10.0, [10.0, 0.0, 0.0])
+    >>> _ = graph.add_pose_prior(0, [0.0, 0.0, 0.0], np.diag([1.0, 1.0, 0.01]))
+    >>> _ = graph.add_odometry(0, 10, [10.0, 0.0, 0.0], np.diag([0.1, 0.1, 1e-4]))
+    >>> _ = graph.add_position_fix(10, [12.0, 0.0], np.eye(2))
+    >>> solution = smooth_pose_graph(graph)
+    >>> solution.pose[:, 0].round(2).tolist()
+    [0.95, 11.05]
     """
     config = config or GraphConfig()
     graph.check_determined()
