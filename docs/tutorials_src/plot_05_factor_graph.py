@@ -29,8 +29,8 @@ import numpy as np
 
 from tangraph.eval import track_metrics
 from tangraph.graph import GraphConfig, GraphNavigator, navigate_online, search_half_width
+from tangraph.graph.fixes import make_fix
 from tangraph.maps import load
-from tangraph.matching import tap_fix
 from tangraph.navigation import dead_reckoning_track, track_summary
 from tangraph.plot import plot_errors, plot_tracks
 from tangraph.sim import load_scenario, simulate
@@ -52,8 +52,9 @@ print(f"fix every {config.spacing} pings ({config.n_pings}-ping windows), key po
 #
 # :func:`~tangraph.graph.navigate_online` steps through the pings. At each window end it
 # predicts the position (the latest key estimate composed with the DR increment), searches a
-# TAP fix around it over a half-width of four predicted standard deviations (but at least five
-# map cells, 50 m on this 10 m map), judges the fix
+# TAP fix around it over a half-width of four predicted standard deviations (but at least
+# ``min_half_width_cells`` steps of the search grid, whose step is a fraction of a map cell),
+# judges the fix
 # and, if it is accepted, adds it as a translation prior; iSAM2 is updated with the new factors
 # only. The dead-reckoning error model comes from the survey (a simulated survey records it;
 # for a recorded one it is passed as ``dr_model``, see :doc:`tutorial 6
@@ -106,7 +107,8 @@ plt.show()
 # true one, and the flags do not see it. We make such a fix by hand. :class:`~tangraph.graph.GraphNavigator`
 # runs one ping per :meth:`~tangraph.graph.GraphNavigator.step`, and ``step`` takes a fix to use
 # instead of the one it would make. We take the window end in the middle of the accepted fixes,
-# run the default navigator up to it, search the genuine fix around its prediction, then move
+# run the default navigator up to it, make the genuine fix as the navigator would
+# (``tangraph.graph.fixes.make_fix``, around its prediction), then move
 # the fix 30 m north and 20 m west and keep its covariance and its flags: a fix about 36 m off
 # that claims an accuracy of a few metres and passes the quality flags.
 
@@ -118,8 +120,8 @@ nav = GraphNavigator(survey, bathymetry, config)
 for _ in range(bad_ping):
     nav.step()
 pose, cov = nav.predicted(bad_ping)
-tap = dataclasses.replace(config.tap, half_width=search_half_width(config, bathymetry, cov[:2, :2]))
-genuine = tap_fix(survey, bathymetry, bad_ping, config.n_pings, tap, prior=pose[:2])
+half_width = search_half_width(config, bathymetry, cov[:2, :2])
+genuine = make_fix(survey, bathymetry, bad_ping, config, pose[:2], half_width)  # as the navigator would
 outlier = dataclasses.replace(genuine, position=genuine.position + offset)
 std = np.sqrt(np.diag(outlier.covariance))
 print(f"outlier at ping {bad_ping} (t = {survey.time[bad_ping]:.0f} s): "
@@ -162,10 +164,10 @@ for label, variant in variants.items():
 # whitened error up to 2.45 as Gaussian and beyond that grows only linearly, so the weight of a
 # fix falls with its disagreement with the odometry and the other fixes: the outlier moves the
 # track by little. A plain Gaussian prior has no such defence, and the track is dragged towards
-# the outlier until the next fixes pull it back. (The two navigators without a gate also accept
-# the genuine fixes the gate refused in the first run, so their RMSE over the whole line is not
-# only the outlier's doing: a gate at p = 0.999 also refuses a good fix now and then, the price
-# of its safety.) The errors around the outlier:
+# the outlier until the next fixes pull it back. (Without the gate a navigator also accepts any
+# genuine fix the gate would have refused: a gate at p = 0.999 refuses a good fix now and then,
+# the price of its safety; the table of fixes above shows whether it did on this line.) The
+# errors around the outlier:
 
 fig, ax = plt.subplots(figsize=(9, 4.5), layout="constrained")
 for (label, track), colour in zip(results.items(), ("tab:green", "tab:orange", "tab:red"), strict=True):
