@@ -187,3 +187,22 @@ def test_dr_model_is_required_when_the_survey_has_none(small_survey, rough_map):
 def test_config_is_validated(changes):
     with pytest.raises(TangraphError, match="GraphConfig"):
         GraphConfig(**changes)
+
+
+@pytest.mark.slow
+def test_covariances_are_honest_over_seeds(rough_map):
+    """Over several seeded surveys both tracks beat DR and the smoother's ANEES is near 2."""
+    from tangraph.sim.scenario import simulate
+    from tests.graph.conftest import small_scenario
+
+    anees = {"isam2": [], "smoother": []}
+    for seed in range(5):
+        survey = simulate(small_scenario(), rng=np.random.default_rng(100 + seed), bathymetry=rough_map)
+        truth = survey.true_pose
+        dr = float(np.sqrt(np.mean(np.sum((survey.dr_pose[:, :2] - truth[:, :2]) ** 2, axis=1))))
+        config = GraphConfig(key_interval=20.0)
+        for track in (navigate_online(survey, rough_map, config), smooth_survey(survey, rough_map, config)):
+            assert rmse(track, truth) < dr / 3
+            anees[track.method].append(mean_nees(track, truth))
+    assert 0.5 < np.mean(anees["smoother"]) < 4.0
+    assert 0.5 < np.mean(anees["isam2"]) < 8.0
