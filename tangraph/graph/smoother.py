@@ -254,7 +254,8 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         "final_error": solution.error,
     })
     total = _time.perf_counter() - started
-    timings = {"total": total, "forward_pass": forward - started, **solution.timings}
+    timings = {"total": total, "per_step": total / survey.n_pings, "forward_pass": forward - started,
+               **solution.timings}
     return Track(time=survey.time, pose=pose, covariance=cov, method="smoother", timings=timings, meta=meta)
 
 
