@@ -151,7 +151,7 @@ class GraphNavigator:
         if fix is not None and int(fix.index) != k:
             raise TangraphError(f"step of ping {k} was given a fix of ping {fix.index}")
         if k == 0:
-            self._start()
+            self._start(fix)
         elif self._is_key[k] or fix is not None:
             self._key_step(k, fix)
         else:
@@ -160,17 +160,26 @@ class GraphNavigator:
         self.step_times.append(_time.perf_counter() - started)
         return self.pose[k], self.covariance[k]
 
-    def _start(self) -> None:
+    def _start(self, fix: TapFix | None) -> None:
         c, dr = self.config, self.survey.dr_pose[0]
         heading_std = float(np.hypot(c.initial_heading_std, self.dr_model.heading_bias))
         cov0 = np.diag([c.initial_position_std**2, c.initial_position_std**2, heading_std**2])
         self.graph.add_pose(0, self.survey.time[0], dr)
         self._new_factors.add(self.graph.add_pose_prior(0, dr, cov0))
         self._new_values.insert(0, gtsam.Pose2(*dr))
+        self._add_fix(0, dr, cov0, fix)
         self._update(0)
         self._rebase(0)
-        if self._is_end[0]:
-            log.debug("a fix window cannot end at the first ping")
+
+    def _add_fix(self, k: int, pose, cov, fix: TapFix | None) -> None:
+        """Make (or take) the fix of ping ``k``, judge it, and add it to the new factors if accepted."""
+        if fix is None and not self._is_end[k]:
+            return
+        outcome = self._judge(k, pose, cov, fix)
+        self.fixes.append(outcome.record)
+        if outcome.accepted:
+            fixed = outcome.fix
+            self._new_factors.add(self.graph.add_position_fix(k, fixed.position, fixed.covariance))
 
     def _key_step(self, k: int, fix: TapFix | None) -> None:
         prev = self.graph.keys[-1]
@@ -178,12 +187,7 @@ class GraphNavigator:
         self.graph.add_pose(k, self.survey.time[k], pose)
         self._new_values.insert(k, gtsam.Pose2(*pose))
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k]))
-        if fix is not None or self._is_end[k]:
-            outcome = self._judge(k, pose, cov, fix)
-            self.fixes.append(outcome.record)
-            if outcome.accepted:
-                self._new_factors.add(self.graph.add_position_fix(k, outcome.fix.position,
-                                                                  outcome.fix.covariance))
+        self._add_fix(k, pose, cov, fix)
         self._update(k)
         self._rebase(k)
 

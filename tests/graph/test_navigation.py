@@ -206,3 +206,9 @@ def test_covariances_are_honest_over_seeds(rough_map):
             anees[track.method].append(mean_nees(track, truth))
     assert 0.5 < np.mean(anees["smoother"]) < 4.0
     assert 0.5 < np.mean(anees["isam2"]) < 8.0
+
+
+def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
+    config = GraphConfig(n_pings=1, fix_spacing=50, key_interval=20.0)
+    track = navigate_online(small_survey, rough_map, config)
+    assert [f["index"] for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
