@@ -316,7 +316,7 @@ def _wrap(angle):
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
-def _translate(exc: RuntimeError, graph: PoseGraph) -> Exception:
+def _translate(exc: Exception, graph: PoseGraph) -> Exception:
     """A TangraphError naming the unconstrained poses for GTSAM's indeterminant-system error."""
     text = str(exc)
     if "ndetermina" not in text:

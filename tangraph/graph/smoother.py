@@ -104,7 +104,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
         ordering = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
         optimizer = _optimizer(factors, values, config, ordering)
         result = optimizer.optimize()
-    except RuntimeError as exc:
+    except (RuntimeError, IndexError) as exc:  # GTSAM's indeterminant system; METIS on odd graphs
         raise _translate(exc, graph) from None
     solved = _time.perf_counter()
     keys = np.asarray(graph.keys, np.int64)
