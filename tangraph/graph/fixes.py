@@ -54,10 +54,10 @@ def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_c
     """Half-width (m) of the TAP search around the predicted position (``GraphConfig.half_width_rule``)."""
     if config.half_width_rule == "fixed":
         return float(config.tap.half_width)
-    step = search_step(config, bathymetry)
+    cell = float(min(bathymetry.cell_size))
     sigma = float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(position_cov, float)).max(), 0.0)))
-    return float(np.clip(config.half_width_sigmas * sigma, config.min_half_width_cells * step,
-                         config.max_half_width_cells * step))
+    return float(np.clip(config.half_width_sigmas * sigma, config.min_half_width_cells * cell,
+                         config.max_half_width_cells * cell))
 
 
 def window_noise(fix: TapFix, survey: Survey, dr_model: DeadReckoningModel) -> TapFix:
@@ -103,6 +103,8 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     first = end - config.n_pings + 1
     if first < 0:
         raise MatchingError(f"window of {config.n_pings} pings ending at ping {end} starts before the survey")
+    if not np.isfinite(survey.beam_depth[first : end + 1]).any():
+        raise MatchingError(f"window of pings {first}..{end} has no sounding")
     patch = window_patch(_window(survey, first, end, poses), end - first, config.n_pings,
                          min_soundings=config.tap.min_soundings)
     patch = dataclasses.replace(patch, reference=end, first=first, ping=patch.ping + first)
