@@ -71,8 +71,7 @@ class GraphConfig:
     half_width_rule : {"marginal", "fixed"}
         ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
         square root of the largest eigenvalue of the predicted position covariance, clipped to
-        ``[min_half_width_cells, max_half_width_cells]`` search steps (``tap.step`` or the map's
-        cell size); ``"fixed"``: ``tap.half_width``.
+        ``[min_half_width_cells, max_half_width_cells]`` map cells; ``"fixed"``: ``tap.half_width``.
     half_width_sigmas, min_half_width_cells, max_half_width_cells : float
     relinearize_threshold, relinearize_position : float
         iSAM2 relinearises a pose whose update exceeds this in heading (rad) or in position (m);
