@@ -37,6 +37,7 @@ extensions = [
     "cliref",
     "catalogue_table",
     "study_readme",
+    "demo_results",
 ]
 exclude_patterns = ["_build", "tutorials_src", "**.ipynb_checkpoints"]
 templates_path = ["_templates"]
