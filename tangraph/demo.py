@@ -111,28 +111,27 @@ def format_table(rows: list[dict]) -> str:
 
 
 def _fix_close_up(survey, bathymetry, smoother: Track, path: Path) -> None:
-    """One accepted fix of the smoother, searched again to show its three regions."""
+    """One accepted fix of the smoother, searched again on a finer grid around it (the patch laid
+    with the dead reckoning) to show its three regions."""
     from matplotlib.figure import Figure
 
     from tangraph.matching import MatchingError, TapConfig, tap_fix
     from tangraph.plot import plot_fix
 
     fixes = [f for f in smoother.meta.get("fixes", []) if f.get("accepted")]
-    fixes = fixes or smoother.meta.get("fixes", [])
+    fixes = fixes or [f for f in smoother.meta.get("fixes", []) if np.isfinite(f["north"])]
     if not fixes:
         raise TangraphError("the demo's smoother made no terrain fix to show")
     chosen = fixes[len(fixes) // 2]
     end = int(chosen["index"])
-    n_pings = int(chosen.get("n_pings", 20))
-    truth = survey.true_pose[end, :2]
-    try:
-        fix = tap_fix(
-            survey, bathymetry, end, n_pings, TapConfig(half_width=60.0), prior=survey.dr_pose[end, :2]
-        )
+    n_pings = int(smoother.meta.get("config", {}).get("n_pings", 10))
+    centre = np.array([chosen["north"], chosen["east"]])
+    try:  # a finer grid than the navigator's, centred on its fix, to show the regions' shapes
+        fix = tap_fix(survey, bathymetry, end, n_pings, TapConfig(half_width=40.0, step=2.0), prior=centre)
     except MatchingError as exc:
         raise TangraphError(f"the demo could not redo the fix at ping {end}: {exc}") from None
     fig = Figure(figsize=(7.5, 6.5), layout="constrained")
-    plot_fix(fix, fig.add_subplot(), truth=truth)
+    plot_fix(fix, fig.add_subplot(), truth=survey.true_pose[end, :2])
     fig.savefig(path, dpi=120)
 
 

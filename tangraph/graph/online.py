@@ -212,7 +212,9 @@ class GraphNavigator:
             return judge_fix(self._grown(fix), pose, cov, self.config, half_width)
         started = _time.perf_counter()
         try:
-            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width)
+            laid = self.pose.copy()  # the patch laid with the navigator's own (heading-corrected) poses
+            laid[k] = pose
+            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width, poses=laid)
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:

@@ -161,7 +161,7 @@ def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
 
 @pytest.mark.parametrize("cov", [np.zeros((2, 2)), -np.eye(2), np.full((2, 2), np.nan)])
 def test_bad_fix_covariance_in_a_step_is_refused(small_survey, rough_map, cov):
-    config = GraphConfig(key_interval=20.0)
+    config = GraphConfig(key_interval=20.0, n_pings=10, fix_spacing=None)
     nav = GraphNavigator(small_survey, rough_map, config)
     for _ in range(29):
         nav.step()

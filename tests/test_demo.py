@@ -1,0 +1,55 @@
+"""The main job: ``tangraph demo`` end to end, and its refusals."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+import tangraph.navigation
+from tangraph.cli import main
+from tangraph.demo import run_demo
+
+
+def test_unknown_map_lists_the_demo_maps(tmp_path, capsys):
+    assert main(["demo", "--map", "atlantis", "--out", str(tmp_path / "d")]) == 2
+    err = capsys.readouterr().err
+    assert "unknown map 'atlantis'" in err and "merimbula" in err and "polar500" in err
+    assert main(["demo", "--map", "vancouver", "--out", str(tmp_path / "d")]) == 2
+    assert "no survey laid out on map 'vancouver'" in capsys.readouterr().err
+    assert not (tmp_path / "d").exists()
+
+
+def test_an_existing_folder_is_not_clobbered(tmp_path, capsys):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "notes.txt").write_text("precious")
+    assert main(["demo", "--out", str(out), "--quick", "-q"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert (out / "notes.txt").read_text() == "precious"
+
+
+def test_an_interrupted_demo_leaves_nothing_behind(tmp_path, monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tangraph.navigation, "navigate", interrupted)
+    out = tmp_path / "demo"
+    with pytest.raises(KeyboardInterrupt):
+        run_demo(out, quick=True, progress=False)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_quick_demo_writes_the_report_and_the_graph_beats_dead_reckoning(tmp_path):
+    result = run_demo(tmp_path / "demo", quick=True, progress=False)
+    text = result.report.read_text()
+    for name in ("tracks.png", "errors.png", "fix.png"):
+        assert f"]({name})" in text and (result.out / name).read_bytes()[:4] == b"\x89PNG"
+    rows = {r["method"]: r for r in json.loads((result.out / "results.json").read_text())}
+    assert set(rows) == {"dead reckoning", "isam2", "smoother", "pf", "ipf", "sjcpf"}
+    assert rows["smoother"]["rmse"] < 0.5 * rows["dead reckoning"]["rmse"]
+    assert rows["isam2"]["rmse"] < rows["dead reckoning"]["rmse"]
+    settings = json.loads((result.out / "settings.json").read_text())
+    assert settings["seed"] == 7 and settings["quick"] is True
+    assert (result.out / "tracks" / "smoother.csv").read_text().startswith("time,lat,lon")
+    assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
