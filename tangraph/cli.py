@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -394,6 +395,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.verbose:  # Dask logs every worker's start and stop at INFO
         for name in ("distributed", "tornado"):
             logging.getLogger(name).setLevel(logging.WARNING)
+        # distributed sets its loggers' levels from its config when first imported (later, lazily)
+        os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
     try:
         args.func(args)
     except (TangraphError, FileNotFoundError, FileExistsError) as exc:

@@ -97,12 +97,20 @@ def summarise(table) -> list[dict]:
     return rows
 
 
+def _cell(v) -> str:
+    if not isinstance(v, float):
+        return str(v)
+    if not np.isfinite(v):
+        return ""
+    return f"{v:.2f}" if abs(v) < 1e4 else f"{v:.1e}"
+
+
 def markdown(rows: list[dict]) -> str:
     keys = list(rows[0])
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     for row in rows:
         lines.append(
-            "| " + " | ".join(f"{v:.2f}" if isinstance(v, float) else str(v) for v in row.values()) + " |"
+            "| " + " | ".join(_cell(v) for v in row.values()) + " |"
         )
     return "\n".join(lines)
 
