@@ -345,6 +345,12 @@ def timing(cfg: dict, seed: int, repeat: int) -> str:
     return "\n".join(lines)
 
 
+def _runs_path(out: Path, tag: str) -> Path:
+    """The saved runs table of a tag (gzipped CSV; plain CSV from earlier versions)."""
+    gz = out / f"runs_{tag}.csv.gz"
+    return gz if gz.exists() else out / f"runs_{tag}.csv"
+
+
 # -- main --------------------------------------------------------------------------------------
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
@@ -388,7 +394,7 @@ def main(argv=None) -> int:
         if args.replot:
             import pandas as pd
 
-            t = pd.read_csv(args.out / f"runs_{tag}.csv")
+            t = pd.read_csv(_runs_path(args.out, tag))
             t.attrs["tangraph"] = (
                 json.loads((args.out / f"config_{tag}.json").read_text()).get("runner") or {}
             )
@@ -402,7 +408,7 @@ def main(argv=None) -> int:
         if failed.any():
             print(f"{part}: {int(failed.sum())} runs failed; the first: {t.loc[failed, 'error'].iloc[0]}")
         if not args.replot:
-            t.to_csv(args.out / f"runs_{tag}.csv", index=False)
+            t.to_csv(args.out / f"runs_{tag}.csv.gz", index=False)
         ok = t[~failed]
         text = table(part, ok)
         command = (

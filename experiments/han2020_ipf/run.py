@@ -485,6 +485,12 @@ def _read_runs(csv: Path, config_json: Path):
     return table
 
 
+def _runs_path(out: Path, tag: str) -> Path:
+    """The saved runs table of a tag (gzipped CSV; plain CSV from earlier versions)."""
+    gz = out / f"runs_{tag}.csv.gz"
+    return gz if gz.exists() else out / f"runs_{tag}.csv"
+
+
 # -- main --------------------------------------------------------------------------------------
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
@@ -511,11 +517,13 @@ def main(argv=None) -> int:
     status = 0
     for part in parts:
         default = cfg["runs"] if part == "areas" else cfg["sweep_runs"]
-        runs = args.runs or (cfg["quick_runs"] if args.quick else default)
+        if args.quick:
+            default = cfg["quick_runs"] if part == "areas" else cfg["quick_sweep_runs"]
+        runs = args.runs or default
         configs = configurations(part, cfg, args.quick)
         tag = f"{part}_seed{args.seed}_runs{runs}{'_quick' if args.quick else ''}"
         if args.replot:
-            table = _read_runs(args.out / f"runs_{tag}.csv", args.out / f"config_{tag}.json")
+            table = _read_runs(_runs_path(args.out, tag), args.out / f"config_{tag}.json")
         else:
             table = run_many(
                 one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers
@@ -528,7 +536,7 @@ def main(argv=None) -> int:
         if failed.any():
             print(f"{part}: {int(failed.sum())} runs failed; the first: {table.loc[failed, 'error'].iloc[0]}")
         if not args.replot:
-            table.to_csv(args.out / f"runs_{tag}.csv", index=False)
+            table.to_csv(args.out / f"runs_{tag}.csv.gz", index=False)
         ok = table[~failed]
         text = TABLES[part](ok)
         command = (
