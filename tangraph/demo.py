@@ -96,17 +96,16 @@ def _row(label: str, track: Track, truth: np.ndarray) -> dict:
 
 def format_table(rows: list[dict]) -> str:
     """The demo's table as Markdown (also readable on a terminal)."""
+    from tangraph.eval import format_figure
+
     head = (
         "| method | RMSE (m) | final error (m) | max error (m) | ANEES | ms per ping | fixes used / refused |"
     )
     lines = [head, "|---|---:|---:|---:|---:|---:|---|"]
     for r in rows:
-        anees = "" if not np.isfinite(r["anees"]) else f"{r['anees']:.2f}"
-        ms = "" if not np.isfinite(r["ms_per_step"]) else f"{r['ms_per_step']:.2f}"
-        lines.append(
-            f"| {r['method']} | {r['rmse']:.2f} | {r['final_error']:.2f} | {r['max_error']:.2f} | {anees} | "
-            f"{ms} | {r['fixes']} |"
-        )
+        cells = [r["method"], *(format_figure(r[k]) for k in ("rmse", "final_error", "max_error", "anees")),
+                 format_figure(r["ms_per_step"]), r["fixes"]]
+        lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
 

@@ -12,7 +12,7 @@ from scipy import stats
 from tangraph.errors import TangraphError
 from tangraph.track import Track, position_errors
 
-__all__ = ["anees_band", "position_nees", "track_metrics"]
+__all__ = ["anees_band", "format_figure", "position_nees", "track_metrics"]
 
 
 def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
@@ -79,3 +79,19 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict
         "final_nees": float(nees[-1]),
         "nees_fraction_known": float(np.mean(known)),
     }
+
+
+def format_figure(value) -> str:
+    """A metric for a table: two decimals, scientific beyond 10^4 (a collapsed filter's NEES),
+    empty where unknown (NaN); anything else as ``str``.
+
+    Examples
+    --------
+    >>> [format_figure(v) for v in (3.14159, 2.5e33, float("nan"), "pf")]
+    ['3.14', '2.5e+33', '', 'pf']
+    """
+    if not isinstance(value, float | np.floating):
+        return str(value)
+    if not np.isfinite(value):
+        return ""
+    return f"{value:.2f}" if abs(value) < 1e4 else f"{value:.1e}"

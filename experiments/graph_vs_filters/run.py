@@ -97,20 +97,14 @@ def summarise(table) -> list[dict]:
     return rows
 
 
-def _cell(v) -> str:
-    if not isinstance(v, float):
-        return str(v)
-    if not np.isfinite(v):
-        return ""
-    return f"{v:.2f}" if abs(v) < 1e4 else f"{v:.1e}"
-
-
 def markdown(rows: list[dict]) -> str:
+    from tangraph.eval import format_figure
+
     keys = list(rows[0])
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     for row in rows:
         lines.append(
-            "| " + " | ".join(_cell(v) for v in row.values()) + " |"
+            "| " + " | ".join(format_figure(v) for v in row.values()) + " |"
         )
     return "\n".join(lines)
 
