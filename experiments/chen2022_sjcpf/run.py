@@ -345,6 +345,13 @@ def timing(cfg: dict, seed: int, repeat: int) -> str:
     return "\n".join(lines)
 
 
+CHECKED = (
+    "rmse",
+    "final_error",
+    "ms_per_loop",
+)  # every run must give finite values (the smoke test `--quick --runs 2`)
+
+
 def _runs_path(out: Path, tag: str) -> Path:
     """The saved runs table of a tag (gzipped CSV; plain CSV from earlier versions)."""
     gz = out / f"runs_{tag}.csv.gz"
@@ -405,8 +412,13 @@ def main(argv=None) -> int:
             print(f"{part}: every run failed; the first: {t['error'].iloc[0]}")
             status = 1
             continue
+        bad = ~np.isfinite(t.loc[~failed, list(CHECKED)].to_numpy(float)).all(axis=1)
+        if bad.any():
+            print(f"{part}: {int(bad.sum())} result rows hold non-finite {CHECKED}")
+            status = 1
         if failed.any():
             print(f"{part}: {int(failed.sum())} runs failed; the first: {t.loc[failed, 'error'].iloc[0]}")
+            status = 1
         if not args.replot:
             t.to_csv(args.out / f"runs_{tag}.csv.gz", index=False)
         ok = t[~failed]

@@ -485,6 +485,13 @@ def _read_runs(csv: Path, config_json: Path):
     return table
 
 
+CHECKED = (
+    "mean_error",
+    "exit_error",
+    "ms_per_patch",
+)  # every run must give finite values (the smoke test `--quick --runs 2`)
+
+
 def _runs_path(out: Path, tag: str) -> Path:
     """The saved runs table of a tag (gzipped CSV; plain CSV from earlier versions)."""
     gz = out / f"runs_{tag}.csv.gz"
@@ -533,8 +540,13 @@ def main(argv=None) -> int:
             print(f"{part}: every run failed; the first: {table['error'].iloc[0]}")
             status = 1
             continue
+        bad = ~np.isfinite(table.loc[~failed, list(CHECKED)].to_numpy(float)).all(axis=1)
+        if bad.any():
+            print(f"{part}: {int(bad.sum())} result rows hold non-finite {CHECKED}")
+            status = 1
         if failed.any():
             print(f"{part}: {int(failed.sum())} runs failed; the first: {table.loc[failed, 'error'].iloc[0]}")
+            status = 1
         if not args.replot:
             table.to_csv(args.out / f"runs_{tag}.csv.gz", index=False)
         ok = table[~failed]
