@@ -67,9 +67,10 @@ class GraphConfig:
         Add the DVL scale-factor error (``speed_scale``) as a variance along each increment:
         it is constant within a run and the graph has no state for it.
     window_noise : bool
-        Grow each fix's covariance by the DR error of its patch (the patch is laid with the DR;
-        its heading bias and scale error distort it): the increment covariance, constant errors
-        included, from the window's middle ping to its end.
+        Grow each fix's covariance by the DR error of its patch (the patch has the DR's shape:
+        online it is laid with the DR increments from the predicted pose of its last ping, in
+        re-matching with the smoothed poses; heading and scale errors distort it): the increment
+        covariance, constant errors included, from the window's middle ping to its end.
     half_width_rule : {"marginal", "fixed"}
         ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
         square root of the largest eigenvalue of the predicted position covariance, clipped to

@@ -27,6 +27,7 @@ __all__ = [
     "between_noise",
     "check_fix_covariance",
     "compose",
+    "inverse_increment_covariance",
     "nis",
     "pose_prior_factor",
     "position_fix_factor",
@@ -70,6 +71,22 @@ def between_noise(increment, cov, min_std: float, min_heading_std: float) -> np.
     cov[..., 1, 1] += min_std**2
     cov[..., 2, 2] += min_heading_std**2
     return world_to_tangent(np.asarray(increment, float)[..., 2], cov)
+
+
+def inverse_increment_covariance(inverse, cov) -> np.ndarray:
+    """Covariance ``(..., 3, 3)`` of the SE(2) inverse ``d^-1`` of an increment ``d`` whose
+    covariance is ``cov`` (frame of ``d``'s start), given the inverse ``(..., 3)`` itself.
+
+    ``d^-1 = (-R(-dpsi) t, -dpsi)``, so its Jacobian is ``[[-R(psi'), (y', -x')^T], [0, 0, -1]]``
+    with ``(x', y', psi') = d^-1``: the heading error of the increment moves the inverse's
+    position by its lever arm, which a rotation alone would miss.
+    """
+    inverse = np.asarray(inverse, float)
+    c, s = np.cos(inverse[..., 2]), np.sin(inverse[..., 2])
+    jac = np.zeros((*inverse.shape[:-1], 3, 3))
+    jac[..., 0, 0], jac[..., 0, 1], jac[..., 1, 0], jac[..., 1, 1] = -c, s, -s, -c
+    jac[..., 0, 2], jac[..., 1, 2], jac[..., 2, 2] = inverse[..., 1], -inverse[..., 0], -1.0
+    return jac @ np.asarray(cov, float) @ np.swapaxes(jac, -1, -2)
 
 
 def compose(pose, increment) -> np.ndarray:

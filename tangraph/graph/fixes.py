@@ -12,6 +12,7 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.errors import TangraphError
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, gate_threshold, nis
 from tangraph.maps.grid import BathymetryMap
@@ -80,9 +81,13 @@ def window_noise(fix: TapFix, survey: Survey, dr_model: DeadReckoningModel) -> T
 
 def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:
     w = slice(first, end + 1)
+    laid = survey.dr_pose[w] if poses is None else np.asarray(poses, float)
+    if laid.shape != (end - first + 1, 3):
+        raise TangraphError(f"poses of window {first}..{end} must have shape ({end - first + 1}, 3), "
+                            f"got {laid.shape}")
     return Survey(
         time=survey.time[w],
-        dr_pose=survey.dr_pose[w] if poses is None else np.asarray(poses, float)[w],
+        dr_pose=laid,
         vehicle_depth=survey.vehicle_depth[w],
         beam_forward=survey.beam_forward[w],
         beam_starboard=survey.beam_starboard[w],
@@ -93,7 +98,8 @@ def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
              half_width: float, *, poses=None) -> TapFix:
     """The TAP fix of the window of ``config.n_pings`` pings ending at ``end``, searched within
-    ``half_width`` of ``prior``; the patch is laid with ``poses`` (default: the DR poses).
+    ``half_width`` of ``prior``; the patch is laid with ``poses``, the ``(n_pings, 3)`` poses of the
+    window's pings (default: their DR poses).
 
     Raises
     ------

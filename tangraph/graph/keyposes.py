@@ -126,7 +126,11 @@ class PoseGraph:
 
     def with_fixes(self, fixes) -> PoseGraph:
         """A copy with the position fixes replaced by ``fixes``, ``(key, position, covariance)`` each."""
-        graph = dataclasses.replace(self, fixes=[], _factors={**self._factors, "fix": []})
+        graph = dataclasses.replace(
+            self, keys=list(self.keys), times=list(self.times), initial=list(self.initial),
+            odometry=list(self.odometry), pose_priors=list(self.pose_priors), fixes=[],
+            _factors={kind: list(factors) for kind, factors in self._factors.items()} | {"fix": []},
+        )
         for key, position, cov in fixes:
             graph.add_position_fix(key, position, cov)
         return graph

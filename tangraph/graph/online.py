@@ -36,7 +36,7 @@ from tangraph.graph.fixes import (
 from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix
-from tangraph.sensors import DeadReckoningModel
+from tangraph.sensors import DeadReckoningModel, odometry
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -158,7 +158,7 @@ class GraphNavigator:
             self.pose[k], self.covariance[k] = self.predicted(k)
         self.index = k
         self.step_times.append(_time.perf_counter() - started)
-        return self.pose[k], self.covariance[k]
+        return self.pose[k].copy(), self.covariance[k].copy()
 
     def _start(self, fix: TapFix | None) -> None:
         c, dr = self.config, self.survey.dr_pose[0]
@@ -212,9 +212,8 @@ class GraphNavigator:
             return judge_fix(self._grown(fix), pose, cov, self.config, half_width)
         started = _time.perf_counter()
         try:
-            laid = self.pose.copy()  # the patch laid with the navigator's own (heading-corrected) poses
-            laid[k] = pose
-            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width, poses=laid)
+            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width,
+                            poses=self._laid(k, pose))
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
@@ -226,6 +225,15 @@ class GraphNavigator:
             outcome = failed(k, exc, half_width)
             outcome.record["reason"] = f"invalid covariance: {exc}"
             return outcome
+
+    def _laid(self, k: int, pose) -> np.ndarray | None:
+        """The window's poses laid rigidly from the predicted pose of ping ``k`` with the DR
+        increments: the DR's shape, turned by the graph's heading correction (no tear at the keys
+        inside the window)."""
+        first = k - self.config.n_pings + 1
+        if first < 0:
+            return None
+        return compose(pose, odometry(self.survey.dr_pose, k, np.arange(first, k + 1)))
 
     def _grown(self, fix: TapFix) -> TapFix:
         if not self.config.window_noise:

@@ -24,7 +24,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import compose, propagate, tangent_to_world
+from tangraph.graph.factors import compose, inverse_increment_covariance, propagate, tangent_to_world
 from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator, _translate, _wrap
@@ -148,11 +148,7 @@ def dense_track(survey: Survey, dr_model: DeadReckoningModel, keys, key_pose, ke
     fwd, fwd_q = increments(dr_model, t, dr, a, ping, scale_noise=scale_noise)
     back_q = increments(dr_model, t, dr, ping, b, scale_noise=scale_noise)[1]
     back = odometry(dr, b, ping)
-    # the covariance of the increment ping -> b (frame of the ping) in the frame of b
-    rot = np.zeros((ping.size, 3, 3))
-    c, s = np.cos(back[:, 2]), np.sin(back[:, 2])
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = c, -s, s, c, 1.0
-    back_q = rot @ back_q @ np.swapaxes(rot, 1, 2)
+    back_q = inverse_increment_covariance(back, back_q)
     pose_f, pose_b = compose(key_pose[ia], fwd), compose(key_pose[ib], back)
     cov_f = propagate(key_pose[ia], key_cov[ia], fwd, fwd_q)
     cov_b = propagate(key_pose[ib], key_cov[ib], back, back_q)
@@ -174,7 +170,7 @@ def _rematch(nav: GraphNavigator, pose, cov, previous: list[dict]) -> tuple[list
         half_width = search_half_width(config, nav.bathymetry, cov[end, :2, :2])
         try:
             fix = make_fix(nav.survey, nav.bathymetry, int(end), config, pose[end, :2], half_width,
-                           poses=pose)
+                           poses=pose[int(end) - config.n_pings + 1 : int(end) + 1])
             outcome = judge_fix(nav._grown(fix), pose[end], cov[end], config, half_width)
         except MatchingError as exc:
             outcome = failed(int(end), exc, half_width)

@@ -106,9 +106,33 @@ def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
 
 
 def test_rematch_converges(small_survey, rough_map):
-    smoothed = smooth_survey(small_survey, rough_map, GraphConfig(key_interval=20.0, rematch_iterations=3))
-    assert 0 <= smoothed.meta["rematch_iterations"] <= 3
-    assert rmse(smoothed, small_survey.true_pose) < 1.5
+    config = GraphConfig(key_interval=20.0, rematch_iterations=3)
+    smoothed = smooth_survey(small_survey, rough_map, config)
+    single = smooth_survey(small_survey, rough_map, dataclasses.replace(config, rematch_iterations=0))
+    done = smoothed.meta["rematch_iterations"]
+    assert 1 <= done <= 3 and single.meta["rematch_iterations"] == 0
+    # re-matched patches are laid with the smoothed poses: the fixes move, and the track does not get worse
+    moved = [np.hypot(a["north"] - b["north"], a["east"] - b["east"])
+             for a, b in zip(smoothed.meta["fixes"], single.meta["fixes"], strict=True)
+             if a["accepted"] and b["accepted"]]
+    assert max(moved) > 0
+    assert rmse(smoothed, small_survey.true_pose) <= 1.05 * rmse(single, small_survey.true_pose) < 1.5
+
+
+def test_step_returns_copies_and_patches_are_laid_rigidly(small_survey, rough_map):
+    nav = GraphNavigator(small_survey, rough_map, GraphConfig(key_interval=20.0))
+    for _ in range(40):
+        pose, cov = nav.step()
+    pose[:] = 1e9
+    cov[:] = 0.0
+    assert np.all(nav.track().pose[39] < 1e8) and np.all(np.isfinite(nav.track().covariance[39]))
+    laid = nav._laid(39, nav.track().pose[39])
+    # the window has the DR's shape: every increment from its last ping is the DR's
+    from tangraph.sensors import odometry
+
+    np.testing.assert_allclose(odometry(laid, laid.shape[0] - 1, np.arange(laid.shape[0])),
+                               odometry(small_survey.dr_pose[20:40], 19, np.arange(20)), atol=1e-9)
+    np.testing.assert_allclose(laid[-1], nav.track().pose[39])
 
 
 def outlier_fixes(survey, bathymetry, config, rate: float, rng) -> dict:
