@@ -123,7 +123,7 @@ def _fix_close_up(survey, bathymetry, smoother: Track, path: Path) -> None:
         raise TangraphError("the demo's smoother made no terrain fix to show")
     chosen = fixes[len(fixes) // 2]
     end = int(chosen["index"])
-    n_pings = int(smoother.meta.get("config", {}).get("n_pings", 10))
+    n_pings = int(smoother.meta["config"]["n_pings"])
     centre = np.array([chosen["north"], chosen["east"]])
     try:  # a finer grid than the navigator's, centred on its fix, to show the regions' shapes
         fix = tap_fix(survey, bathymetry, end, n_pings, TapConfig(half_width=40.0, step=2.0), prior=centre)
@@ -187,8 +187,9 @@ three particle filters on the same soundings.
 
 ![fix](fix.png)
 
-*One terrain-aided fix close up: the criterion surface, the Xie, Wang and calibrated 95 %
-regions, the fix's covariance ellipse and the truth.*
+*One of the smoother's terrain-aided fixes, re-made on a finer grid around it (patch laid with the
+dead reckoning): the criterion surface, the Xie, Wang and calibrated 95 % regions, the fix's
+covariance ellipse and the truth.*
 
 Made by `tangraph demo --map {bathymetry.name} --seed {settings["seed"]}{quick}` in {seconds:.0f} s
 ({datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")}); settings in `settings.json`,

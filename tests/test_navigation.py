@@ -28,6 +28,13 @@ def survey_file(wang_survey, tmp_path_factory):
     return path
 
 
+def test_the_cli_methods_are_the_filters_and_the_graph():
+    from tangraph.filters import FilterMethod
+
+    assert {m.value for m in Method} == {m.value for m in FilterMethod} | {"isam2", "smoother"}
+    assert {m.value for m in Method if m.is_graph} == {"isam2", "smoother"}
+
+
 def test_unknown_method_and_missing_rng_are_named(wang_survey):
     survey, bathymetry = wang_survey
     with pytest.raises(TangraphError, match="unknown navigation method 'kalman'.*tercom-pf"):
