@@ -18,9 +18,10 @@ down-weights one that got through. The ideas are in :doc:`/guide`.
 # ``wang2019`` is a 1.7 km multibeam line over Merimbula Lake (see :doc:`tutorial 2
 # <plot_02_simulate_survey>`); its dead reckoning has a 1 degree heading bias and reads the
 # speed 1 % fast, so it drifts by about 35 m by the end. The graph's settings are a
-# :class:`~tangraph.graph.GraphConfig`; the defaults make a fix of every 10 pings (windows that
-# do not overlap), put a key pose at least every 60 s and at the end of every window, gate
-# fixes at the 0.999 quantile of ``chi2(2)`` and give the fixes a Huber noise model.
+# :class:`~tangraph.graph.GraphConfig`; its defaults (printed below) make a fix every
+# ``fix_spacing`` pings from a window of the last ``n_pings`` pings, put a key pose at least
+# every ``key_interval`` seconds and at the end of every window, gate fixes at a quantile of
+# ``chi2(2)`` and give the fixes a Huber noise model.
 
 import dataclasses
 

@@ -108,8 +108,9 @@ print(f"{recorded.n_pings} of {simulated.n_pings} pings imported; largest positi
 # A recorded survey does not say how good its dead reckoning was: the graph needs the error
 # model of the vehicle's INS/DVL (heading bias and random walk, speed scale and noise), which for
 # a real vehicle comes from its specification or its calibration. Here it is the model the
-# survey was simulated with. :func:`~tangraph.graph.smooth_survey` makes a TAP fix of every
-# 10 pings along the track, gates them, and solves every key pose at once; ``rematch_iterations``
+# survey was simulated with. :func:`~tangraph.graph.smooth_survey` makes TAP fixes along the
+# track (every ``fix_spacing`` pings, each of the last ``n_pings`` pings), gates them, and solves
+# every key pose at once; ``rematch_iterations``
 # then re-searches the fixes around the smoothed track (their patches laid with the smoothed
 # poses) and solves again, until the fixes stop moving.
 
