@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.core import check_run_inputs
 from tangraph.filters.ipf import IPFConfig, ipf
 from tangraph.filters.jbpf import JBPFConfig, jbpf
 from tangraph.filters.mle import MLEConfig, mle_filter
@@ -87,7 +88,7 @@ def run_filter(
         The method's own config (``PFConfig``, ``IPFConfig``, ``SJCPFConfig``, ``JBPFConfig``,
         ``TercomPFConfig``, ``MLEConfig``); None for its defaults.
     rng : numpy.random.Generator
-        The source of randomness (the MLE filter does not use it).
+        The source of randomness (the MLE filter does not use it: None is accepted there).
     progress : bool
         Show a progress bar over the pings.
 
@@ -96,15 +97,25 @@ def run_filter(
     Track
         Weighted mean poses (heading: dead reckoning), covariances ``(K, 3, 3)`` with NaN heading
         terms, ``method`` the method's value; ``meta``: ``ess`` (per ping), ``n_resampled``,
-        ``n_divergences``, ``divergence_steps``, ``config`` and the method's counts;
+        ``n_divergences``, ``divergence_steps``, ``config``, ``seed`` (of ``rng``, particle filters:
+        :func:`~tangraph.filters.core.rng_seed`) and the method's counts;
         ``timings``: ``total``, ``per_step`` (s).
 
     Raises
     ------
     TangraphError
-        An unknown method, or a config of another method's type.
+        An unknown method, a config of another method's type, or a ``survey``, ``bathymetry``
+        or ``rng`` of the wrong type (not a :class:`~tangraph.survey.Survey`,
+        :class:`~tangraph.maps.grid.BathymetryMap`, :class:`numpy.random.Generator`).
     """
     method = _method(method)
+    check_run_inputs(
+        survey,
+        bathymetry,
+        rng,
+        where=f"run_filter({method.value!r})",
+        rng_optional=method is FilterMethod.MLE,
+    )
     cls, runner = _RUNNERS[method]
     if config is None:
         config = cls()

@@ -82,7 +82,8 @@ class ParticleConfig:
     ess_threshold : float
         Resample when the effective sample size falls below ``ess_threshold * n_particles``.
     reinit_std : float or None
-        Spread (m) of the cloud drawn after a divergence; None: ``3 * init_std``.
+        Spread (m) of the cloud drawn after a divergence; None: ``3 * max(init_std, 1)`` (a
+        1 m floor, so that an ``init_std`` of 0 still re-draws a spread cloud).
     reinit_growth : float
         Factor on that spread for each further consecutive divergence.
     """

@@ -7,8 +7,8 @@ covariance, the effective sample size and the resampling count, and recovers fro
 when every particle has zero likelihood (all off the map, or a ping no particle explains) the
 step raises :class:`~tangraph.filters.FilterDivergence`; the runner logs it, draws a
 fresh cloud around the dead-reckoned position of that ping with a wider spread
-(``reinit_std``, times ``reinit_growth`` for each further consecutive divergence, at most the
-map's diagonal), weights it by
+(``reinit_std``, times ``reinit_growth`` for each further consecutive divergence, capped at
+the larger of the map's diagonal and the first re-initialisation spread), weights it by
 the ping if any particle can explain it, and goes on. ``meta["n_divergences"]`` and
 ``meta["divergence_steps"]`` record it.
 """
@@ -24,8 +24,9 @@ from typing import Any
 import numba
 import numpy as np
 
-from tangraph.filters.config import ParticleConfig, survey_sounding_std
-from tangraph.filters.likelihood import FilterDivergence, log_normalise
+from tangraph.errors import TangraphError
+from tangraph.filters.config import ParticleConfig, check_count, check_number, survey_sounding_std
+from tangraph.filters.likelihood import FilterDivergence, effective_sample_size, log_normalise
 from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
 from tangraph.filters.resampling import Resampler, resample
 from tangraph.maps.grid import BathymetryMap
@@ -36,12 +37,14 @@ __all__ = [
     "Belief",
     "FilterModel",
     "StepResult",
+    "check_run_inputs",
     "initial_belief",
     "jitter",
     "measure",
     "resample_belief",
     "resample_if_needed",
     "reweight",
+    "rng_seed",
     "run_particle_filter",
     "weighted_moments",
 ]
@@ -98,6 +101,28 @@ class Belief:
     def __post_init__(self) -> None:
         for name in ("particles", "log_weights", "tide", "history", "measured"):
             object.__setattr__(self, name, _frozen(getattr(self, name)))
+        particles, history = self.particles, self.history
+        if particles.ndim != 2 or particles.shape[1] != 2:
+            raise TangraphError(f"Belief: particles must have shape (N, 2), got {particles.shape}")
+        n = particles.shape[0]
+        if n < 1:
+            raise TangraphError("Belief: particles must hold at least one particle, got shape (0, 2)")
+        for name in ("log_weights", "tide"):
+            shape = getattr(self, name).shape
+            if shape != (n,):
+                raise TangraphError(f"Belief: {name} must have shape ({n},) as particles, got {shape}")
+        if history.ndim != 2 or history.shape[0] != n:
+            raise TangraphError(f"Belief: history must have shape ({n}, L) as particles, got {history.shape}")
+        length = history.shape[1]
+        if self.measured.shape != (length,):
+            raise TangraphError(
+                f"Belief: measured must have shape ({length},) as history's (N, L), got {self.measured.shape}"
+            )
+        check_number(self, "tide_var")
+        check_count(self, "n_history", low=0)
+        if self.n_history > length:
+            raise TangraphError(f"Belief: n_history must be <= L = {length}, got {self.n_history!r}")
+        check_count(self, "n_fixes", low=0)
 
     @property
     def n_particles(self) -> int:
@@ -133,7 +158,8 @@ class Belief:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class StepResult:
-    """One step's output: the new belief, the estimate (mean, covariance) and ESS of the step,
+    """One step's output: the new belief, the estimate (mean, covariance), the ESS of the weights
+    the estimate is taken from (the Monte Carlo error of the estimate depends on them),
     whether it resampled, counts summed into the track's metadata, fix records (TERCOM-PF) and
     ``info`` for inspection (not recorded)."""
 
@@ -160,10 +186,37 @@ def initial_belief(
     tide_var: float = 0.0,
     history_length: int = 0,
 ) -> Belief:
-    """``n`` equally weighted particles drawn from ``N(centre, std^2 I)``."""
-    centre = np.asarray(centre, dtype=np.float64)
+    """``n`` equally weighted particles drawn from ``N(centre, std^2 I)``; ``centre`` is a
+    position ``(north, east)``, shape ``(2,)`` (not a pose).
+
+    Raises
+    ------
+    TangraphError
+        ``centre`` not a finite ``(2,)`` array, ``std`` negative or not finite, ``n < 1``,
+        ``history_length < 0``.
+    """
+    try:
+        centre = np.asarray(centre, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise TangraphError(
+            f"initial_belief: centre must be a (north, east) position, got {centre!r}"
+        ) from None
+    if centre.shape != (2,) or not np.all(np.isfinite(centre)):
+        raise TangraphError(
+            f"initial_belief: centre must be a finite (north, east) position of shape (2,), "
+            f"got shape {centre.shape}: {centre.tolist()!r}"
+        )
+    try:
+        spread = float(std)
+    except (TypeError, ValueError):
+        spread = np.nan
+    if not (np.isfinite(spread) and spread >= 0):
+        raise TangraphError(f"initial_belief: std must be a finite number >= 0, got {std!r}")
+    for name, value, low in (("n", n, 1), ("history_length", history_length, 0)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+            raise TangraphError(f"initial_belief: {name} must be an integer >= {low}, got {value!r}")
     return Belief(
-        particles=centre + std * rng.standard_normal((n, 2)),
+        particles=centre + spread * rng.standard_normal((n, 2)),
         log_weights=np.full(n, -np.log(n)),
         tide=np.full(n, float(tide)),
         tide_var=float(tide_var),
@@ -174,15 +227,14 @@ def initial_belief(
 
 @numba.njit(cache=True, nogil=True)
 def _moments(log_weights, particles):
-    """Weighted mean (2,), covariance (2, 2) and ``1 / sum w^2`` of normalised log weights."""
+    """Weighted mean (2,) and covariance (2, 2) of normalised log weights ``(N,)`` and particles
+    ``(N, 2)`` (the caller checks the shapes: no bounds checks here)."""
     n = log_weights.size
     mean = np.zeros(2)
-    sum_w2 = 0.0
     for p in range(n):
         w = np.exp(log_weights[p])
         mean[0] += w * particles[p, 0]
         mean[1] += w * particles[p, 1]
-        sum_w2 += w * w
     cov = np.zeros((2, 2))
     for p in range(n):
         w = np.exp(log_weights[p])
@@ -192,18 +244,63 @@ def _moments(log_weights, particles):
         cov[0, 1] += w * dn * de
         cov[1, 1] += w * de * de
     cov[1, 0] = cov[0, 1]
-    return mean, cov, 1.0 / sum_w2
-
-
-def weighted_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted mean ``(2,)`` and covariance ``(2, 2)`` (second moment about the mean)."""
-    mean, cov, _ = _moments(belief.log_weights, belief.particles)
     return mean, cov
 
 
-def effective_size(belief: Belief) -> float:
-    """``1 / sum(w^2)``."""
-    return float(1.0 / np.sum(np.exp(2.0 * belief.log_weights)))
+def weighted_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean ``(2,)`` and covariance ``(2, 2)`` (second moment about the mean).
+
+    Raises
+    ------
+    TangraphError
+        The particles are not ``(N, 2)`` with ``N`` the number of weights (a belief made by
+        :meth:`Belief.replace`, which does not check shapes).
+    """
+    particles, log_weights = belief.particles, belief.log_weights
+    if particles.ndim != 2 or particles.shape[1] != 2 or log_weights.shape != (particles.shape[0],):
+        raise TangraphError(
+            f"weighted_moments: particles (N, 2) and log_weights (N,) do not match: "
+            f"{particles.shape}, {log_weights.shape}"
+        )
+    return _moments(log_weights, particles)
+
+
+def check_run_inputs(survey, bathymetry, rng, *, where: str, rng_optional: bool = False) -> None:
+    """Refuse (with a :class:`~tangraph.errors.TangraphError` naming the argument) a ``survey``
+    that is not a :class:`~tangraph.survey.Survey`, a ``bathymetry`` that is not a
+    :class:`~tangraph.maps.grid.BathymetryMap` or an ``rng`` that is not a
+    :class:`numpy.random.Generator` (None allowed if ``rng_optional``)."""
+    if not isinstance(survey, Survey):
+        raise TangraphError(f"{where}: survey must be a tangraph.survey.Survey, got {type(survey).__name__}")
+    if not isinstance(bathymetry, BathymetryMap):
+        raise TangraphError(
+            f"{where}: bathymetry must be a tangraph.maps.grid.BathymetryMap, got {type(bathymetry).__name__}"
+        )
+    if not (isinstance(rng, np.random.Generator) or (rng_optional and rng is None)):
+        raise TangraphError(
+            f"{where}: rng must be a numpy.random.Generator (np.random.default_rng(seed)), got {rng!r}"
+        )
+
+
+def rng_seed(rng: np.random.Generator) -> dict[str, Any] | None:
+    """The seed of a generator, as ``Track.meta["seed"]`` records it: ``{"entropy", "spawn_key"}``
+    of its :class:`numpy.random.SeedSequence` (``np.random.default_rng(seed)`` makes one), None when
+    the bit generator was seeded otherwise.
+
+    Examples
+    --------
+    >>> rng_seed(np.random.default_rng(np.random.SeedSequence(7, spawn_key=(2, 3))))
+    {'entropy': 7, 'spawn_key': [2, 3]}
+    """
+    seed_seq = getattr(rng.bit_generator, "seed_seq", None)
+    if not isinstance(seed_seq, np.random.SeedSequence):
+        return None
+    entropy = seed_seq.entropy
+    if entropy is not None and not isinstance(entropy, (int, np.integer)):
+        entropy = [int(v) for v in np.asarray(entropy).ravel()]
+    elif entropy is not None:
+        entropy = int(entropy)
+    return {"entropy": entropy, "spawn_key": [int(v) for v in seed_seq.spawn_key]}
 
 
 def reweight(belief: Belief, log_factor: np.ndarray, *, where: str) -> Belief:
@@ -242,7 +339,7 @@ def resample_if_needed(
 ) -> tuple[Belief, np.ndarray | None, float]:
     """Resample when ESS < ``ess_threshold * N``; returns the belief, the indices kept (None if
     it did not resample) and the ESS before."""
-    ess = effective_size(belief)
+    ess = effective_sample_size(belief.weights)
     if ess < config.ess_threshold * belief.n_particles:
         new, index = resample_belief(belief, config.resampler, rng=rng)
         return new, index, ess
@@ -279,7 +376,7 @@ def _recover(
     except FilterDivergence:
         pass  # nobody explains this ping either: keep the prior cloud
     mean, cov = weighted_moments(fresh)
-    return StepResult(fresh, mean, cov, effective_size(fresh))
+    return StepResult(fresh, mean, cov, effective_sample_size(fresh.weights))
 
 
 def run_particle_filter(
@@ -297,11 +394,21 @@ def run_particle_filter(
     """Run ``step`` over every ping of a survey and return the weighted-mean track.
 
     The track's heading is the dead-reckoned one (its variance NaN). ``meta`` holds ``ess``
-    (per step), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_particles``,
-    ``config`` and the step's counts; ``timings`` ``total``, ``per_step`` (mean), ``per_step_p99``
-    and ``per_step_max`` (seconds).
+    (per step: of the weights the step's estimate is taken from), ``n_resampled``,
+    ``n_divergences``, ``divergence_steps``, ``n_particles``, ``config``, ``seed`` (the seed of
+    ``rng`` at the start, :func:`rng_seed`: ``{"entropy", "spawn_key"}``, or None when it has no
+    :class:`numpy.random.SeedSequence`) and the step's counts; ``timings`` ``total``, ``per_step``
+    (mean), ``per_step_p99`` and ``per_step_max`` (seconds).
+
+    Raises
+    ------
+    TangraphError
+        ``survey``, ``bathymetry`` or ``rng`` of the wrong type.
     """
     from tqdm.auto import tqdm
+
+    check_run_inputs(survey, bathymetry, rng, where=method)
+    seed = rng_seed(rng)
 
     model = FilterModel.from_config(config, bathymetry, survey)
     pings = survey_pings(survey)
@@ -353,6 +460,7 @@ def run_particle_filter(
         "n_particles": config.n_particles,
         "sounding_std": model.terrain.sounding_std,
         "config": config.as_dict(),
+        "seed": seed,
         **counts,
     }
     if fixes or count_keys:

@@ -13,6 +13,7 @@ attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``, 
 from __future__ import annotations
 
 import logging
+import weakref
 from typing import Any
 
 import numpy as np
@@ -59,12 +60,20 @@ def check_fix_search(config) -> None:
 
 def fix_window(config, survey: Survey) -> int:
     """Pings per fix: ``config.window``, or if None enough pings for about 30 soundings and at
-    least 5 (Han et al.'s 5 pings of multibeam; 30 pings of a single beam)."""
+    least 5 (Han et al.'s 5 pings of multibeam; 30 pings of a single beam); the latter is computed
+    once per survey (cached while the survey lives), so a step may call this at every ping."""
     if config.window is not None:
         return int(config.window)
-    has = np.isfinite(survey.beam_depth)
-    per_ping = has.sum() / max(int(has.any(axis=1).sum()), 1)
-    return int(max(5, np.ceil(30.0 / per_ping)))
+    cached = _DEFAULT_WINDOWS.get(survey)
+    if cached is None:  # one scan of the soundings per survey, not one per step
+        has = np.isfinite(survey.beam_depth)
+        per_ping = has.sum() / max(int(has.any(axis=1).sum()), 1)
+        cached = _DEFAULT_WINDOWS[survey] = int(max(5, np.ceil(30.0 / per_ping)))
+    return cached
+
+
+# The default window of each live survey (surveys are immutable and hashed by identity).
+_DEFAULT_WINDOWS: weakref.WeakKeyDictionary[Survey, int] = weakref.WeakKeyDictionary()
 
 
 def fix_due(config, index: int, window: int) -> bool:

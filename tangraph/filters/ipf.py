@@ -15,8 +15,16 @@ the ping's likelihood (Han et al. eq. 2). When the effective sample size (eq. 6)
    point is the parent's own prediction; the paper's step 3 is garbled, this is its reading in
    SEEDS.md), and the weights are renormalised.
 
-The estimate is the weighted mean and second moment of the cloud the step returns. If no child
-can be weighted (every child off the map) the step falls back to plain copies.
+At ping 0 there is no transition to redraw from (the first ping does not move the particles,
+:meth:`~tangraph.filters.MotionModel.predict`): children would be copies of their parents with
+ratio 1, so a resampling there is plain (copies, equal weights; ``info["auxiliary"]`` False), as
+in the bootstrap PF: the estimate and ``ess`` are those of the weighted cloud before it. The copies
+separate at the next ping's prediction.
+
+Otherwise the estimate is the weighted mean and second moment of the cloud the step returns, and
+the step's ``ess`` is that cloud's (after the children's re-weighting: the weights the estimate's
+Monte Carlo error depends on). If no child can be weighted (every child off the map) the step
+falls back to plain copies.
 """
 
 from __future__ import annotations
@@ -30,12 +38,11 @@ from tangraph.filters.core import (
     Belief,
     FilterModel,
     StepResult,
-    effective_size,
     reweight,
     run_particle_filter,
     weighted_moments,
 )
-from tangraph.filters.likelihood import FilterDivergence
+from tangraph.filters.likelihood import FilterDivergence, effective_sample_size
 from tangraph.filters.model import Ping
 from tangraph.filters.resampling import resample
 from tangraph.maps.grid import BathymetryMap
@@ -61,20 +68,24 @@ def ipf_step(
     if ping.n_soundings == 0:
         predicted = belief.replace(particles=moved)
         mean, cov = weighted_moments(predicted)
-        return StepResult(predicted, mean, cov, effective_size(predicted))
+        return StepResult(predicted, mean, cov, effective_sample_size(predicted.weights))
     update = model.terrain.evaluate(moved, belief.tide, belief.tide_var, ping)
     weighted = reweight(belief, update.log_likelihood, where=f"ping {ping.index}").replace(
         particles=moved, tide=update.tide, tide_var=update.tide_var
     )
-    ess = effective_size(weighted)
+    ess = effective_sample_size(weighted.weights)
     if ess >= config.ess_threshold * belief.n_particles:
         mean, cov = weighted_moments(weighted)
         return StepResult(weighted, mean, cov, ess)
     ancestors = resample(weighted.weights, config.resampler, rng=rng)
     parents, copies = np.unique(ancestors, return_counts=True)
+    uniform = weighted.take(ancestors)
+    if ping.first:  # nothing to redraw from: plain copies (see the module docstring)
+        mean, cov = weighted_moments(weighted)
+        info = {"parents": parents, "copies": copies, "ancestors": ancestors, "auxiliary": False}
+        return StepResult(uniform, mean, cov, ess, resampled=True, info=info)
     children = model.motion.predict(belief.particles[ancestors], ping, rng=rng)
     child_update = model.terrain.evaluate(children, belief.tide[ancestors], belief.tide_var, ping)
-    uniform = weighted.take(ancestors)
     try:
         new = reweight(
             uniform,
@@ -84,8 +95,8 @@ def ipf_step(
     except FilterDivergence:
         new = uniform  # no child on the map: keep the copies
     mean, cov = weighted_moments(new)
-    info = {"parents": parents, "copies": copies, "ancestors": ancestors}
-    return StepResult(new, mean, cov, ess, resampled=True, info=info)
+    info = {"parents": parents, "copies": copies, "ancestors": ancestors, "auxiliary": True}
+    return StepResult(new, mean, cov, effective_sample_size(new.weights), resampled=True, info=info)
 
 
 def ipf(

@@ -14,17 +14,9 @@ import dataclasses
 import numpy as np
 
 from tangraph.filters.config import ParticleConfig, check_number
-from tangraph.filters.core import (
-    Belief,
-    FilterModel,
-    StepResult,
-    jitter,
-    measure,
-    resample_if_needed,
-    run_particle_filter,
-    weighted_moments,
-)
+from tangraph.filters.core import Belief, FilterModel, StepResult, jitter, run_particle_filter
 from tangraph.filters.model import Ping
+from tangraph.filters.pf import pf_step
 from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
 from tangraph.track import Track
@@ -47,14 +39,12 @@ class JBPFConfig(ParticleConfig):
 def jbpf_step(
     belief: Belief, ping: Ping, model: FilterModel, config: JBPFConfig, *, rng: np.random.Generator
 ) -> StepResult:
-    """One JBPF step: a bootstrap step whose resampled particles are jittered."""
-    moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng))
-    weighted, _ = measure(moved, ping, model)
-    mean, cov = weighted_moments(weighted)
-    new, index, ess = resample_if_needed(weighted, config, rng=rng)
-    if index is not None:
-        new = jitter(new, config.jitter_std, rng=rng)
-    return StepResult(new, mean, cov, ess, resampled=index is not None)
+    """One JBPF step: a bootstrap step (:func:`~tangraph.filters.pf_step`) whose resampled
+    particles are then jittered."""
+    result = pf_step(belief, ping, model, config, rng=rng)
+    if not result.resampled:
+        return result
+    return dataclasses.replace(result, belief=jitter(result.belief, config.jitter_std, rng=rng))
 
 
 def jbpf(

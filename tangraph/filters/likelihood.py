@@ -115,8 +115,8 @@ class TerrainLikelihood:
         ``-1/2 sum_b (z_b - tide - h(x + o_b))^2 / sigma^2``; ``-inf`` where a sounding has no map
         depth. One compiled pass (the known-tide case of :meth:`tide_update`).
         """
-        particles, offsets, depths = self._checked(particles, offsets, depths)
-        tide = np.full(particles.shape[0], float(self.tide))
+        particles = np.asarray(particles, dtype=np.float64)
+        tide = np.full(particles.shape[0] if particles.ndim else 0, float(self.tide))
         return self.tide_update(particles, offsets, depths, tide, 0.0)[0]
 
     def _checked(self, particles, offsets, depths) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -132,7 +132,7 @@ class TerrainLikelihood:
         keep = np.isfinite(depths)
         if not keep.all():
             offsets, depths = np.ascontiguousarray(offsets[keep]), depths[keep]
-        return particles, offsets, depths
+        return particles, offsets, np.ascontiguousarray(depths)
 
     def residual_sums(self, particles, offsets, depths) -> np.ndarray:
         """``(N, 2)``: per particle the sum and the sum of squares of the residuals
@@ -159,18 +159,34 @@ class TerrainLikelihood:
         tide_var)`` (``tide_var = 0``: a known tide, the plain Gaussian likelihood), the
         posterior tide mean after them and the mean predicted depth (map plus tide); ``-inf``,
         the old tide and NaN for particles with a sounding off the map. See
-        :mod:`tangraph.filters.model` for the algebra; ``self.tide`` is not used."""
-        particles = np.ascontiguousarray(particles, dtype=np.float64)
+        :mod:`tangraph.filters.model` for the algebra; ``self.tide`` is not used. NaN depths are
+        skipped (with their offsets), as in :meth:`log_likelihood`.
+
+        Raises
+        ------
+        TangraphError
+            ``particles`` not ``(N, 2)``, ``offsets`` and ``depths`` not ``(B, 2)`` and ``(B,)``,
+            ``tide`` not ``(N,)``, ``tide_var`` negative or not finite.
+        """
+        particles, offsets, depths = self._checked(particles, offsets, depths)
         n = particles.shape[0]
-        if len(depths) == 0:  # nothing measured: no information
-            return np.zeros(n), np.array(tide, dtype=np.float64), np.full(n, np.nan)
+        tide = np.ascontiguousarray(tide, dtype=np.float64)
+        if tide.shape != (n,):
+            raise TangraphError(f"tide must have shape ({n},) as particles, got {tide.shape}")
+        try:
+            variance = float(tide_var)
+        except (TypeError, ValueError):
+            variance = np.nan
+        if not (np.isfinite(variance) and variance >= 0):
+            raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
+        if depths.size == 0:  # nothing measured: no information
+            return np.zeros(n), tide.copy(), np.full(n, np.nan)
         log_likelihood, new_tide, predicted = np.empty(n), np.empty(n), np.empty(n)
         n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
-        cells = np.ascontiguousarray(np.asarray(offsets, dtype=np.float64) * np.array([1.0 / dn, 1.0 / de]))
+        cells = np.ascontiguousarray(offsets * np.array([1.0 / dn, 1.0 / de]))
         _tide_update_kernel(
-            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, cells,
-            np.ascontiguousarray(depths, dtype=np.float64), np.ascontiguousarray(tide, dtype=np.float64),
-            float(tide_var), self.sigma**2, log_likelihood, new_tide, predicted,
+            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, cells, depths, tide,
+            variance, self.sigma**2, log_likelihood, new_tide, predicted,
         )  # fmt: skip
         return log_likelihood, new_tide, predicted
 

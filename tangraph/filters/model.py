@@ -28,9 +28,11 @@ particles are dropped: weights are normalised.
 from __future__ import annotations
 
 import dataclasses
+import operator
 
 import numpy as np
 
+from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
@@ -42,13 +44,62 @@ __all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings
 class Ping:
     """What a filter step needs of ping ``index``: the dead-reckoned ``increment (2,)`` from the
     previous ping (zero and ``first`` True at ping 0), the world-aligned ``offsets (B, 2)`` of
-    its finite soundings from the dead-reckoned position, and their ``depths (B,)``."""
+    its finite soundings from the dead-reckoned position, and their ``depths (B,)``.
+
+    Checked on construction: ``index`` an integer >= 0, ``increment`` finite ``(2,)``, ``offsets``
+    finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is dropped with its offset, as
+    :func:`survey_pings` does, so a step never mistakes a missing sounding for a divergence; an
+    infinite depth is refused.
+
+    Examples
+    --------
+    >>> Ping(1, np.zeros(2), np.zeros((3, 2)), np.array([10.0, np.nan, 11.0])).n_soundings
+    2
+    """
 
     index: int
     increment: np.ndarray
     offsets: np.ndarray
     depths: np.ndarray
     first: bool = False
+
+    def __post_init__(self) -> None:
+        try:
+            index = operator.index(self.index)
+        except TypeError:
+            index = -1
+        if isinstance(self.index, bool) or index < 0:
+            raise TangraphError(f"Ping: index must be an integer >= 0, got {self.index!r}")
+        increment = np.asarray(self.increment, dtype=np.float64)
+        offsets = np.asarray(self.offsets, dtype=np.float64)
+        depths = np.asarray(self.depths, dtype=np.float64)
+        if increment.shape != (2,) or not np.all(np.isfinite(increment)):
+            raise TangraphError(
+                f"Ping {index}: increment must be a finite (2,) array, "
+                f"got {increment.shape}: {increment.tolist()!r}"
+            )
+        if offsets.ndim != 2 or offsets.shape[1] != 2 or depths.shape != (offsets.shape[0],):
+            raise TangraphError(
+                f"Ping {index}: offsets (B, 2) and depths (B,) do not match: {offsets.shape}, {depths.shape}"
+            )
+        if not np.all(np.isfinite(offsets)):
+            bad = np.flatnonzero(~np.all(np.isfinite(offsets), axis=1))
+            raise TangraphError(
+                f"Ping {index}: offsets must be finite, got {offsets[bad[0]].tolist()!r} at sounding {bad[0]}"
+            )
+        if np.any(np.isinf(depths)):
+            bad = int(np.flatnonzero(np.isinf(depths))[0])
+            raise TangraphError(
+                f"Ping {index}: depths must be finite or NaN, got {float(depths[bad])!r} at sounding {bad}"
+            )
+        keep = ~np.isnan(depths)
+        if not keep.all():
+            offsets, depths = offsets[keep], depths[keep]
+        object.__setattr__(self, "index", int(index))
+        object.__setattr__(self, "increment", increment)
+        object.__setattr__(self, "offsets", offsets)
+        object.__setattr__(self, "depths", depths)
+        object.__setattr__(self, "first", bool(self.first))
 
     @property
     def n_soundings(self) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import enum
+import operator
 
 import numpy as np
 
@@ -37,6 +38,7 @@ def resample(
     weights, scheme: Resampler | str = Resampler.SYSTEMATIC, *, rng: np.random.Generator, n: int | None = None
 ) -> np.ndarray:
     """Indices (n,) of the particles kept, drawn by ``scheme``; the weights are not modified.
+    ``n`` (default: the number of weights) must be an integer >= 1.
 
     Examples
     --------
@@ -45,8 +47,21 @@ def resample(
     [1, 1, 1]
     """
     w = _checked(weights)
-    n = w.size if n is None else int(n)
-    scheme = Resampler(scheme)
+    if n is None:
+        n = w.size
+    else:
+        try:
+            count = operator.index(n)
+        except TypeError:
+            count = 0
+        if isinstance(n, bool) or count < 1:
+            raise TangraphError(f"resample: n must be an integer >= 1, got {n!r}")
+        n = int(count)
+    try:
+        scheme = Resampler(scheme)
+    except ValueError:
+        known = ", ".join(r.value for r in Resampler)
+        raise TangraphError(f"resample: scheme must be one of {known}, got {scheme!r}") from None
     if scheme is Resampler.MULTINOMIAL:
         return _search(w, rng.random(n))
     if scheme is Resampler.SYSTEMATIC:

@@ -17,8 +17,11 @@ predicted mean, over ``search_sigmas`` times its std. What a fix does:
 - otherwise the particles are re-weighted by the fix's Gaussian likelihood
   ``exp(-(x - fix)^T R^-1 (x - fix) / 2)``, then resampled if ESS < ``ess_threshold * N``.
 
-The per-ping terrain likelihood is not used (the soundings enter through the fixes only), so
-``sounding_std``, ``tide`` and ``tide_std`` are unused; the fix estimates the tide itself.
+The per-ping terrain likelihood is not used by the step (the soundings enter through the fixes
+only, and the fix estimates the tide itself), so ``sounding_std``, ``tide`` and ``tide_std`` do not
+affect it; they are used only by the divergence recovery of
+:func:`~tangraph.filters.run_particle_filter`, which weights a re-drawn cloud by the ping's
+terrain likelihood with that sounding std and tide prior.
 """
 
 from __future__ import annotations
@@ -99,7 +102,8 @@ def tercom_pf_step(
     window: int | None = None,
 ) -> StepResult:
     """One TERCOM-PF step (see the module docstring); ``window`` defaults to
-    :func:`~tangraph.filters.fixes.fix_window` of the config and survey."""
+    :func:`~tangraph.filters.fixes.fix_window` of the config and survey (computed once per survey
+    and cached; :func:`tercom_pf` passes it)."""
     window = window or fix_window(config, survey)
     moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng))
     if not fix_due(config, ping.index, window):

@@ -3,7 +3,6 @@ bad configuration."""
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 
 import numpy as np
@@ -24,12 +23,15 @@ from tangraph.filters import (
     ipf_step,
     jbpf_step,
     pf_step,
+    resample,
     run_filter,
+    run_particle_filter,
     sjcpf_step,
     survey_pings,
     tercom_pf_step,
     weighted_moments,
 )
+from tangraph.filters.likelihood import TerrainLikelihood
 from tests.filters.synthetic import multibeam_survey, rough_map
 
 MAP = rough_map(0)
@@ -77,10 +79,13 @@ def test_steps_return_a_new_belief_and_leave_their_inputs_alone(name):
     window = getattr(config, "window", 0) if name == "sjcpf" else 0
     belief = initial_belief(SURVEY.dr_pose[0, :2], 10.0, 200, rng=rng, history_length=window)
     for ping in pings[:4]:
-        before = {f.name: np.copy(getattr(belief, f.name)) for f in dataclasses.fields(belief)}
-        result = step(belief, ping, model, config, rng=rng)  # read-only inputs: writing would raise
-        for key, value in before.items():
-            np.testing.assert_array_equal(getattr(belief, key), value, err_msg=key)
+        # a belief's arrays are read-only (writing would raise), a ping's are not: compare copies
+        offsets, depths, increment = np.copy(ping.offsets), np.copy(ping.depths), np.copy(ping.increment)
+        result = step(belief, ping, model, config, rng=rng)
+        np.testing.assert_array_equal(ping.offsets, offsets)
+        np.testing.assert_array_equal(ping.depths, depths)
+        np.testing.assert_array_equal(ping.increment, increment)
+        assert not belief.particles.flags.writeable and not belief.log_weights.flags.writeable
         assert result.belief is not belief
         assert np.isclose(np.exp(result.belief.log_weights).sum(), 1.0)
         belief = result.belief
@@ -183,3 +188,189 @@ def test_a_vehicle_never_on_the_map_diverges_at_every_ping_with_a_capped_spread(
     assert diagonal < 3000.0  # so the third spread (3 init_std x 10^2) is capped
     assert spreads[:2] == [30.0, 300.0]
     np.testing.assert_allclose(spreads[2:], diagonal, atol=0.1)
+
+
+def belief_arrays(n=5, length=0, **changes):
+    arrays = {
+        "particles": np.zeros((n, 2)),
+        "log_weights": np.full(n, -np.log(n)),
+        "tide": np.zeros(n),
+        "tide_var": 0.0,
+        "history": np.zeros((n, length)),
+        "measured": np.zeros(length),
+    }
+    return arrays | changes
+
+
+@pytest.mark.parametrize(
+    ("changes", "message"),
+    [
+        ({"particles": np.zeros((3, 2))}, r"log_weights must have shape \(3,\).*got \(5,\)"),
+        ({"particles": np.zeros((5, 3))}, r"particles must have shape \(N, 2\), got \(5, 3\)"),
+        ({"particles": np.zeros(10)}, r"particles must have shape \(N, 2\), got \(10,\)"),
+        ({"tide": np.zeros(4)}, r"tide must have shape \(5,\).*got \(4,\)"),
+        ({"history": np.zeros((4, 3)), "measured": np.zeros(3)}, r"history must have shape \(5, L\)"),
+        ({"history": np.zeros((5, 3)), "measured": np.zeros(2)}, r"measured must have shape \(3,\)"),
+        ({"history": np.zeros(5), "measured": np.zeros(0)}, r"history must have shape \(5, L\)"),
+        ({"tide_var": -1.0}, "tide_var must be >= 0, got -1.0"),
+        ({"n_history": 1}, "n_history must be <= L = 0, got 1"),
+        ({"n_fixes": -1}, "n_fixes must be an integer >= 0, got -1"),
+    ],
+)
+def test_a_belief_of_mismatched_arrays_is_refused(changes, message):
+    """Particles (3, 2) with five weights used to give garbage moments (the compiled loop read
+    past the particles); every per-particle array must have the particles' N."""
+    with pytest.raises(TangraphError, match=f"Belief: {message}"):
+        Belief(**belief_arrays(**changes))
+
+
+def test_moments_refuse_a_replaced_belief_of_mismatched_arrays():
+    belief = Belief(**belief_arrays()).replace(particles=np.zeros((3, 2)))  # replace does not check
+    with pytest.raises(TangraphError, match=r"weighted_moments: .*\(3, 2\), \(5,\)"):
+        weighted_moments(belief)
+
+
+@pytest.mark.parametrize("centre", [[1.0, 2.0, 0.3], [[1.0, 2.0]], [np.nan, 0.0], 5.0, "here"])
+def test_initial_belief_wants_a_position_not_a_pose(centre):
+    with pytest.raises(TangraphError, match=r"initial_belief: centre must be a .*\(north, east\) position"):
+        initial_belief(centre, 1.0, 5, rng=np.random.default_rng(0))
+
+
+@pytest.mark.parametrize(("name", "value"), [("std", -1.0), ("std", np.nan), ("n", 0), ("n", 2.5)])
+def test_initial_belief_names_a_bad_spread_or_count(name, value):
+    args = {"std": 1.0, "n": 5} | {name: value}
+    with pytest.raises(TangraphError, match=f"initial_belief: {name} must be"):
+        initial_belief([0.0, 0.0], args["std"], args["n"], rng=np.random.default_rng(0))
+
+
+@pytest.mark.parametrize("n", [0, -3, 2.5, True])
+def test_resample_needs_at_least_one_draw(n):
+    with pytest.raises(TangraphError, match=f"resample: n must be an integer >= 1, got {n!r}"):
+        resample([0.5, 0.5], "systematic", rng=np.random.default_rng(0), n=n)
+
+
+def test_resample_names_an_unknown_scheme():
+    with pytest.raises(TangraphError, match="resample: scheme must be one of .*got 'bogus'"):
+        resample([0.5, 0.5], "bogus", rng=np.random.default_rng(0))
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"offsets": np.zeros((3, 3))}, r"offsets \(B, 2\) and depths \(B,\) do not match"),
+        ({"depths": np.zeros(2)}, r"offsets \(B, 2\) and depths \(B,\) do not match"),
+        ({"offsets": np.array([[0.0, 0.0], [np.nan, 1.0], [0.0, 1.0]])}, "offsets must be finite"),
+        ({"depths": np.array([1.0, np.inf, 2.0])}, "depths must be finite or NaN, got inf"),
+        ({"increment": np.zeros(3)}, r"increment must be a finite \(2,\) array"),
+        ({"increment": np.array([np.nan, 0.0])}, r"increment must be a finite \(2,\) array"),
+    ],
+)
+def test_a_bad_ping_is_refused(fields, message):
+    args = {"index": 2, "increment": np.zeros(2), "offsets": np.zeros((3, 2)), "depths": np.ones(3)}
+    with pytest.raises(TangraphError, match=f"Ping 2: {message}"):
+        Ping(**(args | fields))
+
+
+@pytest.mark.parametrize("index", [-1, 1.5, True])
+def test_a_ping_index_is_a_count(index):
+    with pytest.raises(TangraphError, match="Ping: index must be an integer >= 0"):
+        Ping(index, np.zeros(2), np.zeros((0, 2)), np.zeros(0))
+
+
+def test_nan_depths_in_a_ping_are_dropped_not_a_divergence():
+    """A NaN depth handed straight to a step (not through survey_pings) is a missing sounding:
+    the step weighs the ping by the other soundings, as if the NaN one were not there."""
+    config = PFConfig(n_particles=100, init_std=5.0, sounding_std=0.5, ess_threshold=0.0)
+    model = FilterModel.from_config(config, MAP)
+    ping = survey_pings(SURVEY)[1]
+    depths = ping.depths.copy()
+    depths[[0, 7]] = np.nan
+    with_nan = Ping(ping.index, ping.increment, ping.offsets, depths)
+    keep = np.isfinite(depths)
+    without = Ping(ping.index, ping.increment, ping.offsets[keep], depths[keep])
+    assert with_nan.n_soundings == without.n_soundings == depths.size - 2
+    np.testing.assert_array_equal(with_nan.offsets, without.offsets)
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 5.0, 100, rng=np.random.default_rng(0))
+    a = pf_step(belief, with_nan, model, config, rng=np.random.default_rng(1))
+    b = pf_step(belief, without, model, config, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(a.belief.log_weights, b.belief.log_weights)
+    all_nan = Ping(ping.index, ping.increment, ping.offsets, np.full(depths.size, np.nan))
+    result = pf_step(belief, all_nan, model, config, rng=np.random.default_rng(1))  # no divergence
+    np.testing.assert_array_equal(result.belief.log_weights, belief.log_weights)
+
+
+def test_tide_update_checks_its_inputs_as_log_likelihood_does():
+    like = TerrainLikelihood(MAP, 0.5)
+    particles, offsets, depths, tide = np.zeros((4, 2)), np.zeros((3, 2)), np.ones(3), np.zeros(4)
+    with pytest.raises(TangraphError, match=r"particles must have shape \(N, 2\), got \(4, 3\)"):
+        like.tide_update(np.zeros((4, 3)), offsets, depths, tide, 0.0)
+    with pytest.raises(TangraphError, match="offsets .* and depths .* do not match"):
+        like.tide_update(particles, offsets, np.ones(2), tide, 0.0)
+    with pytest.raises(TangraphError, match=r"tide must have shape \(4,\) as particles, got \(3,\)"):
+        like.tide_update(particles, offsets, depths, np.zeros(3), 0.0)
+    with pytest.raises(TangraphError, match="tide_var must be a finite number >= 0, got -1.0"):
+        like.tide_update(particles, offsets, depths, tide, -1.0)
+    # NaN depths are skipped, as log_likelihood skips them
+    centre = MAP.north[100], MAP.east[100]
+    particles = np.array(centre) + np.random.default_rng(0).normal(0, 5, (4, 2))
+    depths = MAP.depth_at(centre[0] + offsets[:, 0], centre[1] + offsets[:, 1])
+    depths[1] = np.nan
+    got = like.tide_update(particles, offsets, depths, tide, 0.0)[0]
+    np.testing.assert_allclose(got, like.log_likelihood(particles, offsets[[0, 2]], depths[[0, 2]]))
+
+
+@pytest.mark.parametrize("method", ["pf", "mle"])
+@pytest.mark.parametrize(
+    ("argument", "value"),
+    [
+        ("rng", 0),
+        ("rng", np.random.RandomState(0)),
+        ("survey", "survey.npz"),
+        ("bathymetry", np.zeros((3, 3))),
+    ],
+)
+def test_run_filter_names_an_argument_of_the_wrong_type(method, argument, value):
+    args = {"survey": SURVEY, "bathymetry": MAP, "rng": np.random.default_rng(0)} | {argument: value}
+    with pytest.raises(TangraphError, match=f"run_filter\\('{method}'\\): {argument} must be a"):
+        run_filter(method, args["survey"], args["bathymetry"], rng=args["rng"])
+
+
+def test_rng_none_is_refused_by_the_random_filters_and_accepted_by_mle():
+    with pytest.raises(TangraphError, match=r"rng must be a numpy.random.Generator .*got None"):
+        run_filter("pf", SURVEY, MAP, rng=None)
+    assert run_filter("mle", SURVEY, MAP, MLEConfig(init_std=10.0), rng=None).pose.shape == (12, 3)
+
+
+def test_the_runner_itself_checks_its_arguments():
+    with pytest.raises(TangraphError, match="pf: rng must be a numpy.random.Generator"):
+        run_particle_filter(SURVEY, MAP, PFConfig(n_particles=10), pf_step, method="pf", rng=None)
+    with pytest.raises(TangraphError, match="pf: bathymetry must be a tangraph.maps.grid.BathymetryMap"):
+        run_particle_filter(SURVEY, MAP.depth, PFConfig(), pf_step, method="pf", rng=np.random.default_rng(0))
+
+
+def test_the_track_records_the_seed_of_its_generator():
+    config = PFConfig(n_particles=50, init_std=10.0, sounding_std=0.5)
+    track = run_filter("pf", SURVEY, MAP, config, rng=np.random.default_rng(42))
+    assert track.meta["seed"] == {"entropy": 42, "spawn_key": []}
+    spawned = np.random.default_rng(np.random.SeedSequence(7, spawn_key=(2, 3)))
+    seed = run_filter("pf", SURVEY, MAP, config, rng=spawned).meta["seed"]
+    assert seed == {"entropy": 7, "spawn_key": [2, 3]}
+    # the recorded seed gives the same track back
+    again = run_filter("pf", SURVEY, MAP, config, rng=np.random.default_rng(track.meta["seed"]["entropy"]))
+    np.testing.assert_array_equal(again.pose, track.pose)
+    unseeded = np.random.default_rng()
+    entropy = run_filter("pf", SURVEY, MAP, config, rng=unseeded).meta["seed"]["entropy"]
+    assert entropy == unseeded.bit_generator.seed_seq.entropy  # an OS-drawn seed is recorded too
+
+
+class CountingSeed(np.random.bit_generator.ISeedSequence):
+    """A seed source that is not a numpy SeedSequence (no entropy or spawn key to record)."""
+
+    def generate_state(self, n_words, dtype=np.uint32):
+        return np.arange(1, n_words + 1, dtype=dtype)
+
+
+def test_no_seed_is_recorded_for_a_generator_without_a_seed_sequence():
+    rng = np.random.Generator(np.random.PCG64(CountingSeed()))
+    config = PFConfig(n_particles=20, init_std=10.0, sounding_std=0.5)
+    assert run_filter("pf", SURVEY, MAP, config, rng=rng).meta["seed"] is None

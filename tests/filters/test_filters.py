@@ -36,14 +36,27 @@ MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is 
 }
 
 
+# Thresholds of the recovery test. Scale: the rms slope at the footprints is 0.28 (0.20 per axis), so
+# one ping's 30 soundings of 0.3 m noise bound a position to about 0.3 / sqrt(30) / 0.20 = 0.27 m
+# per axis (Cramér-Rao); the particle filters reach about twice that, the fix-based ones (TERCOM-PF,
+# MLE) dead-reckon between fixes 5 pings apart, drifting up to 5 x 10 m x sin(3 deg) = 2.6 m.
+# Measured (in a one-off study, not run here) over 3 surveys (seeds 1, 11, 21) x 12 filter seeds
+# (0-11) of every method: the mean error over pings 25-49 was at most 1.92 m (TERCOM-PF; the
+# particle filters 0.75 m, sd <= 0.04 m across filter seeds), the final error at most 2.06 m (JBPF;
+# sd <= 0.22 m). The thresholds are 1.5 and 2 times those maxima: a filter that lost the vehicle
+# or stayed on dead reckoning (25 m off at the end) fails by far, a seed change does not.
+LATE_MEAN_ERROR = 3.0  # m, 1.5 x 1.92
+FINAL_ERROR = 4.0  # m, 2 x 2.06
+
+
 @pytest.mark.parametrize("method", list(FilterMethod))
 def test_every_filter_recovers_the_truth_on_a_multibeam_survey(method):
     config = config_type(method)(**MULTIBEAM[method])
     track = run_filter(method, SURVEY, MAP, config, rng=np.random.default_rng(2))
     assert dr_final_error(SURVEY) > 20
     errors = np.hypot(*(track.pose[:, :2] - SURVEY.true_pose[:, :2]).T)
-    assert errors[25:].mean() < 4.0, errors[25:].mean()
-    assert final_error(track, SURVEY) < 6.0
+    assert errors[25:].mean() < LATE_MEAN_ERROR, errors[25:].mean()
+    assert final_error(track, SURVEY) < FINAL_ERROR
     assert track.method == FilterMethod(method).value
     assert track.meta["n_divergences"] == 0
 
@@ -64,6 +77,10 @@ def test_an_unknown_tide_is_estimated(method):
     def late(track):
         return np.hypot(*(track.pose[20:, :2] - survey.true_pose[20:, :2]).T).mean()
 
+    # Measured over 2 surveys (seeds 3, 13) x 12 filter seeds (0-11), pings 20-39: estimating the
+    # tide, a mean error of at most 0.72 m (sd <= 0.05 m); told it is 0, at least 4.99 m (often tens
+    # of metres: the 2.5 m offset over slopes of ~0.2 moves the best match by metres, or off the
+    # vehicle entirely). 1.5 m is twice the former maximum, 3.0 m 0.6 times the latter minimum.
     assert late(estimated) < 1.5 < 3.0 < late(known), (late(estimated), late(known))
 
 

@@ -13,9 +13,12 @@ from tangraph.filters import (
     MLEConfig,
     PFConfig,
     TercomPFConfig,
+    fixes,
     initial_belief,
     jbpf_step,
+    pf_step,
     run_filter,
+    run_particle_filter,
     survey_pings,
     survey_sounding_std,
     tercom_pf_step,
@@ -141,6 +144,40 @@ def test_jbpf_jitters_only_the_pings_it_resamples():
     jittered = jbpf_step(belief, ping, model, config, rng=np.random.default_rng(1))
     assert jittered.resampled
     assert np.unique(jittered.belief.particles, axis=0).shape[0] == 300  # copies pulled apart
+    # exactly the bootstrap step, then N(0, jitter_std^2) on its resampled particles
+    rng = np.random.default_rng(1)
+    plain = pf_step(belief, ping, model, config, rng=rng)
+    np.testing.assert_array_equal(jittered.belief.log_weights, plain.belief.log_weights)
+    np.testing.assert_array_equal(jittered.mean, plain.mean)
+    assert jittered.ess == plain.ess
+    np.testing.assert_allclose(
+        jittered.belief.particles, plain.belief.particles + 2.0 * rng.standard_normal((300, 2))
+    )
+
+
+def test_the_default_fix_window_is_computed_once_per_survey(monkeypatch):
+    """A TERCOM-PF step without ``window`` asks fix_window at every ping: the survey's soundings
+    are scanned the first time only."""
+    survey = SURVEY.replace(meta={"copy": True})  # a survey not seen yet
+    config = TercomPFConfig(n_particles=200, init_std=10.0)
+    assert fix_window(config, survey) == 5
+
+    def no_scan(*args, **kwargs):
+        raise AssertionError("fix_window scanned the survey again")
+
+    monkeypatch.setattr(fixes.np, "isfinite", no_scan)
+    assert fix_window(config, survey) == 5
+    monkeypatch.undo()
+    step = functools.partial(tercom_pf_step, survey=survey, bathymetry=MAP)  # no window passed
+    track = run_particle_filter(
+        survey, MAP, config, step, method="tercom-pf", rng=np.random.default_rng(3), count_keys=COUNTS
+    )
+    reference = run_filter("tercom-pf", survey, MAP, config, rng=np.random.default_rng(3))
+    np.testing.assert_array_equal(track.pose, reference.pose)
+    assert track.meta["n_fixes_accepted"] == reference.meta["n_fixes_accepted"] > 0
+
+
+COUNTS = ("n_fixes_accepted", "n_fixes_rejected", "n_recentred")
 
 
 def test_progress_bar(capsys):

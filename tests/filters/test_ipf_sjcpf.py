@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from tangraph.filters import (
     Belief,
@@ -140,3 +141,40 @@ def test_sjcpf_history_follows_the_particles_through_resampling():
     np.testing.assert_array_equal(result.belief.particles, (belief.particles + ping.increment)[ancestors])
     np.testing.assert_array_equal(result.belief.history[:, :-1], belief.history[ancestors, 1:])
     np.testing.assert_array_equal(result.belief.history[:, -1], update.predicted[ancestors])
+
+
+def test_ipf_at_the_first_ping_resamples_plain_copies():
+    """Ping 0 does not move the particles, so there is no transition to redraw children from
+    (they would be their parents' copies, every ratio 1): the step resamples plainly."""
+    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0)
+    model = FilterModel.from_config(config, MAP)
+    ping = survey_pings(SURVEY)[0]
+    assert ping.first
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0))
+    result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(7))
+    assert result.resampled and result.info["auxiliary"] is False
+    parent = model.terrain.evaluate(belief.particles, belief.tide, belief.tide_var, ping)
+    w = np.exp(parent.log_likelihood - parent.log_likelihood.max())
+    ancestors = resample(w / w.sum(), config.resampler, rng=np.random.default_rng(7))
+    np.testing.assert_array_equal(result.info["ancestors"], ancestors)
+    np.testing.assert_array_equal(result.belief.particles, belief.particles[ancestors])
+    np.testing.assert_allclose(result.belief.weights, 1 / 300)
+    np.testing.assert_allclose(result.belief.tide, parent.tide[ancestors])
+    w = w / w.sum()  # the estimate and ESS are those of the weighted cloud, as in the bootstrap PF
+    assert result.ess == pytest.approx(1.0 / np.sum(w**2))
+    np.testing.assert_allclose(result.mean, w @ belief.particles)
+
+
+def test_ipf_records_the_ess_of_the_cloud_it_returns():
+    """The estimate is taken from the re-weighted children, so the ESS recorded is theirs (after
+    the likelihood-ratio weights), not the parents' before resampling."""
+    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0)
+    model = FilterModel.from_config(config, MAP)
+    ping = survey_pings(SURVEY)[1]
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0))
+    result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(7))
+    assert result.info["auxiliary"] is True
+    w = result.belief.weights
+    assert result.ess == pytest.approx(1.0 / np.sum(w**2))
+    assert result.ess < 300 * (1 - 1e-6)  # the children's weights are not equal
+    np.testing.assert_allclose(result.mean, w @ result.belief.particles)
