@@ -24,7 +24,6 @@ from pathlib import Path
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = ["DEMO_SCENARIOS", "DemoResult", "run_demo"]
@@ -62,16 +61,6 @@ def _scenario_for(map_name: str) -> str:
             f"(`tangraph simulate` with a scenario of your own works on any map)"
         )
     raise TangraphError(f"unknown map {map_name!r}; the demo runs on: {known}")
-
-
-def _head(survey: Survey, n: int) -> Survey:
-    """The first ``n`` pings of a survey."""
-    cut = {
-        f: getattr(survey, f)[:n]
-        for f in ("time", "dr_pose", "vehicle_depth", "beam_forward", "beam_starboard", "beam_depth")
-    }
-    truth = None if survey.true_pose is None else survey.true_pose[:n]
-    return Survey(**cut, true_pose=truth, meta={**survey.meta, "truncated_to": n})
 
 
 def _row(label: str, track: Track, truth: np.ndarray) -> dict:
@@ -250,7 +239,7 @@ def run_demo(
         bar.set_postfix_str(names[0])
         survey = simulate(scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry, seed=seed)
         if quick:
-            survey = _head(survey, survey.n_pings // 2)
+            survey = survey.pings(0, survey.n_pings // 2)
         write_survey(survey, partial / "survey.nc")
         bar.update()
         tracks: dict[str, Track] = {"dead reckoning": dead_reckoning_track(survey)}

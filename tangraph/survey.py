@@ -168,6 +168,29 @@ class Survey:
     def replace(self, **changes) -> Survey:
         return dataclasses.replace(self, **changes)
 
+    def pings(self, start: int, stop: int) -> Survey:
+        """The pings ``start`` to ``stop - 1`` as a survey of their own (``meta`` says which).
+
+        Raises
+        ------
+        SurveyError
+            An empty range, or pings without any sounding.
+        """
+        start, stop = int(start), int(stop)
+        if not 0 <= start < stop <= self.n_pings:
+            raise SurveyError(f"survey: pings {start}..{stop - 1} are not inside 0..{self.n_pings - 1}")
+        w = slice(start, stop)
+        return Survey(
+            time=self.time[w],
+            dr_pose=self.dr_pose[w],
+            vehicle_depth=self.vehicle_depth[w],
+            beam_forward=self.beam_forward[w],
+            beam_starboard=self.beam_starboard[w],
+            beam_depth=self.beam_depth[w],
+            true_pose=None if self.true_pose is None else self.true_pose[w],
+            meta={**self.meta, "pings": [start, stop]},
+        )
+
     def summary(self) -> str:
         """A few lines for a person: duration, pings, beams, soundings, drift if truth is known."""
         lines = [

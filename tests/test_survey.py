@@ -137,3 +137,28 @@ def test_import_names_missing_columns(tmp_path):
     (tmp_path / "s.xyz").write_text("0 0 0 10\n")
     with pytest.raises(SurveyError, match=r"nav.csv: missing columns \['heading'\]"):
         import_csv_xyz(tmp_path / "nav.csv", tmp_path / "s.xyz")
+
+
+def test_pings_cuts_every_array_and_names_a_bad_range():
+    import numpy as np
+    import pytest
+
+    from tangraph.survey import Survey, SurveyError
+
+    k = 5
+    survey = Survey(
+        time=np.arange(k, dtype=float),
+        dr_pose=np.zeros((k, 3)),
+        vehicle_depth=np.ones(k),
+        beam_forward=np.zeros((k, 2)),
+        beam_starboard=np.zeros((k, 2)),
+        beam_depth=np.arange(2 * k, dtype=float).reshape(k, 2),
+        true_pose=np.ones((k, 3)),
+        meta={"map": "m"},
+    )
+    part = survey.pings(1, 3)
+    assert part.n_pings == 2 and part.beam_depth.tolist() == [[2.0, 3.0], [4.0, 5.0]]
+    assert part.true_pose.shape == (2, 3) and part.meta == {"map": "m", "pings": [1, 3]}
+    for start, stop in ((3, 3), (-1, 2), (0, 6)):
+        with pytest.raises(SurveyError, match="not inside 0..4"):
+            survey.pings(start, stop)

@@ -80,19 +80,14 @@ def window_noise(fix: TapFix, survey: Survey, dr_model: DeadReckoningModel) -> T
 
 
 def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:
-    w = slice(first, end + 1)
-    laid = survey.dr_pose[w] if poses is None else np.asarray(poses, float)
+    window = survey.pings(first, end + 1)
+    if poses is None:
+        return window
+    laid = np.asarray(poses, float)
     if laid.shape != (end - first + 1, 3):
         raise TangraphError(f"poses of window {first}..{end} must have shape ({end - first + 1}, 3), "
                             f"got {laid.shape}")
-    return Survey(
-        time=survey.time[w],
-        dr_pose=laid,
-        vehicle_depth=survey.vehicle_depth[w],
-        beam_forward=survey.beam_forward[w],
-        beam_starboard=survey.beam_starboard[w],
-        beam_depth=survey.beam_depth[w],
-    )
+    return window.replace(dr_pose=laid)
 
 
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
