@@ -344,13 +344,19 @@ def table_beams(table) -> str:
     for which, g in table.groupby("map_kind", sort=False):
         methods = list(dict.fromkeys(g["method"]))
         out += [
-            f"#### {which} ({g['map'].iloc[0]}): mean error (m) over all areas by beam set",
+            f"#### {which} ({g['map'].iloc[0]}): error (m) over all areas by beam set, "
+            "mean and median over runs",
             "",
-            "| beams x pings | soundings per patch | runs per area | " + " | ".join(methods) + " |",
-            "|" + "---|" * (3 + len(methods)),
+            "| beams x pings | soundings per patch | runs per area | "
+            + " | ".join(f"{m} mean | {m} median" for m in methods)
+            + " |",
+            "|" + "---|" * (3 + 2 * len(methods)),
         ]
         for (b, p), s in g.groupby(["beams", "pings"], sort=False):
-            cells = [f"{s[s.method == m].mean_error.mean():.2f}" for m in methods]
+            cells = [
+                f"{s[s.method == m].mean_error.mean():.2f} | {s[s.method == m].mean_error.median():.2f}"
+                for m in methods
+            ]
             runs = len(s[(s.method == methods[0]) & (s.area == s.area.iloc[0])])
             out.append(f"| {b}x{p} | {b * p} | {runs} | " + " | ".join(cells) + " |")
         out.append("")
