@@ -158,11 +158,13 @@ over {survey.time[-1] - survey.time[0]:.0f} s) with drifting dead reckoning, nav
 online factor graph (iSAM2 with terrain-aided position fixes as priors), the batch smoother and
 three particle filters on the same soundings.
 
-- Dead reckoning drifts to {dr["final_error"]:.1f} m (RMSE {dr["rmse"]:.1f} m).
+- Dead reckoning drifts up to {dr["max_error"]:.1f} m from the truth (final {dr["final_error"]:.1f} m,
+  RMSE {dr["rmse"]:.1f} m).
 - The batch smoother: RMSE {smoother["rmse"]:.2f} m ({smoother["rmse"] / best_filter["rmse"]:.2f} x the best
   particle filter, {best_filter["method"]}, at {best_filter["rmse"]:.2f} m); the online graph:
   RMSE {online["rmse"]:.2f} m ({online["rmse"] / best_filter["rmse"]:.2f} x).
-- ANEES near 2 means the covariance is honest (a 2-D error normalised by its covariance).
+- ANEES near 2 means the covariance is honest (a 2-D error normalised by its covariance; over
+  the correlated poses of one track it is a guide, not a test).
 
 {format_table(rows)}
 
