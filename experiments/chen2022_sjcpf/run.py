@@ -7,12 +7,14 @@ variant is a method (``pf`` or ``sjcpf``) with changes to the shared settings of
 (particles, initial spread, noise; the SJCPF's jitter, window, kernel). Scored: the RMSE of the
 whole track (the paper's figure), the final error and the time per loop (ms per sounding).
 
-Parts: ``main`` (the paper's Table 2: PF and the three correlations, both charts), ``particles``
-(50 / 500 / 1000), ``rates`` (0.05 / 0.01 / 0.001 Hz), ``constants`` (the window, kernel and
-jitter the paper leaves out, and ablations: jitter only, correction only).
+Parts: ``main`` (the paper's RMSE comparison: PF and the three correlations, both charts),
+``particles`` (50 / 500 / 1000), ``rates`` (0.05 / 0.01 / 0.001 Hz), ``constants`` (the window,
+kernel and jitter the paper leaves out, and ablations: jitter only, correction only, a PF with
+too little process noise), ``timing`` (time per loop, each filter run in turn in this process).
 
-    tangraph experiment chen2022_sjcpf [--part main|particles|rates|constants|all] [--runs N]
+    tangraph experiment chen2022_sjcpf [--part main|particles|rates|constants|timing|all] [--runs N]
                                        [--seed S] [--quick] [--workers W] [--scheduler ADDR] [--out DIR]
+                                       [--replot]
 """
 
 from __future__ import annotations

@@ -17,7 +17,7 @@ Parts: ``areas`` (the paper's Fig. comparing the three methods per area, both ma
 Configuration: ``config.toml`` beside this file.
 
     tangraph experiment han2020_ipf [--part areas|beams|particles|all] [--runs N] [--seed S]
-                                    [--quick] [--workers W] [--scheduler ADDR] [--out DIR]
+                                    [--quick] [--workers W] [--scheduler ADDR] [--out DIR] [--replot]
 """
 
 from __future__ import annotations
