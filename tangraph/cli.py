@@ -187,13 +187,19 @@ def _survey_and_map(args: argparse.Namespace):
     return survey, load_any(name)
 
 
+def _check_outputs(args: argparse.Namespace) -> None:
+    """Before any work: no output over the input, none that exists without --force."""
+    outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
+    for path in outputs:
+        if path.resolve() == Path(args.survey).resolve():
+            raise TangraphError(f"refusing to write over the input survey {args.survey}")
+        if path.exists() and not args.force:
+            raise FileExistsError(f"{path} exists; pass --force to replace it")
+
+
 def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
     from tangraph.track import write_track_csv, write_track_tum
 
-    inputs = {Path(args.survey).resolve()}
-    for path in (args.output, args.tum, args.plot):
-        if path is not None and path.resolve() in inputs:
-            raise TangraphError(f"refusing to write over the input survey {args.survey}")
     if args.output.suffix.lower() == ".tum":
         write_track_tum(track, args.output, overwrite=args.force)
     else:
@@ -232,7 +238,6 @@ def cmd_navigate(args: argparse.Namespace) -> None:
 
     from tangraph.navigation import Method, navigate, track_summary
 
-    survey, bathymetry = _survey_and_map(args)
     method = Method(args.method)
     config = None
     if args.particles is not None:
@@ -241,6 +246,8 @@ def cmd_navigate(args: argparse.Namespace) -> None:
         from tangraph.filters import default_config
 
         config = dataclasses.replace(default_config(method.value), n_particles=args.particles)
+    _check_outputs(args)
+    survey, bathymetry = _survey_and_map(args)
     track = navigate(
         survey, bathymetry, method, config, rng=np.random.default_rng(args.seed), progress=not args.quiet
     )
@@ -251,6 +258,7 @@ def cmd_navigate(args: argparse.Namespace) -> None:
 def cmd_smooth(args: argparse.Namespace) -> None:
     from tangraph.navigation import navigate, track_summary
 
+    _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
     track = navigate(survey, bathymetry, "smoother", progress=not args.quiet)
     print(track_summary(track, survey))

@@ -72,6 +72,11 @@ def test_navigate_command_writes_lat_lon_and_refuses_to_clobber(survey_file, tmp
     assert "--particles does not apply" in capsys.readouterr().err
     assert main(["navigate", str(survey_file), "-o", str(survey_file), "--force", "-q"]) == 2
     assert "over the input survey" in capsys.readouterr().err
+    # an existing second output is found before any work, and the first is not written either
+    fresh, taken = tmp_path / "fresh.csv", tmp_path / "taken.tum"
+    taken.write_text("keep")
+    assert main(["navigate", str(survey_file), "-q", "-o", str(fresh), "--tum", str(taken)]) == 2
+    assert not fresh.exists() and taken.read_text() == "keep"
 
 
 def test_smooth_command_writes_csv_tum_and_figure(wang_survey, survey_file, tmp_path, capsys):
