@@ -178,13 +178,21 @@ def cmd_experiment(args: argparse.Namespace) -> None:
 
 def _survey_and_map(args: argparse.Namespace):
     from tangraph.maps import load_any
+    from tangraph.navigation import in_map_frame
     from tangraph.survey import read_survey
 
     survey = read_survey(args.survey)
     name = args.map or survey.meta.get("map")
     if not name:
         raise TangraphError(f"{args.survey} names no map: pass --map NAME|PATH")
-    return survey, load_any(name)
+    bathymetry = load_any(name)
+    return in_map_frame(survey, bathymetry), bathymetry
+
+
+def _dr_model(args: argparse.Namespace):
+    from tangraph.sim.scenario import load_dr_model
+
+    return None if args.dr_model is None else load_dr_model(args.dr_model)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -249,7 +257,13 @@ def cmd_navigate(args: argparse.Namespace) -> None:
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
     track = navigate(
-        survey, bathymetry, method, config, rng=np.random.default_rng(args.seed), progress=not args.quiet
+        survey,
+        bathymetry,
+        method,
+        config,
+        rng=np.random.default_rng(args.seed),
+        dr_model=_dr_model(args),
+        progress=not args.quiet,
     )
     print(track_summary(track, survey))
     _write_track(args, track, survey, bathymetry)
@@ -260,7 +274,7 @@ def cmd_smooth(args: argparse.Namespace) -> None:
 
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
-    track = navigate(survey, bathymetry, "smoother", progress=not args.quiet)
+    track = navigate(survey, bathymetry, "smoother", dr_model=_dr_model(args), progress=not args.quiet)
     print(track_summary(track, survey))
     for fix in track.meta.get("fixes", []):
         if not fix.get("accepted"):
@@ -369,6 +383,13 @@ def build_parser() -> argparse.ArgumentParser:
         _output(p, "track file: .csv (time, lat, lon, north, east, heading, covariance) or .tum")
         p.add_argument("--tum", type=Path, help="also write the track in TUM format here")
         p.add_argument("--plot", type=Path, help="figure of the track vs DR (and truth) over the map")
+        p.add_argument(
+            "--dr-model",
+            type=Path,
+            metavar="FILE.toml",
+            help="the survey's dead-reckoning error model (a scenario's [dead_reckoning] keys); "
+            "needed by the graph for a recorded survey, which does not carry one",
+        )
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
     p = sub.add_parser("navigate", help="estimate a survey's track with one method (filters or online graph)")

@@ -17,7 +17,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["Method", "dead_reckoning_track", "navigate", "track_summary"]
+__all__ = ["Method", "dead_reckoning_track", "in_map_frame", "navigate", "track_summary"]
 
 
 class Method(enum.StrEnum):
@@ -88,6 +88,36 @@ def navigate(
     from tangraph import filters
 
     return filters.run_filter(method.value, survey, bathymetry, config, rng=rng, progress=progress)
+
+
+def in_map_frame(survey: Survey, bathymetry: BathymetryMap) -> Survey:
+    """The survey with its poses in the map's local frame.
+
+    A recorded survey keeps the projected CRS and the local origin it was imported in
+    (``meta["crs"]``, ``meta["origin"]``); when the CRS is the map's, its poses are shifted by the
+    difference of the origins. A survey that records no CRS or origin (or the map's own) is returned
+    as it is.
+
+    Raises
+    ------
+    TangraphError
+        The survey's CRS is not the map's (reproject one of them first).
+    """
+    crs, origin = survey.meta.get("crs"), survey.meta.get("origin")
+    if crs is None or origin is None or bathymetry.crs is None:
+        return survey
+    import pyproj
+
+    if not pyproj.CRS.from_user_input(crs).equals(pyproj.CRS.from_user_input(bathymetry.crs)):
+        raise TangraphError(
+            f"the survey is in {crs}, the map {bathymetry.name!r} in {bathymetry.crs}: reproject one of them"
+        )
+    shift = np.array([*(np.asarray(origin, float) - np.asarray(bathymetry.origin, float)), 0.0])
+    if not np.any(shift):
+        return survey
+    truth = None if survey.true_pose is None else survey.true_pose + shift
+    meta = {**survey.meta, "origin": [float(v) for v in bathymetry.origin]}
+    return survey.replace(dr_pose=survey.dr_pose + shift, true_pose=truth, meta=meta)
 
 
 def dead_reckoning_track(survey: Survey) -> Track:

@@ -90,3 +90,33 @@ def test_smooth_command_writes_csv_tum_and_figure(wang_survey, survey_file, tmp_
     assert rows.shape[0] == k and np.all(np.isfinite(rows[:, :6]))
     assert np.loadtxt(tum).shape == (k, 8)
     assert fig.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_recorded_survey_is_smoothed_in_the_map_frame_with_its_dr_model(wang_survey, tmp_path, capsys):
+    """CSV log + XYZ soundings in UTM -> `survey import` -> `smooth --dr-model`: the imported survey
+    has its own local origin, and the smoothed track must land on the truth in the map's frame."""
+    survey, bathymetry = wang_survey
+    north0, east0 = bathymetry.origin
+    dr = survey.dr_pose
+    nav, sounds, model = tmp_path / "nav.csv", tmp_path / "s.xyz", tmp_path / "dr.toml"
+    np.savetxt(nav, np.column_stack([survey.time, dr[:, 0] + north0, dr[:, 1] + east0,
+                                     np.degrees(dr[:, 2]) % 360, survey.vehicle_depth]),
+               delimiter=",", header="time,north,east,heading,depth", comments="", fmt="%.3f")
+    north, east = survey.footprints()
+    has = np.isfinite(survey.beam_depth)
+    t = np.broadcast_to(survey.time[:, None], has.shape)
+    np.savetxt(sounds, np.column_stack([t[has], east[has] + east0, north[has] + north0,
+                                        survey.beam_depth[has]]), fmt="%.3f")
+    model.write_text("heading_bias_deg = 1.0\nspeed_scale = 0.01\nspeed_noise = 0.05\n")
+    recorded = tmp_path / "rec.nc"
+    args = ["survey", "import", str(nav), str(sounds), "--crs", bathymetry.crs, "-o", str(recorded)]
+    assert main(args) == 0
+    out = tmp_path / "smoothed.csv"
+    base = ["smooth", str(recorded), "--map", "merimbula", "-q", "-o", str(out)]
+    assert main(base) == 2 and "dr_model" in capsys.readouterr().err
+    assert main([*base, "--dr-model", str(model)]) == 0
+    rows = np.genfromtxt(out, delimiter=",", names=True)
+    same = np.searchsorted(survey.time, rows["time"])
+    error = np.hypot(rows["north"] - survey.true_pose[same, 0], rows["east"] - survey.true_pose[same, 1])
+    dr_error = np.hypot(*(dr[same, :2] - survey.true_pose[same, :2]).T)
+    assert np.sqrt(np.mean(error**2)) < 0.25 * np.sqrt(np.mean(dr_error**2))

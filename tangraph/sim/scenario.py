@@ -40,7 +40,7 @@ from tangraph.sensors import (
 from tangraph.sim import trajectories
 from tangraph.survey import Survey
 
-__all__ = ["Scenario", "list_scenarios", "load_scenario", "scenario_path", "simulate"]
+__all__ = ["Scenario", "list_scenarios", "load_dr_model", "load_scenario", "scenario_path", "simulate"]
 
 _TOP = {
     "name",
@@ -147,6 +147,31 @@ def _presets(cls) -> dict:
         for name in dir(cls)
         if not name.startswith("_") and isinstance(cls.__dict__.get(name), classmethod)
     }
+
+
+def load_dr_model(path: str | os.PathLike) -> DeadReckoningModel:
+    """A dead-reckoning error model from a TOML file: the ``[dead_reckoning]`` table of a scenario,
+    or the same keys at the top level (``DeadReckoningModel`` fields, ``preset``, ``NAME_deg``).
+
+    Examples
+    --------
+    The file of a recorded survey's INS/DVL might read::
+
+        heading_bias_deg = 0.5
+        heading_walk_deg = 0.01     # deg / sqrt(s)
+        speed_scale = 0.005
+        speed_noise = 0.05
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"dead-reckoning model file {path} does not exist")
+    try:
+        with open(path, "rb") as f:
+            table = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"{path}: not valid TOML ({exc})") from None
+    table = table.get("dead_reckoning", table)
+    return _config(DeadReckoningModel, table, _presets(DeadReckoningModel), f"{path}")
 
 
 def load_scenario(name_or_path: str | os.PathLike) -> Scenario:
