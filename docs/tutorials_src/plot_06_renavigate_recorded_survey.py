@@ -87,14 +87,13 @@ print({k: recorded.meta[k] for k in ("crs", "origin", "n_dropped_outside_navigat
 
 # %%
 # The survey's frame and the map's differ only by their origins (both are UTM 55S), so one shift
-# puts the survey on the map. Then the import can be checked against what was written: the
-# poses at the same times must agree to the millimetres of the files.
+# puts the survey on the map: :func:`~tangraph.navigation.in_map_frame` makes it (and refuses a
+# survey in another CRS). Then the import can be checked against what was written: the poses at
+# the same times must agree to the millimetres of the files.
 
-shift = np.array(recorded.meta["origin"]) - np.array(bathymetry.origin)
-recorded = recorded.replace(
-    dr_pose=recorded.dr_pose + [shift[0], shift[1], 0.0],
-    meta={**recorded.meta, "origin": list(bathymetry.origin), "map": bathymetry.name},
-)
+from tangraph.navigation import in_map_frame
+
+recorded = in_map_frame(recorded, bathymetry)
 same = np.searchsorted(simulated.time, recorded.time)  # the simulated ping of each imported one
 assert np.allclose(simulated.time[same], recorded.time)
 difference = np.abs(recorded.dr_pose[:, :2] - simulated.dr_pose[same, :2]).max()
@@ -174,8 +173,9 @@ plt.show()
 # %%
 # On the command line the import is ``tangraph survey import navigation.csv soundings.xyz
 # --crs EPSG:32755 -o survey.nc`` (see :doc:`/cli`); the smoothing of a simulated survey file is
-# ``tangraph smooth survey.nc -o track.csv``. The two steps of this tutorial that need Python
-# today are the shift into the map's frame and the dead-reckoning error model of a recorded
-# survey, which a survey file from another system does not carry.
+# ``tangraph smooth survey.nc --map merimbula --dr-model ins.toml -o track.csv``: the command shifts
+# the survey into the map's frame itself, and ``--dr-model`` gives the error model of the vehicle's
+# dead reckoning (a scenario's ``[dead_reckoning]`` keys, e.g. ``heading_bias_deg = 0.5``), which
+# a survey file from another system does not carry.
 
 # sphinx_gallery_thumbnail_number = 1
