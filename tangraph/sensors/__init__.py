@@ -7,6 +7,7 @@ from tangraph.sensors.dead_reckoning import (
     odometry,
     simulate_dead_reckoning,
 )
+from tangraph.sensors.navigation_model import NavigationModel, load_navigation_model
 from tangraph.sensors.sonar import (
     MultibeamConfig,
     Pings,
@@ -19,10 +20,12 @@ __all__ = [
     "DeadReckoning",
     "DeadReckoningModel",
     "MultibeamConfig",
+    "NavigationModel",
     "Pings",
     "SingleBeamConfig",
     "beam_angles",
     "increment_covariance",
+    "load_navigation_model",
     "odometry",
     "simulate_dead_reckoning",
     "simulate_pings",

@@ -1,0 +1,261 @@
+"""`NavigationModel`: what every estimator believes about the vehicle, its DR and its sonar.
+
+One frozen object per survey, passed to the factor graph and to every particle filter (their
+configs hold only algorithm settings). It holds
+
+- the dead-reckoning error model: the white errors (DVL speed noise, white heading noise, heading
+  random walk, the INS velocity walk during DVL dropouts) and the **constant** errors every real
+  DVL and compass has, the speed scale factor ``k`` (the DVL reads ``1 + k`` times the true speed)
+  and the heading bias ``b`` (the DR heading is the true one plus ``b``), each with a prior mean
+  and std. The constant errors are estimated by the graph (calibration variables) and the filters
+  (particle states), never treated as white noise;
+- the initial uncertainty of the start position, the same for every estimator;
+- the terrain measurement model: sounding noise, map error and the tide prior, with one sign
+  convention everywhere: a residual is ``measured - map``, and the tide is what a measured depth
+  has on top of the map's (``measured = map + tide + noise``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.sensors.dead_reckoning import DeadReckoningModel
+
+__all__ = ["NavigationModel", "load_navigation_model"]
+
+_ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk")
+
+
+@dataclasses.dataclass(frozen=True)
+class NavigationModel:
+    """The estimators' model of a survey's dead reckoning and terrain measurements.
+
+    Parameters
+    ----------
+    speed_noise : float
+        White DVL velocity error, m/s (std per axis and interval).
+    heading_noise : float
+        White heading error of each sample, rad.
+    heading_walk : float
+        Random walk of the heading error, rad/sqrt(s).
+    dropout_speed_noise : float
+        INS velocity random walk while the DVL has lost bottom lock, m/s/sqrt(s).
+    speed_scale, speed_scale_std : float
+        Prior mean and std of the constant DVL scale-factor error ``k`` (0.01: reads 1 % fast).
+    heading_bias, heading_bias_std : float
+        Prior mean and std of the constant heading error ``b`` (DR minus true), rad; it includes
+        the INS alignment error of the start heading.
+    initial_position_std : float
+        Std (m, per axis) of the start position around the first DR position: every estimator
+        starts from this uncertainty.
+    sounding_std : float
+        Std (m) of a sounding's error (noise, attitude, map interpolation).
+    map_std : float
+        Std (m) of the map's own depth error, added in quadrature to ``sounding_std`` where a
+        likelihood treats soundings independently.
+    tide, tide_std : float
+        Prior mean and std (m) of the tide, ``measured = map + tide``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> model = NavigationModel(speed_scale_std=0.02, heading_bias_std=np.deg2rad(2.0))
+    >>> round(model.calibration_std[1], 4)
+    0.0349
+    >>> NavigationModel(sounding_std=-1.0)
+    Traceback (most recent call last):
+    ...
+    tangraph.errors.TangraphError: NavigationModel.sounding_std must be > 0, got -1.0
+    """
+
+    speed_noise: float = 0.05
+    heading_noise: float = 0.0
+    heading_walk: float = 0.0
+    dropout_speed_noise: float = 0.0
+    speed_scale: float = 0.0
+    speed_scale_std: float = 0.02
+    heading_bias: float = 0.0
+    heading_bias_std: float = float(np.deg2rad(2.0))
+    initial_position_std: float = 10.0
+    sounding_std: float = 0.5
+    map_std: float = 0.0
+    tide: float = 0.0
+    tide_std: float = 3.0
+
+    def __post_init__(self) -> None:
+        for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
+                     "map_std", "tide_std"):
+            _number(self, name, low=0.0)
+        for name in ("speed_scale_std", "heading_bias_std", "initial_position_std", "sounding_std"):
+            _number(self, name, low=0.0, open_low=True)
+        _number(self, "speed_scale", low=-0.5, high=0.5)
+        _number(self, "heading_bias", low=-math.pi, high=math.pi)
+        _number(self, "tide", low=None)
+
+    # -- parts ---------------------------------------------------------------------------------
+    @property
+    def dead_reckoning(self) -> DeadReckoningModel:
+        """The white part of the DR error model (constant errors zero): the noise of an increment
+        of the *calibrated* dead reckoning (:func:`~tangraph.sensors.increment_covariance`)."""
+        return DeadReckoningModel(heading_walk=self.heading_walk, heading_noise=self.heading_noise,
+                                  speed_noise=self.speed_noise,
+                                  dropout_speed_noise=self.dropout_speed_noise)
+
+    @property
+    def calibration_prior(self) -> np.ndarray:
+        """Prior mean ``(k, b)`` of the constant DR errors."""
+        return np.array([self.speed_scale, self.heading_bias])
+
+    @property
+    def calibration_std(self) -> np.ndarray:
+        """Prior std ``(k, b)`` of the constant DR errors."""
+        return np.array([self.speed_scale_std, self.heading_bias_std])
+
+    @property
+    def measurement_std(self) -> float:
+        """Std (m) of one sounding's residual against the map: sounding and map errors."""
+        return float(np.hypot(self.sounding_std, self.map_std))
+
+    def replace(self, **changes) -> NavigationModel:
+        """A copy with some fields changed (checked again)."""
+        return dataclasses.replace(self, **changes)
+
+    def as_dict(self) -> dict[str, float]:
+        """JSON-ready form, kept in a track's metadata."""
+        return {k: float(v) for k, v in dataclasses.asdict(self).items()}
+
+    # -- construction --------------------------------------------------------------------------
+    @classmethod
+    def from_dead_reckoning(cls, dr: DeadReckoningModel, **terrain) -> NavigationModel:
+        """The model of a :class:`DeadReckoningModel` (a simulated DR's settings): its white errors
+        as they are, its constant errors as priors of mean zero whose std is the larger of the
+        stated default and the magnitude of the simulated error (the simulated values are the
+        unknown truth, not the estimators' knowledge)."""
+        if not isinstance(dr, DeadReckoningModel):
+            raise TangraphError(f"dead-reckoning model must be a DeadReckoningModel, got {type(dr).__name__}")
+        default = cls()
+        return cls(
+            speed_noise=dr.speed_noise, heading_noise=dr.heading_noise, heading_walk=dr.heading_walk,
+            dropout_speed_noise=dr.dropout_speed_noise,
+            speed_scale_std=max(default.speed_scale_std, abs(dr.speed_scale)),
+            heading_bias_std=max(default.heading_bias_std, abs(dr.heading_bias)),
+            **terrain,
+        )
+
+    @classmethod
+    def from_survey(cls, survey, **overrides) -> NavigationModel:
+        """The model of a simulated survey, from the settings it records (``meta["settings"]``):
+        the DR as :meth:`from_dead_reckoning`; ``sounding_std`` 1.5 times the sonar's
+        ``depth_noise`` (the margin covers map interpolation and attitude errors), at least 0.2 m;
+        the tide prior of mean zero and std 3 m. ``overrides`` replace any field.
+
+        Raises
+        ------
+        TangraphError
+            The survey records no dead-reckoning settings (a recorded survey: use
+            :func:`load_navigation_model` or the constructor with the instrument's figures).
+        """
+        settings = survey.meta.get("settings") if isinstance(survey.meta, dict) else None
+        try:
+            table = dict(settings["dead_reckoning"])
+        except (KeyError, TypeError):
+            raise TangraphError(
+                "this survey does not record its dead-reckoning error model (meta['settings']"
+                "['dead_reckoning']): give a NavigationModel (a TOML file with --dr-model on the "
+                "command line) with the INS/DVL's errors"
+            ) from None
+        try:
+            dr = DeadReckoningModel(**table)
+        except TypeError as exc:
+            raise TangraphError(f"survey meta['settings']['dead_reckoning'] is not a DR model: {exc}") from None
+        terrain: dict[str, Any] = {}
+        try:
+            noise = float(settings["sonar"]["depth_noise"])
+            if np.isfinite(noise) and noise >= 0:
+                terrain["sounding_std"] = max(1.5 * noise, 0.2)
+        except (KeyError, TypeError, ValueError):
+            pass
+        return cls.from_dead_reckoning(dr, **(terrain | overrides))
+
+    @classmethod
+    def from_mapping(cls, table: dict, where: str = "navigation model") -> NavigationModel:
+        """The model of a table of field names (an angle field may be given in degrees as
+        ``NAME_deg``); an unknown key or a bad value is refused, naming it and ``where``."""
+        fields = {f.name for f in dataclasses.fields(cls)}
+        values: dict[str, Any] = {}
+        for key, value in table.items():
+            name = key[:-4] if key.endswith("_deg") else key
+            if name not in fields or (key.endswith("_deg") and name not in _ANGLES):
+                allowed = sorted(fields | {f"{a}_deg" for a in _ANGLES})
+                raise TangraphError(f"{where}: unknown key {key!r}; allowed: {', '.join(allowed)}")
+            if name in values:
+                raise TangraphError(f"{where}: {name} is given twice (as {name} and {name}_deg)")
+            if key.endswith("_deg"):
+                try:
+                    value = math.radians(float(value))
+                except (TypeError, ValueError):
+                    raise TangraphError(f"{where}: {key} must be a number, got {value!r}") from None
+            values[name] = value
+        try:
+            return cls(**values)
+        except TangraphError as exc:
+            raise TangraphError(f"{where}: {exc}") from None
+
+
+def load_navigation_model(path: str | os.PathLike) -> NavigationModel:
+    """A :class:`NavigationModel` from a TOML file: its fields at the top level or in a
+    ``[navigation]`` table; angles in radians, or in degrees as ``NAME_deg``. Fields not given
+    keep their stated defaults.
+
+    Examples
+    --------
+    The file of a recorded survey's INS/DVL might read::
+
+        speed_noise = 0.05           # m/s
+        heading_walk_deg = 0.01      # deg / sqrt(s)
+        speed_scale_std = 0.02       # 2 % scale-factor uncertainty
+        heading_bias_std_deg = 2.0
+        initial_position_std = 5.0   # m
+        sounding_std = 0.3           # m
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise TangraphError(f"navigation model file {path} does not exist")
+    try:
+        with open(path, "rb") as f:
+            table = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise TangraphError(f"{path}: not valid TOML ({exc})") from None
+    if "navigation" in table:
+        extra = sorted(set(table) - {"navigation"})
+        if extra:
+            raise TangraphError(f"{path}: keys outside [navigation]: {', '.join(extra)}")
+        table = table["navigation"]
+    return NavigationModel.from_mapping(table, str(path))
+
+
+def _number(obj, name: str, *, low: float | None = 0.0, open_low: bool = False,
+            high: float | None = None) -> None:
+    value = getattr(obj, name)
+    where = f"{type(obj).__name__}.{name}"
+    if isinstance(value, bool):
+        raise TangraphError(f"{where} must be a number, got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise TangraphError(f"{where} must be a number, got {value!r}") from None
+    if not np.isfinite(v):
+        raise TangraphError(f"{where} must be finite, got {value!r}")
+    if low is not None and (v < low or (open_low and v == low)):
+        raise TangraphError(f"{where} must be {'>' if open_low else '>='} {low:g}, got {value!r}")
+    if high is not None and v > high:
+        raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
+    object.__setattr__(obj, name, v)
