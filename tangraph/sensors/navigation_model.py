@@ -68,7 +68,7 @@ class NavigationModel:
     --------
     >>> import numpy as np
     >>> model = NavigationModel(speed_scale_std=0.02, heading_bias_std=np.deg2rad(2.0))
-    >>> round(model.calibration_std[1], 4)
+    >>> round(float(model.calibration_std[1]), 4)
     0.0349
     >>> NavigationModel(sounding_std=-1.0)
     Traceback (most recent call last):
