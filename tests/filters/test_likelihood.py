@@ -91,3 +91,29 @@ def test_no_finite_sounding_carries_no_information():
         np.zeros((3, 2)) + 100, np.zeros((2, 2)), [np.nan] * 2
     )
     assert ll.tolist() == [0.0, 0.0, 0.0]
+
+
+def test_turned_offsets_match_the_numpy_reference():
+    """Each particle's soundings turned about it by its own angle (R(a) o, clockwise from north)."""
+    m = rough(4)
+    rng = np.random.default_rng(6)
+    particles = rng.uniform(60, 340, (300, 2))
+    turn = rng.normal(0, 0.3, 300)
+    offsets = rng.normal(0, 20, (25, 2))
+    depths = rng.uniform(45, 55, 25)
+    got = TerrainLikelihood(m, sigma=0.5).log_likelihood(particles, offsets, depths, turn=turn)
+    c, s = np.cos(turn)[:, None], np.sin(turn)[:, None]
+    qn = particles[:, 0:1] + c * offsets[:, 0] - s * offsets[:, 1]
+    qe = particles[:, 1:2] + s * offsets[:, 0] + c * offsets[:, 1]
+    h, _ = interpolate(m.north, m.east, m.depth, qn.ravel(), qe.ravel())
+    want = -0.5 * np.sum((h.reshape(qn.shape) - depths) ** 2, axis=1) / 0.25
+    finite = np.isfinite(want)
+    assert 0 < finite.sum() < finite.size
+    np.testing.assert_allclose(got[finite], want[finite], rtol=1e-10)
+    assert np.all(got[~finite] == -np.inf)
+    # a quarter turn clockwise takes a sounding due north of the vehicle to due east of it
+    one = TerrainLikelihood(m, sigma=1.0).residual_sums(
+        particles[:1], [[10.0, 0.0]], [50.0], turn=[np.pi / 2]
+    )
+    east = m.depth_at(particles[0, 0], particles[0, 1] + 10.0)
+    np.testing.assert_allclose(one[0, 0], 50.0 - east, rtol=1e-10)
