@@ -56,21 +56,14 @@ class GraphConfig:
     gate_probability : float or None
         A fix is refused when its NIS ``e^T (P_fix + P_pred)^-1 e`` against the predicted
         marginal exceeds the ``chi2(2)`` quantile of this probability; None: no gate.
-    initial_position_std, initial_heading_std : float
-        Std of the prior on the first pose around its DR pose (m, rad). The dead-reckoning
-        model's constant ``heading_bias`` is added in quadrature to the heading std: the bias
-        cancels in the odometry and is carried by the first pose's heading.
+    estimate_calibration : bool
+        Estimate the DR's constant errors (speed scale, heading bias) as a calibration variable
+        joined to the poses (default; see :mod:`tangraph.graph.calibration`). False keeps them
+        at their prior mean with no uncertainty: the graph then trusts the raw DR's shape, as a
+        graph without the calibration would.
     odometry_min_std, odometry_min_heading_std : float
         Floors (m, rad) added as variances to every odometry covariance, so it stays positive
         definite (a model without heading noise gives a singular one).
-    odometry_scale_noise : bool
-        Add the DVL scale-factor error (``speed_scale``) as a variance along each increment:
-        it is constant within a run and the graph has no state for it.
-    window_noise : bool
-        Grow each fix's covariance by the DR error of its patch (the patch has the DR's shape:
-        online it is laid with the DR increments from the predicted pose of its last ping, in
-        re-matching with the smoothed poses; heading and scale errors distort it): the increment
-        covariance, constant errors included, from the window's middle ping to its end.
     half_width_rule : {"marginal", "fixed"}
         ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
         square root of the largest eigenvalue of the predicted position covariance, clipped to
@@ -120,12 +113,9 @@ class GraphConfig:
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
     robust_parameter: float = 2.45
     gate_probability: float | None = 0.999
-    initial_position_std: float = 10.0
-    initial_heading_std: float = 0.02
+    estimate_calibration: bool = True
     odometry_min_std: float = 0.01
     odometry_min_heading_std: float = 1e-4
-    odometry_scale_noise: bool = True
-    window_noise: bool = True
     half_width_rule: Literal["marginal", "fixed"] = "marginal"
     half_width_sigmas: float = 4.0
     min_half_width_cells: float = 5.0
@@ -141,8 +131,7 @@ class GraphConfig:
     rematch_tolerance: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("key_interval", "tap_step_cells", "robust_parameter", "initial_position_std",
-                     "initial_heading_std",
+        for name in ("key_interval", "tap_step_cells", "robust_parameter",
                      "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
                      "min_half_width_cells", "max_half_width_cells", "relinearize_threshold",
                      "relinearize_position"):

@@ -32,6 +32,7 @@ __all__ = [
     "pose_prior_factor",
     "position_fix_factor",
     "propagate",
+    "propagate_joint",
     "robust_noise",
     "tangent_to_world",
     "world_to_tangent",
@@ -110,6 +111,23 @@ def propagate(pose, cov, increment, increment_cov) -> np.ndarray:
     j[..., 1, 2] = c * increment[..., 0] - s * increment[..., 1]
     a = _blk_rotation(pose[..., 2])
     return j @ cov @ np.swapaxes(j, -1, -2) + a @ increment_cov @ np.swapaxes(a, -1, -2)
+
+
+def propagate_joint(pose, joint, increment, increment_cov) -> np.ndarray:
+    """:func:`propagate` for a joint covariance ``(..., n, n)`` whose first three coordinates are
+    the pose's world coordinates and whose others (the calibration) do not move."""
+    pose, increment = np.asarray(pose, float), np.asarray(increment, float)
+    joint = np.asarray(joint, float)
+    n = joint.shape[-1]
+    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
+    j = np.zeros((*pose.shape[:-1], n, n))
+    j[..., np.arange(n), np.arange(n)] = 1.0
+    j[..., 0, 2] = -s * increment[..., 0] - c * increment[..., 1]
+    j[..., 1, 2] = c * increment[..., 0] - s * increment[..., 1]
+    a = _blk_rotation(pose[..., 2])
+    out = j @ joint @ np.swapaxes(j, -1, -2)
+    out[..., :3, :3] += a @ np.asarray(increment_cov, float) @ np.swapaxes(a, -1, -2)
+    return out
 
 
 def robust_noise(cov: np.ndarray, kernel: str, parameter: float):

@@ -61,22 +61,29 @@ def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_c
                          config.max_half_width_cells * cell))
 
 
-def window_noise(fix: TapFix, survey: Survey, dr_model: DeadReckoningModel) -> TapFix:
-    """``fix`` with its covariance grown by the DR error of its patch: the patch is laid with the DR,
-    whose errors (the constant heading bias and speed scale included, as in
-    ``increment_covariance(include_bias=True)``) move the window's middle ping relative to its
-    reference ping by about this much."""
+def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_jacobian,
+                 calibration_cov, overlap: float) -> TapFix:
+    """``fix`` with the covariance the graph gives it.
+
+    TAP's covariance counts the information of its window's soundings; windows that share pings
+    (``overlap = n_pings / spacing > 1``) would count each sounding ``overlap`` times, so it is
+    multiplied by ``overlap``. The patch is laid with the calibrated DR of the current estimate:
+    what is still uncertain of it moves the window's middle ping relative to its reference ping,
+    the white DR noise from the middle ping to the end (:func:`~tangraph.sensors.increment_covariance`
+    of ``white``) and the calibration's remaining covariance ``calibration_cov (2, 2)`` through
+    ``shape_jacobian (2, 2)`` (the middle ping's world offset from the end against ``(k, b)``).
+    """
     first, end = int(fix.first), int(fix.index)
     mid = (first + end) // 2
-    if mid == end:
-        return fix
-    w = slice(first, end + 1)
-    cov = increment_covariance(dr_model, survey.time[w], survey.dr_pose[w], mid - first, end - first,
-                               include_bias=True)[:2, :2]
-    c, s = np.cos(survey.dr_pose[mid, 2]), np.sin(survey.dr_pose[mid, 2])
-    rot = np.array([[c, -s], [s, c]])
-    grown = np.asarray(fix.covariance, float) + rot @ cov @ rot.T
-    return dataclasses.replace(fix, covariance=grown)
+    grown = max(float(overlap), 1.0) * np.asarray(fix.covariance, float)
+    if mid < end:
+        w = slice(first, end + 1)
+        cov = increment_covariance(white, survey.time[w], survey.dr_pose[w], mid - first, end - first)[:2, :2]
+        c, s = np.cos(survey.dr_pose[mid, 2]), np.sin(survey.dr_pose[mid, 2])
+        rot = np.array([[c, -s], [s, c]])
+        jac = np.asarray(shape_jacobian, float)
+        grown = grown + rot @ cov @ rot.T + jac @ np.asarray(calibration_cov, float) @ jac.T
+    return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
 
 
 def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:

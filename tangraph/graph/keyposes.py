@@ -15,6 +15,11 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.graph.calibration import (
+    CALIBRATION,
+    calibration_prior_factor,
+    world_position_factor,
+)
 from tangraph.graph.factors import between_noise, pose_prior_factor, position_fix_factor
 from tangraph.sensors import DeadReckoningModel, increment_covariance, odometry
 
@@ -44,12 +49,13 @@ def key_indices(time, fix_ends, key_interval: float) -> np.ndarray:
     return np.asarray(keys, np.int64)
 
 
-def increments(model: DeadReckoningModel, time, dr_pose, i, j, *, scale_noise: bool = True
-               ) -> tuple[np.ndarray, np.ndarray]:
+def increments(model: DeadReckoningModel, time, dr_pose, i, j) -> tuple[np.ndarray, np.ndarray]:
     """DR increments ``(n, 3)`` from ping ``i`` to ping ``j`` and their covariances ``(n, 3, 3)``
     (frame of ping ``i``), in chunks so that long gaps do not need a huge padded array.
 
-    With ``scale_noise`` the constant DVL scale error is added as a variance along each chord.
+    ``model`` is the white part of the DR error model
+    (:attr:`~tangraph.sensors.NavigationModel.dead_reckoning`): the constant errors are the
+    calibration variable's, not noise (see :mod:`tangraph.graph.calibration`).
     """
     i, j = np.asarray(i, np.int64).ravel(), np.asarray(j, np.int64).ravel()
     delta = odometry(dr_pose, i, j) if i.size else np.zeros((0, 3))
@@ -63,9 +69,6 @@ def increments(model: DeadReckoningModel, time, dr_pose, i, j, *, scale_noise: b
             stop += 1
         cov[start:stop] = increment_covariance(model, time, dr_pose, i[start:stop], j[start:stop])
         start = stop
-    if scale_noise and model.speed_scale:
-        d = delta[:, :2]
-        cov[:, :2, :2] += model.speed_scale**2 * d[:, :, None] * d[:, None, :]
     return delta, cov
 
 
@@ -75,8 +78,16 @@ class PoseGraph:
 
     A plain container: :class:`~tangraph.graph.GraphNavigator` fills it while it runs, the batch
     smoother (:func:`~tangraph.graph.smooth_pose_graph`) solves all of it at once.
+
+    With ``calibration_std`` (the prior std of ``(k, b)``, see :mod:`tangraph.graph.calibration`)
+    the key poses are in the DR frame about ``origin`` and the graph holds the calibration
+    variable: position fixes and :meth:`add_start` measure world positions through it. Without
+    it (None) poses are world poses and a fix is a plain translation prior.
     """
 
+    calibration_std: np.ndarray | None = None
+    calibration_mean: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(2))
+    origin: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(2))
     robust_kernel: str = "huber"
     robust_parameter: float = 2.45
     min_std: float = 0.01
@@ -89,6 +100,36 @@ class PoseGraph:
     fixes: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     _factors: dict = dataclasses.field(default_factory=lambda: {"prior": [], "odometry": [], "fix": []},
                                        repr=False)
+
+    def __post_init__(self) -> None:
+        self.origin = np.asarray(self.origin, float).copy()
+        self.calibration_mean = np.asarray(self.calibration_mean, float).copy()
+        if self.calibration_std is not None:
+            self.calibration_std = np.asarray(self.calibration_std, float).copy()
+            if not self._factors["prior"]:
+                self._factors["prior"].append(
+                    calibration_prior_factor(self.calibration_mean, self.calibration_std))
+
+    @property
+    def calibrated(self) -> bool:
+        """Whether the graph holds the calibration variable."""
+        return self.calibration_std is not None
+
+    def add_start(self, key: int, pose, position_std: float, heading_std: float) -> list:
+        """The start: the world position of pose ``key`` is its DR position with std
+        ``position_std`` (through the calibration), and its DR-frame heading the DR heading with
+        std ``heading_std`` (the constant heading error is the calibration's). Returns the factors."""
+        pose = np.asarray(pose, float)
+        if not self.calibrated:
+            cov = np.diag([position_std**2, position_std**2, heading_std**2])
+            return [self.add_pose_prior(key, pose, cov)]
+        self.pose_priors.append((int(key), pose, np.diag([position_std**2] * 2 + [heading_std**2])))
+        heading = gtsam.PriorFactorPose2(
+            int(key), gtsam.Pose2(*pose),
+            gtsam.noiseModel.Diagonal.Sigmas(np.array([1e4, 1e4, heading_std])))
+        position = world_position_factor(key, pose[:2], np.eye(2) * position_std**2, self.origin)
+        self._factors["prior"].extend([heading, position])
+        return [heading, position]
 
     def add_pose(self, key: int, time: float, initial_pose) -> None:
         """A key pose at ping ``key`` with its initial estimate ``(north, east, psi)``."""
@@ -120,7 +161,11 @@ class PoseGraph:
     def add_position_fix(self, key: int, position, cov) -> gtsam.NonlinearFactor:
         """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model."""
         self.fixes.append((int(key), np.asarray(position, float), np.asarray(cov, float)))
-        factor = position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
+        if self.calibrated:
+            factor = world_position_factor(key, position, cov, self.origin, self.robust_kernel,
+                                           self.robust_parameter)
+        else:
+            factor = position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
         self._factors["fix"].append(factor)
         return factor
 
@@ -143,11 +188,15 @@ class PoseGraph:
                 graph.add(factor)
         return graph
 
-    def values(self, poses=None) -> gtsam.Values:
-        """Initial values (or ``poses (n_keys, 3)``) of every key pose."""
+    def values(self, poses=None, calibration=None) -> gtsam.Values:
+        """Initial values (or ``poses (n_keys, 3)``) of every key pose, and of the calibration
+        (default its prior mean) when the graph holds it."""
         values = gtsam.Values()
         for key, pose in zip(self.keys, self.initial if poses is None else poses, strict=True):
             values.insert(key, gtsam.Pose2(*pose))
+        if self.calibrated:
+            values.insert(CALIBRATION, np.asarray(
+                self.calibration_mean if calibration is None else calibration, float))
         return values
 
     def unconstrained(self) -> list[list[int]]:

@@ -22,8 +22,9 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.graph.calibration import CALIBRATION, to_world, world_covariance, world_jacobian
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import check_fix_covariance, compose, propagate, tangent_to_world
+from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
 from tangraph.graph.fixes import (
     FixOutcome,
     failed,
@@ -36,44 +37,48 @@ from tangraph.graph.fixes import (
 from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix
-from tangraph.sensors import DeadReckoningModel, odometry
+from tangraph.sensors import NavigationModel, odometry
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["GraphNavigator", "navigate_online", "survey_dr_model"]
+__all__ = ["GraphNavigator", "navigate_online", "survey_model"]
 
 log = logging.getLogger(__name__)
 
 
-def survey_dr_model(survey: Survey, dr_model: DeadReckoningModel | None) -> DeadReckoningModel:
-    """``dr_model``, or the one a simulated survey records in ``meta["settings"]["dead_reckoning"]``."""
-    if dr_model is not None:
-        if not isinstance(dr_model, DeadReckoningModel):
-            raise TangraphError(f"dr_model must be a DeadReckoningModel, got {type(dr_model).__name__}")
-        return dr_model
-    try:
-        settings = survey.meta["settings"]["dead_reckoning"]
-    except (KeyError, TypeError):
-        raise TangraphError(
-            "this survey does not record its dead-reckoning error model (meta['settings']"
-            "['dead_reckoning']); pass dr_model=DeadReckoningModel(...) with the INS/DVL's errors"
-        ) from None
-    try:
-        return DeadReckoningModel(**settings)
-    except TypeError as exc:
-        raise TangraphError(f"survey meta['settings']['dead_reckoning'] is not a DR model: {exc}") from None
+def survey_model(survey: Survey, model: NavigationModel | None) -> NavigationModel:
+    """``model``, or the one of a simulated survey (:meth:`NavigationModel.from_survey`)."""
+    if model is None:
+        return NavigationModel.from_survey(survey)
+    if not isinstance(model, NavigationModel):
+        raise TangraphError(f"model must be a NavigationModel, got {type(model).__name__}")
+    return model
+
+
+def _joint_to_world_frame(psi: float, joint: np.ndarray) -> np.ndarray:
+    """A 5 x 5 covariance of (pose tangent, c) turned into DR-frame world coordinates."""
+    c, s = np.cos(psi), np.sin(psi)
+    a = np.eye(5)
+    a[:2, :2] = [[c, -s], [s, c]]
+    return a @ joint @ a.T
 
 
 class GraphNavigator:
     """Online navigator: one :meth:`step` per ping, iSAM2 updated at key poses only.
+
+    The key poses are in the DR frame and the graph holds the DR's calibration ``c = (k, b)``
+    (:mod:`tangraph.graph.calibration`); every pose and covariance it reports is in the world
+    frame, mapped with the current estimate of ``c`` and carrying its uncertainty. The
+    calibration variable is never marginalised.
 
     Parameters
     ----------
     survey : Survey
     bathymetry : BathymetryMap
     config : GraphConfig, optional
-    dr_model : DeadReckoningModel, optional
-        The INS/DVL error model; by default the one a simulated survey records.
+    model : NavigationModel, optional
+        What the navigator believes about the DR and the sonar; by default the one of a
+        simulated survey (:meth:`NavigationModel.from_survey`).
 
     Examples
     --------
@@ -84,15 +89,17 @@ class GraphNavigator:
     """
 
     def __init__(self, survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
-                 dr_model: DeadReckoningModel | None = None) -> None:
+                 model: NavigationModel | None = None) -> None:
         self.survey = survey
         self.bathymetry = bathymetry
         self.config = config or GraphConfig()
         if not isinstance(self.config, GraphConfig):
             raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
-        self.dr_model = survey_dr_model(survey, dr_model)
+        self.model = survey_model(survey, model)
+        self.white = self.model.dead_reckoning
         c = self.config
         n = survey.n_pings
+        self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
         self.fix_ends = window_ends(n, c.n_pings, c.spacing)
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
@@ -102,15 +109,16 @@ class GraphNavigator:
         # The previous key of every ping, and the DR increment (and covariance) from it.
         self._prev_key = self.keys[np.searchsorted(self.keys, np.arange(n), side="right") - 1]
         self._prev_key[self.keys[1:]] = self.keys[:-1]
-        self._delta, self._delta_cov = increments(self.dr_model, survey.time, survey.dr_pose,
-                                                  self._prev_key, np.arange(n),
-                                                  scale_noise=c.odometry_scale_noise)
-        self.graph = PoseGraph(c.robust_kernel, c.robust_parameter, c.odometry_min_std,
-                               c.odometry_min_heading_std)
+        self._delta, self._delta_cov = increments(self.white, survey.time, survey.dr_pose,
+                                                  self._prev_key, np.arange(n))
+        std = self.model.calibration_std if c.estimate_calibration else None
+        self.graph = PoseGraph(std, self.model.calibration_prior, self.origin, c.robust_kernel,
+                               c.robust_parameter, c.odometry_min_std, c.odometry_min_heading_std)
         params = gtsam.ISAM2Params()
-        threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the GTSAM keys are plain integers
+        threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the pose keys are plain integers
         threshold.insert(("\x00", np.array([c.relinearize_position, c.relinearize_position,
                                               c.relinearize_threshold])))
+        threshold.insert(("c", np.array([1e-4, c.relinearize_threshold])))
         params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = c.relinearize_skip
         params.enablePartialRelinearizationCheck = True
@@ -119,8 +127,9 @@ class GraphNavigator:
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
         self.index = -1  # last ping processed
-        self._key_pose = np.zeros(3)
-        self._key_cov = np.zeros((3, 3))
+        self._key_pose = np.zeros(3)  # DR frame
+        self._key_joint = np.zeros((5, 5))  # (pose in DR-frame world coordinates, c)
+        self.calibration = self.model.calibration_prior.copy()
         self.pose = np.full((n, 3), np.nan)
         self.covariance = np.full((n, 3, 3), np.nan)
         self.fixes: list[dict] = []
@@ -129,13 +138,23 @@ class GraphNavigator:
         self.tap_times: list[float] = []
 
     # -- one step ------------------------------------------------------------------------------
-    def predicted(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Pose and world covariance of ping ``k`` from the latest key estimate and the DR increment."""
+    def predicted_frame(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """DR-frame pose of ping ``k`` and its joint covariance with the calibration ``(5, 5)``,
+        from the latest key estimate and the DR increment."""
         return (compose(self._key_pose, self._delta[k]),
-                propagate(self._key_pose, self._key_cov, self._delta[k], self._delta_cov[k]))
+                propagate_joint(self._key_pose, self._key_joint, self._delta[k], self._delta_cov[k]))
+
+    def predicted(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """World pose and covariance of ping ``k`` from the latest key estimate and the DR increment."""
+        pose, joint = self.predicted_frame(k)
+        return self._world(pose, joint)
+
+    def _world(self, pose, joint) -> tuple[np.ndarray, np.ndarray]:
+        return (to_world(pose, self.calibration, self.origin),
+                world_covariance(pose, joint, self.calibration, self.origin))
 
     def step(self, fix: TapFix | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Process the next ping; returns its pose ``(3,)`` and world covariance ``(3, 3)``.
+        """Process the next ping; returns its world pose ``(3,)`` and covariance ``(3, 3)``.
 
         Parameters
         ----------
@@ -161,21 +180,33 @@ class GraphNavigator:
         return self.pose[k].copy(), self.covariance[k].copy()
 
     def _start(self, fix: TapFix | None) -> None:
-        c, dr = self.config, self.survey.dr_pose[0]
-        heading_std = float(np.hypot(c.initial_heading_std, self.dr_model.heading_bias))
-        cov0 = np.diag([c.initial_position_std**2, c.initial_position_std**2, heading_std**2])
+        dr = self.survey.dr_pose[0]
+        m = self.model
+        heading_std = max(m.heading_noise, self.config.odometry_min_heading_std)
+        if not self.config.estimate_calibration:
+            heading_std = float(np.hypot(heading_std, m.heading_bias_std))
         self.graph.add_pose(0, self.survey.time[0], dr)
-        self._new_factors.add(self.graph.add_pose_prior(0, dr, cov0))
+        for factor in self.graph.add_start(0, dr, m.initial_position_std, heading_std):
+            self._new_factors.add(factor)
         self._new_values.insert(0, gtsam.Pose2(*dr))
-        self._add_fix(0, dr, cov0, fix)
+        if self.graph.calibrated:
+            self._new_factors.add(self.graph._factors["prior"][0])
+            self._new_values.insert(CALIBRATION, self.model.calibration_prior)
+        joint = np.zeros((5, 5))
+        joint[:2, :2] = np.eye(2) * m.initial_position_std**2
+        joint[2, 2] = heading_std**2
+        if self.graph.calibrated:
+            joint[3:, 3:] = np.diag(m.calibration_std**2)
+        self._add_fix(0, dr, joint, fix)
         self._update(0)
         self._rebase(0)
 
-    def _add_fix(self, k: int, pose, cov, fix: TapFix | None) -> None:
-        """Make (or take) the fix of ping ``k``, judge it, and add it to the new factors if accepted."""
+    def _add_fix(self, k: int, pose, joint, fix: TapFix | None) -> None:
+        """Make (or take) the fix of ping ``k`` (DR-frame ``pose`` and its ``joint`` covariance),
+        judge it, and add it to the new factors if accepted."""
         if fix is None and not self._is_end[k]:
             return
-        outcome = self._judge(k, pose, cov, fix)
+        outcome = self._judge(k, pose, joint, fix)
         self.fixes.append(outcome.record)
         if outcome.accepted:
             fixed = outcome.fix
@@ -183,11 +214,11 @@ class GraphNavigator:
 
     def _key_step(self, k: int, fix: TapFix | None) -> None:
         prev = self.graph.keys[-1]
-        pose, cov = self.predicted(k)
+        pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
         self._new_values.insert(k, gtsam.Pose2(*pose))
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k]))
-        self._add_fix(k, pose, cov, fix)
+        self._add_fix(k, pose, joint, fix)
         self._update(k)
         self._rebase(k)
 
@@ -203,23 +234,24 @@ class GraphNavigator:
         if idx.size:
             self._prev_key[idx] = k
             self._delta[idx], self._delta_cov[idx] = increments(
-                self.dr_model, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx,
-                scale_noise=self.config.odometry_scale_noise)
+                self.white, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx)
 
-    def _judge(self, k: int, pose, cov, fix: TapFix | None) -> FixOutcome:
+    def _judge(self, k: int, pose, joint, fix: TapFix | None) -> FixOutcome:
+        world, cov = self._world(pose, joint)
         half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
+        laid = self._laid(k, pose)
         if fix is not None:
-            return judge_fix(self._grown(fix), pose, cov, self.config, half_width)
+            return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width)
         started = _time.perf_counter()
         try:
-            made = make_fix(self.survey, self.bathymetry, k, self.config, pose[:2], half_width,
-                            poses=self._laid(k, pose))
+            made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
+                            poses=None if laid is None else to_world(laid, self.calibration, self.origin))
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
             self.tap_times.append(_time.perf_counter() - started)
         try:
-            return judge_fix(self._grown(made), pose, cov, self.config, half_width)
+            return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width)
         except TangraphError as exc:
             log.warning("%s", exc)
             outcome = failed(k, exc, half_width)
@@ -227,19 +259,25 @@ class GraphNavigator:
             return outcome
 
     def _laid(self, k: int, pose) -> np.ndarray | None:
-        """The window's poses laid rigidly from the predicted pose of ping ``k`` with the DR
-        increments: the DR's shape, turned by the graph's heading correction (no tear at the keys
-        inside the window)."""
+        """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
+        DR increments (no tear at the keys inside the window); mapped to the world with the
+        current calibration they are the calibrated DR's patch."""
         first = k - self.config.n_pings + 1
         if first < 0:
             return None
         return compose(pose, odometry(self.survey.dr_pose, k, np.arange(first, k + 1)))
 
-    def _grown(self, fix: TapFix) -> TapFix:
-        if not self.config.window_noise:
-            return fix
+    def _grown(self, fix: TapFix, laid, joint) -> TapFix:
+        """The covariance the graph gives ``fix`` (:func:`~tangraph.graph.fixes.window_noise`)."""
         check_fix_covariance(fix.covariance, fix_name(fix))
-        return window_noise(fix, self.survey, self.dr_model)
+        first, end = int(fix.first), int(fix.index)
+        mid = (first + end) // 2
+        shape = np.zeros((2, 2))
+        if laid is not None and self.graph.calibrated and laid.shape[0] == end - first + 1:
+            jac = world_jacobian(laid[[mid - first, -1]], self.calibration, self.origin)
+            shape = jac[0, :2, 3:] - jac[1, :2, 3:]
+        overlap = self.config.n_pings / self.config.spacing
+        return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 
     def _update(self, k: int) -> None:
         started = _time.perf_counter()
@@ -251,15 +289,28 @@ class GraphNavigator:
         self._new_values = gtsam.Values()
         self._marginalise_old()
         estimate = self.isam.calculateEstimatePose2(k)
-        self._key_pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
-        self._key_pose[2] = self.survey.dr_pose[k, 2] + _wrap(self._key_pose[2] - self.survey.dr_pose[k, 2])
-        self._key_cov = tangent_to_world(self._key_pose[2], self.isam.marginalCovariance(k))
+        pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
+        pose[2] = self.survey.dr_pose[k, 2] + _wrap(pose[2] - self.survey.dr_pose[k, 2])
+        if self.graph.calibrated:
+            self.calibration = np.asarray(self.isam.calculateEstimateVector(CALIBRATION), float)
+            keys = gtsam.KeyVector([k, CALIBRATION])
+            marginal = self.isam.jointMarginalCovariance(keys)
+            joint = np.zeros((5, 5))
+            joint[:3, :3] = marginal.at(k, k)
+            joint[:3, 3:] = marginal.at(k, CALIBRATION)
+            joint[3:, :3] = joint[:3, 3:].T
+            joint[3:, 3:] = marginal.at(CALIBRATION, CALIBRATION)
+        else:
+            joint = np.zeros((5, 5))
+            joint[:3, :3] = self.isam.marginalCovariance(k)
+        self._key_pose, self._key_joint = pose, _joint_to_world_frame(pose[2], joint)
         self.update_times.append(_time.perf_counter() - started)
-        self.pose[k], self.covariance[k] = self._key_pose, self._key_cov
+        self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 
     def _marginalise_old(self) -> None:
         """Keep at most ``2 * isam_window`` key poses in iSAM2: marginalise the oldest ones (leaves
-        of the Bayes tree of a chain), so that the work per update stays bounded."""
+        of the Bayes tree of a chain), so that the work per update stays bounded. The calibration
+        variable stays."""
         window = self.config.isam_window
         n = len(self.graph.keys)
         if window is None or n - self._oldest <= 2 * window:
@@ -269,7 +320,7 @@ class GraphNavigator:
             leaves.push_back(key)
         try:
             self.isam.marginalizeLeaves(leaves)
-        except RuntimeError as exc:  # not leaves (a graph that is not a chain): keep them
+        except (RuntimeError, IndexError) as exc:  # not leaves (a graph that is not a chain): keep them
             log.debug("could not marginalise key poses: %s", exc)
             return
         self._oldest = n - window
@@ -291,16 +342,23 @@ class GraphNavigator:
             self.step()
         return self
 
+    def calibration_report(self, k: int | None = None) -> dict:
+        """The calibration estimate after ping ``k`` (default the last one processed)."""
+        k = self.index if k is None else k
+        pose, joint = self.predicted_frame(k) if not self._is_key[k] else (self._key_pose, self._key_joint)
+        return calibration_summary(self.calibration, joint, pose, self.survey.dr_pose[k, 2])
+
     def meta(self) -> dict:
-        """``fixes``, their counts, ``key_indices`` and the configuration."""
+        """``fixes``, their counts, ``key_indices``, ``calibration``, the configuration and model."""
         accepted = sum(f["accepted"] for f in self.fixes)
         return {
             "fixes": list(self.fixes),
             "n_fixes_accepted": int(accepted),
             "n_fixes_rejected": len(self.fixes) - int(accepted),
             "key_indices": [int(k) for k in self.graph.keys],
+            "calibration": self.calibration_report(),
             "config": self.config.as_dict(),
-            "dr_model": {k: float(v) for k, v in vars(self.dr_model).items()},
+            "model": self.model.as_dict(),
         }
 
     def track(self) -> Track:
@@ -320,6 +378,24 @@ class GraphNavigator:
         }
         return Track(time=self.survey.time[:done], pose=self.pose[:done], covariance=self.covariance[:done],
                      method="isam2", timings=timings, meta=self.meta())
+
+
+def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
+    """The calibration as a track reports it: ``speed_scale`` and ``heading_bias`` (the constant
+    errors) with their stds, and ``heading_error`` (DR minus true heading at ``pose``: the bias
+    plus the heading walk so far) with its std; ``joint (5, 5)`` is the covariance of the
+    DR-frame ``pose`` and the calibration."""
+    joint = np.asarray(joint, float)
+    error = float(_wrap(dr_heading - (pose[2] - calibration[1])))
+    grad = np.array([0.0, 0.0, -1.0, 0.0, 1.0])
+    return {
+        "speed_scale": float(calibration[0]),
+        "speed_scale_std": float(np.sqrt(max(joint[3, 3], 0.0))),
+        "heading_bias": float(calibration[1]),
+        "heading_bias_std": float(np.sqrt(max(joint[4, 4], 0.0))),
+        "heading_error": error,
+        "heading_error_std": float(np.sqrt(max(grad @ joint @ grad, 0.0))),
+    }
 
 
 def _wrap(angle):
@@ -343,7 +419,7 @@ def _translate(exc: Exception, graph: PoseGraph) -> Exception:
 
 
 def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
-                    dr_model: DeadReckoningModel | None = None, progress: bool = False) -> Track:
+                    model: NavigationModel | None = None, progress: bool = False) -> Track:
     """Online terrain-aided navigation of a survey on a pose graph solved by iSAM2.
 
     Parameters
@@ -351,9 +427,9 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
     survey : Survey
     bathymetry : BathymetryMap
     config : GraphConfig, optional
-    dr_model : DeadReckoningModel, optional
-        The INS/DVL error model; by default the one a simulated survey records in
-        ``meta["settings"]["dead_reckoning"]`` (a TangraphError asks for one otherwise).
+    model : NavigationModel, optional
+        By default the one of a simulated survey (:meth:`NavigationModel.from_survey`; a
+        TangraphError asks for one otherwise).
     progress : bool
         Show a progress bar.
 
@@ -364,9 +440,11 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         ``total``, ``per_step``, ``per_step_p99`` (whole steps, TAP included), ``update_mean``,
         ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``meta`` has
         ``fixes`` (one dict per window: ``index``, ``north``, ``east``, ``cov_nn``, ``cov_ne``,
-        ``cov_ee`` (the covariance given to the graph, TAP's grown by
-        ``GraphConfig.window_noise``), ``accepted``, ``reason`` (``"accepted"``, ``"gate"``,
+        ``cov_ee`` (the covariance given to the graph: TAP's, counted once per ping where windows
+        overlap, grown by what is uncertain of the calibrated patch), ``accepted``, ``reason``
+        (``"accepted"``, ``"gate"``,
         ``"multimodal"``, ``"uninformative"``, ``"match failed: ..."``), ``nis`` and
-        ``half_width``), ``n_fixes_accepted``, ``n_fixes_rejected`` and ``key_indices``.
+        ``half_width``), ``n_fixes_accepted``, ``n_fixes_rejected``, ``key_indices`` and
+        ``calibration`` (:func:`calibration_summary` at the last ping).
     """
-    return GraphNavigator(survey, bathymetry, config, dr_model=dr_model).run(progress).track()
+    return GraphNavigator(survey, bathymetry, config, model=model).run(progress).track()

@@ -23,14 +23,15 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.graph.calibration import CALIBRATION, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import compose, inverse_increment_covariance, propagate, tangent_to_world
+from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
 from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph, increments
-from tangraph.graph.online import GraphNavigator, _translate, _wrap
+from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError
-from tangraph.sensors import DeadReckoningModel, odometry
+from tangraph.sensors import DeadReckoningModel, NavigationModel, odometry
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -41,11 +42,16 @@ log = logging.getLogger(__name__)
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class SmootherSolution:
-    """Key poses ``(n, 3)`` and world covariances ``(n, 3, 3)`` (NaN if not computed) of a batch solve."""
+    """A batch solve: key poses ``(n, 3)`` (in the DR frame when the graph is calibrated), their
+    joint covariances with the calibration ``(n, 5, 5)`` (pose in world coordinates of its frame,
+    then ``(k, b)``; NaN if not computed), the ``calibration (2,)`` and its covariance ``(2, 2)``
+    (zeros when the graph has no calibration variable)."""
 
     keys: np.ndarray
     pose: np.ndarray
     covariance: np.ndarray
+    calibration: np.ndarray
+    calibration_cov: np.ndarray
     iterations: int
     error: float
     timings: dict
@@ -67,7 +73,7 @@ def _optimizer(graph, values, config: GraphConfig, ordering):
 
 
 def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
-                      initial=None) -> SmootherSolution:
+                      initial=None, calibration=None) -> SmootherSolution:
     """Solve a whole :class:`~tangraph.graph.keyposes.PoseGraph` (METIS ordering).
 
     Parameters
@@ -77,6 +83,8 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
         ``optimizer``, ``max_iterations`` and ``smoother_covariance`` are used.
     initial : array_like (n_keys, 3), optional
         Initial key poses (default: those stored in the graph).
+    calibration : array_like (2,), optional
+        Initial calibration (default: its prior mean).
 
     Raises
     ------
@@ -98,7 +106,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     """
     config = config or GraphConfig()
     graph.check_determined()
-    factors, values = graph.factor_graph(), graph.values(initial)
+    factors, values = graph.factor_graph(), graph.values(initial, calibration)
     started = _time.perf_counter()
     try:
         ordering = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
@@ -112,32 +120,77 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     if initial is None:
         initial = np.asarray(graph.initial)
     pose[:, 2] = np.asarray(initial)[:, 2] + _wrap(pose[:, 2] - np.asarray(initial)[:, 2])
-    cov = np.full((keys.size, 3, 3), np.nan)
+    calib = np.zeros(2)
+    if graph.calibrated:
+        calib = np.asarray(result.atVector(CALIBRATION), float)
+    cov = np.full((keys.size, 5, 5), np.nan)
+    calib_cov = np.zeros((2, 2))
     if config.smoother_covariance == "all":
-        cov = tangent_to_world(pose[:, 2], _marginals(factors, result, keys, ordering))
+        cov, calib_cov = _marginals(factors, result, keys, ordering, graph.calibrated)
+        cov = _joint_to_world_frame(pose[:, 2], cov)
     done = _time.perf_counter()
-    return SmootherSolution(keys, pose, cov, int(optimizer.iterations()), float(factors.error(result)),
-                            {"solve": solved - started, "marginals": done - solved})
+    timings = {"solve": solved - started, "marginals": done - solved}
+    return SmootherSolution(keys, pose, cov, calib, calib_cov, int(optimizer.iterations()),
+                            float(factors.error(result)), timings)
 
 
-def _marginals(factors, result, keys, ordering) -> np.ndarray:
-    """Marginal covariances (tangent) of ``keys`` from one METIS-ordered multifrontal elimination."""
+def _marginals(factors, result, keys, ordering, calibrated: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Joint covariances (tangent, then ``c``) of every key pose with the calibration, and that of
+    the calibration, from one METIS-ordered elimination of the linearised graph.
+
+    The pose blocks are the tree's marginals; the cross-covariance of a pose with ``c`` is
+    ``E Sigma_cc``, ``E`` the sensitivity of the pose's conditional mean to ``c``, which two more
+    solves of the linear system with ``c`` pinned to a unit step give."""
     linear = factors.linearize(result)
     try:
         tree = linear.eliminateMultifrontal(ordering)
     except RuntimeError as exc:
         raise TangraphError(f"marginal covariances failed: {str(exc).strip().splitlines()[0]}") from None
-    return np.array([tree.marginalCovariance(int(k)) for k in keys])
+    out = np.zeros((keys.size, 5, 5))
+    out[:, :3, :3] = np.array([tree.marginalCovariance(int(k)) for k in keys])
+    if not calibrated:
+        return out, np.zeros((2, 2))
+    calib_cov = np.asarray(tree.marginalCovariance(CALIBRATION), float)
+    base = _pinned_solution(linear, ordering, keys, np.zeros(2))
+    sensitivity = np.stack([_pinned_solution(linear, ordering, keys, e) - base for e in np.eye(2)], axis=-1)
+    cross = sensitivity @ calib_cov
+    out[:, :3, 3:] = cross
+    out[:, 3:, :3] = np.swapaxes(cross, 1, 2)
+    out[:, 3:, 3:] = calib_cov
+    return out, calib_cov
 
 
-def dense_track(survey: Survey, dr_model: DeadReckoningModel, keys, key_pose, key_cov, *,
-                scale_noise: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Poses ``(K, 3)`` and world covariances ``(K, 3, 3)`` at every ping from smoothed key poses.
+def _pinned_solution(linear, ordering, keys, step) -> np.ndarray:
+    """The linear system's solution for every key pose ``(n, 3)`` with ``c``'s step pinned."""
+    pinned = linear.clone()
+    weight = 1e8
+    pinned.add(gtsam.JacobianFactor(CALIBRATION, weight * np.eye(2), weight * np.asarray(step, float),
+                                    gtsam.noiseModel.Unit.Create(2)))
+    delta = pinned.optimize(ordering)
+    return np.array([delta.at(int(k)) for k in keys])
+
+
+def _joint_to_world_frame(psi, joint) -> np.ndarray:
+    """Joint covariances ``(..., 5, 5)`` of (pose tangent, c) in DR-frame world coordinates."""
+    psi = np.asarray(psi, float)
+    a = np.zeros((*psi.shape, 5, 5))
+    a[..., :, :] = np.eye(5)
+    c, s = np.cos(psi), np.sin(psi)
+    a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1] = c, -s, s, c
+    return a @ joint @ np.swapaxes(a, -1, -2)
+
+
+def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSolution, origin
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """World poses ``(K, 3)`` and covariances ``(K, 3, 3)`` at every ping from a smoothed solution.
 
     Between keys ``a < b`` a ping is predicted forward from ``a`` and backward from ``b`` with the
-    DR increments; poses and covariances are blended with weight ``(t - t_a) / (t_b - t_a)``.
+    DR increments (noise of the white DR model ``white``); DR-frame poses and joint covariances
+    with the calibration are blended with weight ``(t - t_a) / (t_b - t_a)`` and mapped to the
+    world with the smoothed calibration.
     """
-    keys = np.asarray(keys, np.int64)
+    keys = np.asarray(solution.keys, np.int64)
+    key_pose, key_cov = solution.pose, np.where(np.isfinite(solution.covariance), solution.covariance, 0.0)
     t, dr = survey.time, survey.dr_pose
     ping = np.arange(survey.n_pings)
     n_key = np.searchsorted(keys, ping, side="right") - 1
@@ -145,43 +198,52 @@ def dense_track(survey: Survey, dr_model: DeadReckoningModel, keys, key_pose, ke
     b = keys[np.minimum(n_key + 1, keys.size - 1)]
     b = np.where(a == ping, ping, b)
     ia, ib = n_key, np.searchsorted(keys, b)
-    fwd, fwd_q = increments(dr_model, t, dr, a, ping, scale_noise=scale_noise)
-    back_q = increments(dr_model, t, dr, ping, b, scale_noise=scale_noise)[1]
+    fwd, fwd_q = increments(white, t, dr, a, ping)
+    back_q = increments(white, t, dr, ping, b)[1]
     back = odometry(dr, b, ping)
     back_q = inverse_increment_covariance(back, back_q)
     pose_f, pose_b = compose(key_pose[ia], fwd), compose(key_pose[ib], back)
-    cov_f = propagate(key_pose[ia], key_cov[ia], fwd, fwd_q)
-    cov_b = propagate(key_pose[ib], key_cov[ib], back, back_q)
+    cov_f = propagate_joint(key_pose[ia], key_cov[ia], fwd, fwd_q)
+    cov_b = propagate_joint(key_pose[ib], key_cov[ib], back, back_q)
     span = t[b] - t[a]
     w = np.divide(t - t[a], span, out=np.zeros_like(t), where=span > 0)
     pose = pose_f + w[:, None] * np.column_stack([pose_b[:, :2] - pose_f[:, :2],
                                                   _wrap(pose_b[:, 2] - pose_f[:, 2])])
-    cov = (1 - w)[:, None, None] * cov_f + w[:, None, None] * cov_b
-    return pose, cov
+    joint = (1 - w)[:, None, None] * cov_f + w[:, None, None] * cov_b
+    return (to_world(pose, solution.calibration, origin),
+            world_covariance(pose, joint, solution.calibration, origin))
 
 
-def _rematch(nav: GraphNavigator, pose, cov, previous: list[dict]) -> tuple[list[dict], list, bool]:
-    """Fixes re-made around the smoothed track; returns records, accepted fixes and whether they moved."""
+def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previous: list[dict]
+             ) -> tuple[list[dict], list, bool]:
+    """Fixes re-made around the smoothed world track; returns records, accepted fixes and whether
+    they moved."""
     config = nav.config
     records, accepted = [], []
     changed = False
     before = {r["index"]: r for r in previous}
+    joint = np.zeros((5, 5))
+    joint[3:, 3:] = solution.calibration_cov
+    nav.calibration = solution.calibration
     for end in nav.fix_ends:
+        end = int(end)
         half_width = search_half_width(config, nav.bathymetry, cov[end, :2, :2])
+        window = slice(end - config.n_pings + 1, end + 1)
         try:
-            fix = make_fix(nav.survey, nav.bathymetry, int(end), config, pose[end, :2], half_width,
-                           poses=pose[int(end) - config.n_pings + 1 : int(end) + 1])
-            outcome = judge_fix(nav._grown(fix), pose[end], cov[end], config, half_width)
+            fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
+                           poses=pose[window])
+            laid = None if window.start < 0 else _frame_poses(pose[window], solution.calibration, nav.origin)
+            outcome = judge_fix(nav._grown(fix, laid, joint), pose[end], cov[end], config, half_width)
         except MatchingError as exc:
-            outcome = failed(int(end), exc, half_width)
+            outcome = failed(end, exc, half_width)
         except TangraphError as exc:
-            outcome = failed(int(end), exc, half_width)
+            outcome = failed(end, exc, half_width)
             outcome.record["reason"] = f"invalid covariance: {exc}"
         records.append(outcome.record)
         if outcome.accepted:
-            accepted.append((int(end), np.asarray(outcome.fix.position, float),
+            accepted.append((end, np.asarray(outcome.fix.position, float),
                              np.asarray(outcome.fix.covariance, float)))
-        old = before.get(int(end))
+        old = before.get(end)
         if old is None or old["accepted"] != outcome.record["accepted"]:
             changed = True
         elif outcome.accepted and np.hypot(old["north"] - outcome.record["north"],
@@ -190,22 +252,33 @@ def _rematch(nav: GraphNavigator, pose, cov, previous: list[dict]) -> tuple[list
     return records, accepted, changed
 
 
+def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
+    """DR-frame poses of world poses (the inverse of :func:`~tangraph.graph.calibration.to_world`)."""
+    k, b = float(calibration[0]), float(calibration[1])
+    c, s = np.cos(b), np.sin(b)
+    d = np.asarray(world_pose, float)[..., :2] - origin
+    out = np.array(world_pose, float)
+    out[..., :2] = origin + (1.0 + k) * (d @ np.array([[c, -s], [s, c]]).T)
+    out[..., 2] = out[..., 2] + b
+    return out
+
+
 def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
-                  dr_model: DeadReckoningModel | None = None, progress: bool = False) -> Track:
+                  model: NavigationModel | None = None, progress: bool = False) -> Track:
     """Re-navigate a recorded survey with a batch smoother over all key poses and fixes.
 
     A forward pass of :class:`~tangraph.graph.GraphNavigator` makes and gates the fixes; the whole
-    graph is then solved at once (:func:`smooth_pose_graph`), with optional re-matching around the
-    smoothed track (``GraphConfig.rematch_iterations``), and the ping-rate track is recovered
-    from the key poses and the DR (:func:`dense_track`).
+    graph, the DR's calibration included, is then solved at once (:func:`smooth_pose_graph`),
+    with optional re-matching around the smoothed track (``GraphConfig.rematch_iterations``),
+    and the ping-rate track is recovered from the key poses and the DR (:func:`dense_track`).
 
     Parameters
     ----------
     survey : Survey
     bathymetry : BathymetryMap
     config : GraphConfig, optional
-    dr_model : DeadReckoningModel, optional
-        By default the one a simulated survey records (a TangraphError asks for one otherwise).
+    model : NavigationModel, optional
+        By default the one of a simulated survey (a TangraphError asks for one otherwise).
     progress : bool
         Show a progress bar for the forward pass.
 
@@ -213,38 +286,47 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     -------
     Track
         ``method="smoother"``; ``meta`` has ``fixes``, ``n_fixes_accepted``, ``n_fixes_rejected``,
-        ``key_indices``, ``rematch_iterations`` (re-matches run) and ``optimizer_iterations``.
+        ``key_indices``, ``calibration`` (smoothed: ``speed_scale``, ``heading_bias``,
+        ``heading_error`` at the last ping, with stds), ``rematch_iterations`` (re-matches run)
+        and ``optimizer_iterations``.
     """
     started = _time.perf_counter()
-    nav = GraphNavigator(survey, bathymetry, config, dr_model=dr_model).run(progress)
+    nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
     forward = _time.perf_counter()
     config = nav.config
     graph = nav.graph
-    solution = smooth_pose_graph(graph, config, initial=nav.pose[graph.keys])
+    initial = _frame_poses(nav.pose[graph.keys], nav.calibration, nav.origin) if graph.calibrated \
+        else nav.pose[graph.keys]
+    solution = smooth_pose_graph(graph, config, initial=initial, calibration=nav.calibration)
     records = nav.fixes
-    dense = dense_track(survey, nav.dr_model, solution.keys, solution.pose, _usable(solution.covariance),
-                        scale_noise=config.odometry_scale_noise)
+    dense = dense_track(survey, nav.white, solution, nav.origin)
     rounds = 0
     for rounds in range(1, config.rematch_iterations + 1):
-        new_records, accepted, changed = _rematch(nav, dense[0], dense[1], records)
+        new_records, accepted, changed = _rematch(nav, dense[0], dense[1], solution, records)
         if not changed:
             rounds -= 1
             break
         records = new_records
         graph = graph.with_fixes(accepted)
-        solution = smooth_pose_graph(graph, config, initial=solution.pose)
-        dense = dense_track(survey, nav.dr_model, solution.keys, solution.pose, _usable(solution.covariance),
-                            scale_noise=config.odometry_scale_noise)
+        solution = smooth_pose_graph(graph, config, initial=solution.pose, calibration=solution.calibration)
+        dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("re-match %d: %d fixes accepted", rounds, len(accepted))
     pose, cov = dense
     if config.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
     n_accepted = sum(r["accepted"] for r in records)
     meta = nav.meta()
+    last = survey.n_pings - 1
+    joint = np.zeros((5, 5))
+    joint[3:, 3:] = solution.calibration_cov
+    if config.smoother_covariance == "all" and solution.keys[-1] == last:
+        joint = solution.covariance[-1]
     meta.update({
         "fixes": records,
         "n_fixes_accepted": int(n_accepted),
         "n_fixes_rejected": len(records) - int(n_accepted),
+        "calibration": calibration_summary(solution.calibration, joint, solution.pose[-1],
+                                           survey.dr_pose[last, 2]),
         "rematch_iterations": int(rounds),
         "optimizer_iterations": solution.iterations,
         "final_error": solution.error,
@@ -253,9 +335,3 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     timings = {"total": total, "per_step": total / survey.n_pings, "forward_pass": forward - started,
                **solution.timings}
     return Track(time=survey.time, pose=pose, covariance=cov, method="smoother", timings=timings, meta=meta)
-
-
-def _usable(cov: np.ndarray) -> np.ndarray:
-    """Covariances for re-matching and the dense track; zeros stand in for ones not computed."""
-    return np.where(np.isfinite(cov), cov, 0.0)
-

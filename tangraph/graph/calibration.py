@@ -1,0 +1,125 @@
+"""The DR's constant errors in the graph: the DR frame, the calibration variable and its factors.
+
+The dead reckoning has two constant errors (:class:`~tangraph.sensors.NavigationModel`): the DVL
+reads ``1 + k`` times the true speed and the DR heading is the true heading plus ``b``. Each DR
+step is then the true step turned by ``b`` and stretched by ``1 + k``, so the whole DR track is
+the true track mapped by one similarity about the start ``o`` (the first DR position)::
+
+    p' = o + (1 + k) R(b) (p - o),     psi' = psi + b.
+
+The graph's key poses live in this *DR frame* (primed): there the DR increments are exact, so the
+odometry factors are GTSAM's own ``BetweenFactorPose2`` on the DR increments, with the white DR
+noise only. The calibration ``c = (k, b)`` is one variable (a 2-vector, key :data:`CALIBRATION`)
+with a Gaussian prior; every factor that measures the *world* (a terrain fix, the start
+position) maps the pose back with the current ``c``::
+
+    p = o + R(-b) (p' - o) / (1 + k),   psi = psi' - b,
+
+so it depends on the pose and on ``c`` (:func:`world_position_factor`, analytic Jacobians,
+checked against numerical derivatives in the tests). This is exact, not a linearisation: the
+increments of every odometry factor depend on ``c`` only through this map. A *joint* state
+``y = (north', east', psi', k, b)`` (the pose in DR-frame world coordinates) and its 5 x 5
+covariance carry the calibration's uncertainty to every pose the graph reports
+(:func:`to_world`, :func:`world_jacobian`).
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import gtsam
+import numpy as np
+
+from tangraph.graph.factors import robust_noise
+
+__all__ = [
+    "CALIBRATION",
+    "calibration_prior_factor",
+    "to_world",
+    "world_covariance",
+    "world_jacobian",
+    "world_position",
+    "world_position_factor",
+]
+
+CALIBRATION = int(gtsam.symbol("c", 0))  #: GTSAM key of the calibration ``(k, b)``
+
+_J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
+
+
+def _rot(a) -> np.ndarray:
+    a = np.asarray(a, float)
+    c, s = np.cos(a), np.sin(a)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
+
+
+def world_position(position, calibration, origin) -> np.ndarray:
+    """World positions ``(..., 2)`` of DR-frame positions ``(..., 2)`` under ``c = (k, b)``."""
+    k, b = float(calibration[0]), float(calibration[1])
+    d = np.asarray(position, float) - np.asarray(origin, float)
+    return np.asarray(origin, float) + d @ _rot(-b).T / (1.0 + k)
+
+
+def to_world(pose, calibration, origin) -> np.ndarray:
+    """World poses ``(..., 3)`` of DR-frame poses ``(..., 3)`` under ``c = (k, b)``."""
+    pose = np.asarray(pose, float)
+    out = np.empty_like(pose)
+    out[..., :2] = world_position(pose[..., :2], calibration, origin)
+    out[..., 2] = pose[..., 2] - float(calibration[1])
+    return out
+
+
+def world_jacobian(pose, calibration, origin) -> np.ndarray:
+    """Jacobians ``(..., 3, 5)`` of :func:`to_world` with respect to ``y = (north', east', psi',
+    k, b)``."""
+    pose = np.asarray(pose, float)
+    k, b = float(calibration[0]), float(calibration[1])
+    d = pose[..., :2] - np.asarray(origin, float)
+    a = _rot(-b) / (1.0 + k)
+    jac = np.zeros((*pose.shape[:-1], 3, 5))
+    jac[..., :2, :2] = a
+    jac[..., :2, 3] = -(d @ a.T) / (1.0 + k)
+    jac[..., :2, 4] = -(d @ (a @ _J).T)
+    jac[..., 2, 2] = 1.0
+    jac[..., 2, 4] = -1.0
+    return jac
+
+
+def world_covariance(pose, joint_cov, calibration, origin) -> np.ndarray:
+    """World covariances ``(..., 3, 3)`` of poses whose joint state ``y`` has covariance
+    ``joint_cov (..., 5, 5)`` (DR-frame world coordinates)."""
+    jac = world_jacobian(pose, calibration, origin)
+    return jac @ np.asarray(joint_cov, float) @ np.swapaxes(jac, -1, -2)
+
+
+def _position_error(origin, measured, factor, values, jacobians):
+    """Error ``world position - measured`` of a pose (key 0) under the calibration (key 1)."""
+    keys = factor.keys()
+    pose = values.atPose2(keys[0])
+    k, b = values.atVector(keys[1])
+    t = np.array([pose.x(), pose.y()])
+    a = _rot(-b) / (1.0 + k)
+    d = t - origin
+    error = origin + a @ d - measured
+    if jacobians is not None:
+        h_pose = np.zeros((2, 3))
+        h_pose[:, :2] = a @ _rot(pose.theta())  # GTSAM moves a Pose2's position by R(theta) dt
+        jacobians[0] = h_pose
+        jacobians[1] = np.column_stack([-(a @ d) / (1.0 + k), -(a @ _J @ d)])
+    return error
+
+
+def world_position_factor(pose_key: int, position, cov, origin, kernel: str = "none",
+                          parameter: float = 1.0) -> gtsam.CustomFactor:
+    """A factor on a DR-frame pose and the calibration: the pose's world position is ``position``
+    with covariance ``cov (2, 2)`` (world frame), optionally under a robust kernel."""
+    measured = np.asarray(position, float).copy()
+    noise = robust_noise(np.asarray(cov, float), kernel, parameter)
+    return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION],
+                              partial(_position_error, np.asarray(origin, float).copy(), measured))
+
+
+def calibration_prior_factor(mean, std) -> gtsam.NonlinearFactor:
+    """The Gaussian prior of ``c = (k, b)``."""
+    return gtsam.PriorFactorVector(CALIBRATION, np.asarray(mean, float),
+                                   gtsam.noiseModel.Diagonal.Sigmas(np.asarray(std, float)))
