@@ -1,0 +1,21 @@
+"""Evaluation: metrics of estimated tracks against the truth and the posterior Cramér-Rao bound.
+
+:mod:`tangraph.eval.metrics` compares a :class:`~tangraph.track.Track` with the true poses (RMSE,
+NEES and its chi-square band); :mod:`tangraph.eval.crb` computes the physical limit of a survey,
+the posterior Cramér-Rao bound (PCRB) of its linearised error-state model, to report next to an
+estimator's RMSE. Nothing here touches files.
+"""
+
+from tangraph.eval.crb import CramerRaoBound, bound_rmse, metrics_with_bound, posterior_crb
+from tangraph.eval.metrics import anees_band, format_figure, position_nees, track_metrics
+
+__all__ = [
+    "CramerRaoBound",
+    "anees_band",
+    "bound_rmse",
+    "format_figure",
+    "metrics_with_bound",
+    "position_nees",
+    "posterior_crb",
+    "track_metrics",
+]

@@ -1,0 +1,388 @@
+"""The posterior Cramér-Rao bound (PCRB) of a survey with truth: the limit of any estimator.
+
+The bound is that of the survey's error-state model linearised at the true track (the standard
+Bayesian bound of terrain-aided navigation): a linear-Gaussian model, so its bound is the
+covariance of the exact Kalman filter (``kind="filter"``, the recursive PCRB: every ping's bound
+from the soundings up to it) or of the Rauch-Tung-Striebel smoother (``kind="smoother"``: the
+inverse of the full information of odometry, calibration and tide priors and every sounding).
+
+The error state
+---------------
+The dead-reckoning (DR) error of ping ``k`` is ``dp_k = DR position - true position`` (north,
+east). With the DR simulated as in :func:`tangraph.sensors.simulate_dead_reckoning` (the true
+world step ``d_k = p_{k+1} - p_k`` seen in the true body frame, read by the DVL as ``(1 + s)``
+times itself plus white noise, and turned back into the world with the DR heading
+``psi_k + e_k``), and ``R(psi + e) = R(psi) (I + e J)`` to first order::
+
+    dp_{k+1} = dp_k + s d_k + e_k J d_k + v_k,    e_k = b + w_k + n_k,    J = [[0, -1], [1, 0]]
+
+(``J d = (-d_east, d_north)`` is ``d`` turned 90 degrees to starboard, ``d R(psi) / d psi =
+R(psi) J``), where ``s`` is the speed scale, ``b`` the heading bias, ``w_k`` the heading
+walk (``w_0 = 0``, ``w_{k+1} = w_k + N(0, heading_walk^2 dt_k)``), ``n_k`` the white heading error
+of ping ``k`` (``N(0, heading_noise^2)``, fresh at every ping) and ``v_k ~ N(0, speed_noise^2
+dt_k^2 I)`` (isotropic, so its rotation does not matter). Terms of second order (``s e``,
+``e v``, ``e^2``) are dropped. The state of ping ``k`` is ``(dp_k, w_k, n_k, s, b, tide)``; the
+walk and white states are left out when their std is zero, the tide when its prior std is zero.
+The prior at the first ping is ``dp_0 ~ N(0, initial_position_std^2 I)``, ``s``, ``b`` and the tide
+of their prior stds, ``w_0 = 0``.
+
+A sounding of ping ``k`` with body offset ``o`` lies at ``r = R(psi_k) o`` from the true position
+and measures ``z = h(p_k + r) + tide + noise`` (``noise ~ N(0, measurement_std^2)``). Laid from the
+DR pose it would be at ``p_k + r + dp_k + e_k J r``, so, with ``g`` the map gradient at the TRUE
+footprint, its Jacobian is ``-g`` on ``dp_k``, ``-g . J r`` on each of ``b``, ``w_k``, ``n_k``,
+``1`` on the tide and ``0`` on ``s``. Soundings without a depth (NaN) or whose true footprint is
+off the map (NaN gradient) are left out. The ``B`` soundings of a ping enter as one information
+update ``sum_j H_j^T H_j / sigma^2`` of rank at most 4 (in the features ``g_n, g_e, g . J r, 1``).
+
+Not modelled: DVL dropouts (a survey does not record when they happened) and the map's own
+error correlation between soundings (``map_std`` is added to every sounding independently).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Literal
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.navigation_model import NavigationModel
+from tangraph.survey import Survey
+
+__all__ = ["BoundKind", "CramerRaoBound", "bound_rmse", "metrics_with_bound", "posterior_crb"]
+
+logger = logging.getLogger(__name__)
+
+BoundKind = Literal["smoother", "filter"]
+_KINDS = ("smoother", "filter")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class CramerRaoBound:
+    """The posterior Cramér-Rao bound of a survey (from :func:`posterior_crb`).
+
+    Parameters
+    ----------
+    position_cov : ndarray, shape (K, 2, 2)
+        Bound on the covariance of every ping's horizontal ``(north, east)`` position, m^2.
+    calibration_cov : ndarray, shape (2, 2)
+        Bound on the covariance of the constant DR errors ``(speed scale, heading bias)`` given
+        the whole survey (the filter's at the last ping; the smoother's is the same).
+    tide_std : float
+        Bound on the std of the tide given the whole survey, m.
+    kind : {"smoother", "filter"}
+        The smoother (all soundings) or the filter (soundings up to each ping) bound.
+    n_soundings : int
+        Soundings that entered the bound (with a depth and a true footprint on the map).
+    """
+
+    position_cov: np.ndarray
+    calibration_cov: np.ndarray
+    tide_std: float
+    kind: BoundKind
+    n_soundings: int = 0
+
+    def __post_init__(self) -> None:
+        pos = np.array(self.position_cov, dtype=np.float64)
+        cal = np.array(self.calibration_cov, dtype=np.float64)
+        if pos.ndim != 3 or pos.shape[1:] != (2, 2) or pos.shape[0] < 1:
+            raise TangraphError(f"CramerRaoBound.position_cov must be (K, 2, 2), got {pos.shape}")
+        if cal.shape != (2, 2):
+            raise TangraphError(f"CramerRaoBound.calibration_cov must be (2, 2), got {cal.shape}")
+        if self.kind not in _KINDS:
+            raise TangraphError(f"CramerRaoBound.kind must be one of {_KINDS}, got {self.kind!r}")
+        for name, a in (("position_cov", pos), ("calibration_cov", cal)):
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        object.__setattr__(self, "tide_std", float(self.tide_std))
+        object.__setattr__(self, "n_soundings", int(self.n_soundings))
+
+    @property
+    def n_pings(self) -> int:
+        return int(self.position_cov.shape[0])
+
+    @property
+    def drms(self) -> np.ndarray:
+        """Bound on the horizontal distance RMS of every ping, ``sqrt(trace(position_cov))`` (K,), m."""
+        return np.sqrt(np.maximum(np.trace(self.position_cov, axis1=1, axis2=2), 0.0))
+
+
+def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel, *,
+                  kind: BoundKind = "smoother", order: Literal[1, 3] = 1) -> CramerRaoBound:
+    """Posterior Cramér-Rao bound of a survey's positions, linearised at its true track.
+
+    Parameters
+    ----------
+    survey : Survey
+        A survey with ``true_pose`` (simulated, or a GPS-surveyed ship track).
+    bathymetry : BathymetryMap
+        The map the soundings are matched against; its gradient at the true footprints is the
+        information of each sounding.
+    model : NavigationModel
+        The DR errors, start uncertainty, sounding noise and tide prior (see the module notes for
+        the linearised model and its signs).
+    kind : {"smoother", "filter"}
+        ``"smoother"``: the bound given the whole survey (RTS smoother covariance, the inverse of
+        the full information); ``"filter"``: the recursive bound given the pings up to each one
+        (Kalman filter covariance), the limit of an online estimator.
+    order : {1, 3}
+        Interpolation of the map gradient (bilinear or bicubic), as in
+        :meth:`BathymetryMap.gradient_at`.
+
+    Returns
+    -------
+    CramerRaoBound
+
+    Raises
+    ------
+    TangraphError
+        The survey has no truth, an argument has the wrong type, or ``kind`` is unknown.
+
+    Examples
+    --------
+    A sloped seabed (depth grows northwards) sounded by a vehicle going north, the tide known: the
+    slope pins the north error, while the east error is only bounded by the dead reckoning (with
+    an unknown tide, a plane could not tell a north offset from the tide).
+
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> from tangraph.sensors import NavigationModel
+    >>> from tangraph.survey import Survey
+    >>> axis = np.arange(0.0, 1001.0, 10.0)
+    >>> seabed = BathymetryMap(north=axis, east=axis, depth=20 + 0.05 * axis[:, None] + 0 * axis)
+    >>> t = np.arange(100.0)
+    >>> truth = np.column_stack([100 + 2 * t, 500 + 0 * t, 0 * t])
+    >>> offset = np.tile(np.linspace(-20.0, 20.0, 9), (100, 1))
+    >>> survey = Survey(time=t, dr_pose=truth, vehicle_depth=0 * t, beam_forward=0 * offset,
+    ...                 beam_starboard=offset, beam_depth=25 + 0 * offset, true_pose=truth)
+    >>> bound = posterior_crb(survey, seabed, NavigationModel(tide_std=0.0), kind="filter")
+    >>> np.sqrt(np.diag(bound.position_cov[-1])).round(2).tolist()  # north, east std (m)
+    [0.66, 10.82]
+    """
+    if not isinstance(survey, Survey):
+        raise TangraphError(f"posterior_crb: survey must be a Survey, got {type(survey).__name__}")
+    if survey.true_pose is None:
+        raise TangraphError("posterior_crb: the survey has no true_pose; the bound is linearised at "
+                            "the truth")
+    if not isinstance(bathymetry, BathymetryMap):
+        raise TangraphError(f"posterior_crb: bathymetry must be a BathymetryMap, got "
+                            f"{type(bathymetry).__name__}")
+    if not isinstance(model, NavigationModel):
+        raise TangraphError(f"posterior_crb: model must be a NavigationModel, got {type(model).__name__}")
+    if kind not in _KINDS:
+        raise TangraphError(f"posterior_crb: kind must be one of {_KINDS}, got {kind!r}")
+    if model.dropout_speed_noise > 0:
+        logger.info("posterior_crb: DVL dropouts are not modelled (the survey does not record them)")
+
+    layout = _Layout.of(model)
+    scale = layout.scale(model, survey.time)
+    f, q = _transitions(survey, model, layout)
+    features, n_soundings = _sounding_features(survey, bathymetry, order)
+    factor = _information_factor(features, model.measurement_std, layout)
+    # Work in units of each state's natural spread: dp / initial std, s / its prior std, ...
+    f = f / scale[:, None] * scale[None, :]
+    q = q / np.outer(scale, scale)
+    factor = factor * scale[:, None]
+    p0 = np.diag(layout.prior_variance(model)) / np.outer(scale, scale)
+    filtered, predicted = _forward(p0, f, q, factor)
+    p = filtered if kind == "filter" else _rts(filtered, predicted, f)
+    p = p * np.outer(scale, scale)
+    last = p[-1]
+    cal = last[np.ix_(layout.calibration, layout.calibration)]
+    tide = float(np.sqrt(max(last[layout.tide, layout.tide], 0.0))) if layout.tide is not None else 0.0
+    logger.debug("posterior_crb: %s bound over %d pings and %d soundings", kind, survey.n_pings, n_soundings)
+    return CramerRaoBound(position_cov=p[:, :2, :2], calibration_cov=cal, tide_std=tide, kind=kind,
+                          n_soundings=n_soundings)
+
+
+def bound_rmse(bound: CramerRaoBound, skip: int = 0) -> float:
+    """The bound's horizontal RMSE, ``sqrt(mean over pings of trace(position_cov))``, m.
+
+    The figure to set next to an estimator's position RMSE (``track_metrics(...)["rmse"]``, with
+    the same ``skip``): their ratio ``RMSE / PCRB`` is at least about 1 for any estimator.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "filter")
+    >>> bound_rmse(bound)
+    2.0
+    """
+    if not isinstance(bound, CramerRaoBound):
+        raise TangraphError(f"bound_rmse: bound must be a CramerRaoBound, got {type(bound).__name__}")
+    skip = int(skip)
+    if not 0 <= skip < bound.n_pings:
+        raise TangraphError(f"bound_rmse: skip={skip} leaves no ping of {bound.n_pings}")
+    trace = np.trace(bound.position_cov[skip:], axis1=1, axis2=2)
+    return float(np.sqrt(max(float(np.mean(trace)), 0.0)))
+
+
+def metrics_with_bound(metrics: dict[str, float], bound: CramerRaoBound, *,
+                       skip: int = 0) -> dict[str, float]:
+    """A copy of :func:`~tangraph.eval.track_metrics` figures with ``pcrb`` (the bound's RMSE,
+    :func:`bound_rmse`) and ``rmse_over_pcrb`` added; ``skip`` must be the one the metrics used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "smoother")
+    >>> metrics_with_bound({"rmse": 3.0}, bound)
+    {'rmse': 3.0, 'pcrb': 2.0, 'rmse_over_pcrb': 1.5}
+    """
+    if "rmse" not in metrics:
+        raise TangraphError("metrics_with_bound: the metrics have no 'rmse' (use track_metrics)")
+    pcrb = bound_rmse(bound, skip)
+    ratio = float(metrics["rmse"]) / pcrb if pcrb > 0 else float("inf")
+    return {**metrics, "pcrb": pcrb, "rmse_over_pcrb": ratio}
+
+
+# -- the linearised model ------------------------------------------------------------------------
+@dataclasses.dataclass(frozen=True)
+class _Layout:
+    """Indices of the error state: ``dp`` (0, 1), then walk, white, scale, bias, tide if present."""
+
+    n: int
+    walk: int | None
+    white: int | None
+    speed_scale: int
+    heading_bias: int
+    tide: int | None
+
+    @classmethod
+    def of(cls, model: NavigationModel) -> _Layout:
+        names = ["north", "east"]
+        if model.heading_walk > 0:
+            names.append("walk")
+        if model.heading_noise > 0:
+            names.append("white")
+        names += ["scale", "bias"]
+        if model.tide_std > 0:
+            names.append("tide")
+        where = {name: i for i, name in enumerate(names)}
+        return cls(n=len(names), walk=where.get("walk"), white=where.get("white"),
+                   speed_scale=where["scale"], heading_bias=where["bias"], tide=where.get("tide"))
+
+    @property
+    def calibration(self) -> list[int]:
+        return [self.speed_scale, self.heading_bias]
+
+    @property
+    def heading(self) -> list[int]:
+        """States that add to the DR heading error: bias, walk, white."""
+        return [i for i in (self.walk, self.white, self.heading_bias) if i is not None]
+
+    def prior_variance(self, model: NavigationModel) -> np.ndarray:
+        v = np.zeros(self.n)
+        v[:2] = model.initial_position_std**2
+        if self.white is not None:
+            v[self.white] = model.heading_noise**2
+        v[self.speed_scale] = model.speed_scale_std**2
+        v[self.heading_bias] = model.heading_bias_std**2
+        if self.tide is not None:
+            v[self.tide] = model.tide_std**2
+        return v
+
+    def scale(self, model: NavigationModel, time: np.ndarray) -> np.ndarray:
+        """A natural unit of every state (its prior std, or the walk's std at the end)."""
+        s = np.sqrt(self.prior_variance(model))
+        if self.walk is not None:
+            s[self.walk] = model.heading_walk * np.sqrt(max(float(time[-1] - time[0]), 1e-9))
+        return s
+
+
+def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tuple[np.ndarray, np.ndarray]:
+    """Transition matrices ``F_k`` and process noise ``Q_k`` (K-1, n, n) from ping k to k+1."""
+    truth = survey.true_pose
+    assert truth is not None
+    d = np.diff(truth[:, :2], axis=0)
+    jd = np.column_stack([-d[:, 1], d[:, 0]])
+    dt = np.diff(survey.time)
+    m, n = d.shape[0], layout.n
+    f = np.tile(np.eye(n), (m, 1, 1))
+    f[:, :2, layout.speed_scale] = d
+    for i in layout.heading:
+        f[:, :2, i] = jd
+    q = np.zeros((m, n, n))
+    q[:, 0, 0] = q[:, 1, 1] = (model.speed_noise * dt) ** 2
+    if layout.walk is not None:
+        q[:, layout.walk, layout.walk] = model.heading_walk**2 * dt
+    if layout.white is not None:
+        f[:, layout.white, layout.white] = 0.0
+        q[:, layout.white, layout.white] = model.heading_noise**2
+    return f, q
+
+
+def _sounding_features(survey: Survey, bathymetry: BathymetryMap, order) -> tuple[np.ndarray, int]:
+    """Features ``(g_n, g_e, g . J r, 1)`` (K, B, 4) of every sounding, zero where it is left out."""
+    truth = survey.true_pose
+    assert truth is not None
+    north, east = survey.footprints(truth)
+    has = np.isfinite(survey.beam_depth)
+    grad = np.full((*has.shape, 2), np.nan)
+    if has.any():
+        grad[has] = bathymetry.gradient_at(north[has], east[has], order=order)
+    used = has & np.all(np.isfinite(grad), axis=-1)
+    r_n = np.where(used, north - truth[:, :1], 0.0)
+    r_e = np.where(used, east - truth[:, 1:2], 0.0)
+    g = np.where(used[..., None], grad, 0.0)
+    turn = g[..., 1] * r_n - g[..., 0] * r_e  # g . J r, J r = (-r_e, r_n)
+    features = np.stack([g[..., 0], g[..., 1], turn, used.astype(np.float64)], axis=-1)
+    return features, int(used.sum())
+
+
+def _information_factor(features: np.ndarray, sigma: float, layout: _Layout) -> np.ndarray:
+    """``L_k`` (K, n, 4) with ``L_k L_k^T`` the information of ping k's soundings on the state."""
+    info = np.einsum("kbi,kbj->kij", features, features) / sigma**2
+    value, vector = np.linalg.eigh(info)
+    root = vector * np.sqrt(np.maximum(value, 0.0))[:, None, :]
+    jacobian = np.zeros((layout.n, 4))  # d z / d state = jacobian @ features
+    jacobian[0, 0] = jacobian[1, 1] = -1.0
+    jacobian[layout.heading, 2] = -1.0
+    if layout.tide is not None:
+        jacobian[layout.tide, 3] = 1.0
+    return jacobian @ root
+
+
+def _forward(p0: np.ndarray, f: np.ndarray, q: np.ndarray,
+             factor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Kalman filter covariances: filtered (K, n, n) and predicted ``P_{k+1|k}`` (K-1, n, n).
+
+    The update of ping k is ``P - P L (I + L^T P L)^-1 L^T P``, the information form
+    ``(P^-1 + L L^T)^-1`` written so that a singular ``P`` (the walk's zero start) is fine.
+    """
+    k, n = factor.shape[0], p0.shape[0]
+    filtered = np.empty((k, n, n))
+    predicted = np.empty((max(k - 1, 0), n, n))
+    eye = np.eye(factor.shape[2])
+    informed = np.any(factor != 0.0, axis=(1, 2))
+    p = p0
+    for i in range(k):
+        if i:
+            p = f[i - 1] @ p @ f[i - 1].T + q[i - 1]
+            predicted[i - 1] = p
+        if informed[i]:
+            pl = p @ factor[i]
+            p = p - pl @ np.linalg.solve(eye + factor[i].T @ pl, pl.T)
+            p = 0.5 * (p + p.T)
+        filtered[i] = p
+    return filtered, predicted
+
+
+def _rts(filtered: np.ndarray, predicted: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """Rauch-Tung-Striebel smoother covariances from the filter's."""
+    smoothed = np.empty_like(filtered)
+    smoothed[-1] = filtered[-1]
+    if filtered.shape[0] == 1:
+        return smoothed
+    try:  # G_k^T = P_{k+1|k}^-1 F_k P_k
+        gain_t = np.linalg.solve(predicted, f @ filtered[:-1])
+    except np.linalg.LinAlgError:
+        raise TangraphError("posterior_crb: a predicted covariance is singular; the smoother bound "
+                            "is not defined (is a noise std zero with no prior?)") from None
+    for i in range(filtered.shape[0] - 2, -1, -1):
+        g = gain_t[i].T
+        s = filtered[i] + g @ (smoothed[i + 1] - predicted[i]) @ g.T
+        smoothed[i] = 0.5 * (s + s.T)
+    return smoothed
