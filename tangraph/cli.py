@@ -189,10 +189,10 @@ def _survey_and_map(args: argparse.Namespace):
     return in_map_frame(survey, bathymetry), bathymetry
 
 
-def _dr_model(args: argparse.Namespace):
-    from tangraph.sim.scenario import load_dr_model
+def _model(args: argparse.Namespace):
+    from tangraph.sensors import load_navigation_model
 
-    return None if args.dr_model is None else load_dr_model(args.dr_model)
+    return None if args.dr_model is None else load_navigation_model(args.dr_model)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -262,7 +262,7 @@ def cmd_navigate(args: argparse.Namespace) -> None:
         method,
         config,
         rng=np.random.default_rng(args.seed),
-        dr_model=_dr_model(args),
+        model=_model(args),
         progress=not args.quiet,
     )
     print(track_summary(track, survey))
@@ -274,7 +274,7 @@ def cmd_smooth(args: argparse.Namespace) -> None:
 
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
-    track = navigate(survey, bathymetry, "smoother", dr_model=_dr_model(args), progress=not args.quiet)
+    track = navigate(survey, bathymetry, "smoother", model=_model(args), progress=not args.quiet)
     print(track_summary(track, survey))
     for fix in track.meta.get("fixes", []):
         if not fix.get("accepted"):
@@ -387,8 +387,10 @@ def build_parser() -> argparse.ArgumentParser:
             "--dr-model",
             type=Path,
             metavar="FILE.toml",
-            help="the survey's dead-reckoning error model (a scenario's [dead_reckoning] keys); "
-            "needed by the graph for a recorded survey, which does not carry one",
+            help="the navigation model: the DR's white errors and the priors of its constant "
+            "errors (speed scale, heading bias), the start uncertainty and the sounding noise "
+            "(NavigationModel fields, angles as NAME_deg); needed for a recorded survey, which "
+            "does not carry one",
         )
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 

@@ -52,7 +52,7 @@ def navigate(
     config=None,
     *,
     rng: np.random.Generator | None = None,
-    dr_model=None,
+    model=None,
     progress: bool = False,
 ) -> Track:
     """Run one estimator on a survey.
@@ -70,24 +70,34 @@ def navigate(
         ``tangraph.graph.GraphConfig``); ``None`` for its defaults.
     rng : numpy.random.Generator
         Required by the particle filters; unused by the graph, which is deterministic.
-    dr_model : DeadReckoningModel, optional
-        The graph's odometry error model; by default the one a simulated survey records.
+    model : NavigationModel, optional
+        What every estimator believes about the DR and the sonar (the constant DR errors it
+        estimates, the start uncertainty, the terrain measurement); by default the one of a
+        simulated survey (:meth:`~tangraph.sensors.NavigationModel.from_survey`). A recorded
+        survey needs one (``load_navigation_model``).
     progress : bool
         Show a progress bar over the pings.
     """
+    from tangraph.sensors import NavigationModel
+
     method = _method(method)
+    if model is None:
+        model = NavigationModel.from_survey(survey)
+    elif not isinstance(model, NavigationModel):
+        raise TangraphError(f"model must be a NavigationModel, got {type(model).__name__}")
     if method is Method.ISAM2 or method is Method.SMOOTHER:
         from tangraph import graph
 
         run = graph.navigate_online if method is Method.ISAM2 else graph.smooth_survey
-        return run(survey, bathymetry, config, dr_model=dr_model, progress=progress)
+        return run(survey, bathymetry, config, model=model, progress=progress)
     if rng is None:
         raise TangraphError(
             f"navigation method {method.value!r} is random: pass rng=np.random.default_rng(seed)"
         )
     from tangraph import filters
 
-    return filters.run_filter(method.value, survey, bathymetry, config, rng=rng, progress=progress)
+    return filters.run_filter(method.value, survey, bathymetry, config, model=model, rng=rng,
+                              progress=progress)
 
 
 def in_map_frame(survey: Survey, bathymetry: BathymetryMap) -> Survey:

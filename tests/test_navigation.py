@@ -107,13 +107,14 @@ def test_a_recorded_survey_is_smoothed_in_the_map_frame_with_its_dr_model(wang_s
     t = np.broadcast_to(survey.time[:, None], has.shape)
     np.savetxt(sounds, np.column_stack([t[has], east[has] + east0, north[has] + north0,
                                         survey.beam_depth[has]]), fmt="%.3f")
-    model.write_text("heading_bias_deg = 1.0\nspeed_scale = 0.01\nspeed_noise = 0.05\n")
+    model.write_text("heading_bias_std_deg = 2.0\nspeed_scale_std = 0.02\nspeed_noise = 0.05\n"
+                     "sounding_std = 0.3\n")
     recorded = tmp_path / "rec.nc"
     args = ["survey", "import", str(nav), str(sounds), "--crs", bathymetry.crs, "-o", str(recorded)]
     assert main(args) == 0
     out = tmp_path / "smoothed.csv"
     base = ["smooth", str(recorded), "--map", "merimbula", "-q", "-o", str(out)]
-    assert main(base) == 2 and "dr_model" in capsys.readouterr().err
+    assert main(base) == 2 and "NavigationModel" in capsys.readouterr().err
     assert main([*base, "--dr-model", str(model)]) == 0
     rows = np.genfromtxt(out, delimiter=",", names=True)
     same = np.searchsorted(survey.time, rows["time"])

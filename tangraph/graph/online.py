@@ -6,10 +6,11 @@ search is centred on the predicted position (the latest key estimate composed wi
 increment) with a half-width from its covariance, the fix is gated against that prediction, and
 an accepted one becomes a robust translation prior. iSAM2 is then updated with only these new
 factors and values (the containers are emptied after each update), and the marginal covariance
-of the latest key only is read. Once iSAM2 holds ``2 * GraphConfig.isam_window`` key poses the
-oldest are marginalised (iSAM2's ``marginalizeLeaves``; the oldest poses of a chain are leaves of
-its Bayes tree), so the work per update stays bounded as the mission grows: without it each new
-fix moves the whole past and the update time grows with the chain. Between key poses the output
+of the latest key (jointly with the DR's calibration) only is read. iSAM2 runs inside GTSAM's
+incremental fixed-lag smoother, which keeps the newest ``GraphConfig.isam_window`` key poses and
+the calibration and marginalises the older poses, so the work per update stays bounded as the
+mission grows: without it each new fix moves the whole past and the update time grows with the
+chain. Between key poses the output
 is the latest key estimate composed with the DR increment, its covariance grown by the increment's.
 """
 
@@ -122,8 +123,11 @@ class GraphNavigator:
         params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = c.relinearize_skip
         params.enablePartialRelinearizationCheck = True
-        self.isam = gtsam.ISAM2(params)
-        self._oldest = 0  # index in graph.keys of the oldest key pose still in iSAM2
+        # iSAM2 inside GTSAM's fixed-lag smoother, which marginalises the key poses older than
+        # its lag (their information stays as a linear factor on the newer ones) so that the work
+        # per update stays bounded; the calibration's time stamp is renewed at every update.
+        self.smoother = gtsam.IncrementalFixedLagSmoother(1e18, params)
+        self.isam = self.smoother.getISAM2()
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
         self.index = -1  # last ping processed
@@ -183,8 +187,6 @@ class GraphNavigator:
         dr = self.survey.dr_pose[0]
         m = self.model
         heading_std = max(m.heading_noise, self.config.odometry_min_heading_std)
-        if not self.config.estimate_calibration:
-            heading_std = float(np.hypot(heading_std, m.heading_bias_std))
         self.graph.add_pose(0, self.survey.time[0], dr)
         for factor in self.graph.add_start(0, dr, m.initial_position_std, heading_std):
             self._new_factors.add(factor)
@@ -281,13 +283,19 @@ class GraphNavigator:
 
     def _update(self, k: int) -> None:
         started = _time.perf_counter()
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        for key in self._new_values.keys():
+            stamps.insert((key, float(self.survey.time[k])))
+        if self.graph.calibrated:  # the calibration is never old: it is never marginalised
+            stamps.insert((CALIBRATION, float(self.survey.time[k])))
+        self.smoother.setSmootherLag(self._lag())
         try:
-            self.isam.update(self._new_factors, self._new_values)
+            self.smoother.update(self._new_factors, self._new_values, stamps)
         except RuntimeError as exc:
             raise _translate(exc, self.graph) from None
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
-        self._marginalise_old()
+        self.isam = self.smoother.getISAM2()
         estimate = self.isam.calculateEstimatePose2(k)
         pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
         pose[2] = self.survey.dr_pose[k, 2] + _wrap(pose[2] - self.survey.dr_pose[k, 2])
@@ -307,23 +315,14 @@ class GraphNavigator:
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 
-    def _marginalise_old(self) -> None:
-        """Keep at most ``2 * isam_window`` key poses in iSAM2: marginalise the oldest ones (leaves
-        of the Bayes tree of a chain), so that the work per update stays bounded. The calibration
-        variable stays."""
+    def _lag(self) -> float:
+        """Seconds of key poses kept: the newest ``isam_window`` key poses (all without a window)."""
         window = self.config.isam_window
         n = len(self.graph.keys)
-        if window is None or n - self._oldest <= 2 * window:
-            return
-        leaves = gtsam.KeyList()
-        for key in self.graph.keys[self._oldest : n - window]:
-            leaves.push_back(key)
-        try:
-            self.isam.marginalizeLeaves(leaves)
-        except (RuntimeError, IndexError) as exc:  # not leaves (a graph that is not a chain): keep them
-            log.debug("could not marginalise key poses: %s", exc)
-            return
-        self._oldest = n - window
+        if window is None or n <= window:
+            return 1e18
+        times = self.graph.times
+        return float(times[-1] - times[n - window]) + 1e-6
 
     @property
     def pending(self) -> tuple[int, int]:
