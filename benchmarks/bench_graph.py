@@ -27,6 +27,7 @@ import numpy as np
 
 from tangraph.graph import GraphConfig, GraphNavigator, PoseGraph, smooth_pose_graph
 from tangraph.maps import load_any
+from tangraph.sensors import NavigationModel
 from tangraph.sim.scenario import load_scenario, simulate
 
 
@@ -86,8 +87,8 @@ def long_online(n: int) -> None:
                    beam_forward=0 * beams[window], beam_starboard=beams[window], beam_depth=measured)
     template = tap_fix(first, bathymetry, 9, 10, TapConfig(half_width=20.0), prior=truth[9, :2])
     assert template.accepted, template.quality.reasons
-    config = GraphConfig(key_interval=1.0, n_pings=10, window_noise=False)
-    nav = GraphNavigator(survey, bathymetry, config, dr_model=model)
+    config = GraphConfig(key_interval=1.0, n_pings=10)
+    nav = GraphNavigator(survey, bathymetry, config, model=NavigationModel.from_dead_reckoning(model))
     cov = np.diag([4.0, 4.0])
     t0 = time.perf_counter()
     for k in range(n):
@@ -105,14 +106,15 @@ def long_online(n: int) -> None:
           f"last 10 % / first 10 % = {updates[-tenth:].mean() / updates[:tenth].mean():.2f}")
 
 
-def chain(n: int, prior_every: int = 100) -> PoseGraph:
-    """A synthetic chain: 1 m steps turning 0.0001 rad each, position priors every ``prior_every``."""
-    graph = PoseGraph()
+def chain(n: int, prior_every: int = 100, calibrated: bool = False) -> PoseGraph:
+    """A synthetic chain: 1 m steps turning 0.0001 rad each, position priors every ``prior_every``;
+    ``calibrated``: with the DR's calibration variable (scale and heading bias) joined to every fix."""
+    graph = PoseGraph(calibration_std=np.array([0.02, 0.035]) if calibrated else None)
     step = np.array([1.0, 0.0, 1e-4])
     odo_cov = np.diag([0.01, 0.01, 1e-6])
     pose = np.zeros(3)
     graph.add_pose(0, 0.0, pose)
-    graph.add_pose_prior(0, pose, np.diag([1.0, 1.0, 0.01]))
+    graph.add_start(0, pose, 1.0, 0.1)
     rng = np.random.default_rng(1)
     for k in range(1, n):
         c, s = np.cos(pose[2]), np.sin(pose[2])
@@ -125,18 +127,26 @@ def chain(n: int, prior_every: int = 100) -> PoseGraph:
 
 
 def batch(sizes: list[int]) -> None:
+    """Each size without and with the calibration variable, in the same run: the ratio is the
+    calibration's cost."""
     for n in sizes:
-        t0 = time.perf_counter()
-        graph = chain(n)
-        built = time.perf_counter() - t0
-        for covariance in ("none", "all"):
+        totals = {}
+        for calibrated in (False, True):
             t0 = time.perf_counter()
-            solution = smooth_pose_graph(graph, GraphConfig(smoother_covariance=covariance))
-            total = time.perf_counter() - t0
-            parts = solution.timings
-            print(f"batch {n:>7} poses, covariance {covariance:<4}: {total:6.1f} s "
-                  f"(solve {parts['solve']:.1f} s, marginals {parts['marginals']:.1f} s, "
-                  f"{solution.iterations} LM iterations; graph built in {built:.1f} s)")
+            graph = chain(n, calibrated=calibrated)
+            built = time.perf_counter() - t0
+            for covariance in ("none", "all"):
+                t0 = time.perf_counter()
+                solution = smooth_pose_graph(graph, GraphConfig(smoother_covariance=covariance))
+                total = totals[calibrated, covariance] = time.perf_counter() - t0
+                parts = solution.timings
+                print(f"batch {n:>7} poses, calibration {'yes' if calibrated else 'no ':<3}, covariance "
+                      f"{covariance:<4}: {total:6.1f} s (solve {parts['solve']:.1f} s, marginals "
+                      f"{parts['marginals']:.1f} s, {solution.iterations} LM iterations; graph built in "
+                      f"{built:.1f} s)")
+        for covariance in ("none", "all"):
+            print(f"batch {n:>7} poses, covariance {covariance:<4}: with / without calibration = "
+                  f"{totals[True, covariance] / totals[False, covariance]:.2f}")
 
 
 def main() -> None:

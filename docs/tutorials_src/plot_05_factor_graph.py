@@ -57,12 +57,20 @@ print(f"fix every {config.spacing} pings ({config.n_pings}-ping windows), key po
 # ``min_half_width_cells`` steps of the search grid, whose step is a fraction of a map cell),
 # judges the fix
 # and, if it is accepted, adds it as a translation prior; iSAM2 is updated with the new factors
-# only. The dead-reckoning error model comes from the survey (a simulated survey records it;
-# for a recorded one it is passed as ``dr_model``, see :doc:`tutorial 6
+# only. The key poses live in the dead reckoning's own frame and the graph holds one more
+# variable, the DR's calibration (speed scale factor and heading bias): every fix measures a
+# world position through it, so the graph estimates the constant errors with the poses and every
+# pose it reports carries their remaining uncertainty (``track.meta["calibration"]``). The
+# :class:`~tangraph.sensors.NavigationModel` comes from the survey (a simulated survey records
+# its settings; for a recorded one it is passed as ``model``, see :doc:`tutorial 6
 # <plot_06_renavigate_recorded_survey>`).
 
 online = navigate_online(survey, bathymetry, config)
 print(track_summary(online, survey))
+calibration = online.meta["calibration"]
+print(f"speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_scale_std']:.2%}, "
+      f"heading bias {np.degrees(calibration['heading_bias']):+.2f} +- "
+      f"{np.degrees(calibration['heading_bias_std']):.2f} deg")
 
 # %%
 # What became of every fix

@@ -104,20 +104,31 @@ print(f"{recorded.n_pings} of {simulated.n_pings} pings imported; largest positi
 # Smooth
 # ------
 #
-# A recorded survey does not say how good its dead reckoning was: the graph needs the error
-# model of the vehicle's INS/DVL (heading bias and random walk, speed scale and noise), which for
-# a real vehicle comes from its specification or its calibration. Here it is the model the
-# survey was simulated with. :func:`~tangraph.graph.smooth_survey` makes TAP fixes along the
+# A recorded survey does not say how good its dead reckoning was: the graph needs a
+# :class:`~tangraph.sensors.NavigationModel`, the vehicle's INS/DVL white errors (speed noise,
+# heading random walk) and the prior uncertainty of its constant errors (speed scale factor,
+# heading bias), which for a real vehicle come from its specification; the graph estimates the
+# constant errors themselves. Here the white errors are those the survey was simulated with and
+# the priors the defaults (2 % scale, 2 deg bias); ``tangraph smooth --dr-model FILE.toml`` reads
+# the same fields from a file. :func:`~tangraph.graph.smooth_survey` makes TAP fixes along the
 # track (every ``fix_spacing`` pings, each of the last ``n_pings`` pings), gates them, and solves
 # every key pose at once; ``rematch_iterations``
 # then re-searches the fixes around the smoothed track (their patches laid with the smoothed
 # poses) and solves again, until the fixes stop moving.
 
 from tangraph.graph import GraphConfig  # noqa: E402
+from tangraph.sensors import NavigationModel  # noqa: E402
 
+model = NavigationModel.from_dead_reckoning(scenario.dead_reckoning)
 config = GraphConfig(rematch_iterations=2)
-smoothed = smooth_survey(recorded, bathymetry, config, dr_model=scenario.dead_reckoning)
+smoothed = smooth_survey(recorded, bathymetry, config, model=model)
 print(track_summary(smoothed, recorded))
+calibration = smoothed.meta["calibration"]
+print(f"estimated speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_scale_std']:.2%}, "
+      f"heading bias {np.degrees(calibration['heading_bias']):+.2f} +- "
+      f"{np.degrees(calibration['heading_bias_std']):.2f} deg "
+      f"(simulated: {scenario.dead_reckoning.speed_scale:+.2%}, "
+      f"{np.degrees(scenario.dead_reckoning.heading_bias):+.2f} deg)")
 
 # %%
 # The imported survey has no truth (a real one would not), so the summary gives no errors. The
