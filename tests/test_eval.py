@@ -52,3 +52,13 @@ def test_anees_band_covers_an_honest_covariance_at_its_probability():
     assert lo < 2 < hi
     with pytest.raises(TangraphError):
         anees_band(0)
+
+
+def test_the_package_keeps_its_flat_names():
+    import tangraph.eval
+    from tangraph.eval import crb, metrics
+
+    assert tangraph.eval.track_metrics is metrics.track_metrics
+    assert tangraph.eval.posterior_crb is crb.posterior_crb
+    assert {"anees_band", "format_figure", "position_nees", "track_metrics", "posterior_crb",
+            "CramerRaoBound", "bound_rmse", "metrics_with_bound"} <= set(tangraph.eval.__all__)
