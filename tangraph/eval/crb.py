@@ -334,7 +334,7 @@ def _sounding_features(survey: Survey, bathymetry: BathymetryMap, order) -> tupl
 
 def _information_factor(features: np.ndarray, sigma: float, layout: _Layout) -> np.ndarray:
     """``L_k`` (K, n, 4) with ``L_k L_k^T`` the information of ping k's soundings on the state."""
-    info = np.einsum("kbi,kbj->kij", features, features) / sigma**2
+    info = np.swapaxes(features, 1, 2) @ features / sigma**2
     value, vector = np.linalg.eigh(info)
     root = vector * np.sqrt(np.maximum(value, 0.0))[:, None, :]
     jacobian = np.zeros((layout.n, 4))  # d z / d state = jacobian @ features
