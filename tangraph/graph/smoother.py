@@ -109,9 +109,13 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     factors, values = graph.factor_graph(), graph.values(initial, calibration)
     started = _time.perf_counter()
     try:
-        ordering = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
-        optimizer = _optimizer(factors, values, config, ordering)
-        result = optimizer.optimize()
+        ordering = _ordering(factors, graph.calibrated)
+        if graph.calibrated:
+            result, iterations = _gauss_newton(factors, values, ordering, config.max_iterations)
+        else:
+            optimizer = _optimizer(factors, values, config, ordering)
+            result = optimizer.optimize()
+            iterations = int(optimizer.iterations())
     except (RuntimeError, IndexError) as exc:  # GTSAM's indeterminant system; METIS on odd graphs
         raise _translate(exc, graph) from None
     solved = _time.perf_counter()
@@ -130,8 +134,46 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
         cov = _joint_to_world_frame(pose[:, 2], cov)
     done = _time.perf_counter()
     timings = {"solve": solved - started, "marginals": done - solved}
-    return SmootherSolution(keys, pose, cov, calib, calib_cov, int(optimizer.iterations()),
+    return SmootherSolution(keys, pose, cov, calib, calib_cov, iterations,
                             float(factors.error(result)), timings)
+
+
+def _gauss_newton(factors, values, ordering, max_iterations: int, tolerance: float = 1e-6):
+    """Gauss-Newton with step halving, driven from here: GTSAM's optimizer objects take about ten
+    times longer per iteration than linearise + solve + retract on a graph with Python factors
+    (measured: 2.8 s against 0.25 s on a 20 000-pose chain)."""
+    error = factors.error(values)
+    for iteration in range(1, max_iterations + 1):
+        delta = factors.linearize(values).optimize(ordering)
+        step = 1.0
+        while True:
+            trial = values.retract(delta if step == 1.0 else delta.scale(step))
+            new = factors.error(trial)
+            if new <= error or step < 1e-3:
+                break
+            step *= 0.5
+        if new > error:  # no step lowers the error: converged as far as it goes
+            return values, iteration
+        converged = error - new <= tolerance * max(error, 1e-12)
+        values, error = trial, new
+        if converged:
+            return values, iteration
+    return values, max_iterations
+
+
+def _ordering(factors, calibrated: bool):
+    """METIS ordering, with the calibration (joined to every fix) moved to the end: eliminated
+    early it would join all the fixed poses into one dense clique."""
+    metis = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
+    if not calibrated:
+        return metis
+    ordering = gtsam.Ordering()
+    for i in range(metis.size()):
+        key = metis.at(i)
+        if key != CALIBRATION:
+            ordering.push_back(key)
+    ordering.push_back(CALIBRATION)
+    return ordering
 
 
 def _marginals(factors, result, keys, ordering, calibrated: bool) -> tuple[np.ndarray, np.ndarray]:
