@@ -16,6 +16,7 @@ from tangraph.filters.pf import PFConfig, bootstrap_pf
 from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -73,6 +74,7 @@ def run_filter(
     bathymetry: BathymetryMap,
     config=None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
@@ -86,7 +88,12 @@ def run_filter(
         The run and the prior map.
     config
         The method's own config (``PFConfig``, ``IPFConfig``, ``SJCPFConfig``, ``JBPFConfig``,
-        ``TercomPFConfig``, ``MLEConfig``); None for its defaults.
+        ``TercomPFConfig``, ``MLEConfig``); None for its defaults. Configs hold algorithm
+        settings only.
+    model : NavigationModel or None
+        What the filter believes about the DR errors (white noise, the speed scale and heading
+        bias it estimates), the start uncertainty, the soundings, the map and the tide; None:
+        ``NavigationModel.from_survey(survey)`` (a simulated survey's settings).
     rng : numpy.random.Generator
         The source of randomness (the MLE filter does not use it: None is accepted there).
     progress : bool
@@ -97,16 +104,21 @@ def run_filter(
     Track
         Weighted mean poses (heading: dead reckoning), covariances ``(K, 3, 3)`` with NaN heading
         terms, ``method`` the method's value; ``meta``: ``ess`` (per ping), ``n_resampled``,
-        ``n_divergences``, ``divergence_steps``, ``config``, ``seed`` (of ``rng``, particle filters:
-        :func:`~tangraph.filters.core.rng_seed`) and the method's counts;
+        ``n_divergences``, ``divergence_steps``, ``n_lost``, ``lost_steps`` (pings where the
+        filter's innovations say it has lost the vehicle), ``calibration`` (``speed_scale``,
+        ``speed_scale_std``, ``heading_error`` (rad, DR minus true, at the last ping),
+        ``heading_error_std``), ``navigation_model``, ``config``, ``seed`` (of ``rng``, particle
+        filters: :func:`~tangraph.filters.core.rng_seed`) and the method's counts;
         ``timings``: ``total``, ``per_step`` (s).
 
     Raises
     ------
     TangraphError
-        An unknown method, a config of another method's type, or a ``survey``, ``bathymetry``
-        or ``rng`` of the wrong type (not a :class:`~tangraph.survey.Survey`,
-        :class:`~tangraph.maps.grid.BathymetryMap`, :class:`numpy.random.Generator`).
+        An unknown method, a config of another method's type, a ``survey``, ``bathymetry``,
+        ``rng`` or ``model`` of the wrong type (not a :class:`~tangraph.survey.Survey`,
+        :class:`~tangraph.maps.grid.BathymetryMap`, :class:`numpy.random.Generator`,
+        :class:`~tangraph.sensors.NavigationModel`), or no ``model`` for a survey that records
+        no DR model.
     """
     method = _method(method)
     check_run_inputs(
@@ -123,4 +135,4 @@ def run_filter(
         raise TangraphError(
             f"filter {method.value!r} takes a {cls.__name__} (or None), got {type(config).__name__}"
         )
-    return runner(survey, bathymetry, config, rng=rng, progress=progress)
+    return runner(survey, bathymetry, config, model=model, rng=rng, progress=progress)

@@ -14,9 +14,8 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.resampling import Resampler
-from tangraph.survey import Survey
 
-__all__ = ["ParticleConfig", "check_count", "check_number", "survey_sounding_std"]
+__all__ = ["ParticleConfig", "check_count", "check_number"]
 
 
 def check_number(
@@ -58,56 +57,83 @@ def check_count(obj, name: str, *, low: int = 1) -> int:
 
 @dataclasses.dataclass(frozen=True)
 class ParticleConfig:
-    """Settings shared by the particle filters (each filter's config adds its own).
+    """Algorithm settings shared by the particle filters (each filter's config adds its own).
+
+    What the filters believe about the vehicle and its sensors (process noise, start uncertainty,
+    sounding and map errors, tide prior, the priors of the speed scale and heading bias) is the
+    run's :class:`~tangraph.sensors.NavigationModel`, not a config.
 
     Parameters
     ----------
     n_particles : int
         Number of particles.
-    init_std : float
-        Std (m, per axis) of the initial Gaussian cloud around the first dead-reckoned position.
-    process_std, process_fraction : float
-        Process noise per ping and axis: ``sqrt(process_std^2 + (process_fraction d)^2)`` m for a
-        dead-reckoned displacement of ``d`` m (:class:`~tangraph.filters.MotionModel`).
-    sounding_std : float or None
-        Std (m) of a sounding's error in the likelihood. None: from the survey
-        (:func:`survey_sounding_std`: 1.5 times the sonar's ``depth_noise`` a simulated survey
-        records, at least 0.2 m; 1 m when it records none).
-    tide, tide_std : float
-        Prior of the tide (m, measured = map + tide): mean and std. ``tide_std = 0``: the tide
-        is known; otherwise it is estimated per particle (Rao-Blackwellised, see
-        :mod:`tangraph.filters.model`).
     resampler : Resampler
         Resampling scheme.
     ess_threshold : float
         Resample when the effective sample size falls below ``ess_threshold * n_particles``.
+    process_floor : float
+        Extra white position noise (m per ping and axis) on top of the model's white DR errors: a
+        roughening floor; 0 by default (the model's noise is the process noise).
+    kernel_bandwidth : float
+        ``h`` of the Liu-West shrinkage kernel that moves the calibration ``(k, b)`` after every
+        resampling (and the whole state between tempering stages), so that the constant errors do
+        not collapse onto the few values drawn at the start: a particle's state ``s`` becomes
+        ``a s + (1 - a) m + h L e``, ``a = sqrt(1 - h^2)``, ``m`` and ``L L^T`` the weighted mean
+        and covariance before resampling (for the calibration: conditional on the position, by
+        linear regression), ``e`` standard normal. The cloud's mean and covariance are kept (in
+        expectation); 0 turns it off.
+    kernel_floor : float
+        Floor of the kernel's calibration spread, a fraction of the prior std of ``k`` and ``b``
+        (keeps a cloud that has collapsed onto one value from staying there).
+    tempering : bool
+        Progressive correction: when a ping's likelihood would leave an ESS below
+        ``tempering_ess * n_particles``, split it into stages ``p(z | x)^phi_j`` (exponents
+        summing to 1, each the largest that keeps the ESS at or above the threshold), resampling
+        and moving the particles by the kernel between stages.
+    tempering_ess : float
+        The stages' ESS threshold, a fraction of ``n_particles``.
+    max_stages : int
+        At most this many stages per ping (the last takes what remains of the exponent).
+    lost_alpha : float
+        Tail probability of the lost test: a ping is inconsistent when the normalised innovation
+        of its mean sounding (against the weighted cloud's predictive spread) exceeds the
+        chi-square(1) quantile ``1 - lost_alpha``, or the best particle's ``-2 log p`` exceeds the
+        chi-square(B) one.
+    lost_pings : int
+        A ping is *lost* (``Track.meta["lost_steps"]``) when it and the ``lost_pings - 1``
+        previous pings with soundings are all inconsistent.
     reinit_std : float or None
-        Spread (m) of the cloud drawn after a divergence; None: ``3 * max(init_std, 1)`` (a
-        1 m floor, so that an ``init_std`` of 0 still re-draws a spread cloud).
+        Spread (m) of the cloud drawn after a divergence; None: ``3 * max(s, 1)``, ``s`` the
+        model's ``initial_position_std``.
     reinit_growth : float
         Factor on that spread for each further consecutive divergence.
     """
 
     n_particles: int = 1000
-    init_std: float = 50.0
-    process_std: float = 0.5
-    process_fraction: float = 0.1
-    sounding_std: float | None = None
-    tide: float = 0.0
-    tide_std: float = 3.0
     resampler: Resampler = Resampler.SYSTEMATIC
     ess_threshold: float = 0.5
+    process_floor: float = 0.0
+    kernel_bandwidth: float = 0.1
+    kernel_floor: float = 1e-3
+    tempering: bool = True
+    tempering_ess: float = 0.5
+    max_stages: int = 20
+    lost_alpha: float = 1e-3
+    lost_pings: int = 3
     reinit_std: float | None = None
     reinit_growth: float = 2.0
 
     def __post_init__(self) -> None:
         check_count(self, "n_particles")
-        for name in ("init_std", "process_std", "process_fraction", "tide_std"):
-            check_number(self, name)
-        if self.sounding_std is not None:
-            check_number(self, "sounding_std", open_low=True)
-        check_number(self, "tide", low=None)
         check_number(self, "ess_threshold", high=1.0)
+        check_number(self, "process_floor")
+        check_number(self, "kernel_bandwidth", high=1.0)
+        check_number(self, "kernel_floor")
+        object.__setattr__(self, "tempering", bool(self.tempering))
+        check_number(self, "tempering_ess", open_low=True, high=1.0)
+        check_count(self, "max_stages")
+        check_number(self, "lost_alpha", open_low=True, high=1.0)
+        check_count(self, "lost_pings")
         check_number(self, "reinit_growth", low=1.0)
         if self.reinit_std is not None:
             check_number(self, "reinit_std", open_low=True)
@@ -119,28 +145,13 @@ class ParticleConfig:
                 f"{type(self).__name__}: resampler must be one of {known}, got {self.resampler!r}"
             ) from None
 
-    @property
-    def reinit_spread(self) -> float:
-        """Spread (m) of the first re-initialisation after a divergence."""
-        return float(self.reinit_std) if self.reinit_std is not None else 3.0 * max(self.init_std, 1.0)
+    def reinit_spread(self, initial_position_std: float) -> float:
+        """Spread (m) of the first re-initialisation after a divergence, for a model whose start
+        uncertainty is ``initial_position_std``."""
+        if self.reinit_std is not None:
+            return float(self.reinit_std)
+        return 3.0 * max(float(initial_position_std), 1.0)
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form (enums as their values), as stored in ``Track.meta["config"]``."""
         return {k: (v.value if hasattr(v, "value") else v) for k, v in dataclasses.asdict(self).items()}
-
-
-def survey_sounding_std(survey: Survey | None) -> float:
-    """The likelihood's sounding std for a survey: 1.5 times the sonar ``depth_noise`` recorded in
-    ``survey.meta["settings"]["sonar"]`` (simulated surveys; the margin covers map interpolation
-    and attitude errors), at least 0.2 m; 1 m when the survey records none.
-
-    Examples
-    --------
-    >>> survey_sounding_std(None)
-    1.0
-    """
-    try:
-        noise = float(survey.meta["settings"]["sonar"]["depth_noise"])  # type: ignore[union-attr]
-    except (AttributeError, KeyError, TypeError, ValueError):
-        return 1.0
-    return max(1.5 * noise, 0.2) if np.isfinite(noise) and noise >= 0 else 1.0

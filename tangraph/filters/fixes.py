@@ -4,7 +4,7 @@ A fix matches the window of the last ``window`` pings against the map by
 :func:`tangraph.matching.tap_fix` (the TAP grid search, criterion MSD or MLE) over a square of
 half-width ``search_sigmas`` times the predicted position std (the largest axis of the
 predicted covariance), clipped to ``[min_half_width, max_half_width]`` (``min_half_width`` None:
-the larger of 3 map cells and the config's ``init_std``), around the predicted position. Each
+the larger of 3 map cells and the model's ``initial_position_std``), around the predicted position. Each
 attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``, ``position``,
 ``covariance``, ``accepted``, ``reason``: ``"accepted"``, the fix's quality reasons, or
 ``"failed: ..."`` when no match could be made).
@@ -35,7 +35,7 @@ FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_
 def check_fix_search(config) -> None:
     """Validate (in ``__post_init__``) the fix-search fields of a config: ``window`` (pings per
     fix; None: :func:`fix_window`), ``fix_interval`` (pings between fixes; None: ``window``),
-    ``criterion`` (mle or msd), ``search_sigmas``, ``min_half_width`` (None: 3 cells or ``init_std``),
+    ``criterion`` (mle or msd), ``search_sigmas``, ``min_half_width`` (None: 3 cells or the start std),
     ``max_half_width``."""
     if config.window is not None:
         check_count(config, "window")
@@ -91,14 +91,18 @@ def attempt_fix(
     covariance: np.ndarray,
     search,
     window: int,
+    *,
+    initial_std: float = 0.0,
 ) -> tuple[TapFix | None, dict[str, Any]]:
     """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
-    ``None`` (and a ``"failed: ..."`` reason) when no match can be made."""
+    ``None`` (and a ``"failed: ..."`` reason) when no match can be made. ``initial_std`` (the
+    model's start std) is the smallest half-width when ``search.min_half_width`` is None (with
+    3 map cells)."""
     cell = min(bathymetry.cell_size)
     spread = np.sqrt(np.max(np.linalg.eigvalsh(covariance))) if np.all(np.isfinite(covariance)) else np.inf
     low = search.min_half_width
     if low is None:
-        low = max(3.0 * cell, getattr(search, "init_std", 0.0))
+        low = max(3.0 * cell, float(initial_std))
     half_width = float(np.clip(search.search_sigmas * spread, low, max(low, search.max_half_width)))
     record: dict[str, Any] = {
         "index": int(index),

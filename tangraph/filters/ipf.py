@@ -25,6 +25,13 @@ Otherwise the estimate is the weighted mean and second moment of the cloud the s
 the step's ``ess`` is that cloud's (after the children's re-weighting: the weights the estimate's
 Monte Carlo error depends on). If no child can be weighted (every child off the map) the step
 falls back to plain copies.
+
+The children's calibrations ``(k, b)`` are their parents' moved by the shrinkage kernel
+(:func:`~tangraph.filters.core.shrink_calibration`) before they are redrawn. A ping whose
+likelihood is too peaked for the cloud (the ESS after it below ``tempering_ess`` times the ESS
+before, ``tempering`` on) is a tempered bootstrap update instead (:func:`~tangraph.filters.measure`,
+then resampling if needed as the bootstrap PF; ``info["tempered"]`` True): the auxiliary redraw
+has no single transition to redraw from once the cloud has been moved between stages.
 """
 
 from __future__ import annotations
@@ -38,14 +45,23 @@ from tangraph.filters.core import (
     Belief,
     FilterModel,
     StepResult,
+    _kernel_floor,
+    evaluate,
+    innovation,
+    measure,
+    predict,
+    resample_if_needed,
     reweight,
     run_particle_filter,
+    shrink_calibration,
+    state_moments,
     weighted_moments,
 )
 from tangraph.filters.likelihood import FilterDivergence, effective_sample_size
 from tangraph.filters.model import Ping
 from tangraph.filters.resampling import resample
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -60,43 +76,80 @@ class IPFConfig(ParticleConfig):
     n_particles: int = 2000
 
 
+def _tempered(
+    belief: Belief, ping: Ping, model: FilterModel, config: ParticleConfig, update, rng
+) -> StepResult:
+    measured = measure(belief, ping, model, config, rng=rng, update=update)
+    mean, cov = weighted_moments(measured.belief)
+    new, index, ess = resample_if_needed(measured.belief, config, rng=rng, model=model)
+    info = {"tempered": True, "auxiliary": False, "exponents": measured.exponents}
+    return StepResult(
+        new, mean, cov, ess, resampled=index is not None, counts={"n_tempered": 1}, info=info,
+        innovation=measured.innovation,
+    )  # fmt: skip
+
+
+def _needs_tempering(belief: Belief, weighted: Belief, update, config: ParticleConfig) -> bool:
+    if not config.tempering:
+        return False
+    finite = np.isfinite(update.log_likelihood)
+    before = belief.weights[finite]
+    if before.sum() <= 0:
+        return False
+    before = before / before.sum()
+    return effective_sample_size(weighted.weights) < config.tempering_ess * effective_sample_size(before)
+
+
 def ipf_step(
     belief: Belief, ping: Ping, model: FilterModel, config: ParticleConfig, *, rng: np.random.Generator
 ) -> StepResult:
     """One IPF step (see the module docstring)."""
-    moved = model.motion.predict(belief.particles, ping, rng=rng)
+    moved = predict(belief, ping, model, rng=rng)
     if ping.n_soundings == 0:
-        predicted = belief.replace(particles=moved)
-        mean, cov = weighted_moments(predicted)
-        return StepResult(predicted, mean, cov, effective_sample_size(predicted.weights))
-    update = model.terrain.evaluate(moved, belief.tide, belief.tide_var, ping)
-    weighted = reweight(belief, update.log_likelihood, where=f"ping {ping.index}").replace(
-        particles=moved, tide=update.tide, tide_var=update.tide_var
+        mean, cov = weighted_moments(moved)
+        return StepResult(moved, mean, cov, effective_sample_size(moved.weights))
+    update = evaluate(moved, ping, model)
+    check = innovation(moved, update, ping, model)
+    weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}").replace(
+        tide=update.tide, tide_var=update.tide_var
     )
+    if _needs_tempering(moved, weighted, update, config):
+        return _tempered(moved, ping, model, config, update, rng)
     ess = effective_sample_size(weighted.weights)
     if ess >= config.ess_threshold * belief.n_particles:
         mean, cov = weighted_moments(weighted)
-        return StepResult(weighted, mean, cov, ess)
+        return StepResult(weighted, mean, cov, ess, innovation=check)
+    moments = state_moments(weighted)
     ancestors = resample(weighted.weights, config.resampler, rng=rng)
     parents, copies = np.unique(ancestors, return_counts=True)
     uniform = weighted.take(ancestors)
     if ping.first:  # nothing to redraw from: plain copies (see the module docstring)
         mean, cov = weighted_moments(weighted)
         info = {"parents": parents, "copies": copies, "ancestors": ancestors, "auxiliary": False}
-        return StepResult(uniform, mean, cov, ess, resampled=True, info=info)
-    children = model.motion.predict(belief.particles[ancestors], ping, rng=rng)
-    child_update = model.terrain.evaluate(children, belief.tide[ancestors], belief.tide_var, ping)
+        uniform = shrink_calibration(
+            uniform, moments, config.kernel_bandwidth, _kernel_floor(model, config), rng=rng
+        )
+        return StepResult(uniform, mean, cov, ess, resampled=True, info=info, innovation=check)
+    # the children: their parents' previous states with the calibrations moved by the kernel
+    # (conditional on the parents' predicted positions, which the moments are of), redrawn
+    floor = _kernel_floor(model, config)
+    shrunk = shrink_calibration(uniform, moments, config.kernel_bandwidth, floor, rng=rng)
+    previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
+    children = predict(previous, ping, model, rng=rng)
+    child_update = evaluate(children, ping, model)
     try:
         new = reweight(
             uniform,
             child_update.log_likelihood - update.log_likelihood[ancestors],
             where=f"ping {ping.index} (IPF children)",
-        ).replace(particles=children, tide=child_update.tide)
+        ).replace(particles=children.particles, calibration=children.calibration, tide=child_update.tide)
     except FilterDivergence:
         new = uniform  # no child on the map: keep the copies
     mean, cov = weighted_moments(new)
     info = {"parents": parents, "copies": copies, "ancestors": ancestors, "auxiliary": True}
-    return StepResult(new, mean, cov, effective_sample_size(new.weights), resampled=True, info=info)
+    return StepResult(
+        new, mean, cov, effective_sample_size(new.weights), resampled=True, info=info, innovation=check
+    )
 
 
 def ipf(
@@ -104,10 +157,13 @@ def ipf(
     bathymetry: BathymetryMap,
     config: IPFConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
-    """Run the IPF (Han et al. 2020) over a survey; see the module docstring."""
+    """Run the IPF (Han et al. 2020) over a survey (``model``: the navigation model, None: from
+    the survey); see the module docstring."""
     return run_particle_filter(
-        survey, bathymetry, config or IPFConfig(), ipf_step, method="ipf", rng=rng, progress=progress
-    )
+        survey, bathymetry, config or IPFConfig(), ipf_step, method="ipf", rng=rng, model=model,
+        progress=progress,
+    )  # fmt: skip

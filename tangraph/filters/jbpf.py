@@ -18,6 +18,7 @@ from tangraph.filters.core import Belief, FilterModel, StepResult, jitter, run_p
 from tangraph.filters.model import Ping
 from tangraph.filters.pf import pf_step
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -52,10 +53,13 @@ def jbpf(
     bathymetry: BathymetryMap,
     config: JBPFConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
-    """Run the JBPF over a survey; see the module docstring."""
+    """Run the JBPF over a survey (``model``: the navigation model, None: from the survey); see
+    the module docstring."""
     return run_particle_filter(
-        survey, bathymetry, config or JBPFConfig(), jbpf_step, method="jbpf", rng=rng, progress=progress
-    )
+        survey, bathymetry, config or JBPFConfig(), jbpf_step, method="jbpf", rng=rng, model=model,
+        progress=progress,
+    )  # fmt: skip

@@ -6,13 +6,19 @@ window of the last ``window`` pings is matched against the map by
 removed: the maximum of the Gaussian likelihood over the search grid), searched around the
 current estimate over ``search_sigmas`` times its std (see :mod:`tangraph.filters.fixes`). The
 estimate jumps to the fix, with the fix's covariance; between fixes it moves by the dead-reckoned
-increments and its covariance grows by the motion model's process noise
-(:class:`~tangraph.filters.MotionModel`). Before the first fix the estimate is dead
-reckoning from ``N(DR_0, init_std^2 I)``. Only accepted fixes (informative and unimodal,
-``TapFix.accepted``) are used by default; ``require_accepted=False`` takes every fix whatever its
-quality, as plain MLE does (it can then jump to a wrong basin on flat terrain and search around it
-from there on). A window that cannot be matched is skipped.
-No particles: ``meta["ess"]`` is NaN and ``n_resampled``, ``n_divergences`` are 0.
+increments calibrated by the prior mean ``(k, b)`` of the navigation model, and its covariance
+is propagated to first order on ``(north, east, k, b)``: the white DR errors
+(:class:`~tangraph.filters.MotionModel`), the heading walk, and the prior uncertainty of the
+constant errors, which turns and stretches every step alike (so the position error it causes
+grows with the distance run, not its square root). A fix resets the position covariance and its
+correlation with ``(k, b)``; the calibration itself is not estimated (``meta["calibration"]`` is
+the prior, its heading std grown by the walk). Before the first fix the estimate is dead
+reckoning from ``N(DR_0, s^2 I)``, ``s`` the model's ``initial_position_std``. Only accepted
+fixes (informative and unimodal, ``TapFix.accepted``) are used by default;
+``require_accepted=False`` takes every fix whatever its quality, as plain MLE does (it can
+then jump to a wrong basin on flat terrain and search around it from there on). A window that
+cannot be matched is skipped. No particles: ``meta["ess"]`` is NaN and ``n_resampled``,
+``n_divergences``, ``n_lost`` are 0.
 """
 
 from __future__ import annotations
@@ -23,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from tangraph.filters.config import check_number
-from tangraph.filters.core import step_timings
+from tangraph.filters.core import check_run_inputs, navigation_model, step_timings
 from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
-from tangraph.filters.model import MotionModel, survey_pings
+from tangraph.filters.model import MotionModel, rotate, survey_pings
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -40,23 +46,17 @@ class MLEConfig:
 
     Parameters
     ----------
-    init_std : float
-        Std (m, per axis) of the initial position around the first dead-reckoned one.
-    process_std, process_fraction : float
-        Growth of the covariance between fixes (as :class:`~tangraph.filters.MotionModel`).
     window, fix_interval : int or None
         Pings per fix (None: enough for about 30 soundings, at least 5;
         :func:`~tangraph.filters.fixes.fix_window`) and between fixes (None: ``window``).
     search_sigmas, min_half_width, max_half_width : float
         Search half-width: ``search_sigmas`` times the estimate's std, within
-        ``[min_half_width (None: the larger of 3 map cells and init_std), max_half_width]`` metres.
+        ``[min_half_width (None: the larger of 3 map cells and the model's initial_position_std),
+        max_half_width]`` metres.
     require_accepted : bool
         Use only accepted fixes (informative and unimodal); False: every fix (plain MLE).
     """
 
-    init_std: float = 50.0
-    process_std: float = 0.5
-    process_fraction: float = 0.1
     window: int | None = None
     fix_interval: int | None = None
     search_sigmas: float = 3.0
@@ -65,8 +65,6 @@ class MLEConfig:
     require_accepted: bool = True
 
     def __post_init__(self) -> None:
-        for name in ("init_std", "process_std", "process_fraction"):
-            check_number(self, name)
         check_fix_search(self)
         object.__setattr__(self, "require_accepted", bool(self.require_accepted))
 
@@ -74,23 +72,40 @@ class MLEConfig:
         return dataclasses.asdict(self)
 
 
+def _propagate(p: np.ndarray, step: np.ndarray, k: float, noise: np.ndarray, walk_var: float) -> np.ndarray:
+    """Covariance ``(4, 4)`` of ``(north, east, k, b)`` after a calibrated step ``step``."""
+    f = np.eye(4)
+    f[:2, 2] = -step / (1.0 + k)  # d step / d k
+    f[:2, 3] = -np.array([-step[1], step[0]])  # d R(-b) u / d b
+    q = np.zeros((4, 4))
+    q[:2, :2] = noise
+    q[3, 3] = walk_var
+    return f @ p @ f.T + q
+
+
 def mle_filter(
     survey: Survey,
     bathymetry: BathymetryMap,
     config: MLEConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator | None = None,
     progress: bool = False,
 ) -> Track:
-    """Run the MLE filter over a survey (deterministic: ``rng`` is not used); see the module
-    docstring. ``meta["fixes"]`` records every fix attempted."""
+    """Run the MLE filter over a survey (deterministic: ``rng`` is not used); ``model`` is the
+    navigation model (None: ``NavigationModel.from_survey(survey)``). See the module docstring.
+    ``meta["fixes"]`` records every fix attempted; ``meta["calibration"]`` is the model's prior
+    (not estimated)."""
     from tqdm.auto import tqdm
 
+    check_run_inputs(survey, bathymetry, rng, where="mle", rng_optional=True)
     config = config or MLEConfig()
-    motion = MotionModel(config.process_std, config.process_fraction)
+    navigation = navigation_model(survey, model, where="mle")
+    motion = MotionModel.from_model(navigation)
+    k_prior, b_prior = navigation.calibration_prior
     k_total = survey.n_pings
     position = survey.dr_pose[0, :2].copy()
-    p = np.eye(2) * config.init_std**2
+    p = np.diag([navigation.initial_position_std**2] * 2 + list(navigation.calibration_std**2))
     mean = np.empty((k_total, 2))
     cov = np.full((k_total, 3, 3), np.nan)
     seconds = np.empty(k_total)
@@ -102,20 +117,34 @@ def mle_filter(
         t0 = _time.perf_counter()
         k = ping.index
         if not ping.first:
-            position = position + ping.increment
-            p = p + np.eye(2) * motion.noise_std(ping.increment) ** 2
+            step = rotate(-b_prior, ping.increment) / (1.0 + k_prior)
+            position = position + step
+            walk = navigation.heading_walk**2 * ping.dt
+            p = _propagate(p, step, k_prior, motion.noise_covariance(ping), walk)
         if fix_due(config, k, window):
-            fix, record = attempt_fix(survey, bathymetry, k, position, p, config, window)
+            fix, record = attempt_fix(
+                survey, bathymetry, k, position, p[:2, :2], config, window,
+                initial_std=navigation.initial_position_std,
+            )  # fmt: skip
             used = fix is not None and (fix.accepted or not config.require_accepted)
             record["used"] = bool(used)
             fixes.append(record)
             if used:
-                position, p = fix.position.copy(), fix.covariance.copy()  # type: ignore[union-attr]
+                position = fix.position.copy()  # type: ignore[union-attr]
+                p[:2, :2] = fix.covariance  # type: ignore[union-attr]
+                p[:2, 2:] = 0.0
+                p[2:, :2] = 0.0
             accepted += int(bool(fix is not None and fix.accepted))
             rejected += int(not (fix is not None and fix.accepted))
-        mean[k], cov[k, :2, :2] = position, p
+        mean[k], cov[k, :2, :2] = position, p[:2, :2]
         seconds[k] = _time.perf_counter() - t0
     elapsed = _time.perf_counter() - started
+    calibration = {
+        "speed_scale": float(k_prior),
+        "speed_scale_std": float(np.sqrt(p[2, 2])),
+        "heading_error": float(b_prior),
+        "heading_error_std": float(np.sqrt(p[3, 3])),
+    }
     return Track(
         time=survey.time,
         pose=np.column_stack([mean, survey.dr_pose[:, 2]]),
@@ -127,10 +156,14 @@ def mle_filter(
             "n_resampled": 0,
             "n_divergences": 0,
             "divergence_steps": [],
+            "n_lost": 0,
+            "lost_steps": [],
+            "calibration": calibration,
             "n_fixes_accepted": accepted,
             "n_fixes_rejected": rejected,
             "n_fixes_used": sum(bool(f["used"]) for f in fixes),
             "fixes": fixes,
+            "navigation_model": navigation.as_dict(),
             "config": config.as_dict(),
         },
     )

@@ -1,28 +1,39 @@
 """The state-space model every particle filter shares: motion between pings and terrain likelihood.
 
-State of a particle: horizontal position ``x = (north, east)`` (the heading is the dead-reckoned
-one) and, when the tide is uncertain, the mean of its Gaussian tide posterior (Rao-Blackwellised).
+It is built from a :class:`~tangraph.sensors.NavigationModel` (the one model of the survey's dead
+reckoning and terrain measurements every estimator shares): the filter configs hold only
+algorithm settings.
 
-**Motion** (Han et al. 2020, eq. 1): ``x_k = x_{k-1} + u_k + v_k``, ``u_k`` the dead-reckoned
-displacement between pings ``k-1`` and ``k`` and ``v_k ~ N(0, q_k^2 I)`` with
-``q_k^2 = process_std^2 + (process_fraction |u_k|)^2`` (a floor plus an error proportional to the
-distance run, as dead-reckoning errors are).
+State of a particle: horizontal position ``x = (north, east)``, the constant dead-reckoning errors
+``c = (k, b)`` (``k`` the DVL speed scale: the DVL reads ``1 + k`` times the true speed; ``b`` the
+total heading error, DR minus true: the constant bias plus its random walk) and, when the tide is
+uncertain, the mean of its Gaussian tide posterior (Rao-Blackwellised).
 
-**Measurement** (Han et al. 2020, eq. 2): the ``B`` soundings of ping ``k`` (offsets ``o_b`` from
-the vehicle, world-aligned by the dead-reckoned heading) measure ``z_b = h(x + o_b) + t + e_b``,
-``e_b ~ N(0, sigma^2)``, ``h`` the map's bilinear depth and ``t`` the tide (measured = map + tide).
-With ``tide_std = 0`` the tide is known and the log-likelihood is ``-sum (z_b - t - h)^2 /
-(2 sigma^2)``, the paper's. With ``tide_std > 0`` the tide has a Gaussian prior ``N(tide,
-tide_std^2)`` and each particle carries its conjugate posterior ``N(m, v)`` (``v`` is the same
-for all particles: every particle sees the same number of soundings): the weight is the
-predictive density of the ping, with ``e_b = z_b - h_b - m`` (Sherman-Morrison on
-``sigma^2 I + v 1 1^T``)
+**Motion**: ``x_k = x_{k-1} + R(-b_{k-1}) u_k / (1 + k) + v_k`` and ``b_k = b_{k-1} + w_k``,
+``u_k`` the dead-reckoned (world-frame) displacement between pings ``k-1`` and ``k`` (the DR
+integrates ``(1 + k)`` times the true body velocity with the heading ``psi + b``, so this is the
+true displacement up to the white errors), ``R(a)`` the rotation by ``a`` clockwise from north,
+``v_k ~ N(0, Q_k)`` with ``Q_k = (speed_noise dt)^2 I + heading_noise^2 u_k^perp u_k^perp^T +
+floor^2 I`` (the white DVL noise over the interval ``dt``, the white heading error turning the
+step, and the config's optional floor) and ``w_k ~ N(0, heading_walk^2 dt)``.
+
+**Measurement**: the ``B`` soundings of ping ``k`` (offsets ``o_b`` from the vehicle,
+world-aligned by the dead-reckoned heading: ``R(-b) o_b`` are the true offsets) measure
+``z_b = h(x + R(-b) o_b) + t + e_b``, ``e_b ~ N(0, sigma^2)``, ``h`` the map's bilinear depth, ``t``
+the tide (measured = map + tide) and ``sigma^2 = sounding_std^2 + map_std^2`` (the map error
+inflates the likelihood: MBARI's "modified weighting"). With ``tide_std = 0`` the tide is known
+and the log-likelihood is ``-sum (z_b - t - h)^2 / (2 sigma^2)``. With ``tide_std > 0`` the tide
+has a Gaussian prior ``N(tide, tide_std^2)`` and each particle carries its conjugate posterior
+``N(m, v)`` (``v`` is the same for all particles: every particle sees the same number of
+soundings): the weight is the predictive density of the ping, with ``e_b = z_b - h_b - m``
+(Sherman-Morrison on ``sigma^2 I + v 1 1^T``)
 
     ``log p = -(sum e^2 - v (sum e)^2 / (sigma^2 + B v)) / (2 sigma^2)`` (+ a constant),
 
 and the posterior becomes ``v' = v sigma^2 / (sigma^2 + B v)``, ``m' = m + v' sum e / sigma^2``.
-A particle with a sounding off the map or by a NaN cell gets ``-inf``. Constants shared by all
-particles are dropped: weights are normalised.
+At the true state ``-2 log p`` is chi-square with ``B`` degrees of freedom (the filters' lost
+test uses it). A particle with a sounding off the map or by a NaN cell gets ``-inf``. Constants
+shared by all particles are dropped: weights are normalised.
 """
 
 from __future__ import annotations
@@ -35,6 +46,8 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
+from tangraph.sensors.dead_reckoning import _rotate as rotate  # R(psi), written once
 from tangraph.survey import Survey
 
 __all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
@@ -44,12 +57,13 @@ __all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings
 class Ping:
     """What a filter step needs of ping ``index``: the dead-reckoned ``increment (2,)`` from the
     previous ping (zero and ``first`` True at ping 0), the world-aligned ``offsets (B, 2)`` of
-    its finite soundings from the dead-reckoned position, and their ``depths (B,)``.
+    its finite soundings from the dead-reckoned position, their ``depths (B,)`` and the time
+    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0).
 
-    Checked on construction: ``index`` an integer >= 0, ``increment`` finite ``(2,)``, ``offsets``
-    finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is dropped with its offset, as
-    :func:`survey_pings` does, so a step never mistakes a missing sounding for a divergence; an
-    infinite depth is refused.
+    Checked on construction: ``index`` an integer >= 0, ``dt`` finite >= 0, ``increment`` finite
+    ``(2,)``, ``offsets`` finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is
+    dropped with its offset, as :func:`survey_pings` does, so a step never mistakes a missing
+    sounding for a divergence; an infinite depth is refused.
 
     Examples
     --------
@@ -62,6 +76,7 @@ class Ping:
     offsets: np.ndarray
     depths: np.ndarray
     first: bool = False
+    dt: float = 1.0
 
     def __post_init__(self) -> None:
         try:
@@ -100,6 +115,13 @@ class Ping:
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "depths", depths)
         object.__setattr__(self, "first", bool(self.first))
+        try:
+            dt = float(self.dt)
+        except (TypeError, ValueError):
+            dt = np.nan
+        if not (np.isfinite(dt) and dt >= 0):
+            raise TangraphError(f"Ping {index}: dt must be a finite number >= 0, got {self.dt!r}")
+        object.__setattr__(self, "dt", dt)
 
     @property
     def n_soundings(self) -> int:
@@ -116,36 +138,80 @@ def survey_pings(survey: Survey) -> list[Ping]:
         keep = valid[k]
         offsets = np.column_stack([north[k, keep] - dr[k, 0], east[k, keep] - dr[k, 1]])
         increment = dr[k, :2] - dr[k - 1, :2] if k > 0 else np.zeros(2)
-        pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0))
+        dt = float(survey.time[k] - survey.time[k - 1]) if k > 0 else 0.0
+        pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt))
     return pings
 
 
 @dataclasses.dataclass(frozen=True)
 class MotionModel:
-    """Dead-reckoned displacement plus Gaussian process noise (see the module docstring).
+    """Calibrated dead-reckoned displacement plus the white DR errors (see the module docstring).
+
+    Parameters
+    ----------
+    speed_noise : float
+        White DVL velocity error, m/s per axis (``NavigationModel.speed_noise``).
+    heading_noise : float
+        White heading error of each DR sample, rad: turns the step it starts.
+    heading_walk : float
+        Random walk of the heading error, rad/sqrt(s): the particles' ``b`` walks with it.
+    floor : float
+        Extra white noise (m per ping and axis): an algorithm setting (a roughening floor), 0 by
+        default.
 
     Examples
     --------
-    >>> MotionModel(process_std=0.5, process_fraction=0.1).noise_std(np.array([30.0, 40.0]))
-    5.024937810560445
+    >>> model = MotionModel(speed_noise=0.1)
+    >>> model.noise_covariance(Ping(1, np.array([30.0, 40.0]), np.zeros((0, 2)), np.zeros(0), dt=5.0))
+    array([[0.25, 0.  ],
+           [0.  , 0.25]])
     """
 
-    process_std: float = 0.5  # m per ping and axis
-    process_fraction: float = 0.1  # per axis, of the distance run between pings
+    speed_noise: float = 0.05
+    heading_noise: float = 0.0
+    heading_walk: float = 0.0
+    floor: float = 0.0
 
-    def noise_std(self, increment: np.ndarray) -> float:
-        """Std (m, per axis) of the process noise over a dead-reckoned ``increment``."""
-        return float(np.hypot(self.process_std, self.process_fraction * np.hypot(*increment)))
+    @classmethod
+    def from_model(cls, model: NavigationModel, floor: float = 0.0) -> MotionModel:
+        """The white DR errors of a navigation model (plus a floor)."""
+        return cls(model.speed_noise, model.heading_noise, model.heading_walk, float(floor))
+
+    def noise_covariance(self, ping: Ping, extra_std: float = 0.0) -> np.ndarray:
+        """World-frame covariance ``(2, 2)`` of the white position error over the ping's step
+        (plus ``extra_std^2 I``)."""
+        across = np.array([-ping.increment[1], ping.increment[0]])
+        isotropic = (self.speed_noise * ping.dt) ** 2 + self.floor**2 + extra_std**2
+        return isotropic * np.eye(2) + self.heading_noise**2 * np.outer(across, across)
 
     def predict(
-        self, particles: np.ndarray, ping: Ping, *, rng: np.random.Generator, extra_std: float = 0.0
-    ) -> np.ndarray:
-        """New particles ``(N, 2)``: moved by the ping's increment plus process noise (and
-        ``extra_std`` of independent jitter); unchanged at the first ping."""
+        self,
+        particles: np.ndarray,
+        calibration: np.ndarray,
+        ping: Ping,
+        *,
+        rng: np.random.Generator,
+        extra_std: float = 0.0,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """New particles ``(N, 2)`` and calibrations ``(N, 2)`` (``k``, ``b``): every particle
+        moved by its calibrated increment ``R(-b) u / (1 + k)`` plus the white noise (and
+        ``extra_std`` of independent jitter), then its ``b`` walked; unchanged at the first ping.
+        The draws: ``N x 2`` normals for the position, then ``N`` for the walk if any."""
         if ping.first:
-            return particles
-        std = float(np.hypot(self.noise_std(ping.increment), extra_std))
-        return particles + ping.increment + std * rng.standard_normal(particles.shape)
+            return particles, calibration
+        k, b = calibration[:, 0], calibration[:, 1]
+        step = rotate(-b, np.broadcast_to(ping.increment, particles.shape)) / (1.0 + k)[:, None]
+        cov = self.noise_covariance(ping, extra_std)
+        noise = rng.standard_normal(particles.shape)
+        if cov[0, 1] == 0.0:
+            noise = noise * np.sqrt(np.diag(cov))
+        else:
+            noise = noise @ np.linalg.cholesky(cov + 1e-12 * np.eye(2)).T
+        moved = particles + step + noise
+        if self.heading_walk > 0 and ping.dt > 0:
+            walk = self.heading_walk * np.sqrt(ping.dt) * rng.standard_normal(particles.shape[0])
+            calibration = np.column_stack([k, b + walk])
+        return moved, calibration
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -162,7 +228,9 @@ class TerrainUpdate:
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TerrainModel:
-    """The terrain likelihood of a ping with a known (``tide_std = 0``) or uncertain tide."""
+    """The terrain likelihood of a ping with a known (``tide_std = 0``) or uncertain tide;
+    ``sounding_std`` is the std of one sounding's residual (a navigation model's
+    ``measurement_std``: sounding and map errors)."""
 
     bathymetry: BathymetryMap
     sounding_std: float
@@ -172,13 +240,18 @@ class TerrainModel:
     def __post_init__(self) -> None:
         object.__setattr__(self, "likelihood", TerrainLikelihood(self.bathymetry, self.sounding_std))
 
-    def evaluate(self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping) -> TerrainUpdate:
+    def evaluate(
+        self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping, heading_error=None
+    ) -> TerrainUpdate:
         """Likelihood of ``ping`` at ``particles (N, 2)`` whose tide posteriors are ``N(tide (N,),
-        tide_var)``; see the module docstring."""
+        tide_var)`` and whose heading errors are ``heading_error (N,)`` (rad, DR minus true; None:
+        0): each particle's soundings are turned by ``-heading_error`` about it. See the module
+        docstring."""
         b = ping.n_soundings
         s2_noise = self.sounding_std**2
+        turn = None if heading_error is None else -np.asarray(heading_error, dtype=np.float64)
         log_likelihood, new_tide, predicted = self.likelihood.tide_update(
-            particles, ping.offsets, ping.depths, tide, tide_var
+            particles, ping.offsets, ping.depths, tide, tide_var, turn=turn
         )
         new_var = tide_var * s2_noise / (s2_noise + b * tide_var)
         return TerrainUpdate(log_likelihood, new_tide, float(new_var), predicted)

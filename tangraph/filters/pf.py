@@ -1,9 +1,11 @@
 """The bootstrap particle filter on the shared model.
 
-Each ping: move every particle by the dead-reckoned increment plus process noise
-(:class:`~tangraph.filters.MotionModel`), multiply its weight by the terrain likelihood of
-the ping's soundings (:class:`~tangraph.filters.TerrainModel`), take the weighted mean and
-covariance, and resample when the effective sample size falls below ``ess_threshold * N``.
+Each ping: move every particle by its calibrated dead-reckoned increment plus the white DR
+noise (:class:`~tangraph.filters.MotionModel`), multiply its weight by the terrain likelihood of
+the ping's soundings turned by its heading error (:class:`~tangraph.filters.TerrainModel`;
+tempered when too peaked, :func:`~tangraph.filters.measure`), take the weighted mean and
+covariance, and resample when the effective sample size falls below ``ess_threshold * N`` (the
+calibrations then moved by the shrinkage kernel, :func:`~tangraph.filters.core.shrink_calibration`).
 The loop runs over time only; every step is vectorised over particles and soundings.
 """
 
@@ -19,12 +21,14 @@ from tangraph.filters.core import (
     FilterModel,
     StepResult,
     measure,
+    predict,
     resample_if_needed,
     run_particle_filter,
     weighted_moments,
 )
 from tangraph.filters.model import Ping
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -49,12 +53,18 @@ class PFConfig(ParticleConfig):
 def pf_step(
     belief: Belief, ping: Ping, model: FilterModel, config: ParticleConfig, *, rng: np.random.Generator
 ) -> StepResult:
-    """One bootstrap-PF step: predict, weight by the ping, estimate, resample if needed."""
-    moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng))
-    weighted, _ = measure(moved, ping, model)
+    """One bootstrap-PF step: predict, weight by the ping (tempered if needed), estimate,
+    resample if needed."""
+    moved = predict(belief, ping, model, rng=rng)
+    measured = measure(moved, ping, model, config, rng=rng)
+    weighted = measured.belief
     mean, cov = weighted_moments(weighted)
-    new, index, ess = resample_if_needed(weighted, config, rng=rng)
-    return StepResult(new, mean, cov, ess, resampled=index is not None)
+    new, index, ess = resample_if_needed(weighted, config, rng=rng, model=model)
+    info = {"exponents": measured.exponents, "stage_ess": measured.stage_ess}
+    return StepResult(
+        new, mean, cov, ess, resampled=index is not None, counts={"n_tempered": int(measured.tempered)},
+        info=info, innovation=measured.innovation,
+    )  # fmt: skip
 
 
 def bootstrap_pf(
@@ -62,15 +72,18 @@ def bootstrap_pf(
     bathymetry: BathymetryMap,
     config: PFConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
     """Run the bootstrap PF over a survey; returns the weighted-mean track with its covariance.
 
-    The heading is the dead-reckoned one (its variance is NaN in the track). A step where every
+    ``model`` is the run's navigation model (None: ``NavigationModel.from_survey(survey)``). The
+    heading is the dead-reckoned one (its variance is NaN in the track). A step where every
     particle has zero likelihood is a divergence: the cloud is re-drawn around dead reckoning
     (see :func:`~tangraph.filters.run_particle_filter`).
     """
     return run_particle_filter(
-        survey, bathymetry, config or PFConfig(), pf_step, method="pf", rng=rng, progress=progress
-    )
+        survey, bathymetry, config or PFConfig(), pf_step, method="pf", rng=rng, model=model,
+        progress=progress,
+    )  # fmt: skip

@@ -24,8 +24,8 @@ Each ping (SEEDS.md section 3):
 The paper gives no particle count, kernel constant or window for its Table 1; the defaults here
 (1000 particles, ``exp(2 rho)``, ``L = 10``) are choices to sweep (the null scatter of rho over 10
 points is about 1/3, so ``exp(2 rho)`` changes a weight by about a factor 2 per standard error).
-The other defaults are those of every filter (``sounding_std`` from the survey: on the chen2022
-scenario 1.5 x its 5 m depth noise).
+The model (sounding std, tide prior, DR errors) is the run's navigation model, as for every
+filter (from a chen2022 survey: a sounding std of 1.5 x its 5 m depth noise).
 """
 
 from __future__ import annotations
@@ -42,6 +42,7 @@ from tangraph.filters.core import (
     FilterModel,
     StepResult,
     measure,
+    predict,
     resample_if_needed,
     reweight,
     run_particle_filter,
@@ -50,6 +51,7 @@ from tangraph.filters.core import (
 from tangraph.filters.correlation import Correlation, correlate_rows
 from tangraph.filters.model import Ping
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -130,8 +132,9 @@ def sjcpf_step(
     jitter = config.jitter_std
     if jitter is None:
         jitter = config.jitter_fraction * float(np.hypot(*ping.increment))
-    moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng, extra_std=jitter))
-    weighted, update = measure(moved, ping, model)
+    moved = predict(belief, ping, model, rng=rng, extra_std=jitter)
+    measured = measure(moved, ping, model, config, rng=rng)
+    weighted, update = measured.belief, measured.update
     if update is not None:
         weighted = weighted.replace(
             history=_push(weighted.history, update.predicted),
@@ -143,8 +146,11 @@ def sjcpf_step(
             log_f = correlation_log_weight(rho, config.kernel, config.kernel_constant)
             weighted = reweight(weighted, log_f, where=f"ping {ping.index} (correlation)")
     mean, cov = weighted_moments(weighted)
-    new, index, ess = resample_if_needed(weighted, config, rng=rng)
-    return StepResult(new, mean, cov, ess, resampled=index is not None, info={"ancestors": index})
+    new, index, ess = resample_if_needed(weighted, config, rng=rng, model=model)
+    return StepResult(
+        new, mean, cov, ess, resampled=index is not None, counts={"n_tempered": int(measured.tempered)},
+        info={"ancestors": index, "exponents": measured.exponents}, innovation=measured.innovation,
+    )  # fmt: skip
 
 
 def sjcpf(
@@ -152,10 +158,12 @@ def sjcpf(
     bathymetry: BathymetryMap,
     config: SJCPFConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
-    """Run the SJCPF (Chen & Che 2022) over a survey; see the module docstring."""
+    """Run the SJCPF (Chen & Che 2022) over a survey (``model``: the navigation model, None:
+    from the survey); see the module docstring."""
     config = config or SJCPFConfig()
     return run_particle_filter(
         survey,
@@ -164,6 +172,7 @@ def sjcpf(
         sjcpf_step,
         method="sjcpf",
         rng=rng,
+        model=model,
         progress=progress,
         history_length=config.window,
     )

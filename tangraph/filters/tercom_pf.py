@@ -17,11 +17,15 @@ predicted mean, over ``search_sigmas`` times its std. What a fix does:
 - otherwise the particles are re-weighted by the fix's Gaussian likelihood
   ``exp(-(x - fix)^T R^-1 (x - fix) / 2)``, then resampled if ESS < ``ess_threshold * N``.
 
-The per-ping terrain likelihood is not used by the step (the soundings enter through the fixes
-only, and the fix estimates the tide itself), so ``sounding_std``, ``tide`` and ``tide_std`` do not
+The particles carry the constant DR errors ``(k, b)`` and move by their calibrated increments
+as in every filter; a fix re-weights them by position only, so the calibration is learnt through
+its correlation with the position (a re-drawn cloud keeps its particles' calibrations). The
+per-ping terrain likelihood is not used by the step (the soundings enter through the fixes
+only, and the fix estimates the tide itself), so the model's sounding std and tide prior do not
 affect it; they are used only by the divergence recovery of
 :func:`~tangraph.filters.run_particle_filter`, which weights a re-drawn cloud by the ping's
-terrain likelihood with that sounding std and tide prior.
+terrain likelihood. No terrain update, no :class:`~tangraph.filters.core.Innovation`: TERCOM-PF
+never reports itself lost (a rejected fix is counted instead).
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from tangraph.filters.core import (
     Belief,
     FilterModel,
     StepResult,
+    predict,
     resample_if_needed,
     reweight,
     run_particle_filter,
@@ -45,6 +50,7 @@ from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_w
 from tangraph.filters.model import Ping
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -66,7 +72,8 @@ class TercomPFConfig(ParticleConfig):
         ``"mle"`` or ``"msd"``.
     search_sigmas, min_half_width, max_half_width : float
         Search half-width: ``search_sigmas`` times the cloud's std, within
-        ``[min_half_width (None: the larger of 3 map cells and init_std), max_half_width]`` metres.
+        ``[min_half_width (None: the larger of 3 map cells and the model's initial_position_std),
+        max_half_width]`` metres.
     gate : float
         Squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
     """
@@ -105,18 +112,21 @@ def tercom_pf_step(
     :func:`~tangraph.filters.fixes.fix_window` of the config and survey (computed once per survey
     and cached; :func:`tercom_pf` passes it)."""
     window = window or fix_window(config, survey)
-    moved = belief.replace(particles=model.motion.predict(belief.particles, ping, rng=rng))
+    moved = predict(belief, ping, model, rng=rng)
     if not fix_due(config, ping.index, window):
         mean, cov = weighted_moments(moved)
-        new, index, ess = resample_if_needed(moved, config, rng=rng)
+        new, index, ess = resample_if_needed(moved, config, rng=rng, model=model)
         return StepResult(new, mean, cov, ess, resampled=index is not None)
     prior_mean, prior_cov = weighted_moments(moved)
-    fix, record = attempt_fix(survey, bathymetry, ping.index, prior_mean, prior_cov, config, window)
+    fix, record = attempt_fix(
+        survey, bathymetry, ping.index, prior_mean, prior_cov, config, window,
+        initial_std=model.navigation.initial_position_std,
+    )  # fmt: skip
     counts = {"n_fixes_accepted": 0, "n_fixes_rejected": 0, "n_recentred": 0}
     if fix is None or not fix.accepted:
         counts["n_fixes_rejected"] = 1
         mean, cov = prior_mean, prior_cov
-        new, index, ess = resample_if_needed(moved, config, rng=rng)
+        new, index, ess = resample_if_needed(moved, config, rng=rng, model=model)
         return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=(record,))
     counts["n_fixes_accepted"] = 1
     r = fix.covariance
@@ -141,7 +151,7 @@ def tercom_pf_step(
         )
     record["action"] = action
     mean, cov = weighted_moments(updated)
-    new, index, ess = resample_if_needed(updated, config, rng=rng)
+    new, index, ess = resample_if_needed(updated, config, rng=rng, model=model)
     return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=(record,))
 
 
@@ -150,11 +160,12 @@ def tercom_pf(
     bathymetry: BathymetryMap,
     config: TercomPFConfig | None = None,
     *,
+    model: NavigationModel | None = None,
     rng: np.random.Generator,
     progress: bool = False,
 ) -> Track:
-    """Run TERCOM-PF over a survey; see the module docstring. ``meta["fixes"]`` records every
-    fix attempted."""
+    """Run TERCOM-PF over a survey (``model``: the navigation model, None: from the survey); see
+    the module docstring. ``meta["fixes"]`` records every fix attempted."""
     config = config or TercomPFConfig()
     window = fix_window(config, survey)
     step = functools.partial(tercom_pf_step, survey=survey, bathymetry=bathymetry, window=window)
@@ -165,6 +176,7 @@ def tercom_pf(
         step,
         method="tercom-pf",
         rng=rng,
+        model=model,
         progress=progress,
         count_keys=("n_fixes_accepted", "n_fixes_rejected", "n_recentred"),
     )

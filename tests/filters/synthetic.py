@@ -3,10 +3,12 @@ are the map's bilinear depth at the true footprints plus seeded noise)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from tangraph.maps import BathymetryMap, fractal
-from tangraph.sensors import DeadReckoningModel, simulate_dead_reckoning
+from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
 from tangraph.sim import trajectories
 from tangraph.survey import Survey, footprints
 
@@ -30,7 +32,9 @@ def multibeam_survey(
     tide: float = 0.0,
     dr_model: DeadReckoningModel | None = None,
 ) -> Survey:
-    """A straight run with a drifting dead reckoning (3 deg heading bias by default)."""
+    """A straight run with a drifting dead reckoning (3 deg heading bias by default); its
+    ``meta["settings"]`` records the DR model and the depth noise, as a simulated survey's do
+    (so ``NavigationModel.from_survey`` works on it)."""
     rng = np.random.default_rng(seed)
     time, truth = trajectories.straight_line(
         np.asarray(start, float), np.radians(heading_deg), speed, (pings - 1) / rate, rate
@@ -50,7 +54,13 @@ def multibeam_survey(
         beam_starboard=starboard,
         beam_depth=depth,
         true_pose=truth,
+        meta={"settings": {"dead_reckoning": dataclasses.asdict(model), "sonar": {"depth_noise": noise}}},
     )
+
+
+def navigation(survey: Survey, **overrides) -> NavigationModel:
+    """The navigation model of a synthetic survey (``overrides`` replace fields)."""
+    return NavigationModel.from_survey(survey, **overrides)
 
 
 def final_error(track, survey: Survey) -> float:

@@ -22,6 +22,7 @@ from tangraph.filters import (
     initial_belief,
     ipf_step,
     jbpf_step,
+    model_belief,
     pf_step,
     resample,
     run_filter,
@@ -32,10 +33,11 @@ from tangraph.filters import (
     weighted_moments,
 )
 from tangraph.filters.likelihood import TerrainLikelihood
-from tests.filters.synthetic import multibeam_survey, rough_map
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)
 SURVEY = multibeam_survey(MAP, pings=12)
+MODEL = navigation(SURVEY, initial_position_std=10.0, sounding_std=0.5)
 
 
 def one_particle_with_all_the_weight():
@@ -59,13 +61,13 @@ def test_belief_arrays_are_read_only():
 
 
 STEPS = {
-    "pf": (pf_step, PFConfig(n_particles=200, init_std=10.0, sounding_std=0.5)),
-    "ipf": (ipf_step, IPFConfig(n_particles=200, init_std=10.0, sounding_std=0.5, ess_threshold=1.0)),
-    "sjcpf": (sjcpf_step, SJCPFConfig(n_particles=200, init_std=10.0, sounding_std=0.5, window=3)),
-    "jbpf": (jbpf_step, JBPFConfig(n_particles=200, init_std=10.0, sounding_std=0.5, ess_threshold=1.0)),
+    "pf": (pf_step, PFConfig(n_particles=200)),
+    "ipf": (ipf_step, IPFConfig(n_particles=200, ess_threshold=1.0)),
+    "sjcpf": (sjcpf_step, SJCPFConfig(n_particles=200, window=3)),
+    "jbpf": (jbpf_step, JBPFConfig(n_particles=200, ess_threshold=1.0)),
     "tercom-pf": (
         functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP),
-        TercomPFConfig(n_particles=200, init_std=10.0, window=3),
+        TercomPFConfig(n_particles=200, window=3),
     ),
 }
 
@@ -73,11 +75,11 @@ STEPS = {
 @pytest.mark.parametrize("name", list(STEPS))
 def test_steps_return_a_new_belief_and_leave_their_inputs_alone(name):
     step, config = STEPS[name]
-    model = FilterModel.from_config(config, MAP)
+    model = FilterModel.from_model(MODEL, MAP, config)
     pings = survey_pings(SURVEY)
     rng = np.random.default_rng(1)
     window = getattr(config, "window", 0) if name == "sjcpf" else 0
-    belief = initial_belief(SURVEY.dr_pose[0, :2], 10.0, 200, rng=rng, history_length=window)
+    belief = model_belief(SURVEY.dr_pose[0, :2], model, 200, rng=rng, history_length=window)
     for ping in pings[:4]:
         # a belief's arrays are read-only (writing would raise), a ping's are not: compare copies
         offsets, depths, increment = np.copy(ping.offsets), np.copy(ping.depths), np.copy(ping.increment)
@@ -86,6 +88,7 @@ def test_steps_return_a_new_belief_and_leave_their_inputs_alone(name):
         np.testing.assert_array_equal(ping.depths, depths)
         np.testing.assert_array_equal(ping.increment, increment)
         assert not belief.particles.flags.writeable and not belief.log_weights.flags.writeable
+        assert not belief.calibration.flags.writeable
         assert result.belief is not belief
         assert np.isclose(np.exp(result.belief.log_weights).sum(), 1.0)
         belief = result.belief
@@ -93,16 +96,15 @@ def test_steps_return_a_new_belief_and_leave_their_inputs_alone(name):
 
 def test_a_ping_without_soundings_only_predicts():
     config = PFConfig(n_particles=50, ess_threshold=0.0)
-    model = FilterModel.from_config(config, MAP)
+    model = FilterModel.from_model(MODEL, MAP, config)
     belief = initial_belief([300.0, 300.0], 5.0, 50, rng=np.random.default_rng(2))
     belief = belief.replace(log_weights=np.log(np.linspace(1, 2, 50) / np.linspace(1, 2, 50).sum()))
-    empty = Ping(3, np.array([10.0, 0.0]), np.zeros((0, 2)), np.zeros(0))
+    empty = Ping(3, np.array([10.0, 0.0]), np.zeros((0, 2)), np.zeros(0), dt=5.0)
     result = pf_step(belief, empty, model, config, rng=np.random.default_rng(3))
     np.testing.assert_array_equal(result.belief.log_weights, belief.log_weights)
-    assert np.all(
-        np.abs(result.belief.particles - belief.particles - [10.0, 0.0])
-        < 6 * model.motion.noise_std([10.0, 0])
-    )
+    std = np.sqrt(np.diag(model.motion.noise_covariance(empty)))
+    assert np.all(std == MODEL.speed_noise * 5.0)
+    assert np.all(np.abs(result.belief.particles - belief.particles - [10.0, 0.0]) < 6 * std)
 
 
 def test_nan_soundings_are_skipped():
@@ -116,9 +118,9 @@ def test_nan_soundings_are_skipped():
         beam_starboard=SURVEY.beam_starboard[:, 1:],
         beam_depth=depth[:, 1:],
     )
-    config = PFConfig(n_particles=300, init_std=10.0, sounding_std=0.5)
-    a = run_filter("pf", with_nan, MAP, config, rng=np.random.default_rng(4))
-    b = run_filter("pf", cut, MAP, config, rng=np.random.default_rng(4))
+    config = PFConfig(n_particles=300)
+    a = run_filter("pf", with_nan, MAP, config, model=MODEL, rng=np.random.default_rng(4))
+    b = run_filter("pf", cut, MAP, config, model=MODEL, rng=np.random.default_rng(4))
     assert np.all(np.isfinite(a.pose))
     np.testing.assert_array_equal(a.pose, b.pose)
 
@@ -130,9 +132,9 @@ def test_all_particles_off_the_map_is_a_divergence_not_an_error(method):
     shift = np.array([-400.0, 0.0, 0.0])
     survey = SURVEY.replace(dr_pose=SURVEY.dr_pose + shift)
     config = {"pf": PFConfig, "ipf": IPFConfig, "sjcpf": SJCPFConfig, "jbpf": JBPFConfig}[method](
-        n_particles=2000, init_std=10.0, sounding_std=0.5, reinit_std=40.0, reinit_growth=2.0
+        n_particles=2000, reinit_std=40.0, reinit_growth=2.0
     )
-    track = run_filter(method, survey, MAP, config, rng=np.random.default_rng(5))
+    track = run_filter(method, survey, MAP, config, model=MODEL, rng=np.random.default_rng(5))
     steps = track.meta["divergence_steps"]
     assert track.meta["n_divergences"] == len(steps) >= 1
     assert steps == list(range(len(steps)))  # consecutive from ping 0, then the map is found
@@ -151,14 +153,18 @@ def test_bad_particle_count_is_named(value):
 @pytest.mark.parametrize(
     ("cls", "field", "value"),
     [
-        (PFConfig, "sounding_std", 0.0),
-        (PFConfig, "init_std", -1.0),
-        (PFConfig, "process_std", np.nan),
+        (PFConfig, "tempering_ess", 0.0),
+        (PFConfig, "process_floor", -1.0),
+        (PFConfig, "kernel_bandwidth", np.nan),
+        (PFConfig, "kernel_bandwidth", 1.5),
+        (PFConfig, "kernel_floor", -1.0),
+        (PFConfig, "max_stages", 0),
+        (PFConfig, "lost_alpha", 0.0),
+        (PFConfig, "lost_pings", 0),
         (PFConfig, "ess_threshold", 1.5),
         (PFConfig, "resampler", "bogus"),
         (PFConfig, "reinit_std", 0.0),
         (PFConfig, "reinit_growth", 0.5),
-        (PFConfig, "tide_std", -1.0),
         (SJCPFConfig, "window", 2),
         (SJCPFConfig, "kernel", "gaussian"),
         (SJCPFConfig, "correlation", "cosine"),
@@ -178,12 +184,13 @@ def test_bad_configuration_is_named(cls, field, value):
 
 def test_a_vehicle_never_on_the_map_diverges_at_every_ping_with_a_capped_spread(caplog):
     survey = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([1e5, 0.0, 0.0]))
-    config = PFConfig(n_particles=200, init_std=10.0, reinit_growth=10.0)
+    config = PFConfig(n_particles=200, reinit_growth=10.0)
     with caplog.at_level("WARNING", logger="tangraph.filters.core"):
-        track = run_filter("pf", survey, MAP, config, rng=np.random.default_rng(6))
+        track = run_filter("pf", survey, MAP, config, model=MODEL, rng=np.random.default_rng(6))
     assert track.meta["divergence_steps"] == list(range(survey.n_pings))
     assert np.all(np.isfinite(track.pose))
-    spreads = [float(r.getMessage().rsplit("spread ", 1)[1].split()[0]) for r in caplog.records]
+    messages = [r.getMessage() for r in caplog.records if "spread" in r.getMessage()]
+    spreads = [float(m.rsplit("spread ", 1)[1].split()[0]) for m in messages]
     diagonal = np.hypot(MAP.north[-1] - MAP.north[0], MAP.east[-1] - MAP.east[0])
     assert diagonal < 3000.0  # so the third spread (3 init_std x 10^2) is capped
     assert spreads[:2] == [30.0, 300.0]
@@ -280,8 +287,8 @@ def test_a_ping_index_is_a_count(index):
 def test_nan_depths_in_a_ping_are_dropped_not_a_divergence():
     """A NaN depth handed straight to a step (not through survey_pings) is a missing sounding:
     the step weighs the ping by the other soundings, as if the NaN one were not there."""
-    config = PFConfig(n_particles=100, init_std=5.0, sounding_std=0.5, ess_threshold=0.0)
-    model = FilterModel.from_config(config, MAP)
+    config = PFConfig(n_particles=100, ess_threshold=0.0, tempering=False)
+    model = FilterModel.from_model(MODEL, MAP, config)
     ping = survey_pings(SURVEY)[1]
     depths = ping.depths.copy()
     depths[[0, 7]] = np.nan
@@ -338,7 +345,7 @@ def test_run_filter_names_an_argument_of_the_wrong_type(method, argument, value)
 def test_rng_none_is_refused_by_the_random_filters_and_accepted_by_mle():
     with pytest.raises(TangraphError, match=r"rng must be a numpy.random.Generator .*got None"):
         run_filter("pf", SURVEY, MAP, rng=None)
-    assert run_filter("mle", SURVEY, MAP, MLEConfig(init_std=10.0), rng=None).pose.shape == (12, 3)
+    assert run_filter("mle", SURVEY, MAP, MLEConfig(), model=MODEL, rng=None).pose.shape == (12, 3)
 
 
 def test_the_runner_itself_checks_its_arguments():
@@ -349,7 +356,7 @@ def test_the_runner_itself_checks_its_arguments():
 
 
 def test_the_track_records_the_seed_of_its_generator():
-    config = PFConfig(n_particles=50, init_std=10.0, sounding_std=0.5)
+    config = PFConfig(n_particles=50)
     track = run_filter("pf", SURVEY, MAP, config, rng=np.random.default_rng(42))
     assert track.meta["seed"] == {"entropy": 42, "spawn_key": []}
     spawned = np.random.default_rng(np.random.SeedSequence(7, spawn_key=(2, 3)))
@@ -372,5 +379,5 @@ class CountingSeed(np.random.bit_generator.ISeedSequence):
 
 def test_no_seed_is_recorded_for_a_generator_without_a_seed_sequence():
     rng = np.random.Generator(np.random.PCG64(CountingSeed()))
-    config = PFConfig(n_particles=20, init_std=10.0, sounding_std=0.5)
+    config = PFConfig(n_particles=20)
     assert run_filter("pf", SURVEY, MAP, config, rng=rng).meta["seed"] is None

@@ -18,21 +18,22 @@ from tangraph.filters import (
     run_filter,
 )
 from tangraph.maps import fractal
-from tangraph.sensors import DeadReckoningModel, simulate_dead_reckoning
+from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
 from tangraph.sim import trajectories
 from tangraph.survey import Survey
-from tests.filters.synthetic import dr_final_error, final_error, multibeam_survey, rough_map
+from tests.filters.synthetic import dr_final_error, final_error, multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)
 SURVEY = multibeam_survey(MAP, seed=1, pings=50)
+MODEL = navigation(SURVEY, initial_position_std=20.0, sounding_std=0.5)
 
 MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is ~25 m off at the end
-    "pf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
-    "ipf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
-    "sjcpf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5, jitter_std=1.0),
-    "jbpf": dict(n_particles=1000, init_std=20.0, sounding_std=0.5),
-    "tercom-pf": dict(n_particles=1000, init_std=20.0),
-    "mle": dict(init_std=20.0),
+    "pf": dict(n_particles=1000),
+    "ipf": dict(n_particles=1000),
+    "sjcpf": dict(n_particles=1000, jitter_std=1.0),
+    "jbpf": dict(n_particles=1000),
+    "tercom-pf": dict(n_particles=1000),
+    "mle": dict(),
 }
 
 
@@ -52,13 +53,14 @@ FINAL_ERROR = 4.0  # m, 2 x 2.06
 @pytest.mark.parametrize("method", list(FilterMethod))
 def test_every_filter_recovers_the_truth_on_a_multibeam_survey(method):
     config = config_type(method)(**MULTIBEAM[method])
-    track = run_filter(method, SURVEY, MAP, config, rng=np.random.default_rng(2))
+    track = run_filter(method, SURVEY, MAP, config, model=MODEL, rng=np.random.default_rng(2))
     assert dr_final_error(SURVEY) > 20
     errors = np.hypot(*(track.pose[:, :2] - SURVEY.true_pose[:, :2]).T)
     assert errors[25:].mean() < LATE_MEAN_ERROR, errors[25:].mean()
     assert final_error(track, SURVEY) < FINAL_ERROR
     assert track.method == FilterMethod(method).value
     assert track.meta["n_divergences"] == 0
+    assert track.meta["n_lost"] == 0 and track.meta["lost_steps"] == []
 
 
 @pytest.mark.parametrize("method", ["pf", "ipf"])
@@ -66,12 +68,12 @@ def test_an_unknown_tide_is_estimated(method):
     """Soundings 2.5 m deeper than the map: a filter told the tide is exactly 0 is misled (it
     shifts to where the map is deeper), one that estimates it (tide_std > 0) is not."""
     survey = multibeam_survey(MAP, seed=3, pings=40, tide=2.5)
-    cls = config_type(method)
+    config = config_type(method)(**MULTIBEAM[method])
     known = run_filter(
-        method, survey, MAP, cls(**MULTIBEAM[method], tide_std=0.0), rng=np.random.default_rng(4)
+        method, survey, MAP, config, model=MODEL.replace(tide_std=0.0), rng=np.random.default_rng(4)
     )
     estimated = run_filter(
-        method, survey, MAP, cls(**MULTIBEAM[method], tide_std=5.0), rng=np.random.default_rng(4)
+        method, survey, MAP, config, model=MODEL.replace(tide_std=5.0), rng=np.random.default_rng(4)
     )
 
     def late(track):
@@ -97,7 +99,10 @@ def test_sjcpf_recovers_the_truth_from_a_single_beam_on_a_coarse_chart():
     depth = chart.depth_at(truth[:, 0], truth[:, 1])[:, None] + 5.0 * rng.standard_normal((k, 1))
     zeros = np.zeros((k, 1))
     survey = Survey(time, dr, np.full(k, 100.0), zeros, zeros, depth, true_pose=truth)
-    track = run_filter("sjcpf", survey, chart, SJCPFConfig(init_std=300.0), rng=np.random.default_rng(1))
+    model = NavigationModel.from_dead_reckoning(
+        DeadReckoningModel.chen2022(), initial_position_std=300.0, sounding_std=7.5
+    )
+    track = run_filter("sjcpf", survey, chart, SJCPFConfig(), model=model, rng=np.random.default_rng(1))
     rmse = np.sqrt(np.mean(np.sum((track.pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
     dr_rmse = np.sqrt(np.mean(np.sum((dr[:, :2] - truth[:, :2]) ** 2, axis=1)))
     assert rmse < dr_rmse / 4, (rmse, dr_rmse)
@@ -109,13 +114,18 @@ def test_the_track_carries_what_the_api_promises(method):
     config = config_type(method)(
         **{k: (200 if k == "n_particles" else v) for k, v in MULTIBEAM[method].items()}
     )
-    track = run_filter(FilterMethod(method), survey, MAP, config, rng=np.random.default_rng(6))
+    track = run_filter(FilterMethod(method), survey, MAP, config, model=MODEL, rng=np.random.default_rng(6))
     assert track.method == method and track.pose.shape == (12, 3)
     np.testing.assert_array_equal(track.pose[:, 2], survey.dr_pose[:, 2])
     assert np.all(np.isnan(track.covariance[:, 2, :])) and np.all(np.isnan(track.covariance[:, :, 2]))
     assert np.all(np.linalg.eigvalsh(track.covariance[:, :2, :2]) >= -1e-9)
-    for key in ("ess", "n_resampled", "n_divergences", "divergence_steps", "config"):
+    for key in ("ess", "n_resampled", "n_divergences", "divergence_steps", "n_lost", "lost_steps", "config"):
         assert key in track.meta, key
+    assert set(track.meta["calibration"]) == {
+        "speed_scale", "speed_scale_std", "heading_error", "heading_error_std"
+    }  # fmt: skip
+    assert all(np.isfinite(v) for v in track.meta["calibration"].values())
+    assert track.meta["navigation_model"] == MODEL.as_dict()
     assert len(track.meta["ess"]) == 12
     assert set(track.timings) >= {"total", "per_step"} and track.timings["total"] > 0
     assert track.meta["config"] == dataclasses.asdict(config) | {

@@ -7,6 +7,7 @@ import functools
 import numpy as np
 import pytest
 
+from tangraph.errors import TangraphError
 from tangraph.filters import (
     FilterModel,
     JBPFConfig,
@@ -20,18 +21,20 @@ from tangraph.filters import (
     run_filter,
     run_particle_filter,
     survey_pings,
-    survey_sounding_std,
     tercom_pf_step,
 )
+from tangraph.filters.core import predict
 from tangraph.filters.fixes import fix_due, fix_window
-from tests.filters.synthetic import multibeam_survey, rough_map
+from tangraph.sensors import NavigationModel
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)
 SURVEY = multibeam_survey(MAP, seed=1, pings=30)
+MODEL = navigation(SURVEY, initial_position_std=20.0, sounding_std=0.5)
 
 
 def tercom_steps(config, belief, upto):
-    model = FilterModel.from_config(config, MAP)
+    model = FilterModel.from_model(MODEL, MAP, config)
     step = functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP)
     rng = np.random.default_rng(0)
     results = []
@@ -42,7 +45,7 @@ def tercom_steps(config, belief, upto):
 
 
 def test_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
-    config = TercomPFConfig(n_particles=500, init_std=20.0, window=5)
+    config = TercomPFConfig(n_particles=500, window=5)
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 15)
     fixes = [r.fixes for r in results]
@@ -59,12 +62,12 @@ def test_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
 
 
 def test_tercom_pf_recentres_on_a_fix_far_from_the_cloud():
-    config = TercomPFConfig(n_particles=500, init_std=20.0, window=5, gate=13.8, min_half_width=100.0)
+    config = TercomPFConfig(n_particles=500, window=5, gate=13.8, min_half_width=100.0)
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 5)
     # move the cloud 40 m away after the first fix: the next fix is far outside its gate
     shifted = results[4].belief.replace(particles=results[4].belief.particles + np.array([40.0, 0.0]))
-    model = FilterModel.from_config(config, MAP)
+    model = FilterModel.from_model(MODEL, MAP, config)
     step = functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP)
     rng = np.random.default_rng(2)
     belief = shifted
@@ -83,7 +86,8 @@ def test_tercom_pf_records_its_fixes(criterion):
         "tercom-pf",
         SURVEY,
         MAP,
-        TercomPFConfig(n_particles=300, init_std=20.0, criterion=criterion),
+        TercomPFConfig(n_particles=300, criterion=criterion),
+        model=MODEL,
         rng=np.random.default_rng(3),
     )
     meta = track.meta
@@ -94,7 +98,7 @@ def test_tercom_pf_records_its_fixes(criterion):
 
 def test_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_between():
     track = run_filter(
-        "mle", SURVEY, MAP, MLEConfig(init_std=20.0, require_accepted=False), rng=np.random.default_rng(0)
+        "mle", SURVEY, MAP, MLEConfig(require_accepted=False), model=MODEL, rng=np.random.default_rng(0)
     )
     fixes = track.meta["fixes"]
     assert [f["index"] for f in fixes] == [4, 9, 14, 19, 24, 29]
@@ -122,25 +126,36 @@ def test_fix_windows_and_schedule():
     assert [k for k in range(20) if fix_due(MLEConfig(fix_interval=3), k, 5)] == [4, 7, 10, 13, 16, 19]
 
 
-def test_sounding_std_from_the_survey():
-    assert survey_sounding_std(SURVEY) == 1.0  # nothing recorded
-    recorded = SURVEY.replace(meta={"settings": {"sonar": {"depth_noise": 0.5}}})
-    assert survey_sounding_std(recorded) == 0.75
-    track = run_filter("pf", recorded, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
-    assert track.meta["sounding_std"] == 0.75 and track.meta["config"]["sounding_std"] is None
+def test_the_model_comes_from_the_survey_and_the_map_error_inflates_the_likelihood():
+    """No model: ``NavigationModel.from_survey`` (1.5 x the recorded 0.3 m depth noise); a model's
+    map error is added in quadrature to its sounding std."""
+    track = run_filter("pf", SURVEY, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
+    assert track.meta["sounding_std"] == pytest.approx(0.45)
+    assert track.meta["navigation_model"] == NavigationModel.from_survey(SURVEY).as_dict()
+    inflated = MODEL.replace(sounding_std=0.3, map_std=0.4)
+    track = run_filter(
+        "pf", SURVEY, MAP, PFConfig(n_particles=100), model=inflated, rng=np.random.default_rng(0)
+    )
+    assert track.meta["sounding_std"] == pytest.approx(0.5)
+    recorded = SURVEY.replace(meta={})
+    with pytest.raises(TangraphError, match="pf: this survey does not record its dead-reckoning error model"):
+        run_filter("pf", recorded, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
+    with pytest.raises(TangraphError, match="model must be a tangraph.sensors.NavigationModel"):
+        run_filter("mle", SURVEY, MAP, model={"sounding_std": 0.5}, rng=None)
 
 
 def test_jbpf_jitters_only_the_pings_it_resamples():
-    model = FilterModel.from_config(JBPFConfig(), MAP)
+    model = FilterModel.from_model(MODEL, MAP)
     ping = survey_pings(SURVEY)[1]
     belief = initial_belief(SURVEY.dr_pose[0, :2], 10.0, 300, rng=np.random.default_rng(0))
     kept = jbpf_step(
-        belief, ping, model, JBPFConfig(n_particles=300, ess_threshold=0.0), rng=np.random.default_rng(1)
-    )
-    moved = model.motion.predict(belief.particles, ping, rng=np.random.default_rng(1))
+        belief, ping, model, JBPFConfig(n_particles=300, ess_threshold=0.0, tempering=False),
+        rng=np.random.default_rng(1),
+    )  # fmt: skip
+    moved = predict(belief, ping, model, rng=np.random.default_rng(1)).particles
     assert not kept.resampled
     np.testing.assert_array_equal(kept.belief.particles, moved)
-    config = JBPFConfig(n_particles=300, ess_threshold=1.0, jitter_std=2.0, sounding_std=0.5)
+    config = JBPFConfig(n_particles=300, ess_threshold=1.0, jitter_std=2.0)
     jittered = jbpf_step(belief, ping, model, config, rng=np.random.default_rng(1))
     assert jittered.resampled
     assert np.unique(jittered.belief.particles, axis=0).shape[0] == 300  # copies pulled apart
@@ -159,7 +174,7 @@ def test_the_default_fix_window_is_computed_once_per_survey(monkeypatch):
     """A TERCOM-PF step without ``window`` asks fix_window at every ping: the survey's soundings
     are scanned the first time only."""
     survey = SURVEY.replace(meta={"copy": True})  # a survey not seen yet
-    config = TercomPFConfig(n_particles=200, init_std=10.0)
+    config = TercomPFConfig(n_particles=200)
     assert fix_window(config, survey) == 5
 
     def no_scan(*args, **kwargs):
@@ -170,9 +185,10 @@ def test_the_default_fix_window_is_computed_once_per_survey(monkeypatch):
     monkeypatch.undo()
     step = functools.partial(tercom_pf_step, survey=survey, bathymetry=MAP)  # no window passed
     track = run_particle_filter(
-        survey, MAP, config, step, method="tercom-pf", rng=np.random.default_rng(3), count_keys=COUNTS
-    )
-    reference = run_filter("tercom-pf", survey, MAP, config, rng=np.random.default_rng(3))
+        survey, MAP, config, step, method="tercom-pf", rng=np.random.default_rng(3), model=MODEL,
+        count_keys=COUNTS,
+    )  # fmt: skip
+    reference = run_filter("tercom-pf", survey, MAP, config, model=MODEL, rng=np.random.default_rng(3))
     np.testing.assert_array_equal(track.pose, reference.pose)
     assert track.meta["n_fixes_accepted"] == reference.meta["n_fixes_accepted"] > 0
 
@@ -181,5 +197,6 @@ COUNTS = ("n_fixes_accepted", "n_fixes_rejected", "n_recentred")
 
 
 def test_progress_bar(capsys):
-    run_filter("pf", SURVEY, MAP, PFConfig(n_particles=50), rng=np.random.default_rng(0), progress=True)
+    config = PFConfig(n_particles=50)
+    run_filter("pf", SURVEY, MAP, config, model=MODEL, rng=np.random.default_rng(0), progress=True)
     assert "pf" in capsys.readouterr().err

@@ -11,55 +11,78 @@ from tangraph.filters import (
     IPFConfig,
     MotionModel,
     SJCPFConfig,
+    TerrainModel,
     initial_belief,
     ipf_step,
     pearson_rows,
     resample,
+    shrink_calibration,
     sjcpf_step,
+    state_moments,
     survey_pings,
 )
-from tests.filters.synthetic import multibeam_survey, rough_map
+from tangraph.filters.core import evaluate, predict
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)
 SURVEY = multibeam_survey(MAP, pings=6)
 
 
+def ipf_model(**changes):
+    model = navigation(SURVEY, sounding_std=0.5, initial_position_std=15.0, **changes)
+    return FilterModel.from_model(model, MAP)
+
+
 def test_ipf_children_are_redrawn_from_their_parents_and_weighted_by_the_likelihood_ratio():
-    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0, tide_std=1.0)
-    model = FilterModel.from_config(config, MAP)
+    config = IPFConfig(n_particles=300, ess_threshold=1.0, tempering=False)
+    model = ipf_model(tide_std=1.0)
     ping = survey_pings(SURVEY)[1]
-    belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0), tide_var=1.0)
+    belief = initial_belief(
+        SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0), tide_var=1.0,
+        calibration=(0.0, 0.0), calibration_std=(0.02, 0.05),
+    )  # fmt: skip
     result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(7))
-    # replay the step's random draws: prediction, resampling, then the children's noise
+    # replay the step's random draws: prediction, resampling, the kernel, then the children's noise
     rng = np.random.default_rng(7)
-    moved = model.motion.predict(belief.particles, ping, rng=rng)
-    parent = model.terrain.evaluate(moved, belief.tide, belief.tide_var, ping)
+    predicted = predict(belief, ping, model, rng=rng)
+    moved = predicted.particles
+    parent = evaluate(predicted, ping, model)
     w = np.exp(
         belief.log_weights + parent.log_likelihood - np.max(belief.log_weights + parent.log_likelihood)
     )
     ancestors = resample(w / w.sum(), config.resampler, rng=rng)
     np.testing.assert_array_equal(result.info["ancestors"], ancestors)
+    with np.errstate(divide="ignore"):
+        weighted = predicted.replace(log_weights=np.log(w / w.sum()))
+    floor = config.kernel_floor * model.navigation.calibration_std
+    shrunk = shrink_calibration(
+        weighted.take(ancestors), state_moments(weighted), config.kernel_bandwidth, floor, rng=rng
+    )
     parents, copies = result.info["parents"], result.info["copies"]
     assert copies.sum() == 300 and copies.max() > 1  # some parents have several children
     np.testing.assert_array_equal(np.repeat(parents, copies), np.sort(ancestors))
     children = result.belief.particles
     assert np.unique(children, axis=0).shape[0] == 300  # all distinct: no copies
     assert not np.any(np.all(children == moved[ancestors], axis=1))  # none is its parent
-    np.testing.assert_allclose(children, model.motion.predict(belief.particles[ancestors], ping, rng=rng))
-    child = model.terrain.evaluate(children, belief.tide[ancestors], belief.tide_var, ping)
+    previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
+    redrawn = predict(previous, ping, model, rng=rng)
+    np.testing.assert_allclose(children, redrawn.particles)
+    np.testing.assert_allclose(result.belief.calibration, redrawn.calibration)
+    assert np.unique(result.belief.calibration[:, 0]).size == 300  # the scales were moved apart too
+    child = evaluate(redrawn, ping, model)
     ratio = np.exp(child.log_likelihood - parent.log_likelihood[ancestors])
     np.testing.assert_allclose(result.belief.weights, ratio / ratio.sum(), rtol=1e-9)
     np.testing.assert_allclose(result.belief.tide, child.tide)
 
 
 def test_ipf_without_resampling_is_the_bootstrap_update():
-    config = IPFConfig(n_particles=200, init_std=5.0, sounding_std=3.0, ess_threshold=0.0)
-    model = FilterModel.from_config(config, MAP)
+    config = IPFConfig(n_particles=200, ess_threshold=0.0, tempering=False)
+    model = ipf_model()
     ping = survey_pings(SURVEY)[1]
     belief = initial_belief(SURVEY.dr_pose[0, :2], 5.0, 200, rng=np.random.default_rng(1))
     result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(2))
     assert not result.resampled and "ancestors" not in result.info
-    moved = model.motion.predict(belief.particles, ping, rng=np.random.default_rng(2))
+    moved = predict(belief, ping, model, rng=np.random.default_rng(2)).particles
     np.testing.assert_allclose(result.belief.particles, moved)
 
 
@@ -73,17 +96,9 @@ def sjcpf_belief(n=6, window=4, filled=3):
 
 def test_sjcpf_weights_by_likelihood_times_the_correlation_kernel():
     config = SJCPFConfig(
-        n_particles=6,
-        window=4,
-        sounding_std=2.0,
-        jitter_std=0.0,
-        process_std=0.0,
-        process_fraction=0.0,
-        tide_std=0.0,
-        ess_threshold=0.0,
-        kernel_constant=3.0,
+        n_particles=6, window=4, jitter_std=0.0, ess_threshold=0.0, kernel_constant=3.0, tempering=False
     )
-    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 2.0, 0.0))
     belief = sjcpf_belief()
     ping = survey_pings(SURVEY)[1]
     result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
@@ -101,15 +116,9 @@ def test_sjcpf_weights_by_likelihood_times_the_correlation_kernel():
     assert result.belief.n_history == 4 and not result.resampled
 
 
-def model_terrain(config):
-    return FilterModel.from_config(config, MAP).terrain
-
-
 def test_sjcpf_does_not_correct_before_the_window_is_full():
-    config = SJCPFConfig(
-        n_particles=6, window=4, sounding_std=2.0, jitter_std=0.0, tide_std=0.0, ess_threshold=0.0
-    )
-    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=0.0, tempering=False)
+    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 2.0, 0.0))
     belief = sjcpf_belief(filled=1)
     ping = survey_pings(SURVEY)[1]
     result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
@@ -121,17 +130,8 @@ def test_sjcpf_does_not_correct_before_the_window_is_full():
 
 
 def test_sjcpf_history_follows_the_particles_through_resampling():
-    config = SJCPFConfig(
-        n_particles=6,
-        window=4,
-        sounding_std=0.5,
-        jitter_std=0.0,
-        process_std=0.0,
-        process_fraction=0.0,
-        tide_std=0.0,
-        ess_threshold=1.0,
-    )
-    model = FilterModel(MotionModel(0.0, 0.0), model_terrain(config))
+    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=1.0, tempering=False)
+    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 0.5, 0.0))
     belief = sjcpf_belief()
     ping = survey_pings(SURVEY)[1]
     result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(4))
@@ -146,8 +146,8 @@ def test_sjcpf_history_follows_the_particles_through_resampling():
 def test_ipf_at_the_first_ping_resamples_plain_copies():
     """Ping 0 does not move the particles, so there is no transition to redraw children from
     (they would be their parents' copies, every ratio 1): the step resamples plainly."""
-    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0)
-    model = FilterModel.from_config(config, MAP)
+    config = IPFConfig(n_particles=300, ess_threshold=1.0, tempering=False)
+    model = ipf_model()
     ping = survey_pings(SURVEY)[0]
     assert ping.first
     belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0))
@@ -168,8 +168,8 @@ def test_ipf_at_the_first_ping_resamples_plain_copies():
 def test_ipf_records_the_ess_of_the_cloud_it_returns():
     """The estimate is taken from the re-weighted children, so the ESS recorded is theirs (after
     the likelihood-ratio weights), not the parents' before resampling."""
-    config = IPFConfig(n_particles=300, init_std=15.0, sounding_std=0.5, ess_threshold=1.0)
-    model = FilterModel.from_config(config, MAP)
+    config = IPFConfig(n_particles=300, ess_threshold=1.0, tempering=False)
+    model = ipf_model()
     ping = survey_pings(SURVEY)[1]
     belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, 300, rng=np.random.default_rng(0))
     result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(7))

@@ -8,6 +8,7 @@ import pytest
 from scipy import integrate
 
 from tangraph.filters import MotionModel, Ping, TerrainLikelihood, TerrainModel, survey_pings
+from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, rough_map
 from tests.maps.reference import interpolate
 
@@ -16,24 +17,43 @@ def ping(offsets, depths, index=1, increment=(0.0, 0.0)):
     return Ping(index, np.asarray(increment, float), np.asarray(offsets, float), np.asarray(depths, float))
 
 
-def test_motion_without_noise_is_the_dead_reckoned_increment():
+def test_motion_without_noise_is_the_calibrated_dead_reckoned_increment():
     particles = np.array([[0.0, 0.0], [10.0, -5.0]])
+    calibration = np.array([[0.0, 0.0], [0.04, np.radians(3.0)]])
     p = ping(np.zeros((0, 2)), np.zeros(0), increment=(3.0, 4.0))
-    moved = MotionModel(0.0, 0.0).predict(particles, p, rng=np.random.default_rng(0))
-    np.testing.assert_array_equal(moved, particles + np.array([3.0, 4.0]))
+    moved, kept = MotionModel(0.0).predict(particles, calibration, p, rng=np.random.default_rng(0))
+    np.testing.assert_array_equal(moved[0], [3.0, 4.0])
+    c, s = np.cos(np.radians(3.0)), np.sin(np.radians(3.0))
+    # the DR reads 4 % long and turned 3 deg clockwise: the truth is the step turned back, shortened
+    true_step = np.array([c * 3.0 + s * 4.0, -s * 3.0 + c * 4.0]) / 1.04
+    np.testing.assert_allclose(moved[1], np.array([10.0, -5.0]) + true_step)
+    np.testing.assert_array_equal(kept, calibration)  # no walk: the calibration stays
     first = Ping(0, np.zeros(2), np.zeros((0, 2)), np.zeros(0), first=True)
-    assert MotionModel(1.0, 0.1).predict(particles, first, rng=np.random.default_rng(0)) is particles
-    assert MotionModel(0.5, 0.1).noise_std(np.array([30.0, 40.0])) == pytest.approx(np.hypot(0.5, 5.0))
+    same = MotionModel(1.0, 0.1, 0.1).predict(particles, calibration, first, rng=np.random.default_rng(0))
+    assert same[0] is particles and same[1] is calibration
 
 
-def test_motion_noise_has_the_stated_std():
-    p = ping(np.zeros((0, 2)), np.zeros(0), increment=(60.0, 80.0))
-    moved = MotionModel(2.0, 0.1).predict(
-        np.zeros((20000, 2)), p, rng=np.random.default_rng(1), extra_std=5.0
-    )
-    want = np.sqrt(2.0**2 + 10.0**2 + 5.0**2)
-    np.testing.assert_allclose(moved.mean(axis=0), [60.0, 80.0], atol=4 * want / np.sqrt(20000))
-    np.testing.assert_allclose(moved.std(axis=0), want, rtol=4 * np.sqrt(0.5 / 20000))
+def test_motion_noise_is_the_model_s_white_dr_errors():
+    """Speed noise over dt per axis, the white heading error across the step, jitter on top,
+    and the heading error walking by heading_walk sqrt(dt)."""
+    n = 20000
+    p = ping(np.zeros((0, 2)), np.zeros(0), increment=(60.0, 0.0))
+    p = Ping(1, p.increment, p.offsets, p.depths, dt=4.0)
+    model = MotionModel(speed_noise=0.5, heading_noise=0.05, heading_walk=0.01)
+    rng = np.random.default_rng(1)
+    moved, cal = model.predict(np.zeros((n, 2)), np.zeros((n, 2)), p, rng=rng, extra_std=1.0)
+    want = np.sqrt([2.0**2 + 1.0, 2.0**2 + 1.0 + (0.05 * 60.0) ** 2])  # along (north), across (east)
+    np.testing.assert_allclose(moved.mean(axis=0), [60.0, 0.0], atol=4 * want.max() / np.sqrt(n))
+    np.testing.assert_allclose(moved.std(axis=0), want, rtol=4 * np.sqrt(0.5 / n))
+    np.testing.assert_allclose(np.cov(moved.T), np.diag(want**2), atol=4 * want.max() ** 2 / np.sqrt(n))
+    np.testing.assert_allclose(model.noise_covariance(p, 1.0), np.diag(want**2))
+    assert np.all(cal[:, 0] == 0.0)
+    np.testing.assert_allclose(cal[:, 1].std(), 0.01 * 2.0, rtol=4 * np.sqrt(0.5 / n))
+
+
+def test_motion_model_from_the_navigation_model():
+    nav = NavigationModel(speed_noise=0.2, heading_noise=0.01, heading_walk=0.003)
+    assert MotionModel.from_model(nav, floor=0.5) == MotionModel(0.2, 0.01, 0.003, 0.5)
 
 
 def test_residual_sums_match_the_numpy_reference():
@@ -107,3 +127,22 @@ def test_survey_pings_drop_nan_soundings_and_keep_empty_pings():
     assert [p.n_soundings for p in pings] == [4, 3, 4, 0, 4]
     assert pings[0].first and not pings[1].first
     np.testing.assert_allclose(pings[2].increment, s.dr_pose[2, :2] - s.dr_pose[1, :2])
+    assert pings[0].dt == 0.0 and pings[2].dt == pytest.approx(s.time[2] - s.time[1])
+
+
+def test_heading_error_turns_the_soundings_back():
+    """A particle whose heading error is b sees its world-aligned (DR-heading) offsets turned by -b:
+    with the truth's b, the soundings of a turned swath match the map again."""
+    m = rough_map(3, shape=(80, 80))
+    truth = np.array([200.0, 200.0])
+    true_offsets = np.column_stack([np.zeros(21), np.linspace(-60, 60, 21)])
+    depths = m.depth_at(truth[0] + true_offsets[:, 0], truth[1] + true_offsets[:, 1])
+    b = np.radians(5.0)
+    c, s = np.cos(b), np.sin(b)  # the DR heading is the true one plus b: offsets turned by +b
+    dr_offsets = np.column_stack(
+        [c * true_offsets[:, 0] - s * true_offsets[:, 1], s * true_offsets[:, 0] + c * true_offsets[:, 1]]
+    )
+    terrain = TerrainModel(m, 0.1)
+    got = terrain.evaluate(np.tile(truth, (2, 1)), np.zeros(2), 0.0, ping(dr_offsets, depths), [0.0, b])
+    assert got.log_likelihood[1] == pytest.approx(0.0, abs=1e-9)
+    assert got.log_likelihood[0] < -10.0
