@@ -277,8 +277,8 @@ def cmd_smooth(args: argparse.Namespace) -> None:
     track = navigate(survey, bathymetry, "smoother", model=_model(args), progress=not args.quiet)
     print(track_summary(track, survey))
     for fix in track.meta.get("fixes", []):
-        if not fix.get("accepted"):
-            log.info("fix at ping %s refused: %s", fix.get("index"), fix.get("reason"))
+        if not fix.accepted:
+            log.info("fix at ping %s refused: %s", fix.index, fix.reason)
     _write_track(args, track, survey, bathymetry)
 
 

@@ -124,14 +124,14 @@ def _fix_close_up(survey, bathymetry, smoother: Track, path: Path) -> None:
     from tangraph.matching import MatchingError, TapConfig, tap_fix
     from tangraph.plot import plot_fix
 
-    fixes = [f for f in smoother.meta.get("fixes", []) if f.get("accepted")]
-    fixes = fixes or [f for f in smoother.meta.get("fixes", []) if np.isfinite(f["north"])]
+    fixes = [f for f in smoother.meta.get("fixes", []) if f.accepted]
+    fixes = fixes or [f for f in smoother.meta.get("fixes", []) if np.isfinite(f.north)]
     if not fixes:
         raise TangraphError("the demo's smoother made no terrain fix to show")
     chosen = fixes[len(fixes) // 2]
-    end = int(chosen["index"])
+    end = int(chosen.index)
     n_pings = int(smoother.meta["config"]["n_pings"])
-    centre = np.array([chosen["north"], chosen["east"]])
+    centre = chosen.position
     try:  # a finer grid than the navigator's, centred on its fix, to show the regions' shapes
         fix = tap_fix(survey, bathymetry, end, n_pings, TapConfig(half_width=40.0, step=2.0), prior=centre)
     except MatchingError as exc:

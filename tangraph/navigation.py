@@ -145,8 +145,8 @@ def track_summary(track: Track, survey: Survey) -> str:
     if "fixes" in meta:
         reasons: dict[str, int] = {}
         for fix in meta["fixes"]:
-            reason = str(fix.get("reason", "accepted")).split(":")[0]
-            reasons[reason] = reasons.get(reason, 0) + 1
+            reason = getattr(fix, "status", "accepted")  # a filter's fix records may differ
+            reasons[str(reason)] = reasons.get(str(reason), 0) + 1
         detail = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
         lines.append(
             f"fixes        {meta.get('n_fixes_accepted', 0)} accepted, {meta.get('n_fixes_rejected', 0)} "

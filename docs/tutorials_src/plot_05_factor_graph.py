@@ -76,8 +76,9 @@ print(f"speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_sca
 # What became of every fix
 # ------------------------
 #
-# ``Track.meta["fixes"]`` holds one record per window: the ping it ends at, the fix and its
-# covariance, whether it was accepted and why not, its NIS (normalised innovation squared
+# ``Track.meta["fixes"]`` holds one :class:`~tangraph.graph.FixRecord` per window: the ping it
+# ends at, the fix and the covariance given to the graph, its :class:`~tangraph.graph.FixStatus`
+# (accepted, or why not), its NIS (normalised innovation squared
 # against the prediction; the gate is its 0.999 quantile, 13.8) and the search half-width.
 # Refused fixes are *multimodal* (the calibrated region has several parts: two places fit),
 # *uninformative* (the region reaches the edge of the search or is too large), *gate* (the
@@ -86,11 +87,10 @@ print(f"speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_sca
 truth = survey.true_pose
 print(" ping  accepted  reason          NIS   half-width  fix error")
 for record in online.meta["fixes"]:
-    k = record["index"]
-    error = np.hypot(record["north"] - truth[k, 0], record["east"] - truth[k, 1])
-    reason = record["reason"].split(":")[0]
-    print(f"{k:5d}  {record['accepted']!s:>8}  {reason:<13} {record['nis']:7.1f}  "
-          f"{record['half_width']:8.1f} m  {error:7.1f} m")
+    k = record.index
+    error = np.hypot(*(record.position - truth[k, :2]))
+    print(f"{k:5d}  {record.accepted!s:>8}  {record.status.value:<13} {record.nis:7.1f}  "
+          f"{record.half_width:8.1f} m  {error:7.1f} m")
 
 # %%
 # The error against time, with the navigator's 2-sigma band and the fixes marked: the error of
@@ -101,7 +101,7 @@ fixes = online.meta["fixes"]
 fig, ax = plt.subplots(figsize=(9, 4.5), layout="constrained")
 plot_errors({"dead reckoning": dead_reckoning_track(survey), "isam2": online}, truth, ax, bound="isam2")
 for accepted, marker, colour in ((True, "v", "tab:green"), (False, "x", "tab:red")):
-    times = [survey.time[f["index"]] for f in fixes if f["accepted"] is accepted]
+    times = [survey.time[f.index] for f in fixes if f.accepted is accepted]
     ax.plot(times, np.zeros(len(times)) + 0.5, marker, color=colour, ls="",
             label="accepted fixes" if accepted else "refused fixes")
 ax.legend(loc="upper left", fontsize="small")
@@ -121,7 +121,7 @@ plt.show()
 # the fix 30 m north and 20 m west and keep its covariance and its flags: a fix about 36 m off
 # that claims an accuracy of a few metres and passes the quality flags.
 
-good = [f["index"] for f in fixes if f["accepted"]]
+good = [f.index for f in fixes if f.accepted]
 bad_ping = good[len(good) // 2]
 offset = np.array([30.0, -20.0])
 
@@ -159,10 +159,10 @@ results = {}
 after = slice(bad_ping, bad_ping + 20)
 for label, variant in variants.items():
     track = run_with(outlier, variant).track()
-    record = next(f for f in track.meta["fixes"] if f["index"] == bad_ping)
+    record = next(f for f in track.meta["fixes"] if f.index == bad_ping)
     results[label] = track
-    print(f"{label:<26} outlier {'accepted' if record['accepted'] else 'refused'} "
-          f"({record['reason'].split(':')[0]}, NIS {record['nis']:.0f}); largest error over the "
+    print(f"{label:<26} outlier {'accepted' if record.accepted else 'refused'} "
+          f"({record.status.value}, NIS {record.nis:.0f}); largest error over the "
           f"next 20 pings {position_errors(track, truth)[after].max():5.1f} m; RMSE "
           f"{track_metrics(track, truth)['rmse']:.2f} m")
 

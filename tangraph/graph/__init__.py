@@ -13,12 +13,14 @@ from tangraph.graph.factors import (
     tangent_to_world,
     world_to_tangent,
 )
-from tangraph.graph.fixes import search_half_width
+from tangraph.graph.fixes import FixRecord, FixStatus, search_half_width
 from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
 from tangraph.graph.online import GraphNavigator, navigate_online
 from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
 
 __all__ = [
+    "FixRecord",
+    "FixStatus",
     "GraphConfig",
     "GraphNavigator",
     "PoseGraph",

@@ -9,6 +9,7 @@ its NIS against the predicted marginal exceeds the gate (``"gate"``).
 from __future__ import annotations
 
 import dataclasses
+import enum
 
 import numpy as np
 
@@ -22,6 +23,8 @@ from tangraph.survey import Survey
 
 __all__ = [
     "FixOutcome",
+    "FixRecord",
+    "FixStatus",
     "fix_name",
     "judge_fix",
     "make_fix",
@@ -35,13 +38,68 @@ def fix_name(fix: TapFix) -> str:
     return f"fix at ping {fix.index} (window {fix.first}..{fix.index})"
 
 
+class FixStatus(enum.StrEnum):
+    """What became of a TAP window: used by the graph, or why not."""
+
+    ACCEPTED = "accepted"
+    GATE = "gate"  #: its NIS against the prediction is above the gate
+    MULTIMODAL = "multimodal"  #: the calibrated region has several parts: two places fit
+    UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
+    REFUSED = "refused"  #: another quality flag of the fix (``detail`` says which)
+    MATCH_FAILED = "match failed"  #: no fix could be made (``detail`` says why)
+    INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
+
+
+@dataclasses.dataclass(frozen=True)
+class FixRecord:
+    """One TAP window's outcome, as kept in ``Track.meta["fixes"]``: the ping ``index`` it refers to,
+    the fix's position and the covariance given to the graph (NaN without a fix), its ``status``,
+    its ``nis`` against the prediction (NaN if not judged), the search ``half_width`` (m) and a
+    ``detail`` for people (never parsed)."""
+
+    index: int
+    north: float
+    east: float
+    cov_nn: float
+    cov_ne: float
+    cov_ee: float
+    status: FixStatus
+    nis: float
+    half_width: float
+    detail: str = ""
+
+    @property
+    def accepted(self) -> bool:
+        return self.status is FixStatus.ACCEPTED
+
+    @property
+    def position(self) -> np.ndarray:
+        return np.array([self.north, self.east])
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return np.array([[self.cov_nn, self.cov_ne], [self.cov_ne, self.cov_ee]])
+
+    @property
+    def reason(self) -> str:
+        """The status and its detail, for people."""
+        return f"{self.status.value}: {self.detail}" if self.detail else self.status.value
+
+    def as_dict(self) -> dict:
+        """JSON-ready form."""
+        return {**dataclasses.asdict(self), "status": self.status.value}
+
+
 @dataclasses.dataclass(frozen=True)
 class FixOutcome:
     """What became of one fix: its record for ``Track.meta["fixes"]`` and, if accepted, the fix."""
 
-    record: dict
+    record: FixRecord
     fix: TapFix | None
-    accepted: bool
+
+    @property
+    def accepted(self) -> bool:
+        return self.record.accepted
 
 
 def search_step(config: GraphConfig, bathymetry: BathymetryMap) -> float:
@@ -120,27 +178,18 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 
 
-def _record(index: int, fix: TapFix | None, accepted: bool, reason: str, nis_value: float,
-            half_width: float) -> dict:
+def _record(index: int, fix: TapFix | None, status: FixStatus, nis_value: float, half_width: float,
+            detail: str = "") -> FixRecord:
     pos = np.full(2, np.nan) if fix is None else np.asarray(fix.position, float)
     cov = np.full((2, 2), np.nan) if fix is None else np.asarray(fix.covariance, float)
-    return {
-        "index": int(index),
-        "north": float(pos[0]),
-        "east": float(pos[1]),
-        "cov_nn": float(cov[0, 0]),
-        "cov_ne": float(cov[0, 1]),
-        "cov_ee": float(cov[1, 1]),
-        "accepted": bool(accepted),
-        "reason": reason,
-        "nis": float(nis_value),
-        "half_width": float(half_width),
-    }
+    return FixRecord(int(index), float(pos[0]), float(pos[1]), float(cov[0, 0]), float(cov[0, 1]),
+                     float(cov[1, 1]), status, float(nis_value), float(half_width), detail)
 
 
-def failed(index: int, error: Exception, half_width: float) -> FixOutcome:
-    """The record of a window whose match failed."""
-    return FixOutcome(_record(index, None, False, f"match failed: {error}", np.nan, half_width), None, False)
+def failed(index: int, error: Exception, half_width: float,
+           status: FixStatus = FixStatus.MATCH_FAILED) -> FixOutcome:
+    """The record of a window whose match failed (or whose fix had an invalid covariance)."""
+    return FixOutcome(_record(index, None, status, np.nan, half_width, str(error)), None)
 
 
 def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float) -> FixOutcome:
@@ -154,16 +203,16 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     cov = check_fix_covariance(fix.covariance, fix_name(fix))
     value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
                 cov + np.asarray(predicted_cov, float)[:2, :2])
+    detail = ""
     if fix.quality.multimodal:
-        reason = "multimodal"
+        status = FixStatus.MULTIMODAL
     elif not fix.quality.informative:
-        reason = "uninformative"
+        status = FixStatus.UNINFORMATIVE
     elif not fix.accepted:
-        reason = "refused: " + "; ".join(fix.quality.reasons)
+        status, detail = FixStatus.REFUSED, "; ".join(fix.quality.reasons)
     elif value > gate_threshold(config.gate_probability):
-        reason = "gate"
+        status = FixStatus.GATE
     else:
-        reason = "accepted"
-    accepted = reason == "accepted"
-    return FixOutcome(_record(fix.index, fix, accepted, reason, value, half_width), fix if accepted else None,
-                      accepted)
+        status = FixStatus.ACCEPTED
+    record = _record(fix.index, fix, status, value, half_width, detail)
+    return FixOutcome(record, fix if record.accepted else None)

@@ -28,6 +28,8 @@ from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
 from tangraph.graph.fixes import (
     FixOutcome,
+    FixRecord,
+    FixStatus,
     failed,
     fix_name,
     judge_fix,
@@ -136,7 +138,7 @@ class GraphNavigator:
         self.calibration = self.model.calibration_prior.copy()
         self.pose = np.full((n, 3), np.nan)
         self.covariance = np.full((n, 3, 3), np.nan)
-        self.fixes: list[dict] = []
+        self.fixes: list[FixRecord] = []
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
@@ -256,9 +258,7 @@ class GraphNavigator:
             return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width)
         except TangraphError as exc:
             log.warning("%s", exc)
-            outcome = failed(k, exc, half_width)
-            outcome.record["reason"] = f"invalid covariance: {exc}"
-            return outcome
+            return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
 
     def _laid(self, k: int, pose) -> np.ndarray | None:
         """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
@@ -349,7 +349,7 @@ class GraphNavigator:
 
     def meta(self) -> dict:
         """``fixes``, their counts, ``key_indices``, ``calibration``, the configuration and model."""
-        accepted = sum(f["accepted"] for f in self.fixes)
+        accepted = sum(f.accepted for f in self.fixes)
         return {
             "fixes": list(self.fixes),
             "n_fixes_accepted": int(accepted),
@@ -438,7 +438,8 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         ``method="isam2"``, one causal pose per ping with its covariance; ``timings`` has
         ``total``, ``per_step``, ``per_step_p99`` (whole steps, TAP included), ``update_mean``,
         ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``meta`` has
-        ``fixes`` (one dict per window: ``index``, ``north``, ``east``, ``cov_nn``, ``cov_ne``,
+        ``fixes`` (one :class:`~tangraph.graph.FixRecord` per window: ``index``, ``north``, ``east``,
+        ``cov_nn``, ``cov_ne``,
         ``cov_ee`` (the covariance given to the graph: TAP's, counted once per ping where windows
         overlap, grown by what is uncertain of the calibrated patch), ``accepted``, ``reason``
         (``"accepted"``, ``"gate"``,

@@ -26,7 +26,7 @@ from tangraph.errors import TangraphError
 from tangraph.graph.calibration import CALIBRATION, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
-from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
+from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
 from tangraph.maps.grid import BathymetryMap
@@ -256,14 +256,14 @@ def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSol
             world_covariance(pose, joint, solution.calibration, origin))
 
 
-def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previous: list[dict]
-             ) -> tuple[list[dict], list, bool]:
+def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previous: list[FixRecord]
+             ) -> tuple[list[FixRecord], list, bool]:
     """Fixes re-made around the smoothed world track; returns records, accepted fixes and whether
     they moved."""
     config = nav.config
     records, accepted = [], []
     changed = False
-    before = {r["index"]: r for r in previous}
+    before = {r.index: r for r in previous}
     joint = np.zeros((5, 5))
     joint[3:, 3:] = solution.calibration_cov
     nav.calibration = solution.calibration
@@ -279,17 +279,16 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previou
         except MatchingError as exc:
             outcome = failed(end, exc, half_width)
         except TangraphError as exc:
-            outcome = failed(end, exc, half_width)
-            outcome.record["reason"] = f"invalid covariance: {exc}"
+            outcome = failed(end, exc, half_width, FixStatus.INVALID_COVARIANCE)
         records.append(outcome.record)
         if outcome.accepted:
             accepted.append((end, np.asarray(outcome.fix.position, float),
                              np.asarray(outcome.fix.covariance, float)))
         old = before.get(end)
-        if old is None or old["accepted"] != outcome.record["accepted"]:
+        if old is None or old.accepted != outcome.accepted:
             changed = True
-        elif outcome.accepted and np.hypot(old["north"] - outcome.record["north"],
-                                           old["east"] - outcome.record["east"]) > config.rematch_tolerance:
+        elif outcome.accepted and np.hypot(old.north - outcome.record.north,
+                                           old.east - outcome.record.east) > config.rematch_tolerance:
             changed = True
     return records, accepted, changed
 
@@ -356,7 +355,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     pose, cov = dense
     if config.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
-    n_accepted = sum(r["accepted"] for r in records)
+    n_accepted = sum(r.accepted for r in records)
     meta = nav.meta()
     last = survey.n_pings - 1
     joint = np.zeros((5, 5))

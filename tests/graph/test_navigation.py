@@ -9,6 +9,8 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.graph import (
+    FixRecord,
+    FixStatus,
     GraphConfig,
     GraphNavigator,
     dense_track,
@@ -104,9 +106,8 @@ def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
         meta = track.meta
         assert meta["n_fixes_accepted"] + meta["n_fixes_rejected"] == len(meta["fixes"]) > 10
         assert meta["n_fixes_accepted"] >= 0.8 * len(meta["fixes"])
-        assert set(meta["fixes"][0]) >= {"index", "north", "east", "cov_nn", "cov_ne", "cov_ee", "accepted",
-                                         "reason"}
-        assert all(f["index"] in meta["key_indices"] for f in meta["fixes"])
+        assert isinstance(meta["fixes"][0], FixRecord) and isinstance(meta["fixes"][0].status, FixStatus)
+        assert all(f.index in meta["key_indices"] for f in meta["fixes"])
         assert 0.3 < mean_nees(track, truth) < 8.0  # 2 for an honest covariance
     assert {"total", "per_step", "per_step_p99"} <= set(online.timings)
     # heading bias (1 deg) is estimated: the smoothed heading error is well below it
@@ -120,9 +121,9 @@ def test_rematch_converges(small_survey, rough_map):
     done = smoothed.meta["rematch_iterations"]
     assert 1 <= done <= 3 and single.meta["rematch_iterations"] == 0
     # re-matched patches are laid with the smoothed poses: the fixes move, and the track does not get worse
-    moved = [np.hypot(a["north"] - b["north"], a["east"] - b["east"])
+    moved = [np.hypot(a.north - b.north, a.east - b.east)
              for a, b in zip(smoothed.meta["fixes"], single.meta["fixes"], strict=True)
-             if a["accepted"] and b["accepted"]]
+             if a.accepted and b.accepted]
     assert max(moved) > 0
     assert rmse(smoothed, small_survey.true_pose) <= 1.05 * rmse(single, small_survey.true_pose) < 1.5
 
@@ -167,8 +168,8 @@ def test_outlier_fixes_do_not_pull_the_track(small_survey, rough_map, rate):
     for k in range(small_survey.n_pings):
         nav.step(fix=bad.get(k))
     polluted = nav.track()
-    refused = [f for f in polluted.meta["fixes"] if f["index"] in bad]
-    assert all(not f["accepted"] for f in refused)
+    refused = [f for f in polluted.meta["fixes"] if f.index in bad]
+    assert all(not f.accepted for f in refused)
     assert rmse(polluted, truth) <= 1.5 * rmse(clean.track(), truth)
     solve = {n: smooth_pose_graph(x.graph, config) for n, x in (("clean", clean), ("polluted", nav))}
     errors = {}
@@ -243,4 +244,4 @@ def test_covariances_are_honest_over_seeds(rough_map):
 def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
     config = GraphConfig(n_pings=1, fix_spacing=50, key_interval=20.0)
     track = navigate_online(small_survey, rough_map, config)
-    assert [f["index"] for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
+    assert [f.index for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
