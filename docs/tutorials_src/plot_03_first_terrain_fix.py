@@ -74,11 +74,11 @@ print(f"tide  {fix.tide:+.3f} m (the scenario's tide is {scenario.sonar.tide:+.1
 
 # %%
 # **sigma** is the standard deviation of the residuals at the fix (Wang et al.'s eq. 4), an
-# estimate of the sounding noise. **tide** is the mean residual ``mean(map - measured)`` at the
+# estimate of the sounding noise. **tide** is the mean residual ``mean(measured - map)`` at the
 # fix, which the fit removes before it measures the spread (the tide of Wang et al.'s eqs.
 # 3-6). The sea surface of the scenario is 2.5 m above the map's datum, so *measured = map +
-# 2.5 m* and the fix's tide estimates **-2.5 m**: ``fix.tide`` is the offset that takes measured
-# depths to the map, the opposite of the scenario's ``tide``.
+# 2.5 m* and the fix's tide estimates **+2.5 m**: tangraph has one sign for residuals and tide
+# everywhere (matching, filters, graph): ``measured - map``.
 #
 # The quality flags say whether the fix should be used: the fix is *accepted* when its
 # calibrated region (below) is one piece, does not reach the edge of the search grid and covers

@@ -148,7 +148,8 @@ class CriterionSums:
         return self.count == self.n_soundings
 
     def tide(self) -> np.ndarray:
-        """Mean residual ``t = mean(h - z)`` (soundings = map + c gives ``-c``)."""
+        """Mean of the search's differences ``mean(h - z)`` (map minus measured: soundings = map +
+        tide give ``-tide``; ``TapFix.tide`` turns it into the tide, ``measured - map``)."""
         return self.sum_d / self.n_soundings
 
     def msd(self) -> np.ndarray:

@@ -137,7 +137,7 @@ class TapFix:
     first: int
     position: np.ndarray  # (2,) north, east
     covariance: np.ndarray  # (2, 2), the one chosen by TapConfig.covariance
-    tide: float  # mean of h - z at the fix (measured = map + tide  =>  this is -tide)
+    tide: float  # mean of measured - map at the fix: the tide, measured = map + tide
     sigma: float  # std of the sounding error, sqrt of Wang's eq. 4 at the fix
     n_soundings: int
     method: Criterion
@@ -169,13 +169,14 @@ def rotate(offsets: np.ndarray, angle: float) -> np.ndarray:
 def criterion_at(
     bathymetry: BathymetryMap, patch: Patch, positions, heading: float = 0.0, tide: float | None = None
 ) -> np.ndarray:
-    """``Q`` (tide profiled) or, given ``tide``, ``S`` at a few positions ``(M, 2)``: the slow,
-    exact evaluation used to test the truth against the regions."""
+    """``Q`` (tide profiled) or, given ``tide`` (measured = map + tide, as ``TapFix.tide``), ``S``
+    at a few positions ``(M, 2)``: the slow, exact evaluation used to test the truth against the
+    regions."""
     positions = np.atleast_2d(np.asarray(positions, float))
     offsets = rotate(patch.offsets, heading)
     h = bathymetry.depth_at(positions[:, 0:1] + offsets[:, 0], positions[:, 1:2] + offsets[:, 1])
     d = h - patch.depths
-    t = d.mean(axis=1, keepdims=True) if tide is None else tide
+    t = d.mean(axis=1, keepdims=True) if tide is None else -tide
     return np.sum((d - t) ** 2, axis=1)
 
 
@@ -263,7 +264,7 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         first=patch.first,
         position=position,
         covariance=covariances[config.covariance],
-        tide=tide,
+        tide=-tide,  # the search's sums hold map - measured
         sigma=float(np.sqrt(sigma2[k_h, i, j])),
         n_soundings=n,
         method=config.criterion,

@@ -71,7 +71,7 @@ def test_noise_free_fix_lands_on_the_truth_with_the_tide():
     s = survey_on(m)
     fix = tap_fix(s, m, end=9, n_pings=10, config=TapConfig(half_width=40.0))
     np.testing.assert_allclose(fix.position, s.true_pose[9, :2], atol=1e-6)
-    assert fix.tide == pytest.approx(-1.5, abs=1e-9)  # measured = map + tide  =>  mean(h - z) = -tide
+    assert fix.tide == pytest.approx(1.5, abs=1e-9)  # measured = map + tide: one sign everywhere
     assert fix.sigma == pytest.approx(0.0, abs=1e-6)
     assert fix.n_soundings == 410
 
