@@ -113,7 +113,7 @@ class ParticleConfig:
     resampler: Resampler = Resampler.SYSTEMATIC
     ess_threshold: float = 0.5
     process_floor: float = 0.0
-    kernel_bandwidth: float = 0.1
+    kernel_bandwidth: float = 0.3
     kernel_floor: float = 1e-3
     tempering: bool = True
     tempering_ess: float = 0.5
