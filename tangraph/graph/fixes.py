@@ -13,7 +13,6 @@ import enum
 
 import numpy as np
 
-from tangraph.errors import TangraphError
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, gate_threshold, nis
 from tangraph.maps.grid import BathymetryMap
@@ -144,17 +143,6 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
 
 
-def _window(survey: Survey, first: int, end: int, poses=None) -> Survey:
-    window = survey.pings(first, end + 1)
-    if poses is None:
-        return window
-    laid = np.asarray(poses, float)
-    if laid.shape != (end - first + 1, 3):
-        raise TangraphError(f"poses of window {first}..{end} must have shape ({end - first + 1}, 3), "
-                            f"got {laid.shape}")
-    return window.replace(dr_pose=laid)
-
-
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
              half_width: float, *, poses=None) -> TapFix:
     """The TAP fix of the window of ``config.n_pings`` pings ending at ``end``, searched within
@@ -171,9 +159,7 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
         raise MatchingError(f"window of {config.n_pings} pings ending at ping {end} starts before the survey")
     if not np.isfinite(survey.beam_depth[first : end + 1]).any():
         raise MatchingError(f"window of pings {first}..{end} has no sounding")
-    patch = window_patch(_window(survey, first, end, poses), end - first, config.n_pings,
-                         min_soundings=config.tap.min_soundings)
-    patch = dataclasses.replace(patch, reference=end, first=first, ping=patch.ping + first)
+    patch = window_patch(survey, end, config.n_pings, min_soundings=config.tap.min_soundings, poses=poses)
     tap = dataclasses.replace(config.tap, half_width=float(half_width), step=search_step(config, bathymetry))
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 

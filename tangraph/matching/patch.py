@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.survey import Survey
+from tangraph.survey import Survey, footprints
 
 __all__ = ["MatchingError", "Patch", "window_patch"]
 
@@ -45,8 +45,10 @@ class Patch:
         return self.reference - self.first + 1
 
 
-def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10) -> Patch:
-    """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted).
+def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None) -> Patch:
+    """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted),
+    laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
+    window's footprints are computed.
 
     Raises
     ------
@@ -62,15 +64,20 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
     if first < 0:
         raise MatchingError(f"window of {n_pings} pings ending at ping {end} starts before the survey")
     window = slice(first, end + 1)
-    north, east = survey.footprints()
-    north, east, depth = north[window], east[window], survey.beam_depth[window]
+    laid = survey.dr_pose[window] if poses is None else np.asarray(poses, float)
+    if laid.shape != (n_pings, 3):
+        raise MatchingError(
+            f"poses of window {first}..{end} must have shape ({n_pings}, 3), got {laid.shape}"
+        )
+    north, east = footprints(laid, survey.beam_forward[window], survey.beam_starboard[window])
+    depth = survey.beam_depth[window]
     keep = np.isfinite(depth)
     if keep.sum() < min_soundings:
         raise MatchingError(
             f"window of pings {first}..{end} holds {int(keep.sum())} soundings, fewer than "
             f"min_soundings = {min_soundings}"
         )
-    ref = survey.dr_pose[end, :2].copy()
+    ref = laid[-1, :2].copy()
     offsets = np.column_stack([north[keep] - ref[0], east[keep] - ref[1]])
     ping, beam = np.nonzero(keep)
     return Patch(

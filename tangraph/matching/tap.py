@@ -241,6 +241,8 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         )
     k_h, i, j = np.unravel_index(np.nanargmin(score), score.shape)
     heading = float(grid.headings[k_h])
+    if heading:  # the patch turned once by the best heading; everything below reads it as it is
+        patch = dataclasses.replace(patch, offsets=rotate(patch.offsets, heading))
     q = (n - 1) * sigma2[k_h]
     q_min = float(np.nanmin(q))  # regions and covariances live on Q, whatever picked the fix
     tide = float(sums.tide()[k_h, i, j])
@@ -248,15 +250,15 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
     shift, _ = _quadric(score[k_h], i, j, step)
     position = node + shift
     if config.criterion is Criterion.MLE and np.any(shift):  # keep the refinement only if it helps
-        q_node, q_refined = criterion_at(bathymetry, patch, np.vstack([node, position]), heading)
+        q_node, q_refined = criterion_at(bathymetry, patch, np.vstack([node, position]))
         if not q_refined < q_node:
             position = node
 
-    inflation = _variance_inflation(bathymetry, patch, position, heading, tide) if config.calibrate else 1.0
+    inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = q_min / max(n - 3, 1)
     regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
-        q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position, heading
+        q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
     )
     quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config)
     return TapFix(
@@ -299,8 +301,8 @@ def _quadric(surface: np.ndarray, i: int, j: int, step: float) -> tuple[np.ndarr
     return shift * step, hessian / step**2
 
 
-def _residuals(bathymetry, patch, position, heading, tide):
-    offsets = rotate(patch.offsets, heading)
+def _residuals(bathymetry, patch, position, tide):
+    offsets = patch.offsets
     return bathymetry.depth_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1]) - patch.depths - tide
 
 
@@ -336,15 +338,15 @@ def _ping_sandwich(r: np.ndarray, gradient: np.ndarray, ping: np.ndarray) -> flo
     return ratio if ratio > 1.0 + 2.0 * np.sqrt(2.0 / (pings.size - 1)) else 1.0
 
 
-def _variance_inflation(bathymetry, patch, position, heading, tide) -> float:
+def _variance_inflation(bathymetry, patch, position, tide) -> float:
     """How much spatially correlated residuals widen the likelihood: within a ping a
     cluster-robust (sandwich) ratio of the score's variance (any error shared by a ping's beams,
     such as an attitude error), or the lag-one AR(1) factor along the beams when the window has too
     few pings; across pings the lag-one AR(1) factor along each beam's track."""
-    r = _residuals(bathymetry, patch, position, heading, tide)
+    r = _residuals(bathymetry, patch, position, tide)
     if not np.all(np.isfinite(r)) or not np.any(r):
         return 1.0
-    offsets = rotate(patch.offsets, heading)
+    offsets = patch.offsets
     gradient = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
     within = _ping_sandwich(r, gradient, patch.ping) if np.all(np.isfinite(gradient)) else None
     if within is None:
@@ -379,7 +381,7 @@ def _regions(q, s_fixed, q_min, n, inflation, alpha, step) -> dict[RegionMethod,
 
 
 def _covariances(
-    q, q_min, s2, grid, i, j, step, bathymetry, patch, position, heading
+    q, q_min, s2, grid, i, j, step, bathymetry, patch, position
 ) -> dict[str, np.ndarray]:
     valid = np.isfinite(q)
     weight = np.where(valid, np.exp(-(np.where(valid, q, q_min) - q_min) / (2 * s2)), 0.0)
@@ -397,7 +399,7 @@ def _covariances(
     curvature = 2 * s2 * np.linalg.inv(hessian) if hessian is not None else None
     # A likelihood narrower than the grid step is not resolved by its moments on the grid: there
     # the Fisher information at the fix says more; without it, the grid's quantisation bounds it.
-    crlb = _crlb(bathymetry, patch, position, heading, s2)
+    crlb = _crlb(bathymetry, patch, position, s2)
     if np.linalg.eigvalsh(moments).max() >= step**2:
         region = moments
     elif np.all(np.isfinite(crlb)):  # locally linear: the Fisher information at the fix
@@ -408,10 +410,10 @@ def _covariances(
     return {"region": region, "curvature": curvature, "crlb": crlb}
 
 
-def _crlb(bathymetry, patch, position, heading, s2) -> np.ndarray:
+def _crlb(bathymetry, patch, position, s2) -> np.ndarray:
     """Inverse Fisher information of the window's soundings at ``position`` (the tide absorbs the
     mean gradient); infinite where it is singular."""
-    offsets = rotate(patch.offsets, heading)
+    offsets = patch.offsets
     g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
     g = g[np.all(np.isfinite(g), axis=1)]
     g = g - g.mean(axis=0)
