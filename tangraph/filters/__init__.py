@@ -1,7 +1,10 @@
 """Particle-filter front ends on one shared motion model and terrain likelihood (no gtsam here).
 
 :func:`run_filter` runs any of them by :class:`FilterMethod`: the bootstrap PF, Han et al.'s IPF,
-Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF and grid-search MLE fixes.
+Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF and grid-search MLE fixes, on the survey's
+:class:`~tangraph.sensors.NavigationModel` (``model=``; None: from the survey). The particles
+carry the DR's constant errors (speed scale, heading error) and every track reports their
+estimate (``meta["calibration"]``); configs hold algorithm settings only.
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter

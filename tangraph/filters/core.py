@@ -636,7 +636,7 @@ def measure(
     ESS at or above ``tempering_ess`` times that of the cloud before it; between stages the
     cloud is resampled (``config.resampler``) and moved by :func:`shrink_state`. A ping without
     soundings changes nothing. ``update`` is the ping's update at ``belief`` if already computed.
-    ``config`` None (or its ``tempering`` False): one stage.
+    ``config`` None, its ``tempering`` False or ``rng`` None: one stage.
 
     Raises
     ------

@@ -32,8 +32,10 @@ soundings): the weight is the predictive density of the ping, with ``e_b = z_b -
 
 and the posterior becomes ``v' = v sigma^2 / (sigma^2 + B v)``, ``m' = m + v' sum e / sigma^2``.
 At the true state ``-2 log p`` is chi-square with ``B`` degrees of freedom (the filters' lost
-test uses it). A particle with a sounding off the map or by a NaN cell gets ``-inf``. Constants
-shared by all particles are dropped: weights are normalised.
+test uses it). The white heading error of a ping's own DR heading stays in its soundings' offsets
+(not modelled: a few centimetres across a swath for a tenth of a degree). A particle with a
+sounding off the map or by a NaN cell gets ``-inf``. Constants shared by all particles are
+dropped: weights are normalised.
 """
 
 from __future__ import annotations
