@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-SCENARIOS = ("demo", "wang2019", "han2020", "chen2022")
+SCENARIOS = ("demo", "wang2019", "han2020", "chen2022", "demo-flat")
 FILTERS = ("pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle")
 GRAPH = ("isam2", "smoother")
 
@@ -39,10 +39,16 @@ def _survey(config: dict, rng):
     from tangraph.maps import load_any
     from tangraph.sim.scenario import load_scenario, simulate
 
-    scenario = load_scenario(config["scenario"])
+    name = config["scenario"]
+    flat = name.endswith("-flat")  # the scenario over a flat seabed of its map's extent: no fix
+    scenario = load_scenario(name.removesuffix("-flat"))
     if config.get("dr", "demo") == "demo":
         scenario = dataclasses.replace(scenario, dead_reckoning=load_scenario("demo").dead_reckoning)
     bathymetry = load_any(scenario.map)
+    if flat:
+        depth = float(np.nanmedian(bathymetry.depth))
+        bathymetry = dataclasses.replace(bathymetry, depth=np.full(bathymetry.depth.shape, depth),
+                                         name=f"{bathymetry.name}-flat")
     return simulate(scenario, rng=rng, bathymetry=bathymetry), bathymetry
 
 
@@ -79,6 +85,10 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                  "pcrb": bound["filter"]})
     for method in config["methods"]:
         settings = None
+        if method in GRAPH and config.get("graph"):
+            from tangraph.graph import GraphConfig
+
+            settings = GraphConfig(**config["graph"])
         if method in FILTERS and method != "mle":
             from tangraph.filters import default_config
 
@@ -199,14 +209,20 @@ def main(argv=None) -> int:
     parser.add_argument("--scenarios", nargs="+", default=["demo", "wang2019", "han2020"], choices=SCENARIOS)
     parser.add_argument("--methods", nargs="+", choices=[*GRAPH, *FILTERS],
                         help="methods to run (default: the graph and every filter)")
+    parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
+                        help="GraphConfig settings of the graph's runs (values as Python literals)")
     parser.add_argument("--dr", choices=["demo", "own"], default="demo",
                         help="the demo's drifting DR in every scenario, or each scenario's own")
     parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for the tables")
     args = parser.parse_args(argv)
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
+    import ast
+
+    graph = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.graph)}
     configs = [
-        {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr}
+        {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr,
+         "graph": graph}
         for s in args.scenarios
     ]
     table = run_many(one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers)
@@ -215,7 +231,8 @@ def main(argv=None) -> int:
         print(f"{int(failed.sum())} runs failed; first error: {table.loc[failed, 'error'].iloc[0]}")
     rows = summarise(table[~failed])
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
-        ("" if args.methods is None else "_" + "-".join(args.methods))
+        ("" if args.methods is None else "_" + "-".join(args.methods)) + \
+        "".join(f"_{item}" for item in args.graph)
     args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table[~failed], args.out / f"rmse_{tag}.png")
@@ -224,6 +241,7 @@ def main(argv=None) -> int:
         + (" --quick" if args.quick else "")
         + f" --scenarios {' '.join(args.scenarios)} --dr {args.dr}"
         + ("" if args.methods is None else f" --methods {' '.join(args.methods)}")
+        + ("" if not args.graph else f" --graph {' '.join(args.graph)}")
     )
     text = markdown(rows)
     (args.out / f"summary_{tag}.md").write_text(f"Command: `{command}`\n\n{text}\n")

@@ -44,7 +44,6 @@ class FixStatus(enum.StrEnum):
     GATE = "gate"  #: its NIS against the prediction is above the gate
     MULTIMODAL = "multimodal"  #: the calibrated region has several parts: two places fit
     UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
-    REFUSED = "refused"  #: another quality flag of the fix (``detail`` says which)
     MATCH_FAILED = "match failed"  #: no fix could be made (``detail`` says why)
     INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
 
@@ -189,13 +188,11 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     cov = check_fix_covariance(fix.covariance, fix_name(fix))
     value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
                 cov + np.asarray(predicted_cov, float)[:2, :2])
-    detail = ""
-    if fix.quality.multimodal:
+    detail = "; ".join(fix.quality.reasons)
+    if fix.quality.multimodal and not (config.accept_multimodal and config.tap.covariance == "region"):
         status = FixStatus.MULTIMODAL
     elif not fix.quality.informative:
         status = FixStatus.UNINFORMATIVE
-    elif not fix.accepted:
-        status, detail = FixStatus.REFUSED, "; ".join(fix.quality.reasons)
     elif value > gate_threshold(config.gate_probability):
         status = FixStatus.GATE
     else:
