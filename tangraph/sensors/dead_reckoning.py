@@ -82,6 +82,9 @@ class DeadReckoningModel:
     dropout_speed_noise : float
         INS-only velocity error while the DVL is out: a random walk in the (north, east)
         velocity, m/s/sqrt(s), starting at zero when the dropout starts.
+    start_position_std : float
+        Error of the start position the DR is initialised with, m (std per axis): the simulated
+        DR starts this far (drawn) from the true start.
 
     Examples
     --------
@@ -101,12 +104,13 @@ class DeadReckoningModel:
     dropout_rate: float = 0.0
     dropout_duration: float = 0.0
     dropout_speed_noise: float = 0.0
+    start_position_std: float = 0.0
 
     def __post_init__(self) -> None:
         _check_number(self, "heading_bias", low=None)
         _check_number(self, "speed_scale", low=-1.0, open_low=True)
         for name in ("heading_walk", "heading_noise", "speed_noise", "dropout_rate",
-                     "dropout_duration", "dropout_speed_noise"):
+                     "dropout_duration", "dropout_speed_noise", "start_position_std"):
             _check_number(self, name)
         if self.dropout_rate > 0 and self.dropout_duration <= 0:
             raise TangraphError(
@@ -200,8 +204,10 @@ def simulate_dead_reckoning(time, true_pose, model: DeadReckoningModel, *,
     rng : numpy.random.Generator
         The same draws are made whatever the model, so runs with the same seed share noise.
     start_pose : array_like, shape (3,), optional
-        Where the DR believes it starts; by default the true start pose. Its heading offset
-        from the truth is kept as a constant heading error (an INS alignment error).
+        Where the DR believes it starts; by default the true start pose moved by a draw of
+        ``model.start_position_std`` on each axis (from a child of ``rng``, so the other draws
+        stay those of the same seed). Its heading offset from the truth is kept as a constant
+        heading error (an INS alignment error).
 
     Returns
     -------
@@ -220,7 +226,13 @@ def simulate_dead_reckoning(time, true_pose, model: DeadReckoningModel, *,
     [10.1, 0.0, 0.0]
     """
     t, pose = _check_track(time, true_pose, "true_pose")
-    start = pose[0] if start_pose is None else np.asarray(start_pose, dtype=np.float64)
+    if start_pose is not None:
+        start = np.asarray(start_pose, dtype=np.float64)
+    elif model.start_position_std > 0:
+        offset = model.start_position_std * rng.spawn(1)[0].standard_normal(2)
+        start = pose[0] + np.array([offset[0], offset[1], 0.0])
+    else:
+        start = pose[0]
     if start.shape != (3,) or not np.all(np.isfinite(start)):
         raise TangraphError(f"start_pose must be 3 finite numbers, got {start_pose!r}")
     k = t.size

@@ -138,7 +138,8 @@ class NavigationModel:
         """The model of a :class:`DeadReckoningModel` (a simulated DR's settings): its white errors
         as they are, its constant errors as priors of mean zero whose std is the larger of the
         stated default and the magnitude of the simulated error (the simulated values are the
-        unknown truth, not the estimators' knowledge)."""
+        unknown truth, not the estimators' knowledge), and the start uncertainty its
+        ``start_position_std`` (at least 0.1 m)."""
         if not isinstance(dr, DeadReckoningModel):
             raise TangraphError(f"dead-reckoning model must be a DeadReckoningModel, got {type(dr).__name__}")
         default = cls()
@@ -147,7 +148,7 @@ class NavigationModel:
             dropout_speed_noise=dr.dropout_speed_noise,
             speed_scale_std=max(default.speed_scale_std, abs(dr.speed_scale)),
             heading_bias_std=max(default.heading_bias_std, abs(dr.heading_bias)),
-            **terrain,
+            **({"initial_position_std": max(dr.start_position_std, 0.1)} | terrain),
         )
 
     @classmethod

@@ -14,7 +14,7 @@ from tangraph.sim.scenario import Scenario, simulate
 
 def small_scenario(duration: float = 400.0, **dr) -> Scenario:
     model = DeadReckoningModel(**{"heading_bias": float(np.deg2rad(1.0)), "speed_scale": 0.01,
-                                  "speed_noise": 0.05, **dr})
+                                  "speed_noise": 0.05, "start_position_std": 10.0, **dr})
     return Scenario(
         name="graph-test",
         map="fractal",

