@@ -176,7 +176,9 @@ class NavigationModel:
         try:
             dr = DeadReckoningModel(**table)
         except TypeError as exc:
-            raise TangraphError(f"survey meta['settings']['dead_reckoning'] is not a DR model: {exc}") from None
+            raise TangraphError(
+                f"survey meta['settings']['dead_reckoning'] is not a DR model: {exc}"
+            ) from None
         terrain: dict[str, Any] = {}
         try:
             noise = float(settings["sonar"]["depth_noise"])
