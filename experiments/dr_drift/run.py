@@ -35,7 +35,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> dict:
     model = scenario.dead_reckoning
     dr = simulate_dead_reckoning(time, truth, model, rng=rng)
     steady = dataclasses.replace(
-        model, heading_walk=0.0, heading_noise=0.0, speed_noise=0.0, dropout_rate=0.0
+        model, heading_walk=0.0, heading_noise=0.0, speed_noise=0.0, dropout_rate=0.0, start_position_std=0.0
     )
     mean_dr = simulate_dead_reckoning(time, truth, steady, rng=np.random.default_rng(0))
     error = dr.pose[-1, :2] - truth[-1, :2]
@@ -43,7 +43,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> dict:
     body = increment_covariance(model, time, dr.pose, 0, time.size - 1, dvl_valid=dr.dvl_valid)[:2, :2]
     psi = dr.pose[0, 2]
     rot = np.array([[np.cos(psi), -np.sin(psi)], [np.sin(psi), np.cos(psi)]])
-    cov = rot @ body @ rot.T
+    cov = rot @ body @ rot.T + model.start_position_std**2 * np.eye(2)  # the start error adds as it is
     e = error - mean
     return {
         "err_north": error[0],
