@@ -3,6 +3,8 @@ heading bias, and the honesty of the DR covariance it carries when nothing corre
 
 from __future__ import annotations
 
+import dataclasses
+
 import gtsam
 import numpy as np
 import pytest
@@ -124,3 +126,28 @@ def test_dr_covariance_is_honest_when_nothing_corrects_it(rough_map):
         nees.append(e @ np.linalg.solve(track.covariance[-1, :2, :2], e))
     lo, hi = stats.chi2.ppf([0.005, 0.995], 2 * runs) / runs
     assert lo < np.mean(nees) < hi
+
+
+def _flagged(fix, *reasons):
+    quality = dataclasses.replace(fix.quality, reasons=tuple(reasons))
+    return dataclasses.replace(fix, quality=quality)
+
+
+def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
+    from tangraph.graph.fixes import FixStatus, judge_fix
+    from tangraph.matching import tap_fix
+
+    config = GraphConfig()
+    fix = tap_fix(biased_survey.replace(dr_pose=biased_survey.true_pose), rough_map, 59, 20, config.tap,
+                  prior=biased_survey.true_pose[59, :2])
+    predicted, cov = biased_survey.true_pose[59], np.eye(3) * 4.0
+    assert judge_fix(fix, predicted, cov, config, 50.0).record.status is FixStatus.ACCEPTED
+    two = _flagged(fix, "multimodal: 2 basins")
+    used = judge_fix(two, predicted, cov, config, 50.0)
+    assert used.accepted and used.record.status is FixStatus.ACCEPTED and "multimodal" in used.record.reason
+    refused = judge_fix(two, predicted, cov, dataclasses.replace(config, accept_multimodal=False), 50.0)
+    assert refused.record.status is FixStatus.MULTIMODAL and refused.fix is None
+    flat = judge_fix(_flagged(fix, "uninformative: touches the edge"), predicted, cov, config, 50.0)
+    assert flat.record.status is FixStatus.UNINFORMATIVE
+    far = judge_fix(fix, predicted + np.array([200.0, 0.0, 0.0]), cov, config, 50.0)
+    assert far.record.status is FixStatus.GATE and far.record.nis > 13.8
