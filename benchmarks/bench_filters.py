@@ -12,7 +12,11 @@
    140.59, 301.19 and 235.37 ms per loop (target: at least 100x faster for Pearson), and the
    bootstrap PF on the same survey.
 3. Per-step times of every filter with its default config on a short multibeam survey (60 beams,
-   a ping every 10 m, a 5 m fractal map).
+   a ping every 10 m, a 5 m fractal map), with the navigation model of its simulated DR (the
+   survey records no settings, so the model is passed).
+
+Parts 2 and 3 give each filter the run's ``NavigationModel`` (part 2: ``from_survey`` of the
+simulated chen2022 survey), so the particles also estimate the DVL scale and heading bias.
 
 Best of R runs after a warm-up (benchmarks/_timing.py for wall time); on a shared machine the
 process CPU time (``time.process_time``) is printed too, and the ratios use it. Nothing is asserted.
@@ -40,7 +44,7 @@ from tangraph.filters import (
     run_filter,
 )
 from tangraph.maps import BathymetryMap, fractal
-from tangraph.sensors import DeadReckoningModel, simulate_dead_reckoning
+from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
 from tangraph.sim import trajectories
 from tangraph.survey import Survey, footprints
 
@@ -122,14 +126,16 @@ def chen2022_survey() -> tuple[Survey, BathymetryMap]:
     return simulate(scenario, rng=np.random.default_rng(scenario.seed), bathymetry=chart), chart
 
 
-def per_loop(method, survey, chart, config, repeat: int) -> tuple[float, float, float]:
+def per_loop(
+    method, survey, chart, config, repeat: int, model: NavigationModel | None = None
+) -> tuple[float, float, float]:
     """Best wall and CPU seconds per ping over ``repeat`` runs (after a warm-up), and the RMSE of
-    the last run."""
+    the last run; ``model`` None: the survey's (``NavigationModel.from_survey``)."""
     wall = cpu = np.inf
-    run_filter(method, survey, chart, config, rng=np.random.default_rng(0))  # warm-up
+    run_filter(method, survey, chart, config, model=model, rng=np.random.default_rng(0))  # warm-up
     for r in range(repeat):
         t0 = time.process_time()
-        track = run_filter(method, survey, chart, config, rng=np.random.default_rng(r))
+        track = run_filter(method, survey, chart, config, model=model, rng=np.random.default_rng(r))
         cpu = min(cpu, (time.process_time() - t0) / survey.n_pings)
         wall = min(wall, track.timings["per_step"])
     error = np.hypot(*(track.pose[:, :2] - survey.true_pose[:, :2]).T)
@@ -154,7 +160,7 @@ def sjcpf_case(repeat: int) -> None:
     print(f"   {'pf (same survey)':<20}{1e3 * wall:>9.3f}{1e3 * cpu:>9.3f}{'':>10}{'':>16}{rmse:>9.0f}")
 
 
-def multibeam_survey(pings: int) -> tuple[Survey, BathymetryMap]:
+def multibeam_survey(pings: int) -> tuple[Survey, BathymetryMap, NavigationModel]:
     rng = np.random.default_rng(1)
     m = fractal((600, 600), 5.0, rng=rng, beta=3.0, relief=8.0, mean_depth=80.0, name="bench")
     time, truth = trajectories.straight_line((300.0, 300.0), np.radians(45.0), 2.0, (pings - 1) * 5.0, 0.2)
@@ -165,11 +171,13 @@ def multibeam_survey(pings: int) -> tuple[Survey, BathymetryMap]:
     north, east = footprints(truth, forward, starboard)
     depth = m.depth_at(north, east) + 0.3 * rng.standard_normal(north.shape)
     survey = Survey(time, dr, np.full(time.size, 20.0), forward, starboard, depth, true_pose=truth)
-    return survey, m
+    # the DR starts at the truth; the soundings' 0.3 m noise with from_survey's 1.5 margin
+    navigation = NavigationModel.from_dead_reckoning(model, initial_position_std=10.0, sounding_std=0.45)
+    return survey, m, navigation
 
 
 def filters_case(pings: int, repeat: int) -> None:
-    survey, m = multibeam_survey(pings)
+    survey, m, navigation = multibeam_survey(pings)
     dr_error = np.hypot(*(survey.dr_pose[:, :2] - survey.true_pose[:, :2]).T)
     print(
         f"\n3. every filter, default config, {pings} pings x 60 beams on a 600 x 600 map (5 m), "
@@ -178,7 +186,7 @@ def filters_case(pings: int, repeat: int) -> None:
     print(f"   {'method':<12}{'particles':>10}{'wall ms':>9}{'cpu ms':>9}{'RMSE m':>8}")
     for method in FilterMethod:
         config = default_config(method)
-        wall, cpu, rmse = per_loop(method, survey, m, config, repeat)
+        wall, cpu, rmse = per_loop(method, survey, m, config, repeat, navigation)
         n = getattr(config, "n_particles", "-")
         print(f"   {method.value:<12}{n:>10}{1e3 * wall:>9.2f}{1e3 * cpu:>9.2f}{rmse:>8.2f}")
 

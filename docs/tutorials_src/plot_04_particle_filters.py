@@ -28,6 +28,7 @@ from tangraph.filters import default_config, run_filter
 from tangraph.maps import load
 from tangraph.navigation import dead_reckoning_track, track_summary
 from tangraph.plot import plot_errors, plot_tracks
+from tangraph.sensors import NavigationModel
 from tangraph.sim import load_scenario, simulate
 
 scenario = load_scenario("chen2022")
@@ -37,24 +38,38 @@ survey = simulate(scenario, rng=np.random.default_rng(2022), bathymetry=chart, s
 print(survey.summary())
 
 # %%
-# The filters' settings
-# ---------------------
+# The model and the filters' settings
+# -----------------------------------
 #
-# Each filter has a config dataclass (:func:`~tangraph.filters.default_config` gives its
-# defaults). The three share the settings of the ``chen2022_sjcpf`` study: 500 particles here
-# (to keep the tutorial fast; the study uses 1000), an initial cloud of 500 m standard
-# deviation around the first DR position (the paper's initialisation radius of 1000 m read as
-# two standard deviations), the paper's 5 m sounding noise, a known tide (the paper has none),
-# and process noise of 0.5 m plus 10 % of the distance run per ping. Like the paper's PF and
-# SJCPF, the PF resamples at every ping; the IPF re-draws the children of each parent only when
-# the effective sample size falls below half the particles. SJCPF adds its two parts: a 15 m
-# jitter on every particle at every ping (the paper's extra process noise of 225 m²) and a
-# weight correction ``exp(c rho)`` by the Pearson correlation ``rho`` of the last ``L``
-# predicted and measured depths; the paper gives neither ``c`` nor ``L``, and tangraph's
-# defaults (``kernel_constant`` and ``window``, printed below) are choices the study sweeps.
+# What the filters believe about the vehicle and its sonar is one
+# :class:`~tangraph.sensors.NavigationModel`, shared by all three; each filter's config (a
+# dataclass, :func:`~tangraph.filters.default_config` gives its defaults) holds only algorithm
+# settings. :meth:`NavigationModel.from_survey <tangraph.sensors.NavigationModel.from_survey>`
+# reads the simulated dead reckoning's error model from the survey: its white speed noise
+# (0.1 m/s, 10 m over the 100 s between soundings) as it is, and its constant errors as priors of
+# mean zero, a 2 degree std for the heading bias and 2 % for the speed scale. The particles carry
+# those two constants as part of their state and estimate them; they are not treated as noise.
+# The settings of the ``chen2022_sjcpf`` study then replace three fields: the start uncertainty,
+# 500 m per axis around the first DR position (the paper's initialisation radius of 1000 m read
+# as two standard deviations), the paper's 5 m sounding noise, and a known tide (the paper has
+# none: ``tide_std=0``).
+#
+# The configs: 500 particles here (to keep the tutorial fast; the study uses 1000) and an extra
+# 0.5 m of white position noise per ping (``process_floor``) on top of the model's. Like the
+# paper's PF and SJCPF, the PF resamples at every ping; the IPF re-draws the children of each
+# parent only when the effective sample size falls below half the particles. A ping whose
+# likelihood is far narrower than the cloud is taken in tempered stages (``tempering``, on by
+# default). SJCPF adds its two parts: a 15 m jitter on every particle at every ping (the paper's
+# extra process noise of 225 m²) and a weight correction ``exp(c rho)`` by the Pearson
+# correlation ``rho`` of the last ``L`` predicted and measured depths; the paper gives neither
+# ``c`` nor ``L``, and tangraph's defaults (``kernel_constant`` and ``window``, printed below) are
+# choices the study sweeps.
 
-shared = dict(n_particles=500, init_std=500.0, sounding_std=5.0, process_std=0.5,
-              process_fraction=0.1, tide_std=0.0)
+model = NavigationModel.from_survey(survey).replace(
+    initial_position_std=500.0, sounding_std=5.0, tide_std=0.0
+)
+print(model)
+shared = dict(n_particles=500, process_floor=0.5)
 configs = {
     "pf": dataclasses.replace(default_config("pf"), ess_threshold=1.0, **shared),
     "ipf": dataclasses.replace(default_config("ipf"), **shared),
@@ -67,15 +82,23 @@ for name, config in configs.items():
 # One run of each
 # ---------------
 #
-# :func:`~tangraph.filters.run_filter` runs a filter over the survey and returns a
-# :class:`~tangraph.track.Track` (the weighted mean and covariance at every ping). Each filter
-# gets its own generator, a child of one seed.
+# :func:`~tangraph.filters.run_filter` runs a filter over the survey with the model and returns
+# a :class:`~tangraph.track.Track` (the weighted mean and covariance at every ping; its
+# ``meta["calibration"]`` holds the estimate of the speed scale and heading error at the last
+# ping, and ``meta["n_lost"]`` counts the pings where its innovations say it has lost the
+# vehicle). Each filter gets its own generator, a child of one seed.
 
 seeds = np.random.SeedSequence(4).spawn(len(configs))
 tracks = {"dead reckoning": dead_reckoning_track(survey)}
 for (name, config), seed in zip(configs.items(), seeds, strict=True):
-    tracks[name] = run_filter(name, survey, chart, config, rng=np.random.default_rng(seed))
-    print(track_summary(tracks[name], survey), end="\n\n")
+    tracks[name] = run_filter(name, survey, chart, config, model=model, rng=np.random.default_rng(seed))
+    print(track_summary(tracks[name], survey))
+    calibration = tracks[name].meta["calibration"]
+    heading = np.degrees([calibration["heading_error"], calibration["heading_error_std"]])
+    scale = 100 * np.array([calibration["speed_scale"], calibration["speed_scale_std"]])
+    print(f"heading error {heading[0]:.2f} ± {heading[1]:.2f} deg (simulated: 2), "
+          f"speed scale {scale[0]:.2f} ± {scale[1]:.2f} % (simulated: 0); "
+          f"{tracks[name].meta['n_lost']} pings lost", end="\n\n")
 
 # %%
 # The tracks over the chart, and the errors against time. With one sounding per 100 m and
@@ -137,10 +160,14 @@ rows = []
 for run, seed in enumerate(np.random.SeedSequence(2022).spawn(n_runs)):
     survey_seed, *filter_seeds = seed.spawn(1 + len(configs))
     run_survey = simulate(scenario, rng=np.random.default_rng(survey_seed), bathymetry=chart)
+    run_model = NavigationModel.from_survey(run_survey).replace(
+        initial_position_std=500.0, sounding_std=5.0, tide_std=0.0
+    )
     rows.append({"run": run, "dead reckoning": track_metrics(dead_reckoning_track(run_survey),
                                                               run_survey.true_pose)["rmse"]})
     for (name, config), filter_seed in zip(configs.items(), filter_seeds, strict=True):
-        track = run_filter(name, run_survey, chart, config, rng=np.random.default_rng(filter_seed))
+        track = run_filter(name, run_survey, chart, config, model=run_model,
+                           rng=np.random.default_rng(filter_seed))
         rows[-1][name] = track_metrics(track, run_survey.true_pose)["rmse"]
 
 names = ["dead reckoning", *configs]
@@ -162,15 +189,22 @@ print("each filter's RMSE as a fraction of the dead reckoning's: "
 # - The paper's figures come from its own chart (IBCAO, not available here) and its own,
 #   unstated, particle count and kernel constants; the synthetic chart has the same 500 m cells
 #   but not the same relief, so only the direction of the comparison can be checked here, and
-#   six runs give it only roughly: the differences between the filters printed above are well
-#   within the spread from run to run. The study in ``experiments/chen2022_sjcpf`` does it with
-#   200 runs per method and sweeps what the paper leaves out.
+#   six runs give it only roughly. The study in ``experiments/chen2022_sjcpf`` does it with
+#   more runs, on two charts, and sweeps what the paper leaves out.
 # - The errors are of the order of the cell size or more, whatever the filter: a 500 m chart
 #   sounded every 100 m cannot give metres. Where the relief is flat the soundings carry no
 #   information and every filter follows the dead reckoning; the last line printed says how
 #   much of the dead reckoning's error each filter removes on this chart.
-# - The over-confidence of the filters (an ANEES far above 2) is the diversity problem the
-#   paper describes: when the cloud has collapsed, its spread no longer says how wrong it is.
+# - The PF and the IPF estimate the constant heading bias with their particles (the
+#   ``heading error`` lines above): once the rises have told them where the vehicle is, they
+#   also know how its dead reckoning drifts, and their final error is far below the dead
+#   reckoning's. Their ANEES near 2 says their covariance is honest.
+# - The SJCPF's correction ``exp(c rho)`` re-weights by soundings the terrain likelihood has
+#   already used, and rewards particles whose depth profile has the right shape whatever their
+#   calibration; with the 15 m jitter on top, its heading-bias estimate can settle on a wrong
+#   value (the ``heading error`` line above) and the track then drifts away: the filter reports
+#   itself lost (``pings lost`` above) and its ANEES is far above 2, the
+#   over-confidence of a collapsed cloud whose spread no longer says how wrong it is.
 #
 # The factor graph is the other way to navigate: :doc:`the next tutorial
 # <plot_05_factor_graph>` runs it on a multibeam survey.

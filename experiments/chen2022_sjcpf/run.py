@@ -3,8 +3,10 @@
 Each run simulates the 100 000 s single-beam survey of a scenario (``chen2022`` on the synthetic
 500 m chart ``polar500``; ``chen2022_arctic`` on the real ETOPO5 chart of the paper's own region)
 and runs every variant named in the configuration on that same survey (a paired comparison). A
-variant is a method (``pf`` or ``sjcpf``) with changes to the shared settings of ``config.toml``
-(particles, initial spread, noise; the SJCPF's jitter, window, kernel). Scored: the RMSE of the
+variant is a method (``pf`` or ``sjcpf``) with changes to the shared settings of ``config.toml``:
+the navigation model's (``[model]``: initial spread, sounding and speed noise, the tide; the
+filters estimate the DR's heading bias and speed scale) or the filter config's (``[filter]``:
+particles, resampling; the SJCPF's jitter, window, kernel). Scored: the RMSE of the
 whole track (the paper's figure), the final error and the time per loop (ms per sounding).
 
 Parts: ``main`` (the paper's RMSE comparison: PF and the three correlations, both charts),
@@ -41,14 +43,31 @@ def load_config() -> dict:
 
 def variant_config(variant: dict, shared: dict, sjcpf: dict):
     """The filter config of a variant: the method's defaults, the shared settings, the SJCPF's own
-    settings (for ``sjcpf``), then the variant's changes."""
+    settings (for ``sjcpf``), then the variant's changes that are not navigation model fields
+    (those are :func:`model_changes`)."""
     from tangraph.filters import default_config
 
-    changes = dict(variant)
+    changes = {k: v for k, v in variant.items() if k not in _model_fields()}
     method = changes.pop("method")
     base = default_config(method)
     settings = {**shared, **(sjcpf if method == "sjcpf" else {}), **changes}
     return method, dataclasses.replace(base, **settings)
+
+
+def _model_fields() -> set[str]:
+    from tangraph.sensors import NavigationModel
+
+    return {f.name for f in dataclasses.fields(NavigationModel)}
+
+
+def navigation_model(survey, model: dict, variant: dict):
+    """The navigation model of a variant on a survey: the survey's simulated DR errors
+    (``NavigationModel.from_survey``) with the study's ``[model]`` fields, then the variant's."""
+    from tangraph.sensors import NavigationModel
+
+    fields = _model_fields()
+    changes = {**model, **{k: v for k, v in variant.items() if k in fields}}
+    return NavigationModel.from_survey(survey).replace(**changes)
 
 
 def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
@@ -74,10 +93,13 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     distance = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(survey.true_pose[:, :2], axis=0).T))])
     rows = []
     for name in config["variants"]:
-        method, cfg = variant_config(config["variant_settings"][name], config["shared"], config["sjcpf"])
+        variant = config["variant_settings"][name]
+        method, cfg = variant_config(variant, config["shared"], config["sjcpf"])
         if "n_particles" in config:
             cfg = dataclasses.replace(cfg, n_particles=config["n_particles"])
-        track = run_filter(method, survey, bathymetry, cfg, rng=rng)
+        model = navigation_model(survey, config["model"], variant)
+        track = run_filter(method, survey, bathymetry, cfg, model=model, rng=rng)
+        calibration = track.meta.get("calibration", {})
         metrics = track_metrics(track, survey.true_pose)
         err = position_errors(track, survey.true_pose)
         row = {
@@ -95,6 +117,10 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
             "n_pings": k,
             "n_divergences": int(track.meta.get("n_divergences", 0)),
             "n_resampled": int(track.meta.get("n_resampled", 0)),
+            "n_lost": int(track.meta.get("n_lost", 0)),
+            "n_tempered": int(track.meta.get("n_tempered", 0)),
+            "heading_error_deg": float(np.degrees(calibration.get("heading_error", np.nan))),
+            "speed_scale": float(calibration.get("speed_scale", np.nan)),
             "mean_ess": float(np.nanmean(track.meta["ess"])),
         }
         for i, s in enumerate(samples):
@@ -109,6 +135,7 @@ def configurations(part: str, cfg: dict, quick: bool) -> list[dict]:
     base = {
         "part": part,
         "shared": cfg["filter"],
+        "model": cfg["model"],
         "sjcpf": cfg["sjcpf"],
         "variant_settings": cfg["variants"],
         "rate": 0.01,
@@ -298,7 +325,8 @@ def figure_example(cfg: dict, scenario: str, seed: int, path: Path) -> Path:
     tracks = {"dead reckoning": dead_reckoning_track(survey)}
     for name in ("pf", "sjcpf-pearson"):
         method, fc = variant_config(cfg["variants"][name], cfg["filter"], cfg["sjcpf"])
-        tracks[name] = run_filter(method, survey, bathymetry, fc, rng=rng)
+        model = navigation_model(survey, cfg["model"], cfg["variants"][name])
+        tracks[name] = run_filter(method, survey, bathymetry, fc, model=model, rng=rng)
     fig = Figure(figsize=(8, 7), layout="constrained")
     plot_tracks(
         tracks,
@@ -315,6 +343,7 @@ def figure_example(cfg: dict, scenario: str, seed: int, path: Path) -> Path:
 def timing(cfg: dict, seed: int, repeat: int) -> str:
     """Time per loop of the main variants on one chen2022 survey, run ``repeat`` times in this
     process one after another (no Monte Carlo in parallel): the least and the median of the runs."""
+    import functools
     import time
 
     from tangraph.filters import run_filter
@@ -334,11 +363,13 @@ def timing(cfg: dict, seed: int, repeat: int) -> str:
         for name in cfg["main"]:
             method, fc = variant_config(cfg["variants"][name], cfg["filter"], cfg["sjcpf"])
             fc = dataclasses.replace(fc, n_particles=n)
-            run_filter(method, survey, bathymetry, fc, rng=np.random.default_rng(0))  # compile, warm caches
+            model = navigation_model(survey, cfg["model"], cfg["variants"][name])
+            run = functools.partial(run_filter, method, survey, bathymetry, fc, model=model)
+            run(rng=np.random.default_rng(0))  # compile, warm caches
             per = []
             for r in range(repeat):
                 started = time.perf_counter()
-                run_filter(method, survey, bathymetry, fc, rng=np.random.default_rng(r))
+                run(rng=np.random.default_rng(r))
                 per.append(1e3 * (time.perf_counter() - started) / survey.n_pings)
             lines.append(
                 f"| {n} | {name} | {min(per):.3f} | {np.median(per):.3f} | "

@@ -8,7 +8,12 @@ paired comparison). A patch is ``beams`` beams x ``pings`` consecutive pings, as
 - MLE and TERCOM-PF match each non-overlapping window of ``pings`` pings (``window = pings``);
 - the IPF takes each patch as one measurement (the pings of a patch merged into one "ping" whose
   soundings are placed by dead reckoning relative to the patch's last ping), with the per-ping
-  process noise summed over the patch, so its motion model is the same as the others'.
+  white noise summed over the patch, so its motion model is the same as the others'.
+
+Every method of a run shares one ``tangraph.sensors.NavigationModel``: the scenario's simulated
+dead-reckoning errors (white speed noise as it is; the constant heading bias and speed scale as
+priors the filters estimate), the start error's std as ``initial_position_std``, the simulated
+sounding noise and an unknown tide (prior std 3 m).
 
 Every method is scored at the patch ends (where each has seen the same soundings): the mean
 error over the area's second half of patches, and the error at the area's exit.
@@ -111,7 +116,8 @@ def simulate_line(scenario, bathymetry, start, end, *, rng: np.random.Generator)
     if bathymetry.name not in _SCENES:
         _SCENES[bathymetry.name] = raycasting_scene(bathymetry)
     t, truth = true_trajectory(scenario, bathymetry)
-    dr = simulate_dead_reckoning(t, truth, scenario.dead_reckoning, rng=rng)
+    # the DR starts at the true start: the study adds its own start error (init_error)
+    dr = simulate_dead_reckoning(t, truth, scenario.dead_reckoning, rng=rng, start_pose=truth[0])
     depth = np.full(t.size, scenario.vehicle_depth)
     pings = simulate_pings(_SCENES[bathymetry.name], truth, depth, scenario.sonar, rng=rng)
     return Survey(
@@ -153,28 +159,47 @@ def patch_survey(survey, pings: int):
     ), ends
 
 
+def navigation_model(scenario, run: dict):
+    """The navigation model of a run, shared by every method: the scenario's DR errors (white ones
+    as simulated, constant ones as priors of mean zero), the start error's std and the map's
+    sounding std; the tide is unknown (the model's prior, std 3 m)."""
+    from tangraph.sensors import NavigationModel
+
+    return NavigationModel.from_dead_reckoning(
+        scenario.dead_reckoning,
+        initial_position_std=run["init_error"],
+        sounding_std=run["sounding_std"],
+    )
+
+
+def patch_model(model, pings: int):
+    """The model of a patched survey (:func:`patch_survey`): the white per-ping errors summed over
+    the ``P`` pings of a patch. A patch's ``dt`` and displacement are ``P`` times a ping's, and
+    the model's noise std grows linearly with them (``speed_noise dt``, ``heading_noise |u|``),
+    whereas ``P`` independent per-ping errors grow as ``sqrt(P)``: both are divided by
+    ``sqrt(P)`` (the heading walk is per ``sqrt(s)`` and needs nothing)."""
+    root = float(np.sqrt(pings))
+    return model.replace(speed_noise=model.speed_noise / root, heading_noise=model.heading_noise / root)
+
+
 def method_config(method: str, run: dict):
-    """The config of ``method`` in a run: the defaults with the study's constants (config.toml)."""
+    """The config of ``method`` in a run: the defaults with the study's settings (config.toml)."""
     from tangraph.filters import default_config
 
     base = default_config(method)
-    changes = {
-        "init_std": run["init_error"],
-        "process_std": run["process_std"],
-        "process_fraction": run["process_fraction"],
-    }
+    changes: dict = {}
     if method == "ipf":
-        # per-ping process noise summed over a patch of P pings (patch displacement D = P d):
-        # q^2 = P (s^2 + (f d)^2) = (sqrt(P) s)^2 + (f / sqrt(P) D)^2
-        root = np.sqrt(run["pings"])
+        # a per-ping floor summed over a patch of P pings: sqrt(P) times the floor
         changes |= {
             "n_particles": run["n_particles"],
-            "sounding_std": run["sounding_std"],
-            "process_std": run["process_std"] * root,
-            "process_fraction": run["process_fraction"] / root,
+            "process_floor": run["process_floor"] * np.sqrt(run["pings"]),
         }
     elif method == "tercom-pf":
-        changes |= {"n_particles": run["n_particles"], "window": run["pings"]}
+        changes |= {
+            "n_particles": run["n_particles"],
+            "window": run["pings"],
+            "process_floor": run["process_floor"],
+        }
     elif method == "mle":
         changes |= {"window": run["pings"]}
     return dataclasses.replace(base, **changes)
@@ -199,11 +224,17 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     truth = survey.true_pose[ends]
     n = ends.size
     distance = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(survey.true_pose[:, :2], axis=0).T))])
+    model = navigation_model(scenario, config)
     rows = []
     for method in config["methods"]:
         cfg = method_config(method, config)
         started = time.perf_counter()
-        track = run_filter(method, patched if method == "ipf" else survey, bathymetry, cfg, rng=rng)
+        if method == "ipf":
+            track = run_filter(
+                method, patched, bathymetry, cfg, model=patch_model(model, config["pings"]), rng=rng
+            )
+        else:
+            track = run_filter(method, survey, bathymetry, cfg, model=model, rng=rng)
         seconds = time.perf_counter() - started
         pose = track.pose[:, :2] if method == "ipf" else track.pose[ends, :2]
         err = np.hypot(*(pose - truth[:, :2]).T)
@@ -220,6 +251,8 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
             "seconds": seconds,
             "ms_per_patch": 1e3 * seconds / n,
             "n_divergences": int(track.meta.get("n_divergences", 0)),
+            "n_lost": int(track.meta.get("n_lost", 0)),
+            "n_tempered": int(track.meta.get("n_tempered", 0)),
             "exit_distance": float(distance[-1]),
         }
         for i in range(n):
@@ -246,8 +279,7 @@ def configurations(part: str, cfg: dict, quick: bool) -> list[dict]:
             "scenario": cfg[which]["scenario"],
             "sounding_std": cfg[which]["sounding_std"],
             "init_error": cfg[which].get("init_error", cfg["init_error"]),
-            "process_std": cfg[which]["process_std"],
-            "process_fraction": cfg[which]["process_fraction"],
+            "process_floor": cfg[which]["process_floor"],
         }
         bathymetry = load(MAPS[which])
         for area in matching_areas(which, cfg):
