@@ -100,7 +100,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         pcrb = bound["smoother" if method == "smoother" else "filter"]
         calibration = track.meta.get("calibration") or {}
         heading_miss = np.angle(np.exp(1j * (calibration.get("heading_error", np.nan) - truth_heading)))
-        used, covered = _fix_coverage(track, survey.true_pose)
+        used, covered = _fix_coverage(track, survey.true_pose) if method in GRAPH else (0, 0)
         rows.append(
             {
                 "method": method,
@@ -229,6 +229,8 @@ def main(argv=None) -> int:
     failed = table["error"].notna()
     if failed.any():
         print(f"{int(failed.sum())} runs failed; first error: {table.loc[failed, 'error'].iloc[0]}")
+    if failed.all():
+        return 1
     rows = summarise(table[~failed])
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \

@@ -134,22 +134,23 @@ class NavigationModel:
 
     # -- construction --------------------------------------------------------------------------
     @classmethod
-    def from_dead_reckoning(cls, dr: DeadReckoningModel, **terrain) -> NavigationModel:
+    def from_dead_reckoning(cls, dr: DeadReckoningModel, **overrides) -> NavigationModel:
         """The model of a :class:`DeadReckoningModel` (a simulated DR's settings): its white errors
         as they are, its constant errors as priors of mean zero whose std is the larger of the
         stated default and the magnitude of the simulated error (the simulated values are the
         unknown truth, not the estimators' knowledge), and the start uncertainty its
-        ``start_position_std`` (at least 0.1 m)."""
+        ``start_position_std`` (at least 0.1 m). ``overrides`` replace any field."""
         if not isinstance(dr, DeadReckoningModel):
             raise TangraphError(f"dead-reckoning model must be a DeadReckoningModel, got {type(dr).__name__}")
         default = cls()
-        return cls(
-            speed_noise=dr.speed_noise, heading_noise=dr.heading_noise, heading_walk=dr.heading_walk,
-            dropout_speed_noise=dr.dropout_speed_noise,
-            speed_scale_std=max(default.speed_scale_std, abs(dr.speed_scale)),
-            heading_bias_std=max(default.heading_bias_std, abs(dr.heading_bias)),
-            **({"initial_position_std": max(dr.start_position_std, 0.1)} | terrain),
-        )
+        fields = {
+            "speed_noise": dr.speed_noise, "heading_noise": dr.heading_noise,
+            "heading_walk": dr.heading_walk, "dropout_speed_noise": dr.dropout_speed_noise,
+            "speed_scale_std": max(default.speed_scale_std, abs(dr.speed_scale)),
+            "heading_bias_std": max(default.heading_bias_std, abs(dr.heading_bias)),
+            "initial_position_std": max(dr.start_position_std, 0.1),
+        }
+        return cls(**(fields | overrides))
 
     @classmethod
     def from_survey(cls, survey, **overrides) -> NavigationModel:

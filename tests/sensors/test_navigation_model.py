@@ -1,0 +1,59 @@
+"""NavigationModel: validation naming the field, construction from a DR model, a survey, a TOML file."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.sensors import DeadReckoningModel, NavigationModel, load_navigation_model
+
+
+@pytest.mark.parametrize("field, value", [("speed_noise", -0.1), ("sounding_std", 0.0), ("tide_std", np.nan),
+                                          ("speed_scale_std", np.inf), ("initial_position_std", "ten"),
+                                          ("heading_bias", 4.0), ("map_std", True)])
+def test_bad_values_are_refused_naming_the_field(field, value):
+    with pytest.raises(TangraphError, match=f"NavigationModel.{field}"):
+        NavigationModel(**{field: value})
+
+
+def test_from_dead_reckoning_takes_white_errors_and_turns_constants_into_priors():
+    dr = DeadReckoningModel(heading_bias=np.deg2rad(3.5), speed_scale=0.03, speed_noise=0.05,
+                            heading_walk=1e-4, start_position_std=7.0)
+    model = NavigationModel.from_dead_reckoning(dr)
+    assert (model.speed_noise, model.heading_walk, model.initial_position_std) == (0.05, 1e-4, 7.0)
+    assert model.speed_scale == 0.0 and model.heading_bias == 0.0  # the truth is not known
+    np.testing.assert_allclose(model.calibration_std, [0.03, np.deg2rad(3.5)])
+    assert model.dead_reckoning.speed_scale == 0.0 and model.dead_reckoning.heading_bias == 0.0
+    assert NavigationModel.from_dead_reckoning(dr, speed_noise=0.2).speed_noise == 0.2
+
+
+def test_from_survey_needs_the_settings():
+    from tangraph.survey import Survey
+
+    ones = np.ones((3, 1))
+    bare = Survey(time=np.arange(3.0), dr_pose=np.zeros((3, 3)), vehicle_depth=ones[:, 0],
+                  beam_forward=0 * ones, beam_starboard=0 * ones, beam_depth=ones)
+    with pytest.raises(TangraphError, match="NavigationModel"):
+        NavigationModel.from_survey(bare)
+    settings = {"dead_reckoning": {"speed_noise": 0.1}, "sonar": {"depth_noise": 0.2}}
+    model = NavigationModel.from_survey(bare.replace(meta={"settings": settings}))
+    assert model.speed_noise == 0.1 and model.sounding_std == pytest.approx(0.3)
+
+
+def test_toml_file_in_degrees_and_its_errors(tmp_path):
+    path = tmp_path / "dr.toml"
+    path.write_text("speed_noise = 0.04\nheading_bias_std_deg = 1.5\n[other]\n")
+    with pytest.raises(TangraphError, match="unknown key 'other'"):
+        load_navigation_model(path)
+    path.write_text("[navigation]\nspeed_noise = 0.04\nheading_bias_std_deg = 1.5\n")
+    model = load_navigation_model(path)
+    assert model.speed_noise == 0.04 and model.heading_bias_std == pytest.approx(np.deg2rad(1.5))
+    path.write_text("speed_noise = -1\n")
+    with pytest.raises(TangraphError, match=r"dr.toml: NavigationModel.speed_noise must be >= 0"):
+        load_navigation_model(path)
+    path.write_text("heading_bias_std = 0.1\nheading_bias_std_deg = 2\n")
+    with pytest.raises(TangraphError, match="given twice"):
+        load_navigation_model(path)
+    with pytest.raises(TangraphError, match="does not exist"):
+        load_navigation_model(tmp_path / "missing.toml")
