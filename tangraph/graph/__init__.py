@@ -14,7 +14,7 @@ from tangraph.graph.factors import (
     world_to_tangent,
 )
 from tangraph.graph.fixes import FixRecord, FixStatus, search_half_width
-from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
+from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices, window_ends
 from tangraph.graph.online import GraphNavigator, navigate_online
 from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
 
@@ -29,6 +29,7 @@ __all__ = [
     "check_fix_covariance",
     "compose",
     "dense_track",
+    "fix_windows",
     "increments",
     "key_indices",
     "navigate_online",

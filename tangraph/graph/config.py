@@ -41,6 +41,12 @@ class GraphConfig:
         Pings between consecutive window ends (default 10: windows overlap by half, which on the
         shipped scenarios gave the lowest smoother RMSE; see the graph_vs_filters study); None:
         ``n_pings`` (windows that do not overlap).
+    ramp_pings : int or None
+        Before the first full window, windows of this many pings every this many pings (default
+        5), so the first fix comes after 5 pings instead of ``n_pings``; None waits for a full
+        window. A window's TAP covariance is multiplied by how many windows hold its pings on
+        average (:func:`~tangraph.graph.keyposes.fix_windows`), so overlapping windows count
+        every sounding once.
     tap : TapConfig
         Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
         ``"marginal"``.
@@ -115,6 +121,7 @@ class GraphConfig:
     key_interval: float = 60.0
     n_pings: int = 20
     fix_spacing: int | None = 10
+    ramp_pings: int | None = 5
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
     tap_step_cells: float = 0.5
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
@@ -163,6 +170,13 @@ class GraphConfig:
                     f"GraphConfig.fix_spacing must be None or an integer >= 1, got {self.fix_spacing!r}"
                 )
             object.__setattr__(self, "fix_spacing", int(self.fix_spacing))
+        if self.ramp_pings is not None:
+            if isinstance(self.ramp_pings, bool) or not isinstance(self.ramp_pings, int | np.integer) \
+                    or self.ramp_pings < 1:
+                raise TangraphError(
+                    f"GraphConfig.ramp_pings must be None or an integer >= 1, got {self.ramp_pings!r}"
+                )
+            object.__setattr__(self, "ramp_pings", int(self.ramp_pings))
         if self.isam_window is not None and (isinstance(self.isam_window, bool) or not isinstance(
                 self.isam_window, int | np.integer) or self.isam_window < 2):
             raise TangraphError(

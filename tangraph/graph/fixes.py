@@ -122,8 +122,9 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
     """``fix`` with the covariance the graph gives it.
 
     TAP's covariance counts the information of its window's soundings; windows that share pings
-    (``overlap = n_pings / spacing > 1``) would count each sounding ``overlap`` times, so it is
-    multiplied by ``overlap``. The patch is laid with the calibrated DR of the current estimate:
+    would count each sounding ``overlap`` times (the mean number of windows holding its pings,
+    :func:`~tangraph.graph.keyposes.fix_windows`), so it is multiplied by ``overlap``. The patch
+    is laid with the calibrated DR of the current estimate:
     what is still uncertain of it moves the window's middle ping relative to its reference ping,
     the white DR noise from the middle ping to the end (:func:`~tangraph.sensors.increment_covariance`
     of ``white``) and the calibration's remaining covariance ``calibration_cov (2, 2)`` through
@@ -143,22 +144,22 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
 
 
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
-             half_width: float, *, poses=None) -> TapFix:
-    """The TAP fix of the window of ``config.n_pings`` pings ending at ``end``, searched within
-    ``half_width`` of ``prior``; the patch is laid with ``poses``, the ``(n_pings, 3)`` poses of the
-    window's pings (default: their DR poses).
+             half_width: float, *, poses=None, first: int | None = None) -> TapFix:
+    """The TAP fix of the window of pings ``first`` (default ``end - config.n_pings + 1``) to
+    ``end``, searched within ``half_width`` of ``prior``; the patch is laid with ``poses``, the
+    poses of the window's pings (default: their DR poses).
 
     Raises
     ------
     MatchingError
         As :func:`tangraph.matching.tap_fix`.
     """
-    first = end - config.n_pings + 1
+    first = end - config.n_pings + 1 if first is None else int(first)
     if first < 0:
-        raise MatchingError(f"window of {config.n_pings} pings ending at ping {end} starts before the survey")
+        raise MatchingError(f"the window ending at ping {end} starts before the survey ({first})")
     if not np.isfinite(survey.beam_depth[first : end + 1]).any():
         raise MatchingError(f"window of pings {first}..{end} has no sounding")
-    patch = window_patch(survey, end, config.n_pings, min_soundings=config.tap.min_soundings, poses=poses)
+    patch = window_patch(survey, end, end - first + 1, min_soundings=config.tap.min_soundings, poses=poses)
     tap = dataclasses.replace(config.tap, half_width=float(half_width), step=search_step(config, bathymetry))
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 

@@ -23,7 +23,7 @@ from tangraph.graph.calibration import (
 from tangraph.graph.factors import between_noise, pose_prior_factor, position_fix_factor
 from tangraph.sensors import DeadReckoningModel, increment_covariance, odometry
 
-__all__ = ["PoseGraph", "increments", "key_indices", "window_ends"]
+__all__ = ["PoseGraph", "fix_windows", "increments", "key_indices", "window_ends"]
 
 _MAX_PAD = 2_000_000  # pairs x longest pair held at once by increment_covariance
 
@@ -31,6 +31,39 @@ _MAX_PAD = 2_000_000  # pairs x longest pair held at once by increment_covarianc
 def window_ends(n_pings: int, window: int, spacing: int) -> np.ndarray:
     """Last ping of every TAP window: ``window - 1``, then every ``spacing`` pings."""
     return np.arange(window - 1, n_pings, spacing, dtype=np.int64)
+
+
+def fix_windows(n_pings: int, window: int, spacing: int, ramp: int | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The TAP windows of a survey: ``first`` and ``end`` ping of each, and its ``overlap``.
+
+    Full windows of ``window`` pings end at ``window - 1`` and then every ``spacing`` pings
+    (:func:`window_ends`). With ``ramp`` (< ``window``), windows of ``ramp`` pings end every
+    ``ramp`` pings before the first full one, so the first fix comes after ``ramp`` pings, not
+    ``window``. A window's ``overlap`` is the mean, over its pings, of the number of windows
+    that hold each ping: its TAP covariance, multiplied by it, counts every sounding's
+    information once in all.
+
+    Examples
+    --------
+    >>> first, end, overlap = fix_windows(40, 20, 10, ramp=5)
+    >>> first.tolist(), end.tolist()
+    ([0, 5, 10, 0, 10, 20], [4, 9, 14, 19, 29, 39])
+    >>> overlap.round(2).tolist()
+    [2.0, 2.0, 3.0, 2.25, 2.25, 1.5]
+    """
+    full = window_ends(n_pings, window, spacing)
+    early = np.arange(ramp - 1, min(window - 1, n_pings), ramp, dtype=np.int64) if ramp and ramp < window \
+        else np.zeros(0, np.int64)
+    end = np.concatenate([early, full])
+    first = np.concatenate([early - ramp + 1 if early.size else early, full - window + 1])
+    count = np.zeros(n_pings + 1)
+    np.add.at(count, first, 1.0)
+    np.add.at(count, end + 1, -1.0)
+    held = np.cumsum(count)[:n_pings]
+    total = np.concatenate([[0.0], np.cumsum(held)])
+    overlap = (total[end + 1] - total[first]) / (end - first + 1)
+    return first, end, np.maximum(overlap, 1.0)
 
 
 def key_indices(time, fix_ends, key_interval: float) -> np.ndarray:

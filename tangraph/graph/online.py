@@ -37,7 +37,7 @@ from tangraph.graph.fixes import (
     search_half_width,
     window_noise,
 )
-from tangraph.graph.keyposes import PoseGraph, increments, key_indices, window_ends
+from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix
 from tangraph.sensors import NavigationModel, odometry
@@ -103,7 +103,9 @@ class GraphNavigator:
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
-        self.fix_ends = window_ends(n, c.n_pings, c.spacing)
+        firsts, self.fix_ends, overlaps = fix_windows(n, c.n_pings, c.spacing, c.ramp_pings)
+        self.window_first = dict(zip(self.fix_ends.tolist(), firsts.tolist(), strict=True))
+        self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
         self._is_end[self.fix_ends] = True
@@ -249,7 +251,8 @@ class GraphNavigator:
         started = _time.perf_counter()
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
-                            poses=None if laid is None else to_world(laid, self.calibration, self.origin))
+                            poses=None if laid is None else to_world(laid, self.calibration, self.origin),
+                            first=self.window_first.get(k))
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
@@ -264,7 +267,7 @@ class GraphNavigator:
         """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
         DR increments (no tear at the keys inside the window); mapped to the world with the
         current calibration they are the calibrated DR's patch."""
-        first = k - self.config.n_pings + 1
+        first = self.window_first.get(k, k - self.config.n_pings + 1)
         if first < 0:
             return None
         return compose(pose, odometry(self.survey.dr_pose, k, np.arange(first, k + 1)))
@@ -278,7 +281,7 @@ class GraphNavigator:
         if laid is not None and self.graph.calibrated and laid.shape[0] == end - first + 1:
             jac = world_jacobian(laid[[mid - first, -1]], self.calibration, self.origin)
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
-        overlap = self.config.n_pings / self.config.spacing
+        overlap = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 
     def _update(self, k: int) -> None:

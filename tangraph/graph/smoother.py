@@ -270,10 +270,10 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previou
     for end in nav.fix_ends:
         end = int(end)
         half_width = search_half_width(config, nav.bathymetry, cov[end, :2, :2])
-        window = slice(end - config.n_pings + 1, end + 1)
+        window = slice(nav.window_first[end], end + 1)
         try:
             fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
-                           poses=pose[window])
+                           poses=pose[window], first=window.start)
             laid = None if window.start < 0 else _frame_poses(pose[window], solution.calibration, nav.origin)
             outcome = judge_fix(nav._grown(fix, laid, joint), pose[end], cov[end], config, half_width)
         except MatchingError as exc:
