@@ -100,7 +100,7 @@ def long_online(n: int) -> None:
     total = time.perf_counter() - t0
     updates = np.asarray(nav.update_times) * 1e3
     tenth = updates.size // 10
-    accepted = sum(f["accepted"] for f in nav.fixes)
+    accepted = sum(f.accepted for f in nav.fixes)
     print(f"online, {n} key poses, {accepted} fixes (graph only): {total:.1f} s; "
           f"update mean {updates.mean():.2f} ms, p99 {np.percentile(updates, 99):.2f} ms, "
           f"last 10 % / first 10 % = {updates[-tenth:].mean() / updates[:tenth].mean():.2f}")
