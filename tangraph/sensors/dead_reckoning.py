@@ -33,6 +33,8 @@ def _check_number(obj, name: str, *, low: float | None = 0.0, open_low: bool = F
     """``obj.name`` as a float within ``[low, high]``, else raise naming the field and value."""
     value = getattr(obj, name)
     where = f"{type(obj).__name__}.{name}"
+    if isinstance(value, bool):
+        raise TangraphError(f"{where} must be a number, got {value!r}")
     try:
         v = float(value)
     except (TypeError, ValueError):

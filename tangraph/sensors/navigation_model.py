@@ -28,6 +28,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.sensors.dead_reckoning import DeadReckoningModel
+from tangraph.sensors.dead_reckoning import _check_number as _number
 
 __all__ = ["NavigationModel", "load_navigation_model"]
 
@@ -244,22 +245,3 @@ def load_navigation_model(path: str | os.PathLike) -> NavigationModel:
             raise TangraphError(f"{path}: keys outside [navigation]: {', '.join(extra)}")
         table = table["navigation"]
     return NavigationModel.from_mapping(table, str(path))
-
-
-def _number(obj, name: str, *, low: float | None = 0.0, open_low: bool = False,
-            high: float | None = None) -> None:
-    value = getattr(obj, name)
-    where = f"{type(obj).__name__}.{name}"
-    if isinstance(value, bool):
-        raise TangraphError(f"{where} must be a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TangraphError(f"{where} must be a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise TangraphError(f"{where} must be finite, got {value!r}")
-    if low is not None and (v < low or (open_low and v == low)):
-        raise TangraphError(f"{where} must be {'>' if open_low else '>='} {low:g}, got {value!r}")
-    if high is not None and v > high:
-        raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
-    object.__setattr__(obj, name, v)
