@@ -35,6 +35,7 @@ from tangraph.graph.factors import robust_noise
 __all__ = [
     "CALIBRATION",
     "calibration_prior_factor",
+    "joint_in_frame",
     "to_world",
     "world_covariance",
     "world_jacobian",
@@ -51,6 +52,17 @@ def _rot(a) -> np.ndarray:
     a = np.asarray(a, float)
     c, s = np.cos(a), np.sin(a)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
+
+
+def joint_in_frame(psi, joint) -> np.ndarray:
+    """Joint covariances ``(..., 5, 5)`` of (pose in GTSAM's tangent coordinates, c) turned into
+    DR-frame world coordinates (the ``y`` of this module), ``psi`` the poses' headings."""
+    psi = np.asarray(psi, float)
+    a = np.zeros((*psi.shape, 5, 5))
+    a[..., :, :] = np.eye(5)
+    c, s = np.cos(psi), np.sin(psi)
+    a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1] = c, -s, s, c
+    return a @ joint @ np.swapaxes(a, -1, -2)
 
 
 def world_position(position, calibration, origin) -> np.ndarray:

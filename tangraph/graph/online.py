@@ -23,7 +23,13 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.graph.calibration import CALIBRATION, to_world, world_covariance, world_jacobian
+from tangraph.graph.calibration import (
+    CALIBRATION,
+    joint_in_frame,
+    to_world,
+    world_covariance,
+    world_jacobian,
+)
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
 from tangraph.graph.fixes import (
@@ -56,14 +62,6 @@ def survey_model(survey: Survey, model: NavigationModel | None) -> NavigationMod
     if not isinstance(model, NavigationModel):
         raise TangraphError(f"model must be a NavigationModel, got {type(model).__name__}")
     return model
-
-
-def _joint_to_world_frame(psi: float, joint: np.ndarray) -> np.ndarray:
-    """A 5 x 5 covariance of (pose tangent, c) turned into DR-frame world coordinates."""
-    c, s = np.cos(psi), np.sin(psi)
-    a = np.eye(5)
-    a[:2, :2] = [[c, -s], [s, c]]
-    return a @ joint @ a.T
 
 
 class GraphNavigator:
@@ -314,7 +312,7 @@ class GraphNavigator:
         else:
             joint = np.zeros((5, 5))
             joint[:3, :3] = self.isam.marginalCovariance(k)
-        self._key_pose, self._key_joint = pose, _joint_to_world_frame(pose[2], joint)
+        self._key_pose, self._key_joint = pose, joint_in_frame(pose[2], joint)
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 

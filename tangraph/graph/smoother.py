@@ -23,7 +23,7 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.graph.calibration import CALIBRATION, to_world, world_covariance
+from tangraph.graph.calibration import CALIBRATION, joint_in_frame, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
 from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
@@ -131,7 +131,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     calib_cov = np.zeros((2, 2))
     if config.smoother_covariance == "all":
         cov, calib_cov = _marginals(factors, result, keys, ordering, graph.calibrated)
-        cov = _joint_to_world_frame(pose[:, 2], cov)
+        cov = joint_in_frame(pose[:, 2], cov)
     done = _time.perf_counter()
     timings = {"solve": solved - started, "marginals": done - solved}
     return SmootherSolution(keys, pose, cov, calib, calib_cov, iterations,
@@ -210,16 +210,6 @@ def _pinned_solution(linear, ordering, keys, step) -> np.ndarray:
                                     gtsam.noiseModel.Unit.Create(2)))
     delta = pinned.optimize(ordering)
     return np.array([delta.at(int(k)) for k in keys])
-
-
-def _joint_to_world_frame(psi, joint) -> np.ndarray:
-    """Joint covariances ``(..., 5, 5)`` of (pose tangent, c) in DR-frame world coordinates."""
-    psi = np.asarray(psi, float)
-    a = np.zeros((*psi.shape, 5, 5))
-    a[..., :, :] = np.eye(5)
-    c, s = np.cos(psi), np.sin(psi)
-    a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1] = c, -s, s, c
-    return a @ joint @ np.swapaxes(a, -1, -2)
 
 
 def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSolution, origin
