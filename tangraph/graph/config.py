@@ -47,6 +47,9 @@ class GraphConfig:
         window. A window's TAP covariance is multiplied by how many windows hold its pings on
         average (:func:`~tangraph.graph.keyposes.fix_windows`), so overlapping windows count
         every sounding once.
+    fix_inflation : float
+        A further factor (>= 1) on every fix's TAP covariance, for errors that neighbouring fixes
+        share beyond their common pings (map error, patch shape); 1 by default.
     tap : TapConfig
         Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
         ``"marginal"``.
@@ -122,6 +125,7 @@ class GraphConfig:
     n_pings: int = 20
     fix_spacing: int | None = 10
     ramp_pings: int | None = 5
+    fix_inflation: float = 1.0
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
     tap_step_cells: float = 0.5
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
@@ -146,12 +150,14 @@ class GraphConfig:
     rematch_tolerance: float = 0.5
 
     def __post_init__(self) -> None:
-        for name in ("key_interval", "tap_step_cells", "robust_parameter",
+        for name in ("key_interval", "tap_step_cells", "robust_parameter", "fix_inflation",
                      "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
                      "min_half_width_cells", "max_half_width_cells", "relinearize_threshold",
                      "relinearize_position"):
             _number(self, name)
         _number(self, "rematch_tolerance", allow_zero=True)
+        if self.fix_inflation < 1.0:
+            raise TangraphError(f"GraphConfig.fix_inflation must be >= 1, got {self.fix_inflation!r}")
         if self.max_half_width_cells < self.min_half_width_cells:
             raise TangraphError(
                 f"GraphConfig: max_half_width_cells ({self.max_half_width_cells}) is below "

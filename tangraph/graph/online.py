@@ -279,7 +279,8 @@ class GraphNavigator:
         if laid is not None and self.graph.calibrated and laid.shape[0] == end - first + 1:
             jac = world_jacobian(laid[[mid - first, -1]], self.calibration, self.origin)
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
-        overlap = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
+        shared = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
+        overlap = self.config.fix_inflation * shared
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 
     def _update(self, k: int) -> None:

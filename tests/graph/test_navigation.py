@@ -216,7 +216,8 @@ def test_a_model_is_required_when_the_survey_has_none(small_survey, rough_map):
 @pytest.mark.parametrize("changes", [{"robust_kernel": "tukey"}, {"key_interval": 0.0}, {"n_pings": 0},
                                      {"gate_probability": 1.5}, {"isam_window": 1},
                                      {"min_half_width_cells": 10.0, "max_half_width_cells": 5.0},
-                                     {"relinearize_threshold": float("nan")}, {"optimizer": "adam"}])
+                                     {"relinearize_threshold": float("nan")}, {"optimizer": "adam"},
+                                     {"fix_inflation": 0.5}, {"ramp_pings": 0}])
 def test_config_is_validated(changes):
     with pytest.raises(TangraphError, match="GraphConfig"):
         GraphConfig(**changes)
