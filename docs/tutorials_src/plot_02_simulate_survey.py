@@ -44,7 +44,8 @@ print(f"vehicle depth  {scenario.vehicle_depth} m")
 print(f"trajectory     {scenario.trajectory}")
 dr_model = scenario.dead_reckoning
 print(f"dead reckoning heading bias {np.degrees(dr_model.heading_bias):.1f} deg, "
-      f"speed scale {dr_model.speed_scale:+.0%}, speed noise {dr_model.speed_noise} m/s")
+      f"speed scale {dr_model.speed_scale:+.0%}, speed noise {dr_model.speed_noise} m/s, "
+      f"start error {dr_model.start_position_std} m (std)")
 sonar = scenario.sonar
 print(f"sonar          {sonar.n_beams} beams over {np.degrees(sonar.swath):.0f} deg, "
       f"{sonar.ping_rate} Hz, depth noise {sonar.depth_noise} m, "
@@ -99,10 +100,11 @@ plt.show()
 #
 # The DR position error is the distance between ``dr_pose`` and ``true_pose``. The boat heads
 # due north, so the north error is the along-track error and the east error the cross-track
-# error. Both follow from the error model: the 1 % speed scale makes the along-track error grow
-# as ``0.01 v t``, and the 1 degree heading bias turns the track to starboard, so the
-# cross-track error grows as ``sin(1 deg) (1.01 v) t``. The white speed noise adds a small
-# random walk on top.
+# error. Both follow from the error model: the DR starts where it was initialised, a draw of
+# ``start_position_std`` (10 m) from the true start; from there the 1 % speed scale makes the
+# along-track error grow as ``0.01 v t``, and the 1 degree heading bias turns the track to
+# starboard, so the cross-track error grows as ``sin(1 deg) (1.01 v) t``. The white speed noise
+# adds a small random walk on top.
 
 error = survey.dr_pose[:, :2] - survey.true_pose[:, :2]
 speed = scenario.trajectory["speed"]
@@ -111,9 +113,10 @@ fig, ax = plt.subplots(figsize=(8, 4), layout="constrained")
 ax.plot(t, np.hypot(error[:, 0], error[:, 1]), "k-", lw=2, label="position error")
 ax.plot(t, error[:, 0], "C0-", label="north (along track)")
 ax.plot(t, error[:, 1], "C1-", label="east (cross track)")
-ax.plot(t, dr_model.speed_scale * speed * t, "C0:", label="0.01 v t")
-ax.plot(t, np.sin(dr_model.heading_bias) * (1 + dr_model.speed_scale) * speed * t, "C1:",
-        label="sin(1 deg) 1.01 v t")
+start = error[0]
+ax.plot(t, start[0] + dr_model.speed_scale * speed * t, "C0:", label="start + 0.01 v t")
+ax.plot(t, start[1] + np.sin(dr_model.heading_bias) * (1 + dr_model.speed_scale) * speed * t, "C1:",
+        label="start + sin(1 deg) 1.01 v t")
 ax.set_xlabel("time (s)")
 ax.set_ylabel("DR - truth (m)")
 ax.set_title("dead-reckoning error of the wang2019 survey")
