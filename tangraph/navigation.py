@@ -144,9 +144,10 @@ def track_summary(track: Track, survey: Survey) -> str:
     meta = track.meta
     if "fixes" in meta:
         reasons: dict[str, int] = {}
-        for fix in meta["fixes"]:
-            reason = getattr(fix, "status", "accepted")  # a filter's fix records may differ
-            reasons[str(reason)] = reasons.get(str(reason), 0) + 1
+        for fix in meta["fixes"]:  # the graph's FixRecords; the fix-based filters keep dicts
+            status = fix.status.value if hasattr(fix, "status") else \
+                ("accepted" if fix.get("accepted") else "refused")
+            reasons[status] = reasons.get(status, 0) + 1
         detail = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
         lines.append(
             f"fixes        {meta.get('n_fixes_accepted', 0)} accepted, {meta.get('n_fixes_rejected', 0)} "
