@@ -78,13 +78,10 @@ def navigate(
     progress : bool
         Show a progress bar over the pings.
     """
-    from tangraph.sensors import NavigationModel
+    from tangraph.sensors import survey_navigation_model
 
     method = _method(method)
-    if model is None:
-        model = NavigationModel.from_survey(survey)
-    elif not isinstance(model, NavigationModel):
-        raise TangraphError(f"model must be a NavigationModel, got {type(model).__name__}")
+    model = survey_navigation_model(survey, model)
     if method is Method.ISAM2 or method is Method.SMOOTHER:
         from tangraph import graph
 

@@ -35,6 +35,7 @@ explain it, and goes on. ``meta["n_divergences"]`` and ``meta["divergence_steps"
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import time as _time
 from collections.abc import Callable
@@ -50,7 +51,7 @@ from tangraph.filters.likelihood import FilterDivergence, effective_sample_size,
 from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
 from tangraph.filters.resampling import Resampler, resample
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors import NavigationModel
+from tangraph.sensors import NavigationModel, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -68,7 +69,6 @@ __all__ = [
     "jitter",
     "measure",
     "model_belief",
-    "navigation_model",
     "predict",
     "resample_belief",
     "resample_if_needed",
@@ -118,27 +118,6 @@ class FilterModel:
             TerrainModel(bathymetry, navigation.measurement_std, navigation.tide_std),
             navigation,
         )
-
-
-def navigation_model(survey: Survey, model: NavigationModel | None, *, where: str) -> NavigationModel:
-    """``model``, or if None the model of a simulated survey
-    (:meth:`NavigationModel.from_survey <tangraph.sensors.NavigationModel.from_survey>`).
-
-    Raises
-    ------
-    TangraphError
-        ``model`` is not a NavigationModel, or is None for a survey that records no DR model.
-    """
-    if model is None:
-        try:
-            return NavigationModel.from_survey(survey)
-        except TangraphError as exc:
-            raise TangraphError(f"{where}: {exc}") from None
-    if not isinstance(model, NavigationModel):
-        raise TangraphError(
-            f"{where}: model must be a tangraph.sensors.NavigationModel (or None), got {type(model).__name__}"
-        )
-    return model
 
 
 def _frozen(a, dtype=np.float64) -> np.ndarray:
@@ -277,9 +256,14 @@ class Innovation:
 
     def inconsistent(self, alpha: float) -> bool:
         """Whether either statistic is beyond its chi-square quantile ``1 - alpha``."""
-        return bool(
-            self.nis > stats.chi2.isf(alpha, 1) or self.best_chi2 > stats.chi2.isf(alpha, self.n_soundings)
-        )
+        return bool(self.nis > _chi2_quantile(alpha, 1)
+                    or self.best_chi2 > _chi2_quantile(alpha, self.n_soundings))
+
+
+@functools.lru_cache(maxsize=1024)
+def _chi2_quantile(alpha: float, dof: int) -> float:
+    """``chi2.isf(alpha, dof)``, cached: asked at every ping, for few distinct sounding counts."""
+    return float(stats.chi2.isf(alpha, dof))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -762,7 +746,7 @@ def run_particle_filter(
 
     check_run_inputs(survey, bathymetry, rng, where=method)
     seed = rng_seed(rng)
-    navigation = navigation_model(survey, model, where=method)
+    navigation = survey_navigation_model(survey, model, where=method)
     filter_model = FilterModel.from_model(navigation, bathymetry, config)
     pings = survey_pings(survey)
     k_total = survey.n_pings

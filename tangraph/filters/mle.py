@@ -29,11 +29,11 @@ from typing import Any
 
 import numpy as np
 
-from tangraph.filters.core import check_run_inputs, navigation_model, step_timings
+from tangraph.filters.core import check_run_inputs, step_timings
 from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
 from tangraph.filters.model import MotionModel, rotate, survey_pings
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors import NavigationModel
+from tangraph.sensors import NavigationModel, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -100,7 +100,7 @@ def mle_filter(
 
     check_run_inputs(survey, bathymetry, rng, where="mle", rng_optional=True)
     config = config or MLEConfig()
-    navigation = navigation_model(survey, model, where="mle")
+    navigation = survey_navigation_model(survey, model, where="mle")
     motion = MotionModel.from_model(navigation)
     k_prior, b_prior = navigation.calibration_prior
     k_total = survey.n_pings

@@ -31,6 +31,7 @@ import gtsam
 import numpy as np
 
 from tangraph.graph.factors import robust_noise
+from tangraph.sensors import rotation_matrix
 
 __all__ = [
     "CALIBRATION",
@@ -48,12 +49,6 @@ CALIBRATION = int(gtsam.symbol("c", 0))  #: GTSAM key of the calibration ``(k, b
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 
 
-def _rot(a) -> np.ndarray:
-    a = np.asarray(a, float)
-    c, s = np.cos(a), np.sin(a)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
-
-
 def joint_in_frame(psi, joint) -> np.ndarray:
     """Joint covariances ``(..., 5, 5)`` of (pose in GTSAM's tangent coordinates, c) turned into
     DR-frame world coordinates (the ``y`` of this module), ``psi`` the poses' headings."""
@@ -69,7 +64,7 @@ def world_position(position, calibration, origin) -> np.ndarray:
     """World positions ``(..., 2)`` of DR-frame positions ``(..., 2)`` under ``c = (k, b)``."""
     k, b = float(calibration[0]), float(calibration[1])
     d = np.asarray(position, float) - np.asarray(origin, float)
-    return np.asarray(origin, float) + d @ _rot(-b).T / (1.0 + k)
+    return np.asarray(origin, float) + d @ rotation_matrix(-b).T / (1.0 + k)
 
 
 def to_world(pose, calibration, origin) -> np.ndarray:
@@ -87,7 +82,7 @@ def world_jacobian(pose, calibration, origin) -> np.ndarray:
     pose = np.asarray(pose, float)
     k, b = float(calibration[0]), float(calibration[1])
     d = pose[..., :2] - np.asarray(origin, float)
-    a = _rot(-b) / (1.0 + k)
+    a = rotation_matrix(-b) / (1.0 + k)
     jac = np.zeros((*pose.shape[:-1], 3, 5))
     jac[..., :2, :2] = a
     jac[..., :2, 3] = -(d @ a.T) / (1.0 + k)
@@ -110,12 +105,12 @@ def _position_error(origin, measured, factor, values, jacobians):
     pose = values.atPose2(keys[0])
     k, b = values.atVector(keys[1])
     t = np.array([pose.x(), pose.y()])
-    a = _rot(-b) / (1.0 + k)
+    a = rotation_matrix(-b) / (1.0 + k)
     d = t - origin
     error = origin + a @ d - measured
     if jacobians is not None:
         h_pose = np.zeros((2, 3))
-        h_pose[:, :2] = a @ _rot(pose.theta())  # GTSAM moves a Pose2's position by R(theta) dt
+        h_pose[:, :2] = a @ rotation_matrix(pose.theta())  # GTSAM moves a Pose2's position by R(theta) dt
         jacobians[0] = h_pose
         jacobians[1] = np.column_stack([-(a @ d) / (1.0 + k), -(a @ _J @ d)])
     return error

@@ -103,19 +103,12 @@ def propagate(pose, cov, increment, increment_cov) -> np.ndarray:
     """World covariance of ``pose (+) increment``: the pose's world covariance ``cov`` carried by
     the first-order Jacobian, plus the increment covariance (frame of ``pose``) turned into the world.
     """
-    pose, increment = np.asarray(pose, float), np.asarray(increment, float)
-    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
-    j = np.zeros((*pose.shape[:-1], 3, 3))
-    j[..., 0, 0] = j[..., 1, 1] = j[..., 2, 2] = 1.0
-    j[..., 0, 2] = -s * increment[..., 0] - c * increment[..., 1]
-    j[..., 1, 2] = c * increment[..., 0] - s * increment[..., 1]
-    a = _blk_rotation(pose[..., 2])
-    return j @ cov @ np.swapaxes(j, -1, -2) + a @ increment_cov @ np.swapaxes(a, -1, -2)
+    return propagate_joint(pose, cov, increment, increment_cov)
 
 
 def propagate_joint(pose, joint, increment, increment_cov) -> np.ndarray:
-    """:func:`propagate` for a joint covariance ``(..., n, n)`` whose first three coordinates are
-    the pose's world coordinates and whose others (the calibration) do not move."""
+    """:func:`propagate` for a joint covariance ``(..., n, n)`` (``n >= 3``) whose first three
+    coordinates are the pose's world coordinates and whose others (the calibration) do not move."""
     pose, increment = np.asarray(pose, float), np.asarray(increment, float)
     joint = np.asarray(joint, float)
     n = joint.shape[-1]

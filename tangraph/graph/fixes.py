@@ -17,7 +17,7 @@ from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, gate_threshold, nis
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix, tap_fix_patch, window_patch
-from tangraph.sensors import DeadReckoningModel, increment_covariance
+from tangraph.sensors import DeadReckoningModel, increment_covariance, rotation_matrix
 from tangraph.survey import Survey
 
 __all__ = [
@@ -136,8 +136,7 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
     if mid < end:
         w = slice(first, end + 1)
         cov = increment_covariance(white, survey.time[w], survey.dr_pose[w], mid - first, end - first)[:2, :2]
-        c, s = np.cos(survey.dr_pose[mid, 2]), np.sin(survey.dr_pose[mid, 2])
-        rot = np.array([[c, -s], [s, c]])
+        rot = rotation_matrix(survey.dr_pose[mid, 2])
         jac = np.asarray(shape_jacobian, float)
         grown = grown + rot @ cov @ rot.T + jac @ np.asarray(calibration_cov, float) @ jac.T
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))

@@ -46,22 +46,13 @@ from tangraph.graph.fixes import (
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix
-from tangraph.sensors import NavigationModel, odometry
+from tangraph.sensors import NavigationModel, odometry, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["GraphNavigator", "navigate_online", "survey_model"]
+__all__ = ["GraphNavigator", "navigate_online"]
 
 log = logging.getLogger(__name__)
-
-
-def survey_model(survey: Survey, model: NavigationModel | None) -> NavigationModel:
-    """``model``, or the one of a simulated survey (:meth:`NavigationModel.from_survey`)."""
-    if model is None:
-        return NavigationModel.from_survey(survey)
-    if not isinstance(model, NavigationModel):
-        raise TangraphError(f"model must be a NavigationModel, got {type(model).__name__}")
-    return model
 
 
 class GraphNavigator:
@@ -96,7 +87,7 @@ class GraphNavigator:
         self.config = config or GraphConfig()
         if not isinstance(self.config, GraphConfig):
             raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
-        self.model = survey_model(survey, model)
+        self.model = survey_navigation_model(survey, model, where="graph")
         self.white = self.model.dead_reckoning
         c = self.config
         n = survey.n_pings

@@ -31,7 +31,7 @@ from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError
-from tangraph.sensors import DeadReckoningModel, NavigationModel, odometry
+from tangraph.sensors import DeadReckoningModel, NavigationModel, odometry, rotation_matrix
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -286,10 +286,9 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previou
 def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
     """DR-frame poses of world poses (the inverse of :func:`~tangraph.graph.calibration.to_world`)."""
     k, b = float(calibration[0]), float(calibration[1])
-    c, s = np.cos(b), np.sin(b)
     d = np.asarray(world_pose, float)[..., :2] - origin
     out = np.array(world_pose, float)
-    out[..., :2] = origin + (1.0 + k) * (d @ np.array([[c, -s], [s, c]]).T)
+    out[..., :2] = origin + (1.0 + k) * (d @ rotation_matrix(b).T)
     out[..., 2] = out[..., 2] + b
     return out
 

@@ -5,9 +5,14 @@ from tangraph.sensors.dead_reckoning import (
     DeadReckoningModel,
     increment_covariance,
     odometry,
+    rotation_matrix,
     simulate_dead_reckoning,
 )
-from tangraph.sensors.navigation_model import NavigationModel, load_navigation_model
+from tangraph.sensors.navigation_model import (
+    NavigationModel,
+    load_navigation_model,
+    survey_navigation_model,
+)
 from tangraph.sensors.sonar import (
     MultibeamConfig,
     Pings,
@@ -27,6 +32,8 @@ __all__ = [
     "increment_covariance",
     "load_navigation_model",
     "odometry",
+    "rotation_matrix",
     "simulate_dead_reckoning",
     "simulate_pings",
+    "survey_navigation_model",
 ]

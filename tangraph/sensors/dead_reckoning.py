@@ -24,6 +24,7 @@ __all__ = [
     "DeadReckoningModel",
     "increment_covariance",
     "odometry",
+    "rotation_matrix",
     "simulate_dead_reckoning",
 ]
 
@@ -351,7 +352,7 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
             + model.dropout_speed_noise**2 * _ins_walk(t, lock, ii, jj, k, inside)
         )[:, None, None]
         cov += _heading_terms(model, t, pose, ii, jj, k, inside & (p > 0), dtw)
-        to_i = _rotation(-pose[ii, 2])  # world -> frame of pose i
+        to_i = rotation_matrix(-pose[ii, 2])  # world -> frame of pose i
         cov[:, :2, :2] = to_i @ cov[:, :2, :2] @ np.swapaxes(to_i, 1, 2)
         cov[:, :2, 2] = np.einsum("nab,nb->na", to_i, cov[:, :2, 2])
         cov[:, 2, :2] = cov[:, :2, 2]
@@ -363,10 +364,18 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
     return cov.reshape(*shape, 3, 3)
 
 
-def _rotation(psi: np.ndarray) -> np.ndarray:
-    """Matrices ``R(psi) (n, 2, 2)``."""
+def rotation_matrix(psi) -> np.ndarray:
+    """Matrices ``R(psi) (..., 2, 2)`` (a heading's, clockwise from north, on ``(north, east)``)
+    for a heading or an array of them.
+
+    Examples
+    --------
+    >>> rotation_matrix(np.pi / 2).round(6).tolist()
+    [[0.0, -1.0], [1.0, 0.0]]
+    """
+    psi = np.asarray(psi, float)
     c, s = np.cos(psi), np.sin(psi)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=1)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
 
 
 def _heading_terms(model, t, pose, ii, jj, k, later, dtw) -> np.ndarray:

@@ -30,7 +30,7 @@ from tangraph.errors import TangraphError
 from tangraph.sensors.dead_reckoning import DeadReckoningModel
 from tangraph.sensors.dead_reckoning import _check_number as _number
 
-__all__ = ["NavigationModel", "load_navigation_model"]
+__all__ = ["NavigationModel", "load_navigation_model", "survey_navigation_model"]
 
 _ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk")
 
@@ -213,6 +213,29 @@ class NavigationModel:
             return cls(**values)
         except TangraphError as exc:
             raise TangraphError(f"{where}: {exc}") from None
+
+
+def survey_navigation_model(survey, model: NavigationModel | None, *, where: str = "") -> NavigationModel:
+    """``model``, or if None the model of a simulated survey (:meth:`NavigationModel.from_survey`):
+    the one place every estimator resolves its model.
+
+    Raises
+    ------
+    TangraphError
+        ``model`` is not a NavigationModel, or is None for a survey that records no DR model;
+        the message starts with ``where`` when given.
+    """
+    prefix = f"{where}: " if where else ""
+    if model is None:
+        try:
+            return NavigationModel.from_survey(survey)
+        except TangraphError as exc:
+            raise TangraphError(f"{prefix}{exc}") from None
+    if not isinstance(model, NavigationModel):
+        raise TangraphError(
+            f"{prefix}model must be a tangraph.sensors.NavigationModel (or None), got {type(model).__name__}"
+        )
+    return model
 
 
 def load_navigation_model(path: str | os.PathLike) -> NavigationModel:
