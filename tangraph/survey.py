@@ -78,7 +78,11 @@ class Survey:
         Measured depth of the seafloor at the footprint, metres positive down; NaN where the
         beam has no return.
     true_pose : ndarray (K, 3), optional
-        The truth, for simulated runs (or a GPS-surveyed ship track).
+        The reference track: the truth of a simulated run, or the GPS track of a recorded one
+        (``meta["reference"]`` says which). Estimators never see it; it scores them.
+    attitude : ndarray (K, 2), optional
+        Pitch and roll of the sonar, radians (pitch positive bow up, roll positive starboard
+        down), where the recording has them; the footprints already account for them.
     meta : dict
         JSON-serialisable metadata: map name, sensor settings, seed, counts of what was
         dropped or missing, start time (ISO 8601) and the like.
@@ -91,6 +95,7 @@ class Survey:
     beam_starboard: np.ndarray
     beam_depth: np.ndarray
     true_pose: np.ndarray | None = None
+    attitude: np.ndarray | None = None
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -115,10 +120,12 @@ class Survey:
                 f"survey: time is not increasing at ping {i + 1} "
                 f"(time[{i}] = {time[i]!r}, time[{i + 1}] = {time[i + 1]!r})"
             )
-        names = ["dr_pose", "vehicle_depth"] + (["true_pose"] if self.true_pose is not None else [])
+        names = ["dr_pose", "vehicle_depth"] + [
+            n for n in ("true_pose", "attitude") if getattr(self, n) is not None
+        ]
         for name in names:
-            a = arr(name, 2 if name.endswith("pose") else 1)
-            expected = (k, 3) if name.endswith("pose") else (k,)
+            a = arr(name, 1 if name == "vehicle_depth" else 2)
+            expected = {"vehicle_depth": (k,), "attitude": (k, 2)}.get(name, (k, 3))
             if a.shape != expected:
                 raise SurveyError(f"survey: {name} has shape {a.shape}, expected {expected} (K = {k} pings)")
             if not np.all(np.isfinite(a)):
@@ -188,6 +195,7 @@ class Survey:
             beam_starboard=self.beam_starboard[w],
             beam_depth=self.beam_depth[w],
             true_pose=None if self.true_pose is None else self.true_pose[w],
+            attitude=None if self.attitude is None else self.attitude[w],
             meta={**self.meta, "pings": [start, stop]},
         )
 
@@ -250,6 +258,10 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
                     + (" (clockwise from north)" if comp == "heading" else " (local frame)"),
                 },
             )
+    if survey.attitude is not None:
+        for k, (comp, sense) in enumerate((("pitch", "bow up"), ("roll", "starboard down"))):
+            data[comp] = (("ping",), survey.attitude[:, k],
+                          {"units": "rad", "long_name": f"{comp} of the sonar, positive {sense}"})
     for name, long_name in (
         ("beam_forward", "footprint, body x (forward)"),
         ("beam_starboard", "footprint, body y (starboard)"),
@@ -328,6 +340,8 @@ def read_survey(path: str | os.PathLike) -> Survey:
                 beam_starboard=ds["beam_starboard"].values,
                 beam_depth=ds["beam_depth"].values,
                 true_pose=pose["true"],
+                attitude=(np.column_stack([ds["pitch"].values, ds["roll"].values])
+                          if "pitch" in ds and "roll" in ds else None),
                 meta=meta,
             )
         except SurveyError as exc:
