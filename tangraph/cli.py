@@ -212,7 +212,8 @@ def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
         write_track_tum(track, args.output, overwrite=args.force)
     else:
         write_track_csv(
-            track, args.output, crs=bathymetry.crs, origin=bathymetry.origin, overwrite=args.force
+            track, args.output, crs=bathymetry.crs, origin=bathymetry.origin,
+            reference=survey.true_pose, overwrite=args.force,
         )
     written = [args.output]
     if args.tum is not None:

@@ -162,9 +162,11 @@ def track_summary(track: Track, survey: Survey) -> str:
         m = track_metrics(track, survey.true_pose)
         d = track_metrics(dead_reckoning_track(survey), survey.true_pose)
         lines.append(
-            f"error        RMSE {m['rmse']:.2f} m, final {m['final_error']:.2f} m, "
-            f"max {m['max_error']:.2f} m "
-            f"(dead reckoning: RMSE {d['rmse']:.2f} m, final {d['final_error']:.2f} m)"
+            f"error        RMSE {m['rmse']:.2f} m, median {m['median_error']:.2f} m, "
+            f"final {m['final_error']:.2f} m, max {m['max_error']:.2f} m against the "
+            f"{survey.meta.get('reference', 'truth')} "
+            f"(dead reckoning: RMSE {d['rmse']:.2f} m, median {d['median_error']:.2f} m, "
+            f"final {d['final_error']:.2f} m)"
         )
         if np.isfinite(m["anees"]):
             lines.append(f"consistency  ANEES {m['anees']:.2f} (2 for an honest covariance)")

@@ -88,7 +88,7 @@ def position_errors(track: Track, true_pose: np.ndarray) -> np.ndarray:
     return np.hypot(*(track.pose[:, :2] - true_pose[:, :2]).T)
 
 
-def _columns(track: Track, crs: str | None, origin) -> tuple[list[str], np.ndarray]:
+def _columns(track: Track, crs: str | None, origin, reference=None) -> tuple[list[str], np.ndarray]:
     names = ["time", "north", "east", "heading_deg", "var_north", "cov_north_east", "var_east", "var_heading"]
     c = track.covariance
     columns = [
@@ -108,6 +108,14 @@ def _columns(track: Track, crs: str | None, origin) -> tuple[list[str], np.ndarr
         lon, lat = t.transform(track.pose[:, 1] + origin[1], track.pose[:, 0] + origin[0])
         names[1:1] = ["lat", "lon"]
         columns[1:1] = [lat, lon]
+    if reference is not None:
+        reference = np.asarray(reference, float)
+        if reference.shape[0] != track.n_poses or reference.ndim != 2 or reference.shape[1] < 2:
+            raise TangraphError(
+                f"reference track has shape {reference.shape}, the track {track.n_poses} poses"
+            )
+        names += ["ref_north", "ref_east"]
+        columns += [reference[:, 0], reference[:, 1]]
     return names, np.column_stack(columns)
 
 
@@ -117,13 +125,16 @@ def write_track_csv(
     *,
     crs: str | None = None,
     origin=(0.0, 0.0),
+    reference: np.ndarray | None = None,
     overwrite: bool = False,
 ) -> Path:
     """CSV with time, latitude/longitude (when ``crs`` is given: the map's), north, east, heading
-    (degrees clockwise from north) and the covariance terms."""
+    (degrees clockwise from north), the covariance terms and, given the survey's ``reference``
+    track (K, 2 or 3: GPS or the truth, in the frame of ``north``, ``east``), ``ref_north`` and
+    ``ref_east``."""
     from tangraph.maps.io import write_atomically
 
-    names, data = _columns(track, crs, origin)
+    names, data = _columns(track, crs, origin, reference)
     header = ",".join(names)
     p = Path(path)
     write_atomically(

@@ -88,6 +88,13 @@ def test_smooth_command_writes_csv_tum_and_figure(wang_survey, survey_file, tmp_
     assert "fixes" in printed and "accepted" in printed
     rows = np.loadtxt(out, delimiter=",", skiprows=1)
     assert rows.shape[0] == k and np.all(np.isfinite(rows[:, :6]))
+    # the survey's reference track beside the estimate, in the same frame, and the scores
+    header = out.read_text().splitlines()[0].split(",")
+    assert header[-2:] == ["ref_north", "ref_east"]
+    np.testing.assert_allclose(rows[:, -2:], wang_survey[0].true_pose[:, :2], rtol=1e-9, atol=1e-6)
+    north, east = header.index("north"), header.index("east")
+    error = np.hypot(rows[:, north] - rows[:, -2], rows[:, east] - rows[:, -1])
+    assert f"median {np.median(error):.2f} m" in printed and "against the truth" in printed
     assert np.loadtxt(tum).shape == (k, 8)
     assert fig.read_bytes()[:4] == b"\x89PNG"
 

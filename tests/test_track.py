@@ -50,3 +50,15 @@ def test_tum_quaternion_is_the_heading(tmp_path):
     assert data.shape == (5, 8)
     qz, qw = data[:, 6], data[:, 7]
     np.testing.assert_allclose(2 * np.arctan2(qz, qw), np.pi / 2)
+
+
+def test_csv_with_a_reference_track_and_its_shape_checked(tmp_path):
+    track = Track(time=[0.0, 1.0], pose=[[1.0, 2.0, 0.0], [3.0, 4.0, 0.1]])
+    ref = np.array([[1.5, 2.5], [3.5, 4.5]])
+    path = write_track_csv(track, tmp_path / "t.csv", reference=ref)
+    header = path.read_text().splitlines()[0].split(",")
+    rows = np.loadtxt(path, delimiter=",", skiprows=1)
+    np.testing.assert_array_equal(rows[:, header.index("ref_north")], [1.5, 3.5])
+    np.testing.assert_array_equal(rows[:, header.index("ref_east")], [2.5, 4.5])
+    with pytest.raises(TangraphError, match="reference track has shape"):
+        write_track_csv(track, tmp_path / "u.csv", reference=ref[:1])

@@ -57,7 +57,7 @@ def anees_band(n: int, dof: int = 2, probability: float = 0.95) -> tuple[float, 
 
 
 def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict[str, float]:
-    """RMSE, mean, final and maximum horizontal error (m), ANEES and final NEES of a track.
+    """RMSE, mean, median, final and maximum horizontal error (m), ANEES and final NEES of a track.
 
     Over independent runs, the final NEES values are independent chi-square(2) samples, so their
     mean can be checked against :func:`anees_band` exactly; the ANEES of one track averages
@@ -73,6 +73,7 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict
     return {
         "rmse": float(np.sqrt(np.mean(errors**2))),
         "mean_error": float(np.mean(errors)),
+        "median_error": float(np.median(errors)),
         "final_error": float(errors[-1]),
         "max_error": float(np.max(errors)),
         "anees": float(np.mean(nees[known])) if known.any() else float("nan"),

@@ -310,7 +310,8 @@ def import_sontek_sum(
     meta = {
         "format": "sontek-sum",
         "source": [r.path for r in records],
-        "reference": "GPS (SonTek RiverSurveyor internal receiver), DGPS quality of a few metres",
+        "reference": "GPS",
+        "reference_note": "the RiverSurveyor's internal receiver: DGPS, a few metres",
         "crs": target.to_string(),
         "origin": list(origin),
         "start_time": np.datetime_as_string(t_utc[0], unit="s") + "Z",
