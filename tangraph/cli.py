@@ -100,19 +100,44 @@ def cmd_maps_mesh(args: argparse.Namespace) -> None:
 
 def cmd_maps_grid(args: argparse.Namespace) -> None:
     from tangraph.maps import read_soundings
+    from tangraph.maps.gridding import block_reduce, fill_gaps, grid_surveys
     from tangraph.maps.io import write_sounding_grid
-    from tangraph.maps.mesh import grid_soundings
+    from tangraph.survey import read_survey
 
-    soundings = read_soundings(args.soundings, sign=args.sign, crs=args.crs)
-    grid = grid_soundings(
-        soundings.points, cell=args.cell, name=args.output.stem, crs=soundings.crs, origin=soundings.origin
-    )
+    inputs = list(args.inputs)
+    if args.output.resolve() in {path.resolve() for path in inputs}:
+        raise TangraphError(f"maps grid: the output {args.output} is one of the inputs")
+    surveys = [path for path in inputs if path.suffix.lower() == ".nc"]
+    if (surveys and len(surveys) != len(inputs)) or (not surveys and len(inputs) > 1):
+        raise TangraphError("maps grid: give survey files (.nc) or one x y z text file, not both")
+    if surveys:
+        for option, given in (("--sign", args.sign), ("--crs", args.crs)):
+            if given is not None:
+                raise TangraphError(
+                    f"maps grid: {option} applies to x y z text; survey files hold depths (positive "
+                    "down) in their own CRS"
+                )
+        grid = grid_surveys(
+            [read_survey(path) for path in surveys], cell=args.cell, statistic=args.statistic,
+            fill=args.fill, use_dr=args.use_dr, names=[str(path) for path in surveys],
+            name=args.output.stem,
+        )
+    else:
+        if args.sign is None:
+            raise TangraphError("maps grid: x y z text input needs --sign (depth or elevation)")
+        if args.use_dr:
+            raise TangraphError("maps grid: --use-dr applies to survey files (.nc), not x y z text")
+        soundings = read_soundings(inputs[0], sign=args.sign, crs=args.crs)
+        grid = block_reduce(soundings.points, cell=args.cell, statistic=args.statistic,
+                            name=args.output.stem, crs=soundings.crs, origin=soundings.origin)
+        grid = fill_gaps(grid, args.fill) if args.fill else grid
     write_sounding_grid(grid, args.output, overwrite=args.force)
-    filled = int(np.count_nonzero(grid.count))
+    gridded = int(grid.count.sum())
+    measured = int(np.count_nonzero(grid.count))
     print(
-        f"gridded {len(soundings.points) - grid.n_dropped} soundings into {filled} of "
-        f"{grid.count.size} cells ({args.cell:g} m); dropped {grid.n_dropped} without depth; "
-        f"wrote {args.output}"
+        f"gridded {gridded} soundings into {measured} of {grid.count.size} cells "
+        f"({args.cell:g} m, {grid.statistic}); {grid.n_filled} more filled by --fill {args.fill}; "
+        f"dropped {grid.n_dropped} without depth; wrote {args.output}"
     )
 
 
@@ -324,17 +349,36 @@ def build_parser() -> argparse.ArgumentParser:
     _map_argument(p)
     _output(p, "mesh file (.ply or .obj)")
     p.set_defaults(func=cmd_maps_mesh)
-    p = maps_sub.add_parser("grid", help="grid scattered soundings (x y z text) into a map")
-    p.add_argument("soundings", type=Path, help="x/east y/north z text file")
+    p = maps_sub.add_parser(
+        "grid",
+        help="grid surveys (.nc, at their reference tracks) or scattered soundings (x y z text) into a map",
+        description="Grid the soundings of one or more survey files (.nc), each placed at its "
+        "reference track (GPS or truth) and put in the frame (CRS, origin) of the first, or of one "
+        "x y z text file, into a map: median or mean, count and std per cell.",
+    )
+    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
+                   help="survey files (.nc), or one x/east y/north z text file")
     p.add_argument("--cell", type=float, required=True, help="cell size (m)")
+    p.add_argument(
+        "--statistic", choices=["mean", "median"], default="median",
+        help="the statistic that becomes the map's depth (default: median, robust to outliers)",
+    )
+    p.add_argument(
+        "--fill", type=int, default=0, metavar="CELLS",
+        help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
+        "farther cells stay no-data (default: 0, no fill)",
+    )
+    p.add_argument(
+        "--use-dr", action="store_true",
+        help="place survey soundings at the dead reckoning (for surveys without a reference track)",
+    )
     p.add_argument(
         "--sign",
         choices=["depth", "elevation"],
-        required=True,
-        help="what z is: depth (positive down) or elevation (positive up)",
+        help="x y z text only (required there): what z is, depth (positive down) or elevation",
     )
-    p.add_argument("--crs", help="CRS of x, y (e.g. EPSG:4326 for lon/lat); default local metres")
-    _output(p, "NetCDF file with depth, count and std per cell")
+    p.add_argument("--crs", help="x y z text only: CRS of x, y (e.g. EPSG:4326); default local metres")
+    _output(p, "NetCDF file: depth (the statistic), mean, median, count and std per cell")
     p.set_defaults(func=cmd_maps_grid)
 
     p = sub.add_parser("simulate", help="simulate a survey from a scenario")

@@ -215,31 +215,53 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         )
 
 
-def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] | None = None) -> None:
+def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] | None = None,
+                 attrs: dict | None = None) -> None:
     """CF-1.8 NetCDF with dims (north, east), depth positive down, CRS and origin as attrs.
 
-    ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``.
+    ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``; ``attrs`` adds
+    global attributes, and its ``"depth"`` entry (a dict) attributes of the depth variable.
     """
     import tangraph
 
+    attrs = dict(attrs or {})
     ds = bathymetry.to_xarray().to_dataset()
-    for key, (values, attrs) in (extra or {}).items():
-        ds[key] = (("north", "east"), np.asarray(values), attrs)
+    ds["depth"].attrs.update(attrs.pop("depth", {}))
+    for key, (values, var_attrs) in (extra or {}).items():
+        ds[key] = (("north", "east"), np.asarray(values), var_attrs)
     ds.attrs.update({"Conventions": "CF-1.8", "title": bathymetry.name,
-                     "source": f"tangraph {tangraph.__version__}"})
+                     "source": f"tangraph {tangraph.__version__}", **attrs})
     ds.to_netcdf(path, encoding={"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan}})
 
 
 def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a `tangraph.maps.mesh.SoundingGrid` as NetCDF: mean depth, count and std per cell."""
+    """Write a `tangraph.maps.mesh.SoundingGrid` as NetCDF.
+
+    ``depth`` is the grid's map (:attr:`~tangraph.maps.SoundingGrid.depth`: its ``statistic``
+    per cell, said in the CF ``cell_methods`` attribute, e.g. ``"area: median"``, plus any gap
+    fill); ``mean``, ``median`` (if computed), ``count`` and ``std`` are the soundings' per-cell
+    statistics, ``filled`` (if a gap fill ran) is 1 where ``depth`` came from the gap fill. The
+    grid's ``meta`` is the global attribute ``tangraph_meta`` (JSON).
+    """
     p = Path(path)
     if _format_of(p, None) != "netcdf":
         raise TangraphError(f"{p}: gridded soundings are written as NetCDF (.nc)")
     extra = {
+        "mean": (grid.mean.depth, {"long_name": "mean depth of the soundings in the cell",
+                                   "units": "m", "positive": "down"}),
         "count": (grid.count.astype(np.int32), {"long_name": "soundings in the cell"}),
         "std": (grid.std, {"long_name": "std of the soundings in the cell", "units": "m"}),
     }
-    write_atomically(p, overwrite, lambda tmp: write_netcdf(grid.mean, tmp, extra))
+    if grid.median is not None:
+        extra["median"] = (grid.median, {"long_name": "median depth of the soundings in the cell",
+                                         "units": "m", "positive": "down"})
+    if grid.gap_fill is not None:
+        extra["filled"] = (np.isfinite(grid.gap_fill).astype(np.int8),
+                           {"long_name": "1 where depth was filled from neighbouring cells"})
+    attrs = {"depth": {"cell_methods": f"area: {grid.statistic}"},
+             "tangraph_depth_statistic": grid.statistic,
+             "tangraph_meta": json.dumps(grid.meta, sort_keys=True)}
+    write_atomically(p, overwrite, lambda tmp: write_netcdf(grid.depth, tmp, extra, attrs))
     return p
 
 

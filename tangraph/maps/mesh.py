@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 from pathlib import Path
+from typing import Any, Literal
 
 import numpy as np
 import open3d as o3d
@@ -403,12 +404,21 @@ class SoundingGrid:
     ``mean`` is the map of mean depths (NaN in empty cells), ``count (ny, nx)`` the soundings
     per cell, ``std (ny, nx)`` their sample standard deviation (ddof 1; NaN below 2
     soundings), ``n_dropped`` the soundings left out (a NaN coordinate or outside the extent).
+    ``median (ny, nx)`` is the (weighted) median depth per cell (NaN in empty cells; None if
+    not computed), ``statistic`` which of ``"mean"`` and ``"median"`` is the map's
+    :attr:`depth`, ``gap_fill (ny, nx)`` the depth a gap fill gave to empty cells (NaN
+    elsewhere; None: no gap fill, see :func:`tangraph.maps.gridding.fill_gaps`), and ``meta``
+    JSON-ready provenance (sources, vertical datum), written with the grid.
     """
 
     mean: BathymetryMap
     count: np.ndarray
     std: np.ndarray
     n_dropped: int = 0
+    median: np.ndarray | None = None
+    statistic: Literal["mean", "median"] = "mean"
+    gap_fill: np.ndarray | None = None
+    meta: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         count = np.array(self.count, dtype=np.int64)
@@ -417,11 +427,38 @@ class SoundingGrid:
             raise TangraphError(
                 f"count {count.shape} and std {std.shape} must match the map's {self.mean.shape}"
             )
-        for a in (count, std):
+        if self.statistic not in ("mean", "median"):
+            raise TangraphError(f"statistic must be 'mean' or 'median', got {self.statistic!r}")
+        if self.statistic == "median" and self.median is None:
+            raise TangraphError("statistic 'median' needs the median layer")
+        layers = {"count": count, "std": std}
+        for name in ("median", "gap_fill"):
+            if getattr(self, name) is not None:
+                layers[name] = np.array(getattr(self, name), dtype=np.float64)
+                if layers[name].shape != self.mean.shape:
+                    raise TangraphError(
+                        f"{name} {layers[name].shape} must match the map's {self.mean.shape}"
+                    )
+        if "gap_fill" in layers and np.any(np.isfinite(layers["gap_fill"]) & (count > 0)):
+            raise TangraphError("gap_fill gives a depth to a cell that holds soundings")
+        for key, a in layers.items():
             a.setflags(write=False)
-        object.__setattr__(self, "count", count)
-        object.__setattr__(self, "std", std)
+            object.__setattr__(self, key, a)
         object.__setattr__(self, "n_dropped", int(self.n_dropped))
+        object.__setattr__(self, "meta", dict(self.meta))
+
+    @property
+    def n_filled(self) -> int:
+        """Empty cells given a depth by the gap fill."""
+        return 0 if self.gap_fill is None else int(np.isfinite(self.gap_fill).sum())
+
+    @property
+    def depth(self) -> BathymetryMap:
+        """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any)."""
+        layer = self.mean.depth if self.statistic == "mean" else self.median
+        if self.gap_fill is not None:
+            layer = np.where(self.count > 0, layer, self.gap_fill)
+        return self.mean.replace(depth=layer)
 
 
 def _as_points(points) -> np.ndarray:
@@ -442,7 +479,9 @@ def grid_soundings(
     origin: tuple[float, float] = (0.0, 0.0),
     extent: tuple[float, float, float, float] | None = None,
 ) -> SoundingGrid:
-    """Bin scattered soundings into square cells: count, mean and spread of depth per cell.
+    """Bin scattered soundings into square cells: count, mean, median and spread of depth per cell.
+
+    :func:`tangraph.maps.gridding.block_reduce` of an array or an Open3D point cloud.
 
     Parameters
     ----------
@@ -467,39 +506,6 @@ def grid_soundings(
     array([[11., 11.],
            [nan, 13.]])
     """
-    where = f"soundings {name!r}"
-    cell = _check_cell(cell, where)
-    pts = _as_points(points)
-    finite = np.all(np.isfinite(pts), axis=1)
-    pts = pts[finite]
-    if pts.shape[0] == 0:
-        raise TangraphError(f"{where}: no finite soundings")
-    if extent is None:
-        n_lo, e_lo = pts[:, 0].min(), pts[:, 1].min()
-        n_hi, e_hi = pts[:, 0].max(), pts[:, 1].max()
-        n_hi = n_lo + cell * np.rint((n_hi - n_lo) / cell)
-        e_hi = e_lo + cell * np.rint((e_hi - e_lo) / cell)
-    else:
-        n_lo, n_hi, e_lo, e_hi = (float(x) for x in extent)
-        if not (np.isfinite([n_lo, n_hi, e_lo, e_hi]).all() and n_lo < n_hi and e_lo < e_hi):
-            raise TangraphError(f"{where}: extent must be finite (lo, hi, lo, hi), got {extent!r}")
-    north = _axis(n_lo, n_hi, cell, "north", where)
-    east = _axis(e_lo, e_hi, cell, "east", where)
-    i = np.rint((pts[:, 0] - n_lo) / cell).astype(np.int64)
-    j = np.rint((pts[:, 1] - e_lo) / cell).astype(np.int64)
-    inside = (i >= 0) & (i < north.size) & (j >= 0) & (j < east.size)
-    n_dropped = int(np.sum(~finite) + np.sum(~inside))
-    if n_dropped:
-        log.info("%s: dropped %d of %d soundings", where, n_dropped, finite.size)
-    flat = i[inside] * east.size + j[inside]
-    z = pts[inside, 2]
-    size = north.size * east.size
-    count = np.bincount(flat, minlength=size)
-    mean = np.full(size, np.nan)
-    np.divide(np.bincount(flat, weights=z, minlength=size), count, out=mean, where=count > 0)
-    spread = np.bincount(flat, weights=(z - mean[flat]) ** 2, minlength=size)
-    var = np.full(size, np.nan)
-    np.divide(spread, count - 1, out=var, where=count > 1)
-    shape = (north.size, east.size)
-    mean_map = BathymetryMap(north, east, mean.reshape(shape), crs=crs, origin=origin, name=name)
-    return SoundingGrid(mean_map, count.reshape(shape), np.sqrt(var).reshape(shape), n_dropped)
+    from tangraph.maps.gridding import block_reduce
+
+    return block_reduce(_as_points(points), cell=cell, name=name, crs=crs, origin=origin, extent=extent)

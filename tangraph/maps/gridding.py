@@ -1,0 +1,368 @@
+"""Maps gridded from soundings: a vectorised block reduce, gap filling, and surveys in one frame.
+
+:func:`block_reduce` bins ``(north, east, depth)`` points into square cells and gives the count,
+(weighted) mean, (weighted) median and spread of depth per cell, by one sort of the points by
+cell (no Python loop over cells). :func:`fill_gaps` gives empty cells near data a depth by
+inverse-distance weighting. :func:`grid_surveys` places the soundings of one or more
+:class:`~tangraph.survey.Survey` at their reference tracks, in the frame of the first, and grids
+them into a map that keeps the first survey's CRS and origin.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from typing import Literal
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.maps.mesh import SoundingGrid, _axis, _check_cell
+from tangraph.survey import Survey
+
+__all__ = ["DEFAULT_VERTICAL_DATUM", "Statistic", "block_reduce", "fill_gaps", "grid_surveys"]
+
+log = logging.getLogger(__name__)
+
+Statistic = Literal["mean", "median"]
+DEFAULT_VERTICAL_DATUM = "water surface"  # what a survey without meta["vertical_datum"] means
+
+
+# -- block reduce -----------------------------------------------------------------------------
+def _extent(pts: np.ndarray, cell: float, extent, where: str) -> tuple[float, float, float, float]:
+    if extent is None:
+        n_lo, e_lo = pts[:, 0].min(), pts[:, 1].min()
+        n_hi, e_hi = pts[:, 0].max(), pts[:, 1].max()
+        n_hi = n_lo + cell * np.rint((n_hi - n_lo) / cell)
+        e_hi = e_lo + cell * np.rint((e_hi - e_lo) / cell)
+        return n_lo, n_hi, e_lo, e_hi
+    n_lo, n_hi, e_lo, e_hi = (float(x) for x in extent)
+    if not (np.isfinite([n_lo, n_hi, e_lo, e_hi]).all() and n_lo < n_hi and e_lo < e_hi):
+        raise TangraphError(f"{where}: extent must be finite (lo, hi, lo, hi), got {extent!r}")
+    return n_lo, n_hi, e_lo, e_hi
+
+
+def _check_weights(weights, n: int, where: str) -> np.ndarray:
+    if weights is None:
+        return np.ones(n)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n,):
+        raise TangraphError(f"{where}: weights must have shape ({n},) like the points, got {w.shape}")
+    if not np.all(np.isfinite(w) & (w > 0)):
+        raise TangraphError(f"{where}: weights must be finite and positive")
+    return w
+
+
+def block_reduce(
+    points,
+    *,
+    cell: float,
+    weights=None,
+    extent: tuple[float, float, float, float] | None = None,
+    statistic: Statistic = "mean",
+    name: str = "soundings",
+    crs: str | None = None,
+    origin: tuple[float, float] = (0.0, 0.0),
+) -> SoundingGrid:
+    """Count, (weighted) mean, (weighted) median and spread of depth per square cell.
+
+    Parameters
+    ----------
+    points : array_like, shape (N, 3)
+        Soundings ``(north, east, depth)``; rows with a NaN are dropped and counted.
+    cell : float
+        Cell size in metres; a sounding goes to the nearest cell centre.
+    weights : array_like, shape (N,), optional
+        Positive weight of each sounding (default: all 1), used by the mean, the median and
+        the std.
+    extent : (north_min, north_max, east_min, east_max), optional
+        Cell centres from the minima in steps of ``cell``; soundings outside are dropped.
+        By default the centres start at the soundings' smallest north and east.
+    statistic : {"mean", "median"}
+        Which statistic is the grid's :attr:`~tangraph.maps.SoundingGrid.depth` map.
+    name, crs, origin
+        As in :class:`BathymetryMap`.
+
+    Returns
+    -------
+    SoundingGrid
+        ``mean`` (a map), ``median``, ``count``, ``std`` per cell (NaN in empty cells).
+
+    Notes
+    -----
+    With weights ``w_i`` (all 1 by default) the mean is ``sum(w z) / sum(w)`` and the std is
+    ``sqrt(sum(w (z - mean)^2) / sum(w) * n / (n - 1))`` (NaN for ``n < 2``), the sample std
+    (ddof 1) for equal weights. The weighted median of a cell is found on its depths sorted
+    ascending with cumulative weights ``W_k``: the first ``z_k`` with ``W_k >= W / 2`` (``W``
+    the cell's total weight), or the mean of ``z_k`` and ``z_(k+1)`` if ``W_k`` is exactly
+    ``W / 2``; with equal weights this is the ordinary median. All cells are reduced at once:
+    the points are sorted by (cell, depth) with :func:`numpy.lexsort` and summed per cell
+    with :func:`numpy.add.reduceat`.
+
+    Examples
+    --------
+    >>> pts = [[0.0, 0, 10], [0.2, 0, 12], [0.1, 0, 30], [0, 1, 11], [1, 1, 13]]
+    >>> g = block_reduce(pts, cell=1.0, statistic="median")
+    >>> g.count
+    array([[3, 1],
+           [0, 1]])
+    >>> g.depth.depth
+    array([[12., 11.],
+           [nan, 13.]])
+    >>> float(block_reduce(pts, cell=1.0, weights=[1, 1, 3, 1, 1]).median[0, 0])
+    30.0
+    """
+    where = f"soundings {name!r}"
+    cell = _check_cell(cell, where)
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise TangraphError(f"points must have shape (N, 3) [north, east, depth], got {pts.shape}")
+    w = _check_weights(weights, pts.shape[0], where)
+    finite = np.all(np.isfinite(pts), axis=1)
+    pts, w = pts[finite], w[finite]
+    if pts.shape[0] == 0:
+        raise TangraphError(f"{where}: no finite soundings")
+    n_lo, n_hi, e_lo, e_hi = _extent(pts, cell, extent, where)
+    north = _axis(n_lo, n_hi, cell, "north", where)
+    east = _axis(e_lo, e_hi, cell, "east", where)
+    i = np.rint((pts[:, 0] - n_lo) / cell).astype(np.int64)
+    j = np.rint((pts[:, 1] - e_lo) / cell).astype(np.int64)
+    inside = (i >= 0) & (i < north.size) & (j >= 0) & (j < east.size)
+    n_dropped = int(np.sum(~finite) + np.sum(~inside))
+    if n_dropped:
+        log.info("%s: dropped %d of %d soundings", where, n_dropped, finite.size)
+    shape = (north.size, east.size)
+    layers = _reduce_cells(i[inside] * east.size + j[inside], pts[inside, 2], w[inside], shape)
+    mean_map = BathymetryMap(north, east, layers["mean"], crs=crs, origin=origin, name=name)
+    return SoundingGrid(mean_map, layers["count"], layers["std"], n_dropped, median=layers["median"],
+                        statistic=statistic)
+
+
+def _reduce_cells(flat: np.ndarray, z: np.ndarray, w: np.ndarray, shape: tuple[int, int]) -> dict:
+    """Per-cell layers of depths ``z`` with weights ``w`` in flat cell indices ``flat``."""
+    size = shape[0] * shape[1]
+    layers = {"count": np.zeros(size, np.int64)}
+    layers.update({k: np.full(size, np.nan) for k in ("mean", "median", "std")})
+    if flat.size:
+        order = np.lexsort((z, flat))  # by cell, then by depth within a cell
+        cells, zs, ws = flat[order], z[order], w[order]
+        starts = np.flatnonzero(np.r_[True, cells[1:] != cells[:-1]])
+        counts = np.diff(np.r_[starts, cells.size])
+        cell_of = cells[starts]
+        total = np.add.reduceat(ws, starts)
+        mean = np.add.reduceat(ws * zs, starts) / total
+        spread = np.add.reduceat(ws * (zs - np.repeat(mean, counts)) ** 2, starts)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            var = np.where(counts > 1, spread / total * counts / (counts - 1), np.nan)
+        cum = np.cumsum(ws)
+        within = cum - np.repeat(cum[starts] - ws[starts], counts)  # cumulative weight in the cell
+        half = np.repeat(0.5 * total, counts)
+        k = starts + np.add.reduceat((within < half).astype(np.int64), starts)
+        k = np.minimum(k, starts + counts - 1)  # guards rounding of real weights
+        tie = within[k] == 0.5 * total
+        median = np.where(tie, 0.5 * (zs[k] + zs[np.minimum(k + 1, zs.size - 1)]), zs[k])
+        layers["count"][cell_of] = counts
+        layers["mean"][cell_of] = mean
+        layers["median"][cell_of] = median
+        layers["std"][cell_of] = np.sqrt(var)
+    return {key: value.reshape(shape) for key, value in layers.items()}
+
+
+# -- gap filling ------------------------------------------------------------------------------
+def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
+    """Give empty cells near data a depth: inverse-distance weighting within ``cells`` cells.
+
+    An empty cell gets ``sum(w_k d_k) / sum(w_k)`` over the cells ``k`` holding soundings
+    whose centres lie within ``cells`` cell sizes of its own (a disc), with ``w_k = 1 / r_k^2``
+    (``r_k`` the distance in cells) and ``d_k`` the grid's chosen statistic. It is computed for
+    all cells at once as a normalised convolution (the data times the kernel over the data
+    mask times the kernel). Only measured cells feed the fill (it is not iterated), and a
+    cell farther than ``cells`` from every measured cell stays no-data (NaN).
+
+    Parameters
+    ----------
+    grid : SoundingGrid
+    cells : int
+        Search radius in cells (``>= 0``; 0 fills nothing).
+
+    Returns
+    -------
+    SoundingGrid
+        ``grid`` with ``gap_fill`` set: its ``depth`` map holds the filled cells, while
+        ``mean``, ``median``, ``count`` and ``std`` stay those of the soundings.
+
+    Examples
+    --------
+    >>> g = block_reduce([[0.0, 0, 10], [0, 2, 14], [1, 0, 10], [1, 2, 14], [0, 6, 20]], cell=1.0)
+    >>> f = fill_gaps(g, 1)
+    >>> f.depth.depth
+    array([[10., 12., 14., 14., nan, 20., 20.],
+           [10., 12., 14., 14., nan, nan, 20.]])
+    >>> f.n_filled
+    6
+    """
+    from scipy import ndimage
+
+    if isinstance(cells, bool) or not isinstance(cells, int | np.integer) or cells < 0:
+        raise TangraphError(f"gap fill: cells must be an integer >= 0, got {cells!r}")
+    cells = int(cells)
+    depth = grid.mean.depth if grid.statistic == "mean" else grid.median
+    measured = grid.count > 0
+    gap_fill = np.full(grid.mean.shape, np.nan)
+    if cells > 0:
+        di, dj = np.mgrid[-cells : cells + 1, -cells : cells + 1]
+        r2 = (di**2 + dj**2).astype(np.float64)
+        kernel = np.where((r2 > 0) & (r2 <= cells**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0)
+        data = np.where(measured, depth, 0.0)
+        num = ndimage.correlate(data, kernel, mode="constant", cval=0.0)
+        den = ndimage.correlate(measured.astype(np.float64), kernel, mode="constant", cval=0.0)
+        near = ~measured & (den > 0)
+        gap_fill[near] = num[near] / den[near]
+    meta = {**grid.meta, "gap_fill": {"cells": cells, "method": "inverse distance squared"}}
+    return SoundingGrid(grid.mean, grid.count, grid.std, grid.n_dropped, median=grid.median,
+                        statistic=grid.statistic, gap_fill=gap_fill, meta=meta)
+
+
+# -- surveys ----------------------------------------------------------------------------------
+def _same_crs(a: str, b: str) -> bool:
+    import pyproj
+
+    return a == b or pyproj.CRS.from_user_input(a) == pyproj.CRS.from_user_input(b)
+
+
+def _to_frame(north, east, crs, origin, frame_crs, frame_origin, names: tuple[str, str]):
+    """Local ``(north, east)`` of one survey's frame in the frame ``(frame_crs, frame_origin)``."""
+    if (crs is None) != (frame_crs is None):
+        raise TangraphError(
+            f"surveys in different frames: {names[0]} has CRS {frame_crs!r}, {names[1]} has "
+            f"{crs!r}; a survey without a CRS can only be gridded with others without one"
+        )
+    import pyproj
+
+    try:
+        if crs is None or _same_crs(crs, frame_crs):
+            return north + (origin[0] - frame_origin[0]), east + (origin[1] - frame_origin[1])
+        transformer = pyproj.Transformer.from_crs(crs, frame_crs, always_xy=True)
+    except pyproj.exceptions.CRSError as exc:
+        raise TangraphError(f"{names[0]} ({frame_crs!r}) or {names[1]} ({crs!r}): bad CRS ({exc})") from None
+    x, y = transformer.transform(east + origin[1], north + origin[0])
+    return np.asarray(y) - frame_origin[0], np.asarray(x) - frame_origin[1]
+
+
+def _frame_of(survey: Survey, name: str) -> tuple[str | None, tuple[float, float]]:
+    crs = survey.meta.get("crs")
+    origin = survey.meta.get("origin", (0.0, 0.0))
+    try:
+        origin = (float(origin[0]), float(origin[1]))
+    except (TypeError, ValueError, IndexError):
+        raise TangraphError(f"{name}: meta origin must be (northing, easting), got {origin!r}") from None
+    return (None if crs is None else str(crs)), origin
+
+
+def _vertical_datum(surveys: Sequence[Survey], names: Sequence[str]) -> str:
+    datums = [str(s.meta.get("vertical_datum", DEFAULT_VERTICAL_DATUM)) for s in surveys]
+    for name, datum in zip(names, datums, strict=True):
+        if datum != datums[0]:
+            raise TangraphError(
+                f"surveys with different vertical datums: {names[0]} {datums[0]!r}, {name} "
+                f"{datum!r}; reduce them to one datum first"
+            )
+    return datums[0]
+
+
+def grid_surveys(
+    surveys: Sequence[Survey],
+    *,
+    cell: float,
+    statistic: Statistic = "median",
+    fill: int = 0,
+    use_dr: bool = False,
+    names: Sequence[str] | None = None,
+    name: str = "surveys",
+) -> SoundingGrid:
+    """Grid the soundings of one or more surveys, placed at their reference tracks, into a map.
+
+    Every sounding (a beam with a return; beams without one are dropped and counted) is placed
+    by :meth:`Survey.footprints` seen from the survey's ``true_pose`` (its GPS track, or the
+    truth of a simulated run). The surveys are put in the frame of the first: its
+    ``meta["crs"]`` and ``meta["origin"]`` (local coordinates + origin = projected
+    coordinates). Another survey in the same CRS is shifted by the difference of the origins,
+    one in another CRS is reprojected with pyproj. The cell centres lie on multiples of
+    ``cell`` in that frame, over the soundings' extent.
+
+    Parameters
+    ----------
+    surveys : sequence of Survey
+    cell : float
+        Cell size, metres.
+    statistic : {"mean", "median"}
+        The depth layer of the map (median: robust to outliers); the other one, the count and
+        the std are kept in the result (and written as extra NetCDF variables).
+    fill : int
+        Fill empty cells from the data within this many cells (:func:`fill_gaps`); 0: none.
+    use_dr : bool
+        Place the soundings of every survey at its dead reckoning instead (for surveys
+        without a reference track).
+    names : sequence of str, optional
+        Names of the surveys (e.g. their files) in errors and in the result's ``meta``.
+    name : str
+        Name of the map.
+
+    Returns
+    -------
+    SoundingGrid
+        The map is ``.depth``, in the first survey's CRS and origin; ``meta`` holds the
+        sources, the vertical datum, the track used and the gap fill.
+
+    Raises
+    ------
+    TangraphError
+        No surveys; a survey without ``true_pose`` (unless ``use_dr``); surveys with different
+        vertical datums (``meta["vertical_datum"]``, ``"water surface"`` if missing); a survey
+        with a CRS mixed with one without.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from tangraph.survey import Survey
+    >>> pose = np.column_stack([np.arange(20.0), np.zeros(20), np.zeros(20)])
+    >>> s = Survey(time=np.arange(20.0), dr_pose=pose, vehicle_depth=np.zeros(20),
+    ...            beam_forward=np.zeros((20, 3)), beam_starboard=np.tile([-2.0, 0, 2], (20, 1)),
+    ...            beam_depth=np.full((20, 3), 30.0), true_pose=pose)
+    >>> g = grid_surveys([s], cell=2.0)
+    >>> g.depth.shape, int(g.count.sum()), g.meta["vertical_datum"]
+    ((11, 3), 60, 'water surface')
+    """
+    surveys = list(surveys)
+    if not surveys:
+        raise TangraphError("grid_surveys: no surveys")
+    names = [f"survey {k + 1}" for k in range(len(surveys))] if names is None else [str(n) for n in names]
+    if len(names) != len(surveys):
+        raise TangraphError(f"grid_surveys: {len(names)} names for {len(surveys)} surveys")
+    datum = _vertical_datum(surveys, names)
+    frame_crs, frame_origin = _frame_of(surveys[0], names[0])
+    blocks = []
+    for survey, survey_name in zip(surveys, names, strict=True):
+        if not use_dr and survey.true_pose is None:
+            raise TangraphError(
+                f"{survey_name}: the survey has no reference track (true_pose: GPS or truth); "
+                "grid it on its dead reckoning with use_dr (CLI: --use-dr)"
+            )
+        north, east = survey.footprints(survey.dr_pose if use_dr else survey.true_pose)
+        crs, origin = _frame_of(survey, survey_name)
+        north, east = _to_frame(north, east, crs, origin, frame_crs, frame_origin, (names[0], survey_name))
+        blocks.append(np.column_stack([north.ravel(), east.ravel(), survey.beam_depth.ravel()]))
+    points = np.concatenate(blocks)
+    cell = _check_cell(cell, f"surveys {name!r}")
+    finite = np.all(np.isfinite(points), axis=1)
+    if not finite.any():
+        raise TangraphError(f"surveys {name!r}: no soundings")
+    lo = np.rint(points[finite, :2].min(axis=0) / cell) * cell
+    hi = np.maximum(np.rint(points[finite, :2].max(axis=0) / cell) * cell, lo + cell)
+    grid = block_reduce(points, cell=cell, extent=(lo[0], hi[0], lo[1], hi[1]), statistic=statistic,
+                        name=name, crs=frame_crs, origin=frame_origin)
+    meta = {"sources": names, "vertical_datum": datum, "track": "dr_pose" if use_dr else "true_pose"}
+    grid = SoundingGrid(grid.mean, grid.count, grid.std, grid.n_dropped, median=grid.median,
+                        statistic=grid.statistic, meta=meta)
+    return fill_gaps(grid, fill) if fill else grid
