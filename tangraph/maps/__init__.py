@@ -10,6 +10,7 @@ from tangraph.maps.catalogue import (
     load_any,
 )
 from tangraph.maps.grid import BathymetryMap
+from tangraph.maps.gridding import block_reduce, fill_gaps, grid_surveys
 from tangraph.maps.io import Soundings, read_map, read_soundings, write_map
 from tangraph.maps.mesh import (
     SoundingGrid,
@@ -51,16 +52,19 @@ __all__ = [
     "SoundingGrid",
     "Soundings",
     "TerrainScene",
+    "block_reduce",
     "cast_rays",
     "catalogue",
     "catalogue_path",
     "crlb",
+    "fill_gaps",
     "fisher_information",
     "flat_with_noise",
     "fractal",
     "from_lonlat",
     "from_mesh",
     "grid_soundings",
+    "grid_surveys",
     "han2020_chart",
     "list_maps",
     "load",

@@ -12,7 +12,6 @@ barycentric interpolation for :func:`triangles_to_map`).
 from __future__ import annotations
 
 import dataclasses
-import logging
 from pathlib import Path
 from typing import Any, Literal
 
@@ -35,7 +34,6 @@ __all__ = [
     "write_mesh",
 ]
 
-log = logging.getLogger(__name__)
 
 _CHUNK = 1 << 21  # rays per cast_rays call (2M rays: 48 MB of float32)
 _MESH_SUFFIXES = (".ply", ".obj")
