@@ -162,13 +162,54 @@ def cmd_survey_info(args: argparse.Namespace) -> None:
 
 
 def cmd_survey_import(args: argparse.Namespace) -> None:
-    from tangraph.survey import import_csv_xyz, write_survey
+    from tangraph.survey import write_survey
 
-    survey = import_csv_xyz(args.navigation, args.soundings, sign=args.sign, crs=args.crs)
+    csv_only = {"--columns": args.columns, "--no-header": args.no_header or None,
+                "--time-format": args.time_format, "--sign": args.sign}
+    sontek_only = {"--water-level": args.water_level,
+                   "--water-level-interpolate": args.water_level_interpolate or None,
+                   "--draft": args.draft, "--dr-heading": args.dr_heading, "--declination": args.declination}
+    wrong = [k for k, v in (sontek_only if args.format == "csv-xyz" else csv_only).items() if v is not None]
+    if wrong:
+        raise TangraphError(
+            f"{', '.join(wrong)} {'does' if len(wrong) == 1 else 'do'} not apply to --format {args.format}"
+        )
+    if args.format == "csv-xyz" and len(args.files) != 2:
+        raise TangraphError(
+            f"--format csv-xyz takes two files (navigation log, soundings), got {len(args.files)}"
+        )
+    for path in [*args.files, *([args.water_level] if args.water_level else [])]:
+        if args.output.resolve() == Path(path).resolve():
+            raise TangraphError(f"refusing to write the survey over the input {path}")
+    if args.output.exists() and not args.force:
+        raise FileExistsError(f"{args.output} exists; pass --force to replace it")
+    columns: dict[str, int | str] | None = None
+    for item in [] if args.columns is None else args.columns.split(","):  # digits are positions
+        key, sep, column = (v.strip() for v in item.partition("="))
+        if not (sep and key and column):
+            raise TangraphError(f"--columns: {item!r} is not KEY=COLUMN (e.g. time=0,lat=2,lon=3)")
+        columns = {**(columns or {}), key: int(column) if column.isdigit() else column}
+    if args.format == "csv-xyz":
+        from tangraph.survey import import_csv_xyz
+
+        options = {k: v for k, v in (("sign", args.sign), ("time_format", args.time_format)) if v is not None}
+        survey = import_csv_xyz(*args.files, crs=args.crs, timezone=args.timezone,
+                                columns=columns, header=not args.no_header, **options)
+    else:
+        from tangraph.formats.sontek import import_sontek_sum
+
+        given = {"draft": args.draft, "dr_heading": args.dr_heading, "declination_deg": args.declination}
+        survey = import_sontek_sum(
+            args.files, crs=args.crs, timezone=args.timezone, water_level=args.water_level,
+            water_level_interpolate=args.water_level_interpolate,
+            **{k: v for k, v in given.items() if v is not None},
+        )
     write_survey(survey, args.output, overwrite=args.force)
     print(survey.summary())
-    dropped = survey.meta["n_dropped_outside_navigation"]
-    print(f"dropped {dropped} soundings outside the log's time span; wrote {args.output}")
+    counts = [f"{k} {v}" for k, v in survey.meta.items() if k.startswith("n_")]
+    if counts:
+        print("counts       " + ", ".join(counts))
+    print(f"wrote {args.output}")
 
 
 def cmd_survey_plot(args: argparse.Namespace) -> None:
@@ -395,11 +436,35 @@ def build_parser() -> argparse.ArgumentParser:
     p = survey_sub.add_parser("info", help="describe a survey file")
     p.add_argument("survey", type=Path, help="survey file (.nc)")
     p.set_defaults(func=cmd_survey_info)
-    p = survey_sub.add_parser("import", help="a survey from a CSV navigation log and XYZ soundings")
-    p.add_argument("navigation", type=Path, help="CSV: time, north, east (or lat, lon), heading (deg), depth")
-    p.add_argument("soundings", type=Path, help="rows: time x/east y/north z")
-    p.add_argument("--sign", choices=["depth", "elevation"], default="depth", help="what z is")
-    p.add_argument("--crs", help="projected CRS of north/east, recorded in the survey")
+    p = survey_sub.add_parser(
+        "import",
+        help="a survey recorded by another system: CSV log + XYZ soundings, or SonTek .sum files",
+    )
+    p.add_argument("--format", choices=["csv-xyz", "sontek-sum"], default="csv-xyz",
+                   help="csv-xyz (default): FILE is a navigation log and a soundings file; "
+                   "sontek-sum: one or more RiverSurveyor .sum files of one run")
+    p.add_argument("files", nargs="+", type=Path, metavar="FILE",
+                   help="csv-xyz: the log (time, north, east or lat, lon, heading deg, depth) and "
+                   "the soundings (time x y z)")
+    p.add_argument("--crs", help="projected CRS of the survey: of north/east, or the one lat/lon "
+                   "go into (e.g. EPSG:32633); csv-xyz lat/lon default: a local transverse Mercator")
+    p.add_argument("--timezone", help="zone of times written without one (e.g. UTC, Europe/Berlin)")
+    p.add_argument("--columns", metavar="KEY=COL,...",
+                   help="csv-xyz: log columns by name or 0-based position, keys time, north, east, "
+                   "lat, lon, heading, depth (e.g. time=0,lat=2,lon=3,heading=4,depth=5)")
+    p.add_argument("--no-header", action="store_true", help="csv-xyz: the log has no header row")
+    p.add_argument("--time-format", choices=["auto", "seconds", "epoch", "iso"],
+                   help="csv-xyz: how times read (default auto: text ISO 8601, numbers from 1e8 epoch)")
+    p.add_argument("--sign", choices=["depth", "elevation"], help="csv-xyz: what z is (default depth)")
+    p.add_argument("--water-level", type=Path, metavar="LEVEL.csv",
+                   help="sontek-sum: water-level table; depths below its zero")
+    p.add_argument("--water-level-interpolate", action="store_true",
+                   help="sontek-sum: interpolate the level between the table's dates")
+    p.add_argument("--draft", type=float, metavar="M", help="sontek-sum: transducer depth (m)")
+    p.add_argument("--dr-heading", choices=["boat", "compass"],
+                   help="sontek-sum: DR along the boat direction (default) or the compass heading")
+    p.add_argument("--declination", type=float, metavar="DEG",
+                   help="sontek-sum: added to the compass heading (deg)")
     _output(p, "survey file (.nc)")
     p.set_defaults(func=cmd_survey_import)
     p = survey_sub.add_parser(

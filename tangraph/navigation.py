@@ -101,30 +101,75 @@ def in_map_frame(survey: Survey, bathymetry: BathymetryMap) -> Survey:
     """The survey with its poses in the map's local frame.
 
     A recorded survey keeps the projected CRS and the local origin it was imported in
-    (``meta["crs"]``, ``meta["origin"]``); when the CRS is the map's, its poses are shifted by the
-    difference of the origins. A survey that records no CRS or origin (or the map's own) is returned
-    as it is.
+    (``meta["crs"]``, ``meta["origin"]``). When the CRS is the map's, its poses are shifted by the
+    difference of the origins. When it is another (projected) CRS, the poses are reprojected
+    (pyproj: survey frame + survey origin -> survey CRS -> map CRS -> minus the map's origin) and
+    their headings turned by the difference of grid convergence between the two CRSs at each
+    pose (the angle, in the map's grid, of a 1 m step to grid north of the survey's CRS);
+    ``meta["reprojected_from"]`` then holds the survey's former CRS and origin. Body-frame beam
+    footprints stay as they are (both projections are conformal). A survey that records no CRS
+    or origin, or a map without a CRS, is returned as it is.
 
     Raises
     ------
     TangraphError
-        The survey's CRS is not the map's (reproject one of them first).
+        A CRS pyproj does not understand or that is not projected, or poses the map's CRS
+        cannot hold.
     """
     crs, origin = survey.meta.get("crs"), survey.meta.get("origin")
     if crs is None or origin is None or bathymetry.crs is None:
         return survey
-    import pyproj
-
-    if not pyproj.CRS.from_user_input(crs).equals(pyproj.CRS.from_user_input(bathymetry.crs)):
-        raise TangraphError(
-            f"the survey is in {crs}, the map {bathymetry.name!r} in {bathymetry.crs}: reproject one of them"
-        )
+    source, target = _projected(crs, "the survey's"), _projected(bathymetry.crs, f"map {bathymetry.name!r}'s")
+    if not source.equals(target):
+        return _reprojected(survey, bathymetry, source, target)
     shift = np.array([*(np.asarray(origin, float) - np.asarray(bathymetry.origin, float)), 0.0])
     if not np.any(shift):
         return survey
     truth = None if survey.true_pose is None else survey.true_pose + shift
     meta = {**survey.meta, "origin": [float(v) for v in bathymetry.origin]}
     return survey.replace(dr_pose=survey.dr_pose + shift, true_pose=truth, meta=meta)
+
+
+def _projected(crs, whose: str):
+    import pyproj
+
+    try:
+        parsed = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError:
+        raise TangraphError(f"{whose} CRS {crs!r} is not understood by pyproj") from None
+    if not parsed.is_projected:
+        raise TangraphError(f"{whose} CRS {crs!r} is not projected (metres): cannot reproject the survey")
+    return parsed
+
+
+def _reprojected(survey: Survey, bathymetry: BathymetryMap, source, target) -> Survey:
+    """The survey's poses from its CRS and origin into the map's."""
+    import pyproj
+
+    transform = pyproj.Transformer.from_crs(source, target, always_xy=True).transform
+    origin = np.asarray(survey.meta["origin"], float)
+    map_origin = np.asarray(bathymetry.origin, float)
+
+    def move(pose: np.ndarray) -> np.ndarray:
+        north, east = pose[:, 0] + origin[0], pose[:, 1] + origin[1]
+        e, n = (np.asarray(v) for v in transform(east, north))
+        e1, n1 = (np.asarray(v) for v in transform(east, north + 1.0))  # 1 m to the survey's grid north
+        if not np.all(np.isfinite([e, n, e1, n1])):
+            raise TangraphError(
+                f"the survey's poses in {survey.meta['crs']} do not project into {bathymetry.crs} "
+                f"(map {bathymetry.name!r})"
+            )
+        turn = np.arctan2(e1 - e, n1 - n)  # grid north of the survey's CRS, in the map's grid
+        return np.column_stack([n - map_origin[0], e - map_origin[1], pose[:, 2] + turn])
+
+    meta = {
+        **survey.meta,
+        "crs": bathymetry.crs,
+        "origin": [float(v) for v in map_origin],
+        "reprojected_from": {"crs": survey.meta["crs"], "origin": [float(v) for v in origin]},
+    }
+    truth = None if survey.true_pose is None else move(survey.true_pose)
+    return survey.replace(dr_pose=move(survey.dr_pose), true_pose=truth, meta=meta)
 
 
 def dead_reckoning_track(survey: Survey) -> Track:
