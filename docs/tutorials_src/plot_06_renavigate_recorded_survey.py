@@ -87,8 +87,9 @@ print({k: recorded.meta[k] for k in ("crs", "origin", "n_dropped_outside_navigat
 
 # %%
 # The survey's frame and the map's differ only by their origins (both are UTM 55S), so one shift
-# puts the survey on the map: :func:`~tangraph.navigation.in_map_frame` makes it (and refuses a
-# survey in another CRS). Then the import can be checked against what was written: the poses at
+# puts the survey on the map: :func:`~tangraph.navigation.in_map_frame` makes it (a survey in
+# another projected CRS it reprojects, turning headings by the grid convergence). Then the import
+# can be checked against what was written: the poses at
 # the same times must agree to the millimetres of the files.
 
 from tangraph.navigation import in_map_frame
