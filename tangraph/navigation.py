@@ -146,20 +146,19 @@ def _reprojected(survey: Survey, bathymetry: BathymetryMap, source, target) -> S
     """The survey's poses from its CRS and origin into the map's."""
     import pyproj
 
+    from tangraph.maps.projection import north_in_grid
+
     transform = pyproj.Transformer.from_crs(source, target, always_xy=True).transform
     origin = np.asarray(survey.meta["origin"], float)
     map_origin = np.asarray(bathymetry.origin, float)
 
     def move(pose: np.ndarray) -> np.ndarray:
-        north, east = pose[:, 0] + origin[0], pose[:, 1] + origin[1]
-        e, n = (np.asarray(v) for v in transform(east, north))
-        e1, n1 = (np.asarray(v) for v in transform(east, north + 1.0))  # 1 m to the survey's grid north
-        if not np.all(np.isfinite([e, n, e1, n1])):
+        n, e, turn = north_in_grid(transform, pose[:, 1] + origin[1], pose[:, 0] + origin[0], 1.0)
+        if not np.all(np.isfinite([e, n, turn])):
             raise TangraphError(
                 f"the survey's poses in {survey.meta['crs']} do not project into {bathymetry.crs} "
                 f"(map {bathymetry.name!r})"
             )
-        turn = np.arctan2(e1 - e, n1 - n)  # grid north of the survey's CRS, in the map's grid
         return np.column_stack([n - map_origin[0], e - map_origin[1], pose[:, 2] + turn])
 
     meta = {

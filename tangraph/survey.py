@@ -757,7 +757,7 @@ def _project_log(nav: _Table, cols, lat, lon, heading, lat_s, lon_s, crs, target
     projected step to a point 1 m north)."""
     import pyproj
 
-    from tangraph.maps.projection import local_crs
+    from tangraph.maps.projection import local_crs, north_in_grid
 
     for values, key, limit in ((lat, "lat", 90.0), (lon, "lon", 360.0)):
         bad = np.flatnonzero((np.abs(values) > limit) | ((values < -180) if key == "lon" else False))
@@ -769,9 +769,8 @@ def _project_log(nav: _Table, cols, lat, lon, heading, lat_s, lon_s, crs, target
         crs = local_crs(float(np.mean(lat)), float(np.mean(lon)))
         target = crs
     t = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True)
-    e, n = (np.asarray(v) for v in t.transform(lon, lat))
-    e1, n1 = (np.asarray(v) for v in t.transform(lon, lat + 1.0 / 111_320.0))
+    n, e, turn = north_in_grid(t.transform, lon, lat, 1.0 / 111_320.0)
     e_s, n_s = (np.asarray(v) for v in t.transform(lon_s, lat_s))
-    if not (np.all(np.isfinite([e, n, e1, n1])) and np.all(np.isfinite([e_s, n_s]))):
+    if not (np.all(np.isfinite([e, n, turn])) and np.all(np.isfinite([e_s, n_s]))):
         raise SurveyError(f"{nav.path}: positions lie outside where {crs} projects (crs=, CLI: --crs)")
-    return crs, (n, e, heading + np.arctan2(e1 - e, n1 - n), n_s, e_s)
+    return crs, (n, e, heading + turn, n_s, e_s)

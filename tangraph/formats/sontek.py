@@ -30,6 +30,7 @@ from typing import Literal
 
 import numpy as np
 
+from tangraph.maps.projection import north_in_grid
 from tangraph.survey import Survey, SurveyError
 
 __all__ = ["SontekRecord", "import_sontek_sum", "read_sontek_sum"]
@@ -229,7 +230,11 @@ def import_sontek_sum(
         ``Boat Direction``), or the boat speed along the compass heading (``"compass"``: the
         heading's real errors and the boat's sideslip enter the DR).
     declination_deg : float
-        Added to the compass heading (the pose heading, the footprints and a compass DR).
+        Magnetic declination, added to the compass heading to make it true; the heading is then
+        turned to the grid north of ``crs`` (at Lake Caputh, true north lies 1.6 deg clockwise
+        of the grid north of EPSG:25833). The boat direction is taken as it is: on the files
+        tested it is a grid direction (its integral follows the GPS projected into EPSG:25833
+        within 0.13 m per 300 s).
     beam_azimuths_deg : four floats
         Azimuths of slant beams 1-4, clockwise from the bow.
 
@@ -238,7 +243,8 @@ def import_sontek_sum(
     Survey
         One ping per sample: ``true_pose`` is the GPS track (linearly interpolated over the
         samples that repeat the previous position: the GPS had no new fix), ``dr_pose`` the
-        dead reckoning started at the first GPS position, heading the compass (+ declination);
+        dead reckoning started at the first GPS position, heading the compass (+ declination,
+        + convergence);
         five beams (vertical, slant 1-4) with footprints from the depth, the 25 deg slant and the
         pitch and roll. Samples without a boat velocity keep the last velocity (none before the
         first); samples without any depth stay as pings without soundings. ``meta`` counts both,
@@ -286,14 +292,15 @@ def import_sontek_sum(
     time = np.concatenate([[0.0], np.cumsum(steps)])
 
     target = pyproj.CRS.from_user_input(_checked_crs(crs))
-    e, n = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform(rec.lon, rec.lat)
-    e, n = np.asarray(e), np.asarray(n)
     _check_area(target, crs, rec)
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform
+    n, e, convergence = north_in_grid(transform, rec.lon, rec.lat, 1e-5)
     reference, n_repeated = _gps_track(time, n, e, rec)
     origin = (float(np.floor(reference[:, 0].min())), float(np.floor(reference[:, 1].min())))
     reference -= origin
 
-    psi = np.radians(rec.heading + float(declination_deg))
+    # the compass reads from magnetic north: + declination -> true north, + convergence -> grid
+    psi = np.radians(rec.heading + float(declination_deg)) + convergence
     direction = np.radians(rec.boat_direction) if dr_heading == "boat" else psi
     velocity, n_no_velocity, longest = _held_velocity(rec, direction)
     dr = np.zeros((time.size, 2))
@@ -320,6 +327,7 @@ def import_sontek_sum(
         "draft": draft,
         "dr_heading": dr_heading,
         "declination_deg": float(declination_deg),
+        "grid_convergence_deg": float(np.degrees(np.median(convergence))),
         "beams": "vertical beam, slant beams 1-4",
         "slant_angle_deg": SLANT_ANGLE_DEG,
         "beam_azimuths_deg": [float(a) for a in np.degrees(azimuths)],

@@ -13,7 +13,7 @@ import pyproj
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["from_lonlat", "local_crs", "project_geographic_grid", "to_lonlat"]
+__all__ = ["from_lonlat", "local_crs", "north_in_grid", "project_geographic_grid", "to_lonlat"]
 
 _WGS84 = "EPSG:4326"
 _METRES_PER_DEGREE = 111_320.0
@@ -33,6 +33,22 @@ def _transformer(source, target) -> pyproj.Transformer:
         return pyproj.Transformer.from_crs(source, target, always_xy=True)
     except pyproj.exceptions.CRSError as exc:
         raise TangraphError(f"CRS {source!r} is not understood by pyproj: {exc}") from None
+
+
+def north_in_grid(transform, x, y, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the source's north points in the target grid: the projected ``(north, east)`` of
+    source points ``(x, y)`` (easting/longitude, northing/latitude) and the angle (rad,
+    clockwise from the target's grid north) of the projected step ``step`` north of each (in
+    source units: metres, or degrees of latitude). A heading from the source's north plus that
+    angle is a heading from the target's grid north (conformal projections keep angles).
+
+    ``transform`` is a ``pyproj.Transformer.transform`` with ``always_xy=True``; NaN where a
+    point does not project.
+    """
+    x, y = np.asarray(x, float), np.asarray(y, float)
+    e, n = (np.asarray(v) for v in transform(x, y))
+    e1, n1 = (np.asarray(v) for v in transform(x, y + step))
+    return n, e, np.arctan2(e1 - e, n1 - n)
 
 
 def to_lonlat(bathymetry: BathymetryMap, north, east) -> tuple[np.ndarray, np.ndarray]:

@@ -62,7 +62,11 @@ def test_survey_of_the_long_run(caputh):
     # DR: the boat velocity of sample 2 (0.173 m/s towards 201.1 deg) over one second
     step = s.dr_pose[1, :2] - s.dr_pose[0, :2]
     assert step == pytest.approx(0.173 * np.array([np.cos(np.radians(201.1)), np.sin(np.radians(201.1))]))
-    assert s.dr_pose[0, 2] == pytest.approx(np.radians(207.2))
+    # the compass heading turned from true to grid north: PROJ's convergence is grid from true
+    factors = pyproj.Proj("EPSG:25833").get_factors(_dms(12, 59, 42.97), _dms(52, 20, 35.27))
+    convergence = factors.meridian_convergence
+    assert s.dr_pose[0, 2] == pytest.approx(np.radians(207.2 - convergence))
+    assert s.meta["grid_convergence_deg"] == pytest.approx(-convergence, abs=0.01)
     # depths below the water-level table's zero: 0.72 m on 27.03.2025
     np.testing.assert_allclose(s.beam_depth[0], np.array([3.83, 3.92, 3.96, 3.75, 3.70]) - 0.72)
     assert s.meta["water_level"] == {"2025-03-27": 0.72}
@@ -105,8 +109,11 @@ def test_missing_velocity_is_held_and_counted(caputh):
 
 def test_compass_dead_reckoning_and_declination(caputh):
     s = import_sontek_sum(caputh / LONG_RUN, dr_heading="compass", declination_deg=4.5, **OPTIONS)
+    import pyproj
+
     rec = read_sontek_sum(caputh / LONG_RUN)
-    psi = np.radians(rec.heading[1] + 4.5)
+    convergence = pyproj.Proj("EPSG:25833").get_factors(rec.lon[1], rec.lat[1]).meridian_convergence
+    psi = np.radians(rec.heading[1] + 4.5 - convergence)
     step = s.dr_pose[1, :2] - s.dr_pose[0, :2]
     assert step == pytest.approx(rec.boat_speed[1] * np.array([np.cos(psi), np.sin(psi)]))
     assert s.dr_pose[1, 2] == pytest.approx(psi)
