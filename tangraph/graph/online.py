@@ -41,6 +41,7 @@ from tangraph.graph.fixes import (
     judge_fix,
     make_fix,
     search_half_width,
+    soundings_per_cell,
     window_noise,
 )
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
@@ -272,6 +273,8 @@ class GraphNavigator:
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
         shared = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
         overlap = self.config.fix_inflation * shared
+        if self.config.map_error_cells:
+            overlap *= soundings_per_cell(self.survey, self.bathymetry, first, end)
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 
     def _update(self, k: int) -> None:

@@ -1,0 +1,411 @@
+"""Lake Caputh replay: real RiverSurveyor runs re-navigated against a map of other days.
+
+The prior map is gridded from the January runs at their GPS positions; each March run is
+re-navigated with every estimator (the batch smoother, online iSAM2, PF, IPF, SJCPF) from its own
+dead reckoning and its five soundings per second, and scored against its GPS track. The dead
+reckoning comes in four cases: the file's boat velocity (``boat``), the boat speed along the
+compass heading (``compass``), and each with a constant +3 deg heading and +3 % speed error added
+(``boat+spoiled``, ``compass+spoiled``). Data: ``../shared/data/caputh`` beside the checkout (or
+``--data``); settings: ``config.toml`` beside this file (or ``--config``).
+
+    tangraph experiment caputh_replay [--data DIR] [--out DIR] [--methods ...] [--cases ...]
+                                      [--workers N] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import json
+import logging
+import subprocess
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DEFAULT_DATA = HERE.parents[1].parent / "shared" / "data" / "caputh"
+METHODS = ("smoother", "isam2", "pf", "ipf", "sjcpf")
+GRAPH = ("smoother", "isam2")
+CASES = ("boat", "boat+spoiled", "compass", "compass+spoiled")
+MONTH_RUNS = "2025-03"  # the runs re-navigated
+LONG_RUN = 30 * 60.0  # s: the goals are stated for runs of at least this long
+
+
+# -- the data ------------------------------------------------------------------------------------
+def load_config(path: Path) -> dict:
+    with open(path, "rb") as f:
+        return tomllib.load(f)
+
+
+def run_files(data: Path, month: str) -> list[Path]:
+    """The ``.sum`` files of a month (``YYYY-MM``), by name (their start time)."""
+    stem = month.replace("-", "")
+    return sorted(p for p in data.glob(f"{stem}*.sum"))
+
+
+@functools.cache
+def import_run(path: str, water_level: str, dr_heading: str, options: tuple) -> object:
+    from tangraph.formats import import_sontek_sum
+
+    logging.getLogger("tangraph.formats.sontek").setLevel(logging.ERROR)  # stated in the README
+    return import_sontek_sum(path, water_level=water_level, dr_heading=dr_heading, **dict(options))
+
+
+def _import(cfg: dict, data: Path, path: Path, dr_heading: str = "boat"):
+    return import_run(str(path), str(data / "waterlevel.csv"), dr_heading,
+                      tuple(sorted(cfg["import"].items())))
+
+
+def build_map(cfg: dict, data: Path):
+    """The prior map: the runs of ``cfg["map"]["months"]`` gridded at their GPS positions."""
+    from tangraph.maps.gridding import grid_surveys
+
+    m = cfg["map"]
+    surveys = [_import(cfg, data, p) for month in m["months"] for p in run_files(data, month)]
+    return grid_surveys(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
+                        name="caputh-" + "-".join(m["months"]))
+
+
+def spoil(survey, heading_deg: float, speed_scale: float):
+    """The survey with constant DR errors added: the DR track scaled by ``1 + speed_scale`` and
+    turned by ``heading_deg`` about its start, its heading turned too (the model's ``k``, ``b``)."""
+    from tangraph.sensors import rotation_matrix
+
+    b = np.radians(heading_deg)
+    start = survey.dr_pose[0, :2]
+    moved = start + (1.0 + speed_scale) * (survey.dr_pose[:, :2] - start) @ rotation_matrix(b).T
+    meta = {**survey.meta, "spoiled": {"heading_deg": heading_deg, "speed_scale": speed_scale}}
+    return survey.replace(dr_pose=np.column_stack([moved, survey.dr_pose[:, 2] + b]), meta=meta)
+
+
+def dr_case(cfg: dict, data: Path, path: Path, case: str, bathymetry):
+    from tangraph.navigation import in_map_frame
+
+    survey = _import(cfg, data, path, "compass" if case.startswith("compass") else "boat")
+    if case.endswith("+spoiled"):
+        survey = spoil(survey, cfg["spoil"]["heading_deg"], cfg["spoil"]["speed_scale"])
+    return in_map_frame(survey, bathymetry)
+
+
+def gps_calibration(survey) -> tuple[float, float]:
+    """Speed scale ``k`` and heading bias ``b`` (rad) the GPS implies for the survey's DR: the
+    least-squares similarity ``DR - p0 = (1 + k) R(b) (GPS - p0)`` about the start ``p0``."""
+    p0 = survey.true_pose[0, :2]
+    g = (survey.true_pose[:, 0] - p0[0]) + 1j * (survey.true_pose[:, 1] - p0[1])
+    d = (survey.dr_pose[:, 0] - p0[0]) + 1j * (survey.dr_pose[:, 1] - p0[1])
+    z = np.sum(np.conj(g) * d) / np.sum(np.abs(g) ** 2)  # north + i east: R(b) is e^{ib}
+    return float(np.abs(z) - 1.0), float(np.angle(z))
+
+
+def beam_offsets(pairs, *, min_slope: float = 0.03) -> list[dict]:
+    """Each slant beam's body-frame footprint as the data see it, from (survey, map) pairs where
+    the map was made without the survey: the least-squares ``(f, s) / h`` of
+    ``depth(beam) - depth(vertical) = grad(map) . R(psi) (f, s)`` with ``(f, s)`` proportional to
+    the height ``h`` over the seafloor (the 25 deg slant), at the GPS positions where the map's
+    slope exceeds ``min_slope`` (residuals beyond 3 median deviations trimmed, three rounds).
+    For a 25 deg beam ``|(f, s)| / h = tan 25 deg = 0.466``."""
+    rows = []
+    for beam in range(1, 5):
+        a_all, y_all = [], []
+        for survey, bathymetry in pairs:
+            pose = survey.true_pose
+            g = bathymetry.gradient_at(pose[:, 0], pose[:, 1])
+            c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+            h = survey.beam_depth[:, beam] - survey.vehicle_depth  # transducer to seafloor
+            g_fwd, g_stb = (c * g[:, 0] + s * g[:, 1]) * h, (-s * g[:, 0] + c * g[:, 1]) * h
+            y = survey.beam_depth[:, beam] - survey.beam_depth[:, 0]
+            ok = np.isfinite(y) & np.isfinite(g_fwd) & (np.hypot(g[:, 0], g[:, 1]) > min_slope)
+            a_all.append(np.column_stack([g_fwd[ok], g_stb[ok]]))
+            y_all.append(y[ok])
+        a, y = np.concatenate(a_all), np.concatenate(y_all)
+        keep = np.ones(y.size, bool)
+        for _ in range(3):
+            x = np.linalg.lstsq(a[keep], y[keep], rcond=None)[0]
+            r = np.abs(y - a @ x)
+            keep = r <= 3.0 * np.median(r) + 1e-12
+        rows.append({"beam": beam, "azimuth_deg": float(np.degrees(np.arctan2(x[1], x[0])) % 360),
+                     "tan_slant": float(np.hypot(*x)), "n": int(keep.sum())})
+    return rows
+
+
+def beam_check(cfg: dict, data: Path) -> list[dict]:
+    """:func:`beam_offsets` over every run, each against a map of the other days' vertical beams
+    (so that the check does not depend on the slant beams' assumed azimuths)."""
+    from tangraph.maps.gridding import grid_surveys
+
+    m = cfg["map"]
+    runs = {p: _import(cfg, data, p) for p in sorted(data.glob("*.sum"))}
+    days = sorted({p.stem[:8] for p in runs})
+    pairs = []
+    for day in days:
+        others = [s.replace(beam_depth=np.where(np.arange(s.n_beams) == 0, s.beam_depth, np.nan))
+                  for p, s in runs.items() if p.stem[:8] != day]
+        bathymetry = grid_surveys(others, cell=m["cell"], statistic=m["statistic"], fill=m["fill"]).depth
+        pairs += [(in_map(s, bathymetry), bathymetry) for p, s in runs.items() if p.stem[:8] == day]
+    return beam_offsets(pairs)
+
+
+def in_map(survey, bathymetry):
+    from tangraph.navigation import in_map_frame
+
+    return in_map_frame(survey, bathymetry)
+
+
+# -- one run: one March run, one DR case, one method -----------------------------------------------
+@functools.cache
+def _map(path: str):
+    from tangraph.maps import read_map
+
+    return read_map(path)
+
+
+def one_run(config: dict, *, rng: np.random.Generator) -> dict:
+    """Navigate one (run, DR case, method) and score it against the GPS."""
+    from tangraph.eval import track_metrics
+    from tangraph.navigation import dead_reckoning_track, navigate
+
+    cfg, data = config["cfg"], Path(config["data"])
+    bathymetry = _map(config["map"])
+    survey = dr_case(cfg, data, Path(config["file"]), config["case"], bathymetry)
+    model, settings = estimator(cfg, config["case"], config["method"])
+    method = config["method"]
+    t0 = time.perf_counter()
+    track = navigate(survey, bathymetry, method, settings, rng=rng, model=model)
+    seconds = time.perf_counter() - t0
+    return {**scores(track, survey, cfg["reference"]["gps_std"]), "seconds": seconds,
+            "dr_median": track_metrics(dead_reckoning_track(survey), survey.true_pose)["median_error"],
+            "duration_min": float(survey.time[-1] / 60.0)}
+
+
+def estimator(cfg: dict, case: str, method: str):
+    """The navigation model of the case's DR source and the method's settings."""
+    from tangraph.filters import default_config
+    from tangraph.graph import GraphConfig
+    from tangraph.matching import TapConfig
+    from tangraph.sensors import NavigationModel
+
+    source = case.split("+")[0]
+    model = NavigationModel.from_mapping(cfg["navigation"][source], f"config.toml [navigation.{source}]")
+    if method in GRAPH:
+        fields = dict(cfg["graph"])
+        fields["tap"] = TapConfig(**fields.get("tap", {}))
+        return model, GraphConfig(**fields)
+    return model, dataclasses.replace(default_config(method), n_particles=cfg["filters"]["n_particles"])
+
+
+def scores(track, survey, gps_std: float) -> dict:
+    """Errors against the GPS, NEES against the covariance plus the GPS's own error, calibration."""
+    from tangraph.eval import position_nees, track_metrics
+    from tangraph.track import Track
+
+    m = track_metrics(track, survey.true_pose)
+    widened = track.covariance.copy()
+    widened[:, 0, 0] += gps_std**2
+    widened[:, 1, 1] += gps_std**2
+    nees = position_nees(Track(time=track.time, pose=track.pose, covariance=widened), survey.true_pose)
+    k_gps, b_gps = gps_calibration(survey)
+    cal = track.meta.get("calibration", {})
+    fixes = track.meta.get("fixes", [])
+    return {
+        "median": m["median_error"], "rmse": m["rmse"], "final": m["final_error"], "max": m["max_error"],
+        "final_nees": float(nees[-1]), "anees": float(np.nanmean(nees)),
+        "speed_scale": float(cal.get("speed_scale", np.nan)),
+        "speed_scale_std": float(cal.get("speed_scale_std", np.nan)),
+        # the graph's constant bias; the filters carry the heading error (bias plus its walk)
+        "heading_bias_deg": float(np.degrees(cal.get("heading_bias", cal.get("heading_error", np.nan)))),
+        "heading_bias_std_deg": float(np.degrees(cal.get("heading_bias_std",
+                                                         cal.get("heading_error_std", np.nan)))),
+        "gps_speed_scale": k_gps, "gps_heading_bias_deg": float(np.degrees(b_gps)),
+        "fixes_accepted": int(track.meta.get("n_fixes_accepted", 0)), "fixes": len(fixes),
+    }
+
+
+# -- tables and figures ------------------------------------------------------------------------
+def summarise(table) -> list[dict]:
+    """One row per (run, DR case, method): the filters' figures are means over their seeds."""
+    keys = ["median", "rmse", "final", "final_nees", "anees", "speed_scale", "speed_scale_std",
+            "heading_bias_deg", "heading_bias_std_deg", "gps_speed_scale", "gps_heading_bias_deg",
+            "dr_median", "duration_min", "seconds", "fixes_accepted", "fixes"]
+    rows = []
+    for (run, case, method), group in table.groupby(["survey", "case", "method"], sort=False):
+        row = {"run": run, "case": case, "method": method, "seeds": len(group)}
+        row.update({k: float(group[k].mean()) for k in keys})
+        row["median_max"] = float(group["median"].max())
+        rows.append(row)
+    return rows
+
+
+def goals(rows: list[dict]) -> list[str]:
+    """The stated goals, checked on the runs of at least 30 minutes."""
+    lines = []
+    long_runs = {r["run"] for r in rows if r["duration_min"] * 60.0 >= LONG_RUN}
+    for run in sorted(long_runs):
+        for case in CASES:
+            here = {r["method"]: r for r in rows if r["run"] == run and r["case"] == case}
+            if "smoother" not in here:
+                continue
+            sm = here["smoother"]
+            ok = sm["median"] <= 5.0 and sm["median"] <= 0.5 * sm["dr_median"]
+            lines.append(f"- {run} {case}: smoother median {sm['median']:.2f} m "
+                         f"(DR {sm['dr_median']:.2f} m): {'met' if ok else 'missed'} "
+                         "(<= 5 m and <= half the DR's)")
+            others = [(m, here[m]["median_max"]) for m in here if m != "smoother"]
+            for m, value in others:
+                verdict = "met" if value <= 8.0 else "missed"
+                lines.append(f"  - {m}: median {value:.2f} m (worst seed): {verdict} (<= 8 m)")
+    return lines
+
+
+def markdown(rows: list[dict]) -> str:
+    head = ("| run | DR | method | median (m) | RMSE (m) | final (m) | DR median (m) | final NEES | ANEES "
+            "| speed scale (GPS) | heading bias deg (GPS) | fixes used | s |")
+    lines = [head, "|" + "---|" * 13]
+    for r in rows:
+        scale = (f"{r['speed_scale']:+.3f} ± {r['speed_scale_std']:.3f} ({r['gps_speed_scale']:+.3f})"
+                 if np.isfinite(r["speed_scale"]) else f"({r['gps_speed_scale']:+.3f})")
+        bias = (f"{r['heading_bias_deg']:+.2f} ± {r['heading_bias_std_deg']:.2f} "
+                f"({r['gps_heading_bias_deg']:+.2f})"
+                if np.isfinite(r["heading_bias_deg"]) else f"({r['gps_heading_bias_deg']:+.2f})")
+        fixes = f"{r['fixes_accepted']:.0f}/{r['fixes']:.0f}" if r["fixes"] else ""
+        seeds = "" if r["seeds"] == 1 else f" ({r['seeds']})"
+        lines.append(
+            f"| {r['run']} | {r['case']} | {r['method']}{seeds} "
+            f"| {r['median']:.2f} | {r['rmse']:.2f} | {r['final']:.2f} | {r['dr_median']:.2f} "
+            f"| {r['final_nees']:.2f} | {r['anees']:.2f} | {scale} | {bias} | {fixes} | {r['seconds']:.1f} |"
+        )
+    return "\n".join(lines)
+
+
+def figures(cfg: dict, data: Path, bathymetry, out: Path, run: Path, case: str, methods,
+            seed: int) -> list[Path]:
+    """Tracks over the map and error against time of one run and DR case."""
+    from matplotlib.figure import Figure
+
+    from tangraph.navigation import dead_reckoning_track, navigate
+    from tangraph.plot import plot_errors, plot_tracks
+
+    survey = dr_case(cfg, data, run, case, bathymetry)
+    tracks = {"dead reckoning": dead_reckoning_track(survey)}
+    for method in methods:
+        model, settings = estimator(cfg, case, method)
+        tracks[method] = navigate(survey, bathymetry, method, settings, model=model,
+                                  rng=np.random.default_rng(seed))
+    tag = f"{run.stem}_{case.replace('+', '_')}"
+    fig = Figure(figsize=(8, 8), layout="constrained")
+    plot_tracks(tracks, bathymetry, fig.add_subplot(), truth=survey.true_pose,
+                title=f"{run.stem}, DR {case}: GPS (truth) and estimates over the January map")
+    paths = [out / f"tracks_{tag}.png"]
+    fig.savefig(paths[-1], dpi=110)
+    fig = Figure(figsize=(9, 4.5), layout="constrained")
+    ax = fig.add_subplot()
+    bound = "smoother" if "smoother" in tracks else None
+    plot_errors(tracks, survey.true_pose, ax, bound=bound,
+                title=f"{run.stem}, DR {case}: horizontal error against the GPS")
+    paths.append(out / f"errors_{tag}.png")
+    fig.savefig(paths[-1], dpi=110)
+    return paths
+
+
+def map_figure(grid, surveys, path: Path) -> None:
+    from matplotlib.figure import Figure
+
+    from tangraph.plot import plot_map
+
+    fig = Figure(figsize=(7, 8), layout="constrained")
+    ax = fig.add_subplot()
+    plot_map(grid, ax, title="prior map: January runs, median per cell; March GPS tracks")
+    for name, s in surveys.items():
+        shift = np.asarray(s.meta["origin"]) - np.asarray(grid.origin)
+        ax.plot(s.true_pose[:, 1] + shift[1], s.true_pose[:, 0] + shift[0], lw=0.8, label=name)
+    ax.legend(loc="lower left", fontsize=7)
+    fig.savefig(path, dpi=110)
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE, capture_output=True,
+                              text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def main(argv=None) -> int:
+    from tangraph.experiments import run_many
+    from tangraph.maps.io import write_sounding_grid
+
+    parser = argparse.ArgumentParser(prog="tangraph experiment caputh_replay",
+                                     description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the Lake Caputh data folder")
+    parser.add_argument("--config", type=Path, default=HERE / "config.toml")
+    parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for tables and figures")
+    parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
+    parser.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
+    parser.add_argument("--seed", type=int, default=1, help="root seed of the filters' runs")
+    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    parser.add_argument("--scheduler", help="Dask scheduler address, or 'synchronous'")
+    parser.add_argument("--quick", action="store_true", help="the two short March runs, one seed")
+    args = parser.parse_args(argv)
+    if not (args.data / "waterlevel.csv").is_file():
+        parser.error(f"{args.data} holds no Lake Caputh data (waterlevel.csv and *.sum): pass --data DIR")
+    cfg = load_config(args.config)
+    args.out.mkdir(parents=True, exist_ok=True)
+
+    grid = build_map(cfg, args.data)
+    map_path = args.out / "map.nc"
+    write_sounding_grid(grid, map_path, overwrite=True)
+    bathymetry = _map(str(map_path))
+    runs = run_files(args.data, MONTH_RUNS)
+    if args.quick:
+        runs = [r for r in runs if _import(cfg, args.data, r).time[-1] < LONG_RUN]
+    march = {r.stem: _import(cfg, args.data, r) for r in runs}
+    map_figure(bathymetry, march, args.out / "map.png")
+
+    checks = {
+        "dr_drift_300s_m": {p.stem: _import(cfg, args.data, p).meta["dr_drift_300s_m"]
+                            for p in sorted(args.data.glob("*.sum"))},
+        "slant_beams": beam_check(cfg, args.data),
+    }
+    seeds = 1 if args.quick else int(cfg["filters"]["seeds"])
+    configs = [
+        {"cfg": cfg, "data": str(args.data), "map": str(map_path), "file": str(r), "survey": r.stem,
+         "case": case, "method": method, "replica": replica}
+        for r in runs for case in args.cases for method in args.methods
+        for replica in range(1 if method in GRAPH else seeds)
+    ]
+    table = run_many(one_run, configs, 1, args.seed, scheduler=args.scheduler, workers=args.workers)
+    failed = table["error"].notna()
+    if failed.any():
+        print(f"{int(failed.sum())} runs failed; first error: {table.loc[failed, 'error'].iloc[0]}")
+    if failed.all():
+        return 1
+    table.to_csv(args.out / "runs.csv", index=False)
+    rows = summarise(table[~failed])
+    long_run = max(runs, key=lambda r: march[r.stem].time[-1])
+    pictures = []
+    for case in [c for c in ("boat+spoiled", "compass") if c in args.cases]:
+        pictures += figures(cfg, args.data, bathymetry, args.out, long_run, case,
+                            [m for m in ("smoother", "isam2", "ipf") if m in args.methods], args.seed)
+    command = "tangraph experiment caputh_replay" + (" --quick" if args.quick else "") + \
+        ("" if args.methods == list(METHODS) else f" --methods {' '.join(args.methods)}") + \
+        ("" if args.cases == list(CASES) else f" --cases {' '.join(args.cases)}")
+    text = "\n".join([
+        f"Command: `{command}` at commit {_commit()}; settings `{args.config.name}`; "
+        f"filters: {seeds} seeds from root seed {args.seed}.", "", markdown(rows), "",
+        "Goals (runs of at least 30 min):", *goals(rows), "",
+    ])
+    (args.out / "summary.md").write_text(text)
+    (args.out / "checks.json").write_text(json.dumps(checks, indent=2))
+    (args.out / "config.json").write_text(json.dumps({"command": command, "commit": _commit(),
+                                                      "config": cfg}, indent=2))
+    print(text)
+    print(json.dumps(checks, indent=1))
+    print("figures: " + ", ".join(str(p) for p in pictures))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
