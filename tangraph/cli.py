@@ -261,6 +261,12 @@ def _model(args: argparse.Namespace):
     return None if args.dr_model is None else load_navigation_model(args.dr_model)
 
 
+def _graph_config(args: argparse.Namespace):
+    from tangraph.graph import load_graph_config
+
+    return None if args.graph_config is None else load_graph_config(args.graph_config)
+
+
 def _check_outputs(args: argparse.Namespace) -> None:
     """Before any work: no output over the input, none that exists without --force."""
     outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
@@ -314,7 +320,9 @@ def cmd_navigate(args: argparse.Namespace) -> None:
     from tangraph.navigation import Method, navigate, track_summary
 
     method = Method(args.method)
-    config = None
+    config = _graph_config(args)
+    if config is not None and not method.is_graph:
+        raise TangraphError(f"--graph-config does not apply to method {method.value!r}")
     if args.particles is not None:
         if method.is_graph or method is Method.MLE:
             raise TangraphError(f"--particles does not apply to method {method.value!r}")
@@ -341,7 +349,8 @@ def cmd_smooth(args: argparse.Namespace) -> None:
 
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
-    track = navigate(survey, bathymetry, "smoother", model=_model(args), progress=not args.quiet)
+    track = navigate(survey, bathymetry, "smoother", _graph_config(args), model=_model(args),
+                     progress=not args.quiet)
     print(track_summary(track, survey))
     for fix in track.meta.get("fixes", []):
         if not fix.accepted:
@@ -501,6 +510,13 @@ def build_parser() -> argparse.ArgumentParser:
             "errors (speed scale, heading bias), the start uncertainty and the sounding noise "
             "(NavigationModel fields, angles as NAME_deg); needed for a recorded survey, which "
             "does not carry one",
+        )
+        p.add_argument(
+            "--graph-config",
+            type=Path,
+            metavar="FILE.toml",
+            help="settings of the factor graph (GraphConfig fields, TapConfig ones in [tap]): "
+            "window length, fix criterion, gate, robust kernel, map_error_cells...",
         )
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 

@@ -128,3 +128,17 @@ def test_a_recorded_survey_is_smoothed_in_the_map_frame_with_its_dr_model(wang_s
     error = np.hypot(rows["north"] - survey.true_pose[same, 0], rows["east"] - survey.true_pose[same, 1])
     dr_error = np.hypot(*(dr[same, :2] - survey.true_pose[same, :2]).T)
     assert np.sqrt(np.mean(error**2)) < 0.25 * np.sqrt(np.mean(dr_error**2))
+
+
+def test_graph_config_option(survey_file, tmp_path, capsys):
+    graph = tmp_path / "graph.toml"
+    graph.write_text("[graph]\nn_pings = 30\nfix_spacing = 15\n")
+    out = tmp_path / "s.csv"
+    assert main(["smooth", str(survey_file), "-q", "--graph-config", str(graph), "-o", str(out)]) == 0
+    assert main(["navigate", str(survey_file), "--method", "pf", "-q", "--graph-config", str(graph),
+                 "-o", str(tmp_path / "pf.csv")]) == 2
+    assert "--graph-config does not apply to method 'pf'" in capsys.readouterr().err
+    graph.write_text("[graph]\nn_ping = 30\n")
+    args = ["smooth", str(survey_file), "-q", "--graph-config", str(graph), "-o", str(out), "--force"]
+    assert main(args) == 2
+    assert "unknown GraphConfig field 'n_ping'" in capsys.readouterr().err

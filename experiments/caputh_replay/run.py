@@ -185,15 +185,12 @@ def estimator(cfg: dict, case: str, method: str):
     """The navigation model of the case's DR source and the method's settings."""
     from tangraph.filters import default_config
     from tangraph.graph import GraphConfig
-    from tangraph.matching import TapConfig
     from tangraph.sensors import NavigationModel
 
     source = case.split("+")[0]
     model = NavigationModel.from_mapping(cfg["navigation"][source], f"config.toml [navigation.{source}]")
     if method in GRAPH:
-        fields = dict(cfg["graph"])
-        fields["tap"] = TapConfig(**fields.get("tap", {}))
-        return model, GraphConfig(**fields)
+        return model, GraphConfig.from_mapping(cfg["graph"], "config.toml [graph]")
     return model, dataclasses.replace(default_config(method), n_particles=cfg["filters"]["n_particles"])
 
 

@@ -4,7 +4,7 @@ The only package of tangraph that imports gtsam. Online: :class:`GraphNavigator`
 :func:`navigate_online` (iSAM2); recorded surveys: :func:`smooth_survey` (batch smoother).
 """
 
-from tangraph.graph.config import GraphConfig
+from tangraph.graph.config import GraphConfig, load_graph_config
 from tangraph.graph.factors import (
     between_noise,
     check_fix_covariance,
@@ -32,6 +32,7 @@ __all__ = [
     "fix_windows",
     "increments",
     "key_indices",
+    "load_graph_config",
     "navigate_online",
     "propagate",
     "search_half_width",

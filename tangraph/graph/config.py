@@ -10,7 +10,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.matching import TapConfig
 
-__all__ = ["GraphConfig"]
+__all__ = ["GraphConfig", "load_graph_config"]
 
 
 def _number(config, name: str, *, positive: bool = True, allow_zero: bool = False) -> None:
@@ -157,6 +157,30 @@ class GraphConfig:
     rematch_iterations: int = 2
     rematch_tolerance: float = 0.5
 
+    @classmethod
+    def from_mapping(cls, fields, where: str = "GraphConfig") -> GraphConfig:
+        """A config from a mapping of its fields (a TOML table, ``--graph`` options); ``tap``
+        may be a mapping of :class:`~tangraph.matching.TapConfig` fields. Unknown names are
+        refused, naming ``where``.
+
+        >>> GraphConfig.from_mapping({"n_pings": 60, "tap": {"criterion": "msd"}}).tap.criterion.value
+        'msd'
+        >>> GraphConfig.from_mapping({"n_ping": 60}, "--graph")
+        Traceback (most recent call last):
+        ...
+        tangraph.errors.TangraphError: --graph: unknown GraphConfig field 'n_ping'
+        """
+        fields = dict(fields)
+        for name, kind in (("tap", TapConfig), (None, cls)):
+            table = fields.get(name, {}) if name else fields
+            known = {f.name for f in dataclasses.fields(kind)}
+            unknown = sorted(set(table) - known) if isinstance(table, dict) else []
+            if unknown:
+                raise TangraphError(f"{where}: unknown {kind.__name__} field {unknown[0]!r}")
+        if isinstance(fields.get("tap"), dict):
+            fields["tap"] = TapConfig(**fields["tap"])
+        return cls(**fields)
+
     def __post_init__(self) -> None:
         for name in ("key_interval", "tap_step_cells", "robust_parameter", "fix_inflation",
                      "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
@@ -222,3 +246,26 @@ class GraphConfig:
         out["tap"] = {k: (v.value if hasattr(v, "value") else v) for k, v in out["tap"].items()}
         out["tap"]["headings"] = list(out["tap"]["headings"])
         return out
+
+
+def load_graph_config(path) -> GraphConfig:
+    """A :class:`GraphConfig` from a TOML file: its fields at the top level or in a ``[graph]``
+    table, TapConfig fields in ``[graph.tap]`` (or ``[tap]``); fields not given keep their
+    defaults (CLI: ``--graph-config``)."""
+    import tomllib
+    from pathlib import Path
+
+    path = Path(path)
+    if not path.is_file():
+        raise TangraphError(f"graph config file {path} does not exist")
+    try:
+        with open(path, "rb") as f:
+            table = tomllib.load(f)
+    except tomllib.TOMLDecodeError as exc:
+        raise TangraphError(f"{path}: not valid TOML ({exc})") from None
+    if "graph" in table:
+        extra = sorted(set(table) - {"graph"})
+        if extra:
+            raise TangraphError(f"{path}: keys outside [graph]: {', '.join(extra)}")
+        table = table["graph"]
+    return GraphConfig.from_mapping(table, str(path))

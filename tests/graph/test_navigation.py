@@ -246,3 +246,33 @@ def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
     config = GraphConfig(n_pings=1, fix_spacing=50, key_interval=20.0)
     track = navigate_online(small_survey, rough_map, config)
     assert [f.index for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
+
+
+def test_map_error_cells_widens_every_fix_by_its_soundings_per_cell(small_survey, rough_map):
+    from tangraph.graph.fixes import soundings_per_cell
+
+    config = GraphConfig(key_interval=20.0)
+    plain = navigate_online(small_survey, rough_map, config).meta["fixes"][0]
+    shared = navigate_online(small_survey, rough_map, dataclasses.replace(config, map_error_cells=True))
+    first = shared.meta["fixes"][0]
+    assert first.index == plain.index
+    factor = soundings_per_cell(small_survey, rough_map, first.index - config.ramp_pings + 1, first.index)
+    assert factor > 2.0  # 40 beams a ping on 5 m cells
+    # the TAP part is multiplied by the factor, the DR and calibration parts are not
+    ratio = np.trace(first.covariance) / np.trace(plain.covariance)
+    assert 0.5 * factor < ratio <= factor * (1 + 1e-9), (ratio, factor)
+
+
+def test_graph_config_from_a_toml_file(tmp_path):
+    from tangraph.graph import load_graph_config
+
+    path = tmp_path / "graph.toml"
+    path.write_text('[graph]\nn_pings = 60\nmap_error_cells = true\n[graph.tap]\ncriterion = "msd"\n')
+    config = load_graph_config(path)
+    assert (config.n_pings, config.map_error_cells, config.tap.criterion.value) == (60, True, "msd")
+    path.write_text('[graph.tap]\ncriterio = "msd"\n')
+    with pytest.raises(TangraphError, match="unknown TapConfig field 'criterio'"):
+        load_graph_config(path)
+    path.write_text("[graph]\nn_pings = 60\n[other]\nx = 1\n")
+    with pytest.raises(TangraphError, match="keys outside \\[graph\\]: other"):
+        load_graph_config(path)
