@@ -149,6 +149,24 @@ def beam_check(cfg: dict, data: Path) -> list[dict]:
     return beam_offsets(pairs)
 
 
+def terrain(survey, bathymetry, window: int) -> dict:
+    """How much the map can tell along a run: its slope at the GPS track (median, 90th
+    percentile, fraction above 0.05 and off the map) and a window's soundings per distinct map
+    cell (median over windows, from the DR footprints)."""
+    from tangraph.graph.fixes import soundings_per_cell
+
+    pose = survey.true_pose
+    slope = np.hypot(*bathymetry.gradient_at(pose[:, 0], pose[:, 1]).T)
+    on = np.isfinite(slope)
+    shared = [soundings_per_cell(survey, bathymetry, a, a + window - 1)
+              for a in range(0, survey.n_pings - window + 1, window // 2)]
+    return {"slope_median": float(np.median(slope[on])),
+            "slope_p90": float(np.percentile(slope[on], 90)),
+            "fraction_steeper_0.05": float(np.mean(slope[on] > 0.05)),
+            "fraction_off_map": float(np.mean(~on)),
+            "soundings_per_cell": float(np.median(shared)) if shared else float("nan")}
+
+
 def in_map(survey, bathymetry):
     from tangraph.navigation import in_map_frame
 
@@ -365,6 +383,8 @@ def main(argv=None) -> int:
         "dr_drift_300s_m": {p.stem: _import(cfg, args.data, p).meta["dr_drift_300s_m"]
                             for p in sorted(args.data.glob("*.sum"))},
         "slant_beams": beam_check(cfg, args.data),
+        "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["n_pings"])
+                    for name, s in march.items()},
     }
     seeds = 1 if args.quick else int(cfg["filters"]["seeds"])
     configs = [
