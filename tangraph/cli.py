@@ -516,7 +516,7 @@ def build_parser() -> argparse.ArgumentParser:
             type=Path,
             metavar="FILE.toml",
             help="settings of the factor graph (GraphConfig fields, TapConfig ones in [tap]): "
-            "window length, fix criterion, gate, robust kernel, map_error_cells...",
+            "window length, fix criterion, gate, robust kernel...",
         )
         p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 

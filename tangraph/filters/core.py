@@ -614,8 +614,9 @@ def measure(
     rng: np.random.Generator | None = None,
     update: TerrainUpdate | None = None,
 ) -> Measurement:
-    """The terrain update of a ping (weights and tide posterior), tempered when ``config`` asks
-    and the likelihood is too peaked for the cloud (see the module docstring): stage ``j``
+    """The terrain update of a ping (weights and tide posterior), raised to ``ping.weight`` and
+    tempered when ``config`` asks and the likelihood is too peaked for the cloud (see the module
+    docstring): stage ``j``
     multiplies the weights by ``p(z | x)^phi_j``, ``phi_j`` the largest exponent that keeps the
     ESS at or above ``tempering_ess`` times that of the cloud before it; between stages the
     cloud is resampled (``config.resampler``) and moved by :func:`shrink_state`. A ping without
@@ -632,7 +633,7 @@ def measure(
     update = evaluate(belief, ping, model) if update is None else update
     first = innovation(belief, update, ping, model)
     tempering = config is not None and config.tempering and rng is not None
-    current, remaining = belief, 1.0
+    current, remaining = belief, ping.weight
     exponents: list[float] = []
     stage_ess: list[float] = []
     while True:
@@ -748,7 +749,7 @@ def run_particle_filter(
     seed = rng_seed(rng)
     navigation = survey_navigation_model(survey, model, where=method)
     filter_model = FilterModel.from_model(navigation, bathymetry, config)
-    pings = survey_pings(survey)
+    pings = survey_pings(survey, bathymetry if navigation.map_error_shared else None)
     k_total = survey.n_pings
     belief = model_belief(
         survey.dr_pose[0, :2], filter_model, config.n_particles, rng=rng, history_length=history_length

@@ -110,7 +110,7 @@ def ipf_step(
         return StepResult(moved, mean, cov, effective_sample_size(moved.weights))
     update = evaluate(moved, ping, model)
     check = innovation(moved, update, ping, model)
-    weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}").replace(
+    weighted = reweight(moved, ping.weight * update.log_likelihood, where=f"ping {ping.index}").replace(
         tide=update.tide, tide_var=update.tide_var
     )
     if _needs_tempering(moved, weighted, update, config):
@@ -140,7 +140,7 @@ def ipf_step(
     try:
         new = reweight(
             uniform,
-            child_update.log_likelihood - update.log_likelihood[ancestors],
+            ping.weight * (child_update.log_likelihood - update.log_likelihood[ancestors]),
             where=f"ping {ping.index} (IPF children)",
         ).replace(particles=children.particles, calibration=children.calibration, tide=child_update.tide)
     except FilterDivergence:

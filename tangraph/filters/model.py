@@ -52,15 +52,17 @@ from tangraph.sensors import NavigationModel
 from tangraph.sensors.dead_reckoning import _rotate as rotate  # R(psi), written once
 from tangraph.survey import Survey
 
-__all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
+__all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "shared_map_weights", "survey_pings"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class Ping:
     """What a filter step needs of ping ``index``: the dead-reckoned ``increment (2,)`` from the
     previous ping (zero and ``first`` True at ping 0), the world-aligned ``offsets (B, 2)`` of
-    its finite soundings from the dead-reckoned position, their ``depths (B,)`` and the time
-    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0).
+    its finite soundings from the dead-reckoned position, their ``depths (B,)``, the time
+    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0) and the
+    ``weight`` in (0, 1] of its likelihood (the exponent of its terrain update: below 1 where its
+    soundings share map errors with neighbouring pings', ``NavigationModel.map_error_shared``).
 
     Checked on construction: ``index`` an integer >= 0, ``dt`` finite >= 0, ``increment`` finite
     ``(2,)``, ``offsets`` finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is
@@ -79,6 +81,7 @@ class Ping:
     depths: np.ndarray
     first: bool = False
     dt: float = 1.0
+    weight: float = 1.0
 
     def __post_init__(self) -> None:
         try:
@@ -124,25 +127,46 @@ class Ping:
         if not (np.isfinite(dt) and dt >= 0):
             raise TangraphError(f"Ping {index}: dt must be a finite number >= 0, got {self.dt!r}")
         object.__setattr__(self, "dt", dt)
+        weight = float(self.weight)
+        if not 0.0 < weight <= 1.0:
+            raise TangraphError(f"Ping {index}: weight must lie in (0, 1], got {self.weight!r}")
+        object.__setattr__(self, "weight", weight)
 
     @property
     def n_soundings(self) -> int:
         return int(self.depths.size)
 
 
-def survey_pings(survey: Survey) -> list[Ping]:
-    """The pings of a survey as filter inputs (NaN soundings dropped)."""
+def survey_pings(survey: Survey, bathymetry=None) -> list[Ping]:
+    """The pings of a survey as filter inputs (NaN soundings dropped). Given the map, each
+    ping's ``weight`` is one over the soundings per distinct map cell
+    (:func:`~tangraph.matching.soundings_per_cell`) of the pings whose DR positions lie within
+    one cell diagonal of its own: the pings that can share its cells' map errors."""
     north, east = survey.footprints()
     dr = survey.dr_pose
     valid = np.isfinite(survey.beam_depth)
+    weights = np.ones(survey.n_pings) if bathymetry is None else shared_map_weights(survey, bathymetry)
     pings = []
     for k in range(survey.n_pings):
         keep = valid[k]
         offsets = np.column_stack([north[k, keep] - dr[k, 0], east[k, keep] - dr[k, 1]])
         increment = dr[k, :2] - dr[k - 1, :2] if k > 0 else np.zeros(2)
         dt = float(survey.time[k] - survey.time[k - 1]) if k > 0 else 0.0
-        pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt))
+        pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt,
+                          weight=weights[k]))
     return pings
+
+
+def shared_map_weights(survey: Survey, bathymetry) -> np.ndarray:
+    """Per ping, one over the soundings per distinct map cell of the pings around it (those
+    whose DR track distance from it is within one cell diagonal)."""
+    from tangraph.matching import soundings_per_cell
+
+    reach = float(np.hypot(*bathymetry.cell_size))
+    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(survey.dr_pose[:, :2], axis=0).T))])
+    lo = np.searchsorted(along, along - reach, side="left")
+    hi = np.searchsorted(along, along + reach, side="right") - 1
+    return np.array([1.0 / soundings_per_cell(survey, bathymetry, a, b) for a, b in zip(lo, hi, strict=True)])
 
 
 @dataclasses.dataclass(frozen=True)

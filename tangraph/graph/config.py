@@ -50,13 +50,6 @@ class GraphConfig:
     fix_inflation : float
         A further factor (>= 1) on every fix's TAP covariance, for errors that neighbouring fixes
         share beyond their common pings (map error, patch shape); 1 by default.
-    map_error_cells : bool
-        Treat the map's error as shared by the soundings of one map cell: every fix's covariance
-        is further multiplied by its window's soundings per distinct map cell (counted at the DR
-        footprints; :func:`~tangraph.graph.fixes.soundings_per_cell`). TAP counts soundings as
-        independent; where many soundings fall into each cell (dense beams on a coarse map, as a
-        5-beam sonar on a 5 m map) their common map error makes its covariance that much too
-        small. Off by default (the simulated scenarios' map error is per sounding).
     tap : TapConfig
         Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
         ``"marginal"``.
@@ -133,7 +126,6 @@ class GraphConfig:
     fix_spacing: int | None = 10
     ramp_pings: int | None = 5
     fix_inflation: float = 1.0
-    map_error_cells: bool = False
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
     tap_step_cells: float = 0.5
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"

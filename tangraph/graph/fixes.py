@@ -29,7 +29,6 @@ __all__ = [
     "make_fix",
     "search_half_width",
     "search_step",
-    "soundings_per_cell",
     "window_noise",
 ]
 
@@ -141,32 +140,6 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
         jac = np.asarray(shape_jacobian, float)
         grown = grown + rot @ cov @ rot.T + jac @ np.asarray(calibration_cov, float) @ jac.T
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
-
-
-def soundings_per_cell(survey: Survey, bathymetry: BathymetryMap, first: int, end: int) -> float:
-    """Soundings of pings ``first..end`` per distinct map cell they fall into, at their DR
-    footprints (the count the map's cell-wise error is shared over; at least 1).
-
-    >>> import numpy as np
-    >>> from tangraph.maps import BathymetryMap
-    >>> m = BathymetryMap(north=np.arange(0, 50, 5.0), east=np.arange(0, 50, 5.0), depth=np.ones((10, 10)))
-    >>> t = np.arange(4.0)
-    >>> s = Survey(time=t, dr_pose=np.column_stack([t, 0 * t + 10, 0 * t]), vehicle_depth=0 * t,
-    ...            beam_forward=np.zeros((4, 3)), beam_starboard=np.tile([-1.0, 0, 1], (4, 1)),
-    ...            beam_depth=np.ones((4, 3)))
-    >>> soundings_per_cell(s, m, 0, 3)  # 12 soundings in two cells (centred at north 0 and 5)
-    6.0
-    """
-    w = slice(int(first), int(end) + 1)
-    north, east = survey.footprints()
-    north, east, has = north[w], east[w], np.isfinite(survey.beam_depth[w])
-    if not has.any():
-        return 1.0
-    dn, de = bathymetry.cell_size
-    i = np.floor((north[has] - bathymetry.north[0]) / dn + 0.5).astype(np.int64)
-    j = np.floor((east[has] - bathymetry.east[0]) / de + 0.5).astype(np.int64)
-    cells = np.unique(i * (bathymetry.east.size + 1) + j).size
-    return max(float(has.sum()) / cells, 1.0)
 
 
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,

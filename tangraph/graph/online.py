@@ -41,12 +41,11 @@ from tangraph.graph.fixes import (
     judge_fix,
     make_fix,
     search_half_width,
-    soundings_per_cell,
     window_noise,
 )
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix
+from tangraph.matching import MatchingError, TapFix, soundings_per_cell
 from tangraph.sensors import NavigationModel, odometry, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
@@ -273,7 +272,7 @@ class GraphNavigator:
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
         shared = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
         overlap = self.config.fix_inflation * shared
-        if self.config.map_error_cells:
+        if self.model.map_error_shared:
             overlap *= soundings_per_cell(self.survey, self.bathymetry, first, end)
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 

@@ -9,7 +9,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.survey import Survey, footprints
 
-__all__ = ["MatchingError", "Patch", "window_patch"]
+__all__ = ["MatchingError", "Patch", "soundings_per_cell", "window_patch"]
 
 
 class MatchingError(TangraphError):
@@ -90,3 +90,31 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         reference_position=ref,
         n_dropped=int((~keep).sum()),
     )
+
+
+def soundings_per_cell(survey: Survey, bathymetry, first: int, end: int) -> float:
+    """Soundings of pings ``first..end`` per distinct map cell they fall into, at their DR
+    footprints: how many soundings share each cell's map error (at least 1). A model whose map
+    error is shared per cell (``NavigationModel.map_error_shared``) counts a window's soundings
+    that many times fewer.
+
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> m = BathymetryMap(north=np.arange(0, 50, 5.0), east=np.arange(0, 50, 5.0), depth=np.ones((10, 10)))
+    >>> t = np.arange(4.0)
+    >>> s = Survey(time=t, dr_pose=np.column_stack([t, 0 * t + 10, 0 * t]), vehicle_depth=0 * t,
+    ...            beam_forward=np.zeros((4, 3)), beam_starboard=np.tile([-1.0, 0, 1], (4, 1)),
+    ...            beam_depth=np.ones((4, 3)))
+    >>> soundings_per_cell(s, m, 0, 3)  # 12 soundings in two cells (centred at north 0 and 5)
+    6.0
+    """
+    w = slice(int(first), int(end) + 1)
+    north, east = survey.footprints()
+    north, east, has = north[w], east[w], np.isfinite(survey.beam_depth[w])
+    if not has.any():
+        return 1.0
+    dn, de = bathymetry.cell_size
+    i = np.floor((north[has] - bathymetry.north[0]) / dn + 0.5).astype(np.int64)
+    j = np.floor((east[has] - bathymetry.east[0]) / de + 0.5).astype(np.int64)
+    cells = np.unique(i * (bathymetry.east.size + 1) + j).size
+    return max(float(has.sum()) / cells, 1.0)

@@ -64,6 +64,13 @@ class NavigationModel:
         likelihood treats soundings independently.
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
+    map_error_shared : bool
+        The map's error is one per map cell, shared by every sounding in it (a map gridded
+        from surveys, with more soundings per cell than cells), instead of independent per
+        sounding. The estimators then count a window's soundings once per distinct cell
+        (:func:`~tangraph.matching.soundings_per_cell`): the graph multiplies each fix's
+        covariance by its window's soundings per cell; the filters raise each ping's likelihood
+        to the power of one over the soundings per cell of the pings around it.
 
     Examples
     --------
@@ -90,8 +97,13 @@ class NavigationModel:
     map_std: float = 0.0
     tide: float = 0.0
     tide_std: float = 3.0
+    map_error_shared: bool = False
 
     def __post_init__(self) -> None:
+        if not isinstance(self.map_error_shared, bool):
+            raise TangraphError(
+                f"NavigationModel.map_error_shared must be true or false, got {self.map_error_shared!r}"
+            )
         for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
                      "map_std", "tide_std"):
             _number(self, name, low=0.0)

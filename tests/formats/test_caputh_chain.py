@@ -26,11 +26,11 @@ initial_position_std = 3.0
 sounding_std = 0.1
 map_std = 0.2
 tide_std = 0.1
+map_error_shared = true
 """
 GRAPH = """[graph]
 n_pings = 120
 fix_spacing = 60
-map_error_cells = true
 accept_multimodal = false
 gate_probability = 0.99
 robust_kernel = "cauchy"

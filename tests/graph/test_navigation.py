@@ -248,12 +248,13 @@ def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
     assert [f.index for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
 
 
-def test_map_error_cells_widens_every_fix_by_its_soundings_per_cell(small_survey, rough_map):
-    from tangraph.graph.fixes import soundings_per_cell
+def test_shared_map_error_widens_every_fix_by_its_soundings_per_cell(small_survey, rough_map):
+    from tangraph.matching import soundings_per_cell
 
     config = GraphConfig(key_interval=20.0)
-    plain = navigate_online(small_survey, rough_map, config).meta["fixes"][0]
-    shared = navigate_online(small_survey, rough_map, dataclasses.replace(config, map_error_cells=True))
+    model = NavigationModel.from_survey(small_survey)
+    plain = navigate_online(small_survey, rough_map, config, model=model).meta["fixes"][0]
+    shared = navigate_online(small_survey, rough_map, config, model=model.replace(map_error_shared=True))
     first = shared.meta["fixes"][0]
     assert first.index == plain.index
     factor = soundings_per_cell(small_survey, rough_map, first.index - config.ramp_pings + 1, first.index)
@@ -267,9 +268,9 @@ def test_graph_config_from_a_toml_file(tmp_path):
     from tangraph.graph import load_graph_config
 
     path = tmp_path / "graph.toml"
-    path.write_text('[graph]\nn_pings = 60\nmap_error_cells = true\n[graph.tap]\ncriterion = "msd"\n')
+    path.write_text('[graph]\nn_pings = 60\nrobust_kernel = "cauchy"\n[graph.tap]\ncriterion = "msd"\n')
     config = load_graph_config(path)
-    assert (config.n_pings, config.map_error_cells, config.tap.criterion.value) == (60, True, "msd")
+    assert (config.n_pings, config.robust_kernel, config.tap.criterion.value) == (60, "cauchy", "msd")
     path.write_text('[graph.tap]\ncriterio = "msd"\n')
     with pytest.raises(TangraphError, match="unknown TapConfig field 'criterio'"):
         load_graph_config(path)
