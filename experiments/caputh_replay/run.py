@@ -153,7 +153,7 @@ def terrain(survey, bathymetry, window: int) -> dict:
     """How much the map can tell along a run: its slope at the GPS track (median, 90th
     percentile, fraction above 0.05 and off the map) and a window's soundings per distinct map
     cell (median over windows, from the DR footprints)."""
-    from tangraph.graph.fixes import soundings_per_cell
+    from tangraph.matching import soundings_per_cell
 
     pose = survey.true_pose
     slope = np.hypot(*bathymetry.gradient_at(pose[:, 0], pose[:, 1]).T)
