@@ -190,7 +190,7 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
             raise TangraphError(f"--columns: {item!r} is not KEY=COLUMN (e.g. time=0,lat=2,lon=3)")
         columns = {**(columns or {}), key: int(column) if column.isdigit() else column}
     if args.format == "csv-xyz":
-        from tangraph.survey import import_csv_xyz
+        from tangraph.formats import import_csv_xyz
 
         options = {k: v for k, v in (("sign", args.sign), ("time_format", args.time_format)) if v is not None}
         survey = import_csv_xyz(*args.files, crs=args.crs, timezone=args.timezone,

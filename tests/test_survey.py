@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from tangraph.survey import Survey, SurveyError, footprints, import_csv_xyz, read_survey, write_survey
+from tangraph.formats import import_csv_xyz
+from tangraph.survey import Survey, SurveyError, footprints, read_survey, write_survey
 
 
 def make_survey(k=20, b=7, seed=0, truth=True):

@@ -9,9 +9,10 @@ import pytest
 
 from tangraph.cli import main
 from tangraph.errors import TangraphError
+from tangraph.formats import import_csv_xyz
 from tangraph.maps.grid import BathymetryMap
 from tangraph.navigation import in_map_frame
-from tangraph.survey import Survey, SurveyError, import_csv_xyz, read_survey
+from tangraph.survey import Survey, SurveyError, read_survey
 
 LAT0, LON0 = 52.40, 13.40  # near Potsdam: UTM zone 33, 1.3 deg west of its central meridian
 OFFSETS = np.array([-20.0, 0.0, 20.0])  # beams to starboard, metres

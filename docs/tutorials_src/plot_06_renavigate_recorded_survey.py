@@ -7,7 +7,7 @@ soundings, both georeferenced with the vehicle's own, drifting, dead reckoning. 
 the survey means estimating where the vehicle really was, from the soundings and a prior map,
 and writing the corrected track. This tutorial does it end to end: it writes the two files a
 recording system would (from a simulated survey, so that the truth is known), imports them
-with :func:`tangraph.survey.import_csv_xyz`, smooths the track with the factor graph and
+with :func:`tangraph.formats.import_csv_xyz`, smooths the track with the factor graph and
 writes it in latitude and longitude.
 """
 
@@ -36,7 +36,7 @@ from tangraph.maps import load
 from tangraph.navigation import dead_reckoning_track, track_summary
 from tangraph.plot import plot_tracks
 from tangraph.sim import load_scenario, simulate
-from tangraph.survey import import_csv_xyz
+from tangraph.formats import import_csv_xyz
 from tangraph.track import position_errors, write_track_csv
 
 scenario = load_scenario("demo")
@@ -73,7 +73,7 @@ for path in (navigation_file, soundings_file):
 # Import
 # ------
 #
-# :func:`~tangraph.survey.import_csv_xyz` reads the log and the soundings, makes one ping per
+# :func:`~tangraph.formats.import_csv_xyz` reads the log and the soundings, makes one ping per
 # distinct sounding time, interpolates the log at those times (the heading on the circle) and
 # turns every sounding into body coordinates relative to its ping's pose. ``crs`` names the
 # projected CRS of the log; the survey's local frame then starts at the whole metres below the

@@ -1,10 +1,19 @@
 """Readers of files recorded by instruments, each turning a recording into a `Survey`.
 
+- :mod:`tangraph.formats.csv_xyz`: a CSV navigation log and an XYZ soundings file;
 - :mod:`tangraph.formats.sontek`: SonTek RiverSurveyor (M9, S5) summary exports (``.sum``);
 - :mod:`tangraph.formats.waterlevel`: water-level tables that refer depths to a common datum.
 """
 
+from tangraph.formats.csv_xyz import import_csv_xyz
 from tangraph.formats.sontek import SontekRecord, import_sontek_sum, read_sontek_sum
 from tangraph.formats.waterlevel import WaterLevel, read_water_level
 
-__all__ = ["SontekRecord", "WaterLevel", "import_sontek_sum", "read_sontek_sum", "read_water_level"]
+__all__ = [
+    "SontekRecord",
+    "WaterLevel",
+    "import_csv_xyz",
+    "import_sontek_sum",
+    "read_sontek_sum",
+    "read_water_level",
+]

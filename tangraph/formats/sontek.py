@@ -23,13 +23,13 @@ import datetime as dt
 import logging
 import os
 import re
-import zoneinfo
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from tangraph.formats._checks import projected_crs, time_zone
 from tangraph.maps.projection import north_in_grid
 from tangraph.survey import Survey, SurveyError
 
@@ -172,10 +172,7 @@ def _dms(text: str, where: str) -> float:
 
 def _to_utc(local: np.ndarray, timezone: str, path: str) -> np.ndarray:
     """UTC ``datetime64[s]`` of naive local times; ambiguous or skipped clock times refused."""
-    try:
-        zone = zoneinfo.ZoneInfo(timezone)
-    except (zoneinfo.ZoneInfoNotFoundError, ValueError):
-        raise SurveyError(f"time zone {timezone!r} is not known (e.g. Europe/Berlin, UTC)") from None
+    zone = time_zone(timezone)
     # the offset changes at most at a few instants: convert each distinct hour once
     hours, inverse = np.unique(local.astype("datetime64[h]"), return_inverse=True)
     offsets = np.empty(hours.size, dtype="timedelta64[s]")
@@ -291,7 +288,7 @@ def import_sontek_sum(
         raise SurveyError(f"{rec.path}: time does not increase at sample {int(rec.sample[i + 1])}")
     time = np.concatenate([[0.0], np.cumsum(steps)])
 
-    target = pyproj.CRS.from_user_input(_checked_crs(crs))
+    target = projected_crs(crs)
     _check_area(target, crs, rec)
     transform = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform
     n, e, convergence = north_in_grid(transform, rec.lon, rec.lat, 1e-5)
@@ -368,18 +365,6 @@ def _concatenate(records: list[SontekRecord]) -> SontekRecord:
     fields = {f.name: np.concatenate([getattr(r, f.name) for r in records])
               for f in dataclasses.fields(SontekRecord) if f.name != "path"}
     return SontekRecord(path=", ".join(r.path for r in records), **fields)
-
-
-def _checked_crs(crs: str) -> str:
-    import pyproj
-
-    try:
-        parsed = pyproj.CRS.from_user_input(crs)
-    except pyproj.exceptions.CRSError:
-        raise SurveyError(f"CRS {crs!r} is not understood by pyproj (e.g. EPSG:25833)") from None
-    if not parsed.is_projected:
-        raise SurveyError(f"CRS {crs!r} is not projected: give one in metres (e.g. the UTM zone, EPSG:25833)")
-    return crs
 
 
 def _check_area(target, crs: str, rec: SontekRecord) -> None:

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from tangraph.cli import main
-from tangraph.formats import import_sontek_sum, read_sontek_sum
+from tangraph.formats import import_csv_xyz, import_sontek_sum, read_sontek_sum
 from tangraph.maps import read_map
 from tangraph.navigation import in_map_frame
-from tangraph.survey import import_csv_xyz, read_survey
+from tangraph.survey import read_survey
 
 OPTIONS = ["--format", "sontek-sum", "--crs", "EPSG:25833", "--timezone", "Europe/Berlin"]
 MODEL = """[navigation]
