@@ -203,3 +203,22 @@ def test_read_water_level_refuses_bad_rows(tmp_path):
     p.write_text("date;waterlevel\n16.13.2025;0.7\n")
     with pytest.raises(SurveyError, match="line 2, column 1: '16.13.2025' is not a date"):
         read_water_level(p)
+
+
+def test_cli_refuses_a_malformed_file_in_one_line_and_writes_nothing(tmp_path, caputh, capsys):
+    from tangraph.cli import main
+
+    bad = _write(tmp_path, caputh, lambda ls: [*ls[:5], ls[5][:40], *ls[6:]])
+    out = tmp_path / "survey.nc"
+    args = ["survey", "import", "--format", "sontek-sum", str(bad), "--crs", "EPSG:25833",
+            "--timezone", "Europe/Berlin", "-o", str(out)]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "run.sum, line 6: " in err and "Traceback" not in err
+    assert not out.exists() and not list(tmp_path.glob(".survey*"))
+    with pytest.raises(SystemExit) as exc:
+        main(["survey", "import", "--format", "sontek", str(bad), "-o", str(out)])
+    assert exc.value.code == 2 and "invalid choice: 'sontek'" in capsys.readouterr().err
+    assert main([*args[:4], str(caputh / LONG_RUN), "--crs", "EPSG:32610", "--timezone", "UTC",
+                 "-o", str(out)]) == 2
+    assert "outside the area of use of EPSG:32610" in capsys.readouterr().err and not out.exists()

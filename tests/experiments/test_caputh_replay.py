@@ -1,0 +1,35 @@
+"""The Lake Caputh study's own arithmetic: the spoiled DR and the calibration the GPS implies."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.experiments.registry import load_experiment
+from tangraph.survey import Survey
+
+
+def _survey() -> Survey:
+    t = np.arange(200.0)
+    track = np.column_stack([100 * np.sin(t / 30.0), 2.0 * t, np.full_like(t, 0.3)])
+    zeros = np.zeros((t.size, 1))
+    return Survey(time=t, dr_pose=track, vehicle_depth=t * 0, beam_forward=zeros, beam_starboard=zeros,
+                  beam_depth=zeros + 5.0, true_pose=track.copy())
+
+
+def test_the_gps_implies_the_constant_errors_added_to_a_dr():
+    study = load_experiment("caputh_replay")
+    survey = _survey()
+    assert study.gps_calibration(survey) == pytest.approx((0.0, 0.0), abs=1e-12)
+    spoiled = study.spoil(survey, 3.0, 0.03)
+    k, b = study.gps_calibration(spoiled)
+    assert (k, np.degrees(b)) == pytest.approx((0.03, 3.0), abs=1e-9)
+    np.testing.assert_allclose(spoiled.dr_pose[:, 2], survey.dr_pose[:, 2] + np.radians(3.0))
+    assert spoiled.dr_pose[0, :2] == pytest.approx(survey.dr_pose[0, :2])  # turned about the start
+
+
+def test_the_study_refuses_a_folder_without_the_data(tmp_path, capsys):
+    study = load_experiment("caputh_replay")
+    with pytest.raises(SystemExit):
+        study.main(["--data", str(tmp_path), "--out", str(tmp_path / "out")])
+    assert "holds no Lake Caputh data" in capsys.readouterr().err
