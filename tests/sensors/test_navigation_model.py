@@ -57,3 +57,12 @@ def test_toml_file_in_degrees_and_its_errors(tmp_path):
         load_navigation_model(path)
     with pytest.raises(TangraphError, match="does not exist"):
         load_navigation_model(tmp_path / "missing.toml")
+
+
+def test_shared_map_error_is_a_boolean_from_toml(tmp_path):
+    path = tmp_path / "model.toml"
+    path.write_text("[navigation]\nmap_error_shared = true\nsounding_std = 0.1\n")
+    assert load_navigation_model(path).map_error_shared is True
+    path.write_text("[navigation]\nmap_error_shared = 1\n")
+    with pytest.raises(TangraphError, match="map_error_shared must be true or false, got 1"):
+        load_navigation_model(path)
