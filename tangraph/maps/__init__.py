@@ -1,49 +1,68 @@
 """Bathymetry maps: the grid, its readers and writers, the catalogue, synthetic terrain,
 terrain statistics and the Open3D bridge."""
 
-from tangraph.maps.catalogue import (
-    CatalogueEntry,
-    catalogue,
-    catalogue_path,
-    list_maps,
-    load,
-    load_any,
-)
-from tangraph.maps.grid import BathymetryMap
-from tangraph.maps.gridding import block_reduce, fill_gaps, grid_surveys
-from tangraph.maps.io import Soundings, read_map, read_soundings, write_map
-from tangraph.maps.mesh import (
-    SoundingGrid,
-    TerrainScene,
-    cast_rays,
-    from_mesh,
-    grid_soundings,
-    raycasting_scene,
-    read_mesh,
-    to_mesh,
-    triangles_to_map,
-    write_mesh,
-)
-from tangraph.maps.projection import from_lonlat, local_crs, project_geographic_grid, to_lonlat
-from tangraph.maps.statistics import (
-    crlb,
-    fisher_information,
-    region_entropy,
-    roughness,
-    slope,
-    terrain_entropy,
-    terrain_std,
-    window_information,
-)
-from tangraph.maps.synthetic import (
-    HAN2020_AREAS,
-    flat_with_noise,
-    fractal,
-    han2020_chart,
-    polar_chart,
-    ridges,
-    seamounts,
-)
+import importlib
+
+#: every public name and the module that defines it; imported when first used, so that
+#: ``import tangraph.maps`` does not load Open3D, numba or pyproj before they are needed
+_WHERE = {
+    "BathymetryMap": "tangraph.maps.grid",
+    "CatalogueEntry": "tangraph.maps.catalogue",
+    "HAN2020_AREAS": "tangraph.maps.synthetic",
+    "SoundingGrid": "tangraph.maps.mesh",
+    "Soundings": "tangraph.maps.io",
+    "TerrainScene": "tangraph.maps.mesh",
+    "block_reduce": "tangraph.maps.gridding",
+    "cast_rays": "tangraph.maps.mesh",
+    "catalogue": "tangraph.maps.catalogue",
+    "catalogue_path": "tangraph.maps.catalogue",
+    "crlb": "tangraph.maps.statistics",
+    "fill_gaps": "tangraph.maps.gridding",
+    "fisher_information": "tangraph.maps.statistics",
+    "flat_with_noise": "tangraph.maps.synthetic",
+    "fractal": "tangraph.maps.synthetic",
+    "from_lonlat": "tangraph.maps.projection",
+    "from_mesh": "tangraph.maps.mesh",
+    "grid_soundings": "tangraph.maps.mesh",
+    "grid_surveys": "tangraph.maps.gridding",
+    "han2020_chart": "tangraph.maps.synthetic",
+    "list_maps": "tangraph.maps.catalogue",
+    "load": "tangraph.maps.catalogue",
+    "load_any": "tangraph.maps.catalogue",
+    "local_crs": "tangraph.maps.projection",
+    "polar_chart": "tangraph.maps.synthetic",
+    "project_geographic_grid": "tangraph.maps.projection",
+    "raycasting_scene": "tangraph.maps.mesh",
+    "read_map": "tangraph.maps.io",
+    "read_mesh": "tangraph.maps.mesh",
+    "read_soundings": "tangraph.maps.io",
+    "region_entropy": "tangraph.maps.statistics",
+    "ridges": "tangraph.maps.synthetic",
+    "roughness": "tangraph.maps.statistics",
+    "seamounts": "tangraph.maps.synthetic",
+    "slope": "tangraph.maps.statistics",
+    "terrain_entropy": "tangraph.maps.statistics",
+    "terrain_std": "tangraph.maps.statistics",
+    "to_lonlat": "tangraph.maps.projection",
+    "to_mesh": "tangraph.maps.mesh",
+    "triangles_to_map": "tangraph.maps.mesh",
+    "window_information": "tangraph.maps.statistics",
+    "write_map": "tangraph.maps.io",
+    "write_mesh": "tangraph.maps.mesh",
+}
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        value = getattr(importlib.import_module(_WHERE[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = [
     "HAN2020_AREAS",
