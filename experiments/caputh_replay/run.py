@@ -14,7 +14,6 @@ compass heading (``compass``), and each with a constant +3 deg heading and +3 % 
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import functools
 import json
@@ -350,24 +349,20 @@ def _commit() -> str:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
+    from tangraph.experiments.study import output_folder, study_parser
     from tangraph.maps.io import write_sounding_grid
 
-    parser = argparse.ArgumentParser(prog="tangraph experiment caputh_replay",
-                                     description=__doc__.splitlines()[0])
+    parser = study_parser(HERE, __doc__.splitlines()[0], runs=None, seed=1,
+                          quick="the two short March runs, one seed of each filter")
     parser.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the Lake Caputh data folder")
-    parser.add_argument("--config", type=Path, default=HERE / "config.toml")
-    parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for tables and figures")
+    parser.add_argument("--config", type=Path, default=HERE / "config.toml", help="the settings")
     parser.add_argument("--methods", nargs="+", choices=METHODS, default=list(METHODS))
     parser.add_argument("--cases", nargs="+", choices=CASES, default=list(CASES))
-    parser.add_argument("--seed", type=int, default=1, help="root seed of the filters' runs")
-    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    parser.add_argument("--scheduler", help="Dask scheduler address, or 'synchronous'")
-    parser.add_argument("--quick", action="store_true", help="the two short March runs, one seed")
     args = parser.parse_args(argv)
     if not (args.data / "waterlevel.csv").is_file():
         parser.error(f"{args.data} holds no Lake Caputh data (waterlevel.csv and *.sum): pass --data DIR")
+    args.out = output_folder(args, HERE)
     cfg = load_config(args.config)
-    args.out.mkdir(parents=True, exist_ok=True)
 
     grid = build_map(cfg, args.data)
     map_path = args.out / "map.nc"
@@ -386,7 +381,7 @@ def main(argv=None) -> int:
         "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["n_pings"])
                     for name, s in march.items()},
     }
-    seeds = 1 if args.quick else int(cfg["filters"]["seeds"])
+    seeds = 1 if args.quick else int(args.runs or cfg["filters"]["seeds"])
     configs = [
         {"cfg": cfg, "data": str(args.data), "map": str(map_path), "file": str(r), "survey": r.stem,
          "case": case, "method": method, "replica": replica}

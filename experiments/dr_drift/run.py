@@ -13,7 +13,6 @@ frame. If the model states its covariance honestly, the NEES of the random part 
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 from pathlib import Path
@@ -95,15 +94,12 @@ def markdown(rows) -> str:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
+    from tangraph.experiments.study import output_folder, study_parser
 
-    parser = argparse.ArgumentParser(prog="tangraph experiment dr_drift", description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", type=int, default=200)
-    parser.add_argument("--seed", type=int, default=1)
-    parser.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
-    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    parser.add_argument("--quick", action="store_true", help="40 runs, a minute or less")
-    parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for the table and CSV")
+    parser = study_parser(HERE, __doc__.splitlines()[0], runs=200, seed=1,
+                          quick="40 runs, a minute or less")
     args = parser.parse_args(argv)
+    args.out = output_folder(args, HERE)
     runs = 40 if args.quick else args.runs
     configs = [{"scenario": name} for name in SCENARIOS]
     table = run_many(one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers)
@@ -111,7 +107,6 @@ def main(argv=None) -> int:
     if failed:
         print(f"{failed} runs failed; first error: {table.loc[table['error'].notna(), 'error'].iloc[0]}")
     rows = summarise(table[table["error"].isna()])
-    args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / f"runs_seed{args.seed}_n{runs}.csv", index=False)
     text = markdown(rows)
     (args.out / f"summary_seed{args.seed}_n{runs}.md").write_text(

@@ -21,7 +21,6 @@ best filter and <= 2 x the filter PCRB, mean final NEES inside the chi-square ba
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from pathlib import Path
@@ -205,16 +204,11 @@ def figure(table, path: Path) -> None:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
+    from tangraph.experiments.study import output_folder, study_parser
 
-    parser = argparse.ArgumentParser(
-        prog="tangraph experiment graph_vs_filters", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--runs", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=6)
+    parser = study_parser(HERE, __doc__.splitlines()[0], runs=20, seed=6,
+                          quick="4 runs of PF, IPF and SJCPF: minutes")
     parser.add_argument("--particles", type=int, default=1000, help="particles of every filter")
-    parser.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
-    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    parser.add_argument("--quick", action="store_true", help="4 runs of PF, IPF and SJCPF: minutes")
     parser.add_argument("--scenarios", nargs="+", default=["demo", "wang2019", "han2020"], choices=SCENARIOS)
     parser.add_argument("--methods", nargs="+", choices=[*GRAPH, *FILTERS],
                         help="methods to run (default: the graph and every filter)")
@@ -222,8 +216,8 @@ def main(argv=None) -> int:
                         help="GraphConfig settings of the graph's runs (values as Python literals)")
     parser.add_argument("--dr", choices=["demo", "own"], default="demo",
                         help="the demo's drifting DR in every scenario, or each scenario's own")
-    parser.add_argument("--out", type=Path, default=HERE / "results", help="folder for the tables")
     args = parser.parse_args(argv)
+    args.out = output_folder(args, HERE)
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
     import ast
@@ -244,7 +238,6 @@ def main(argv=None) -> int:
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \
         "".join(f"_{item}" for item in args.graph)
-    args.out.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table[~failed], args.out / f"rmse_{tag}.png")
     command = (

@@ -27,7 +27,6 @@ Configuration: ``config.toml`` beside this file.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import time
@@ -539,25 +538,19 @@ def _runs_path(out: Path, tag: str) -> Path:
 # -- main --------------------------------------------------------------------------------------
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
+    from tangraph.experiments.study import output_folder, study_parser
 
-    parser = argparse.ArgumentParser(
-        prog="tangraph experiment han2020_ipf", description=__doc__.splitlines()[0]
-    )
+    parser = study_parser(HERE, __doc__.splitlines()[0], runs=None, seed=2020,
+                          quick="a few runs per configuration: minutes")
     parser.add_argument("--part", choices=[*PARTS, "all"], default="all")
-    parser.add_argument("--runs", type=int, help="runs per configuration (default from config.toml)")
-    parser.add_argument("--seed", type=int, default=2020)
-    parser.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
-    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
-    parser.add_argument("--quick", action="store_true", help="a few runs per configuration: minutes")
-    parser.add_argument("--out", type=Path, default=HERE / "results")
     parser.add_argument(
         "--replot",
         action="store_true",
         help="remake the tables and figures from the runs CSV of these options",
     )
     args = parser.parse_args(argv)
+    args.out = output_folder(args, HERE)
     cfg = load_config()
-    args.out.mkdir(parents=True, exist_ok=True)
     parts = PARTS if args.part == "all" else (args.part,)
     status = 0
     for part in parts:

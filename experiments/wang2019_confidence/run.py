@@ -20,7 +20,6 @@ Configuration: ``config.toml`` beside this file.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import tomllib
@@ -231,17 +230,12 @@ def figures(table, out: Path, tag: str) -> list[Path]:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
+    from tangraph.experiments.study import output_folder, study_parser
 
-    parser = argparse.ArgumentParser(
-        prog="tangraph experiment wang2019_confidence", description=__doc__.splitlines()[0]
-    )
-    parser.add_argument("--runs", type=int, help="runs per configuration (default from config.toml)")
-    parser.add_argument("--seed", type=int, default=2019)
-    parser.add_argument("--scheduler", help="Dask scheduler address (default: local processes)")
-    parser.add_argument("--workers", type=int)
-    parser.add_argument("--quick", action="store_true", help="few runs on the real map only: minutes")
-    parser.add_argument("--out", type=Path, default=HERE / "results")
+    parser = study_parser(HERE, __doc__.splitlines()[0], runs=None, seed=2019,
+                          quick="few runs on the real map only: minutes")
     args = parser.parse_args(argv)
+    args.out = output_folder(args, HERE)
     cfg = load_config()
     runs = args.runs or (cfg["quick_runs"] if args.quick else cfg["runs"])
     configs = []
@@ -257,7 +251,6 @@ def main(argv=None) -> int:
     if table["error"].notna().all():
         print(f"every run failed; the first: {table['error'].iloc[0]}")
         return 1
-    args.out.mkdir(parents=True, exist_ok=True)
     tag = f"seed{args.seed}_runs{runs}{'_quick' if args.quick else ''}"
     table.to_csv(args.out / f"fixes_{tag}.csv", index=False)
     truth_sigma = {k: float(np.hypot(v.get("depth_noise", 0.0), 0.0)) for k, v in cfg["noise"].items()}

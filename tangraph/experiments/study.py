@@ -1,0 +1,78 @@
+"""The command line every study shares: runs, seed, where to run, and where its results go.
+
+A study's ``main`` builds its parser with :func:`study_parser` (adding its own options) and
+gets its output folder from :func:`output_folder`: the folder the user names with ``--out``, or,
+for a study run from a checkout of the repository, its ``results/`` beside it (where the
+committed tables live). An installed study (inside the package) never writes into the package:
+it asks for ``--out``. A folder that already holds files is written into only with ``--force``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from tangraph.errors import TangraphError
+
+__all__ = ["output_folder", "study_parser"]
+
+
+class _Defaults(argparse.HelpFormatter):
+    """Help that shows an option's default where it has one and its help does not say it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in text:
+            text += " (default: %(default)s)"
+        return text
+
+
+def study_parser(here: Path, description: str, *, runs: int | None, seed: int,
+                 quick: str) -> argparse.ArgumentParser:
+    """The parser of the study in folder ``here`` with the options every study has.
+
+    ``runs`` is the default number of runs (None: the study's config file says); ``seed`` the
+    default root seed; ``quick`` what ``--quick`` does, for the help.
+    """
+    parser = argparse.ArgumentParser(
+        prog=f"tangraph experiment {here.name}", description=description,
+        formatter_class=_Defaults,
+    )
+    where = " (default: the study's config.toml)" if runs is None else ""
+    parser.add_argument("--runs", type=int, default=runs, help="runs per configuration" + where)
+    parser.add_argument("--seed", type=int, default=seed, help="root seed of every run")
+    parser.add_argument("--scheduler",
+                        help="Dask scheduler address, or 'synchronous' (default: local processes)")
+    parser.add_argument("--workers", type=int, help="local worker processes (default: all cores)")
+    parser.add_argument("--quick", action="store_true", help=quick)
+    parser.add_argument("--out", type=Path, help="folder for the tables and figures (default: results/ "
+                        "beside the study in a checkout; required for an installed study)")
+    parser.add_argument("--force", action="store_true", help="write into an --out folder that holds files")
+    return parser
+
+
+def output_folder(args: argparse.Namespace, here: Path) -> Path:
+    """The folder the study writes to (created), checked as the module docstring says.
+
+    Raises
+    ------
+    TangraphError
+        No ``--out`` for an installed study, or a folder with files and no ``--force``.
+    """
+    installed = here.parent.name != "experiments"  # the wheel puts studies in tangraph/_experiments
+    out = args.out
+    if out is None:
+        if installed:
+            raise TangraphError(
+                f"{here.name}: pass --out DIR (an installed study does not write into its package)"
+            )
+        out, checkout = here / "results", True
+    else:
+        checkout = False
+    out = Path(out)
+    if out.is_file():
+        raise TangraphError(f"{here.name}: --out {out} is a file, not a folder")
+    if not checkout and out.is_dir() and any(out.iterdir()) and not args.force:
+        raise TangraphError(f"{here.name}: {out} already holds files; pass --force to write into it")
+    out.mkdir(parents=True, exist_ok=True)
+    return out
