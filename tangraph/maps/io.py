@@ -100,9 +100,10 @@ def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | No
 
 def _grid_to_map(
     y: np.ndarray, x: np.ndarray, depth: np.ndarray, *, geographic: bool, crs: str | None,
-    cell: float | None, name: str, where: str,
+    cell: float | None, name: str, where: str, origin: tuple[float, float] | None = None,
 ) -> BathymetryMap:
-    """Flip descending axes, then project (geographic) or shift to a local origin (projected)."""
+    """Flip descending axes, then project (geographic) or shift to a local origin (projected):
+    ``origin`` if given, else the first cell centre (``(0, 0)`` without a CRS)."""
     y = np.asarray(y, float)
     x = np.asarray(x, float)
     depth = np.asarray(depth, float)
@@ -114,8 +115,10 @@ def _grid_to_map(
         if geographic:
             return project_geographic_grid(y, x, depth, cell=cell, name=name,
                                            source_crs=crs or "EPSG:4326")
-        m = BathymetryMap(north=y - y[0], east=x - x[0], depth=depth, crs=crs,
-                          origin=(float(y[0]), float(x[0])) if crs else (0.0, 0.0), name=name)
+        if origin is None:
+            origin = (float(y[0]), float(x[0])) if crs else (0.0, 0.0)
+        m = BathymetryMap(north=y - origin[0], east=x - origin[1], depth=depth, crs=crs,
+                          origin=origin, name=name)
     except MapFormatError as exc:
         raise MapFormatError(f"{where}: {exc}") from None
     return m.resample(cell) if cell is not None else m
@@ -159,15 +162,25 @@ def _axis_kind(name: str, attrs: dict) -> tuple[str | None, bool]:
 
 
 def _netcdf_crs(ds, var) -> str | None:
+    """The CRS of a grid variable: a ``crs`` attribute (tangraph's), else its CF grid mapping
+    (``crs_wkt``/``spatial_ref``/``proj4``, or only the CF grid-mapping parameters)."""
     for source in (var.attrs, ds.attrs):
         if "crs" in source:
             return str(source["crs"])
-    mapping = var.attrs.get("grid_mapping")
+    mapping = str(var.attrs.get("grid_mapping", "")).split(":")[0].strip()
     if mapping and mapping in ds.variables:
         attrs = ds[mapping].attrs
         for key in ("crs_wkt", "spatial_ref", "proj4", "proj4text"):
             if key in attrs:
                 return str(attrs[key])
+        if "grid_mapping_name" in attrs:
+            import pyproj
+
+            try:
+                return pyproj.CRS.from_cf(dict(attrs)).to_wkt()
+            except pyproj.exceptions.CRSError as exc:
+                raise MapFormatError(f"grid mapping {mapping!r} is not understood by pyproj "
+                                     f"({exc})") from None
     return None
 
 
@@ -182,7 +195,8 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         raise MapFormatError(f"{path}: not a readable NetCDF file ({exc})") from None
     with ds:
         grids = [k for k, v in ds.data_vars.items() if v.ndim == 2]
-        if variable is None and "depth" in grids and ds["depth"].dims == ("north", "east"):
+        if variable is None and "depth" in grids and (
+                ds["depth"].dims == ("north", "east") or "origin_northing" in ds["depth"].attrs):
             variable = "depth"  # tangraph's own files (maps and gridded soundings)
         if variable is None:
             if len(grids) != 1:
@@ -209,29 +223,61 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         values = np.asarray(var.values, dtype=float)
         factor = resolve_sign(values, var.attrs, variable, sign, f"{path}")
         geographic = kinds[0][1] or kinds[1][1]
+        try:
+            file_crs = _netcdf_crs(ds, var)
+        except MapFormatError as exc:
+            raise MapFormatError(f"{path}:{variable}: {exc}") from None
+        origin = None  # tangraph's own maps keep their origin
+        if not geographic and {"origin_northing", "origin_easting"} <= var.attrs.keys():
+            origin = (float(var.attrs["origin_northing"]), float(var.attrs["origin_easting"]))
         return _grid_to_map(
             ds[ydim].values, ds[xdim].values, factor * values, geographic=geographic,
-            crs=crs or _netcdf_crs(ds, var), cell=cell, name=name or path.stem, where=f"{path}:{variable}",
+            crs=crs or file_crs, cell=cell, origin=origin,
+            name=name or str(var.attrs.get("name", "")) or path.stem, where=f"{path}:{variable}",
         )
 
 
 def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] | None = None,
                  attrs: dict | None = None) -> None:
-    """CF-1.8 NetCDF with dims (north, east), depth positive down, CRS and origin as attrs.
+    """CF-1.8 NetCDF that GDAL, GMT and QGIS place: dims ``(y, x)`` holding the projected
+    coordinates of the cell centres (local + origin), a CF ``grid_mapping`` variable ``crs``
+    (``pyproj.CRS.to_cf``, with ``crs_wkt`` and ``spatial_ref``), depth positive down; the map's
+    own CRS string, origin and name as attributes of ``depth``, so it reads back in its frame.
 
     ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``; ``attrs`` adds
     global attributes, and its ``"depth"`` entry (a dict) attributes of the depth variable.
     """
+    import xarray as xr
+
     import tangraph
 
     attrs = dict(attrs or {})
-    ds = bathymetry.to_xarray().to_dataset()
-    ds["depth"].attrs.update(attrs.pop("depth", {}))
+    depth_attrs = {**bathymetry.to_xarray().attrs, **attrs.pop("depth", {})}
+    variables: dict[str, tuple] = {}
+    if bathymetry.crs is not None:
+        import pyproj
+
+        crs = pyproj.CRS(bathymetry.crs)
+        variables["crs"] = ((), np.int32(0), {**crs.to_cf(), "spatial_ref": crs.to_wkt()})
+        depth_attrs["grid_mapping"] = "crs"
+    variables["depth"] = (("y", "x"), np.array(bathymetry.depth), depth_attrs)
     for key, (values, var_attrs) in (extra or {}).items():
-        ds[key] = (("north", "east"), np.asarray(values), var_attrs)
+        variables[key] = (("y", "x"), np.asarray(values),
+                          {**var_attrs, **({"grid_mapping": "crs"} if bathymetry.crs else {})})
+    where = "projected" if bathymetry.crs else "local"
+    coords = {
+        "y": ("y", bathymetry.north + bathymetry.origin[0],
+              {"standard_name": "projection_y_coordinate", "long_name": f"northing ({where})",
+               "units": "m", "axis": "Y"}),
+        "x": ("x", bathymetry.east + bathymetry.origin[1],
+              {"standard_name": "projection_x_coordinate", "long_name": f"easting ({where})",
+               "units": "m", "axis": "X"}),
+    }
+    ds = xr.Dataset(variables, coords=coords)
     ds.attrs.update({"Conventions": "CF-1.8", "title": bathymetry.name,
                      "source": f"tangraph {tangraph.__version__}", **attrs})
-    ds.to_netcdf(path, encoding={"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan}})
+    ds.to_netcdf(path, encoding={"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan},
+                                 "x": {"_FillValue": None}, "y": {"_FillValue": None}})
 
 
 def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
@@ -265,53 +311,57 @@ def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = Fals
     return p
 
 
-# -- GeoTIFF ----------------------------------------------------------------------------------
-_GDAL_NODATA = 42113
-_USER_DEFINED = 32767
+# -- GeoTIFF (rasterio / GDAL) ----------------------------------------------------------------
+_DEPTH_TAGS = {"positive": "down", "standard_name": "sea_floor_depth_below_sea_surface", "units": "m"}
 
 
 def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) -> BathymetryMap:
-    """A grid from a north-up GeoTIFF (tifffile reads its GeoKeys); see :func:`read_map`."""
-    import logging
+    """A grid from a north-up GeoTIFF (any compression, tiled or COG), read by rasterio.
 
-    import tifffile
+    The CRS is the file's (an EPSG code where it is one exactly, else its WKT); no-data is the
+    file's (or its mask); GDAL resolves PixelIsArea/PixelIsPoint. A rotated or south-up raster is
+    refused. See :func:`read_map`.
+    """
+    import rasterio
+    from rasterio.errors import RasterioError
 
     path = _existing(path)
-    quiet = logging.getLogger("tifffile")
-    level = quiet.level
-    quiet.setLevel(logging.CRITICAL)  # it logs an error for a float64 GDAL_NODATA in a float32 file
     try:
-        with tifffile.TiffFile(path) as tif:
-            page = tif.pages[0]
-            values = page.asarray().astype(float)
-            geo = page.geotiff_tags or {}
-            raw_nodata = page.tags.get(_GDAL_NODATA)
-            description = page.tags.get("ImageDescription")
-    except (tifffile.TiffFileError, OSError, ValueError, IndexError, KeyError) as exc:
-        raise MapFormatError(f"{path}: not a readable TIFF ({exc})") from None
-    finally:
-        quiet.setLevel(level)
-    if values.ndim != 2:
-        raise MapFormatError(f"{path}: image has shape {values.shape}; one band of depths is expected")
-    if "ModelTransformation" in geo or "ModelPixelScale" not in geo or "ModelTiepoint" not in geo:
-        raise MapFormatError(f"{path}: no north-up georeference (ModelPixelScale + ModelTiepoint)")
-    own = _tangraph_description(description.value if description else "")
-    if nodata is None and raw_nodata is not None:
-        text = str(raw_nodata.value).strip().strip("\x00")
-        nodata = float(text) if text else None
+        with rasterio.open(path) as src:
+            if src.count != 1:
+                raise MapFormatError(f"{path}: {src.count} bands; one band of depths is expected")
+            band = src.read(1, masked=True)
+            transform, file_crs = src.transform, src.crs
+            tags, band_tags = src.tags(), src.tags(1)
+            variable = src.descriptions[0] or "band 1"
+    except RasterioError as exc:
+        raise MapFormatError(f"{path}: not a readable GeoTIFF ({exc})") from None
+    values = np.ma.filled(band.astype(float), np.nan)
+    a, b, c, d, e, f = (float(v) for v in tuple(transform)[:6])
+    if transform.is_identity:
+        raise MapFormatError(f"{path}: no georeference (no geotransform); a north-up GeoTIFF is expected")
+    if b != 0.0 or d != 0.0:
+        raise MapFormatError(f"{path}: the raster is rotated (geotransform {tuple(transform)[:6]}); "
+                             "warp it north-up first (gdalwarp)")
+    if e > 0.0:
+        raise MapFormatError(f"{path}: the raster is south-up (pixel height {e} > 0); "
+                             "warp it north-up first (gdalwarp)")
+    own = _tangraph_description(tags.get("TIFFTAG_IMAGEDESCRIPTION", ""))  # files of tangraph < 0.2
+    if tags.get("TANGRAPH_NAME") is not None:
+        own = {"name": tags["TANGRAPH_NAME"], "crs": tags.get("TANGRAPH_CRS") or None,
+               "positive": band_tags.get("positive")}
     if nodata is not None and np.isfinite(nodata):
         values[np.isclose(values, nodata, rtol=1e-6, atol=0)] = np.nan
-    sx, sy = float(geo["ModelPixelScale"][0]), float(geo["ModelPixelScale"][1])
-    i0, j0, _, x0, y0, _ = (float(v) for v in geo["ModelTiepoint"][:6])
-    offset = 0.0 if int(geo.get("GTRasterTypeGeoKey", 1)) == 1 else -0.5  # area vs point
     ny, nx = values.shape
-    x = x0 + (np.arange(nx) - j0 + 0.5 + offset) * sx
-    y = y0 - (np.arange(ny) - i0 + 0.5 + offset) * sy
-    geographic = int(geo.get("GTModelTypeGeoKey", 1)) == 2
+    x = c + (np.arange(nx) + 0.5) * a  # GDAL's geotransform is PixelIsArea (it shifts Point files)
+    y = f + (np.arange(ny) + 0.5) * e
     if crs is None:
-        crs = own.get("crs") or _geotiff_epsg(geo, geographic, path)
-    factor = (1.0 if own.get("positive") == "down" else -1.0) if own and sign is None else \
-        resolve_sign(values, {}, "band 1", sign, str(path))
+        crs = _geotiff_crs(file_crs, own, path)
+    geographic = crs is not None and _is_geographic(crs)
+    attrs = band_tags if "positive" in band_tags or "standard_name" in band_tags else {}
+    if own and sign is None and own.get("positive") in ("down", "up"):
+        attrs = {"positive": own["positive"]}
+    factor = resolve_sign(values, attrs, variable, sign, str(path))
     return _grid_to_map(y, x, factor * values, geographic=geographic, crs=crs, cell=cell,
                         name=name or own.get("name") or path.stem, where=str(path))
 
@@ -324,36 +374,50 @@ def _tangraph_description(text: str) -> dict:
     return data.get("tangraph", {}) if isinstance(data, dict) else {}
 
 
-def _geotiff_epsg(geo: dict, geographic: bool, path: Path) -> str:
-    key = "GeographicTypeGeoKey" if geographic else "ProjectedCSTypeGeoKey"
-    code = geo.get(key)
-    if code is None or int(code) == _USER_DEFINED:
-        raise MapFormatError(f"{path}: the GeoTIFF names no EPSG code in {key}; pass crs= (CLI: --crs)")
-    return f"EPSG:{int(code)}"
+def _geotiff_crs(file_crs, own: dict, path: Path) -> str | None:
+    """The CRS of a GeoTIFF as a string: tangraph's own (if the file's agrees), an EPSG code the
+    file names exactly, or the file's WKT."""
+    import pyproj
+
+    parsed = None
+    if file_crs is not None:
+        parsed = pyproj.CRS.from_wkt(file_crs.to_wkt())
+        if parsed.is_engineering:  # LOCAL_CS: a user-defined CRS GDAL could not read
+            parsed = None
+    if own.get("crs") and (parsed is None or pyproj.CRS(own["crs"]).equals(parsed, ignore_axis_order=True)):
+        return str(own["crs"])
+    if parsed is None:
+        if own:
+            return None  # a tangraph map with no place on Earth
+        raise MapFormatError(f"{path}: the GeoTIFF names no CRS; pass crs= (CLI: --crs)")
+    code = parsed.to_epsg(min_confidence=100)
+    return f"EPSG:{code}" if code is not None else parsed.to_wkt()
 
 
 def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
-    """A float32 GeoTIFF, north up, NaN no-data, depth positive down (said in its description)."""
+    """A float32 GeoTIFF (DEFLATE, floating-point predictor), north up, NaN no-data, the map's CRS
+    and bounds as GDAL reads them; depth positive down in the band's metadata."""
     import pyproj
-    import tifffile
+    import rasterio
+    from rasterio.transform import Affine
 
     dn, de = bathymetry.cell_size
-    x0 = bathymetry.east[0] + bathymetry.origin[1] - 0.5 * de
-    y_top = bathymetry.north[-1] + bathymetry.origin[0] + 0.5 * dn
-    epsg = pyproj.CRS(bathymetry.crs).to_epsg() if bathymetry.crs else None
-    keys = [(1024, 0, 1, 1), (1025, 0, 1, 1), (3072, 0, 1, epsg or _USER_DEFINED)]
-    geokeys = [1, 1, 0, len(keys), *[v for k in keys for v in k]]
-    description = json.dumps({"tangraph": {"positive": "down", "name": bathymetry.name,
-                                           "crs": bathymetry.crs}})
-    tifffile.imwrite(
-        path, np.ascontiguousarray(bathymetry.depth[::-1], dtype=np.float32), description=description,
-        extratags=[
-            (33550, "d", 3, (de, dn, 0.0), True),
-            (33922, "d", 6, (0.0, 0.0, 0.0, x0, y_top, 0.0), True),
-            (34735, "H", len(geokeys), geokeys, True),
-            (_GDAL_NODATA, "s", 0, "nan", True),
-        ],
-    )
+    west = bathymetry.east[0] + bathymetry.origin[1] - 0.5 * de
+    top = bathymetry.north[-1] + bathymetry.origin[0] + 0.5 * dn
+    ny, nx = bathymetry.shape
+    profile = {
+        "driver": "GTiff", "height": ny, "width": nx, "count": 1, "dtype": "float32", "nodata": np.nan,
+        "transform": Affine(de, 0.0, west, 0.0, -dn, top), "compress": "deflate", "predictor": 3,
+        "crs": (rasterio.crs.CRS.from_wkt(pyproj.CRS(bathymetry.crs).to_wkt())
+                if bathymetry.crs else None),
+    }
+    if ny >= 512 and nx >= 512:
+        profile.update(tiled=True, blockxsize=256, blockysize=256)
+    with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(path, "w", **profile) as dst:
+        dst.write(np.ascontiguousarray(bathymetry.depth[::-1], dtype=np.float32), 1)
+        dst.set_band_description(1, "depth")
+        dst.update_tags(1, **_DEPTH_TAGS)
+        dst.update_tags(TANGRAPH_NAME=bathymetry.name, TANGRAPH_CRS=bathymetry.crs or "")
 
 
 # -- XYZ text -------------------------------------------------------------------------------
