@@ -292,8 +292,9 @@ def triangles_to_map(
     name: str = "mesh",
     crs: str | None = None,
     origin: tuple[float, float] = (0.0, 0.0),
+    method: Literal["linear", "raycast"] = "linear",
 ) -> BathymetryMap:
-    """Grid a triangulated surface (a TIN) onto a regular grid by vertical ray casting.
+    """Grid a triangulated surface (a TIN) onto a regular grid.
 
     Parameters
     ----------
@@ -306,12 +307,14 @@ def triangles_to_map(
         step by ``cell`` while inside their extent.
     name, crs, origin
         As in :class:`BathymetryMap`.
-
-    Returns
-    -------
-    BathymetryMap
-        The depth of the TIN (its shallowest surface) under each cell centre, linear within
-        each triangle; NaN where no triangle lies under the centre (e.g. beyond a shoreline).
+    method : {"linear", "raycast"}
+        ``"linear"``: linear interpolation in the triangle under each centre
+        (``matplotlib.tri.LinearTriInterpolator``), for a TIN that is a surface over the plane
+        (no overlapping triangles, no repeated vertices); a TIN that is not falls back to ray
+        casting. ``"raycast"``: vertical rays cast by Open3D onto the shallowest surface, for
+        any mesh. On the shipped Merimbula TIN the two agree to 1.2e-6 m (at 2 m cells, 8 of
+        5.3 million centres on the TIN's outer edge differ in whether they hold data) and linear
+        is 2-8x faster, the more the finer the cells (``benchmarks/bench_tin.py``).
 
     Examples
     --------
@@ -328,10 +331,27 @@ def triangles_to_map(
     north = _axis(v[:, 0].min(), v[:, 0].max(), cell, "north", where)
     east = _axis(v[:, 1].min(), v[:, 1].max(), cell, "east", where)
     nn, ee = np.meshgrid(north, east, indexing="ij")
-    depth = _vertical_depths(TerrainScene.from_triangles(v, t), nn.ravel(), ee.ravel())
+    depth = _linear_depths(v, t, nn.ravel(), ee.ravel()) if method == "linear" else None
+    if method not in ("linear", "raycast"):
+        raise TangraphError(f"{where}: method must be 'linear' or 'raycast', got {method!r}")
+    if depth is None:
+        depth = _vertical_depths(TerrainScene.from_triangles(v, t), nn.ravel(), ee.ravel())
     if not np.any(np.isfinite(depth)):
         raise MapFormatError(f"{where}: no cell centre lies on a triangle; use a smaller cell")
     return BathymetryMap(north, east, depth.reshape(nn.shape), crs=crs, origin=origin, name=name)
+
+
+def _linear_depths(v: np.ndarray, t: np.ndarray, north: np.ndarray, east: np.ndarray) -> np.ndarray | None:
+    """Linear interpolation of the TIN's depth at points (NaN off it); None when matplotlib
+    refuses the triangulation (overlapping triangles, repeated vertices)."""
+    import matplotlib.tri as mtri
+
+    try:
+        tin = mtri.Triangulation(v[:, 1], v[:, 0], t)
+        values = mtri.LinearTriInterpolator(tin, v[:, 2])(east, north)
+    except (RuntimeError, ValueError):
+        return None
+    return np.ma.filled(values.astype(np.float64), np.nan)
 
 
 def from_mesh(mesh: o3d.geometry.TriangleMesh, *, cell: float, name: str = "mesh", **kwargs):

@@ -324,3 +324,20 @@ def test_grid_soundings_rejects_bad_input():
         grid_soundings([[0.0, 0, 1], [0.1, 5, 1]], cell=1.0)
     with pytest.raises(TangraphError, match="extent"):
         grid_soundings(SOUNDINGS, cell=1.0, extent=(2.0, 1.0, 0.0, 1.0))
+
+
+def test_linear_tin_gridding_agrees_with_ray_casting_and_falls_back_for_overlaps():
+    from pathlib import Path
+
+    from tangraph.maps.io import read_tsh
+
+    verts, tris, _ = read_tsh(Path(__file__).resolve().parents[2] / "maps" / "merimbula_10785_1.tsh")
+    v = np.column_stack([verts[:, 1] - verts[:, 1].min(), verts[:, 0] - verts[:, 0].min(), -verts[:, 2]])
+    linear = triangles_to_map(v, tris, cell=25.0, method="linear")
+    ray = triangles_to_map(v, tris, cell=25.0, method="raycast")
+    np.testing.assert_array_equal(np.isfinite(linear.depth), np.isfinite(ray.depth))
+    np.testing.assert_allclose(linear.depth, ray.depth, atol=2e-6, equal_nan=True)
+    # two overlapping triangles (a fold): matplotlib refuses them, ray casting takes the shallowest
+    folded = [[0.0, 0, 10], [4, 0, 10], [0, 4, 10], [0.0, 0, 5], [4, 0, 5], [0, 4, 5]]
+    m = triangles_to_map(folded, [[0, 1, 2], [3, 4, 5]], cell=2.0)
+    assert m.depth[0, 0] == pytest.approx(5.0)
