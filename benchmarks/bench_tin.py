@@ -33,8 +33,9 @@ def main() -> None:
         t_ray = best_time(lambda cell=cell: triangles_to_map(v, tris, cell=cell, method="raycast"), 3)
         a, b = np.isfinite(linear.depth), np.isfinite(ray.depth)
         diff = float(np.max(np.abs(linear.depth - ray.depth)[a & b]))
-        print(f"cell {cell:4g} m, {linear.depth.size:>9} centres: linear {t_lin:.3f} s, raycast {t_ray:.3f} s "
-              f"(ratio {t_ray / t_lin:.1f}); max |diff| {diff:.2e} m; data in one only: {int((a != b).sum())}")
+        print(f"cell {cell:4g} m, {linear.depth.size:>9} centres: linear {t_lin:.3f} s, "
+              f"raycast {t_ray:.3f} s (ratio {t_ray / t_lin:.1f}); max |diff| {diff:.2e} m; "
+              f"data in one only: {int((a != b).sum())}")
 
 
 if __name__ == "__main__":
