@@ -16,7 +16,7 @@ from docutils import nodes
 from sphinx.application import Sphinx
 from sphinx.util.docutils import SphinxDirective
 
-HELP_WIDTH = "88"  # argparse wraps to $COLUMNS; fix it so that the build is reproducible
+HELP_WIDTH = "78"  # argparse wraps to $COLUMNS; fix it so that the build is reproducible
 
 
 def _commands(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentParser]:
