@@ -169,7 +169,9 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
     sontek_only = {"--water-level": args.water_level,
                    "--water-level-interpolate": args.water_level_interpolate or None,
                    "--draft": args.draft, "--dr-heading": args.dr_heading, "--declination": args.declination}
-    wrong = [k for k, v in (sontek_only if args.format == "csv-xyz" else csv_only).items() if v is not None]
+    refused = {"csv-xyz": sontek_only, "sontek-sum": csv_only}.get(
+        args.format, {**csv_only, **sontek_only, "--timezone": args.timezone})  # xtf, gsf: UTC files
+    wrong = [k for k, v in refused.items() if v is not None]
     if wrong:
         raise TangraphError(
             f"{', '.join(wrong)} {'does' if len(wrong) == 1 else 'do'} not apply to --format {args.format}"
@@ -178,6 +180,8 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
         raise TangraphError(
             f"--format csv-xyz takes two files (navigation log, soundings), got {len(args.files)}"
         )
+    if args.format in ("xtf", "gsf") and len(args.files) != 1:
+        raise TangraphError(f"--format {args.format} takes one file, got {len(args.files)}")
     for path in [*args.files, *([args.water_level] if args.water_level else [])]:
         if args.output.resolve() == Path(path).resolve():
             raise TangraphError(f"refusing to write the survey over the input {path}")
@@ -195,6 +199,14 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
         options = {k: v for k, v in (("sign", args.sign), ("time_format", args.time_format)) if v is not None}
         survey = import_csv_xyz(*args.files, crs=args.crs, timezone=args.timezone,
                                 columns=columns, header=not args.no_header, **options)
+    elif args.format == "xtf":
+        from tangraph.formats.xtf import import_xtf
+
+        survey = import_xtf(args.files[0], crs=args.crs)
+    elif args.format == "gsf":
+        from tangraph.formats.gsf import import_gsf
+
+        survey = import_gsf(args.files[0], crs=args.crs)
     else:
         from tangraph.formats.sontek import import_sontek_sum
 
@@ -449,7 +461,7 @@ def build_parser() -> argparse.ArgumentParser:
         "import",
         help="a survey recorded by another system: CSV log + XYZ soundings, or SonTek .sum files",
     )
-    p.add_argument("--format", choices=["csv-xyz", "sontek-sum"], default="csv-xyz",
+    p.add_argument("--format", choices=["csv-xyz", "sontek-sum", "xtf", "gsf"], default="csv-xyz",
                    help="csv-xyz (default): FILE is a navigation log and a soundings file; "
                    "sontek-sum: one or more RiverSurveyor .sum files of one run")
     p.add_argument("files", nargs="+", type=Path, metavar="FILE",

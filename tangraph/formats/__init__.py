@@ -6,14 +6,18 @@
 """
 
 from tangraph.formats.csv_xyz import import_csv_xyz
+from tangraph.formats.gsf import import_gsf
 from tangraph.formats.sontek import SontekRecord, import_sontek_sum, read_sontek_sum
 from tangraph.formats.waterlevel import WaterLevel, read_water_level
+from tangraph.formats.xtf import import_xtf
 
 __all__ = [
     "SontekRecord",
     "WaterLevel",
     "import_csv_xyz",
+    "import_gsf",
     "import_sontek_sum",
+    "import_xtf",
     "read_sontek_sum",
     "read_water_level",
 ]
