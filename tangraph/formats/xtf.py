@@ -143,7 +143,7 @@ def _nav_time(packet) -> float:
     return day + packet.Microsecond * 1e-6
 
 
-def read_xtf_pings(path: str | os.PathLike) -> tuple[list[_Ping], np.ndarray, dict]:
+def _read_xtf(path: str | os.PathLike) -> tuple[list[_Ping], np.ndarray, dict]:
     """The R2Sonic pings, the raw navigation (N, 3: Unix time, lat, lon) and header facts."""
     import pyxtf
 
@@ -216,7 +216,7 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         raise SurveyError(f"draft must be between 0 and 1000 m, got {draft!r}")
     target = projected_crs(crs)
     p = Path(path)
-    pings, nav, facts = read_xtf_pings(p)
+    pings, nav, facts = _read_xtf(p)
     sizes = sorted({q.angle.size for q in pings})
     if len(sizes) != 1:
         raise SurveyError(f"{p}: pings have different numbers of beams {sizes}")
