@@ -39,7 +39,10 @@ _EOF = -23  # GSF_READ_TO_END_OF_FILE
 
 def _lat_lon_fields() -> tuple[str, str]:
     """gsfpy's names of the C structure's first and second double (latitude, longitude)."""
-    from gsfpy.gsfSwathBathyPing import c_gsfSwathBathyPing
+    try:
+        from gsfpy.gsfSwathBathyPing import c_gsfSwathBathyPing
+    except (ImportError, OSError) as exc:  # OSError: its GSF library does not load here
+        raise SurveyError(f"reading GSF needs gsfpy (pip install gsfpy; Linux x86-64): {exc}") from None
 
     names = [f[0] for f in c_gsfSwathBathyPing._fields_[1:3]]
     if sorted(names) != ["latitude", "longitude"]:
@@ -48,10 +51,10 @@ def _lat_lon_fields() -> tuple[str, str]:
 
 
 def _read_pings(p: Path) -> tuple[dict[str, np.ndarray], dict]:
+    lat_field, lon_field = _lat_lon_fields()
     from gsfpy import GsfException, open_gsf
     from gsfpy.enums import RecordType
 
-    lat_field, lon_field = _lat_lon_fields()
     rows: dict[str, list] = {k: [] for k in (
         "time", "lat", "lon", "heading", "pitch", "roll", "heave", "flags",
         "depth", "across", "along", "beam_flags")}

@@ -145,7 +145,10 @@ def _nav_time(packet) -> float:
 
 def _read_xtf(path: str | os.PathLike) -> tuple[list[_Ping], np.ndarray, dict]:
     """The R2Sonic pings, the raw navigation (N, 3: Unix time, lat, lon) and header facts."""
-    import pyxtf
+    try:
+        import pyxtf
+    except ImportError as exc:
+        raise SurveyError(f"reading XTF needs pyxtf (pip install pyxtf): {exc}") from None
 
     p = Path(path)
     if not p.is_file():
