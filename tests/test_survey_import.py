@@ -390,8 +390,8 @@ def test_cli_refuses_writing_over_an_input_and_the_wrong_file_count(tmp_path, ca
     assert main(["survey", "import", str(nav), "-o", str(tmp_path / "s.nc")]) == 2
     assert "--format csv-xyz takes two files (navigation log, soundings), got 1" in capsys.readouterr().err
     with pytest.raises(SystemExit) as info:
-        main(["survey", "import", "--format", "gsf", str(nav), "-o", str(tmp_path / "s.nc")])
-    assert info.value.code == 2 and "invalid choice: 'gsf'" in capsys.readouterr().err
+        main(["survey", "import", "--format", "kmall", str(nav), "-o", str(tmp_path / "s.nc")])
+    assert info.value.code == 2 and "invalid choice: 'kmall'" in capsys.readouterr().err
 
 
 def test_cli_hands_sontek_files_and_options_to_the_sontek_import(tmp_path, capsys, monkeypatch):
