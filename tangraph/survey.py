@@ -1,7 +1,8 @@
 """`Survey`: one recorded or simulated run as arrays, and its files.
 
-The NetCDF schema (version 1, CF-1.8, written and read through xarray) is documented in
-``docs/survey_schema.rst``; :func:`read_survey` validates everything and names what is wrong.
+The NetCDF schema (version 2: CF-1.8 trajectories, written and read through xarray; version 1
+is still read) is documented in ``docs/survey_schema.rst``; :func:`read_survey` validates
+everything and names what is wrong.
 Surveys recorded by other systems come in through :mod:`tangraph.formats` (a CSV navigation log
 plus XYZ soundings, SonTek RiverSurveyor exports).
 """
@@ -9,7 +10,9 @@ plus XYZ soundings, SonTek RiverSurveyor exports).
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
+import logging
 import os
 from pathlib import Path
 from typing import Any
@@ -17,6 +20,8 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+
+_log = logging.getLogger(__name__)
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -28,7 +33,7 @@ __all__ = [
     "write_survey",
 ]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 
 class SurveyError(TangraphError):
@@ -226,24 +231,93 @@ def _first(mask: np.ndarray, n: int = 5) -> list[int]:
 # -- NetCDF ------------------------------------------------------------------------------------
 _POSE = ("north", "east", "heading")
 _UNITS = {"north": "m", "east": "m", "heading": "rad"}
+_READABLE_VERSIONS = (1, 2)
+_SECONDS_PER = {"s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0,
+                "ms": 1e-3, "millisecond": 1e-3, "milliseconds": 1e-3, "microsecond": 1e-6,
+                "microseconds": 1e-6, "min": 60.0, "minute": 60.0, "minutes": 60.0, "h": 3600.0,
+                "hr": 3600.0, "hour": 3600.0, "hours": 3600.0, "d": 86400.0, "day": 86400.0,
+                "days": 86400.0}
+
+
+def _utc(text) -> datetime.datetime | None:
+    """An ISO 8601 time as a naive UTC datetime (a time without zone is taken as UTC)."""
+    try:
+        t = datetime.datetime.fromisoformat(str(text))
+    except (TypeError, ValueError):
+        return None
+    return t if t.tzinfo is None else t.astimezone(datetime.UTC).replace(tzinfo=None)
+
+
+def _time_units(start: datetime.datetime) -> str:
+    stamp = start.strftime("%Y-%m-%d %H:%M:%S") + (f".{start.microsecond:06d}" if start.microsecond else "")
+    return f"seconds since {stamp}"
+
+
+def _reference_lonlat(survey: Survey) -> tuple[np.ndarray, np.ndarray, str] | None:
+    """Longitude and latitude (WGS84) of the reference track (true_pose, else DR), where
+    ``meta`` places the local frame (``crs`` and ``origin``)."""
+    import pyproj
+
+    crs, origin = survey.meta.get("crs"), survey.meta.get("origin")
+    if not crs or origin is None:
+        return None
+    which, pose = ("dr_pose", survey.dr_pose) if survey.true_pose is None else ("true_pose", survey.true_pose)
+    try:
+        to_wgs84 = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        lon, lat = to_wgs84.transform(pose[:, 1] + float(origin[1]), pose[:, 0] + float(origin[0]))
+    except (pyproj.exceptions.CRSError, pyproj.exceptions.ProjError, TypeError, ValueError,
+            IndexError) as exc:
+        _log.warning("survey: no latitude/longitude written (meta crs %r, origin %r: %s)", crs, origin, exc)
+        return None
+    lon, lat = np.asarray(lon, float), np.asarray(lat, float)
+    if not (np.all(np.isfinite(lon)) and np.all(np.isfinite(lat))):
+        _log.warning("survey: no latitude/longitude written (the track does not project from %r)", crs)
+        return None
+    return lon, lat, which
 
 
 def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a survey as NetCDF (schema version 1); atomic, never over an existing file
-    unless ``overwrite``."""
+    """Write a survey as CF-1.8 NetCDF (schema version 2); atomic, never over an existing file
+    unless ``overwrite``.
+
+    The file is a CF trajectory (``featureType = "trajectory"``, a ``trajectory`` id variable:
+    ``meta["name"]``, else the file's stem); where ``meta`` places it on Earth (``crs`` and
+    ``origin``), ``lat``/``lon`` of the reference track (``true_pose``, else the dead
+    reckoning) are its auxiliary coordinates. ``time`` is in
+    ``seconds since meta["start_time"]`` (UTC) where the start time is known, else in seconds
+    from the start.
+    """
     import xarray as xr
 
     import tangraph
     from tangraph.maps.io import write_atomically
 
-    data: dict[str, Any] = {
-        "time": (("ping",), survey.time, {"units": "s", "long_name": "time from the survey start"}),
+    p = Path(path)
+    start = _utc(survey.meta["start_time"]) if "start_time" in survey.meta else None
+    if start is not None:
+        time_attrs = {"standard_name": "time", "long_name": "time of the ping", "axis": "T",
+                      "units": _time_units(start), "calendar": "standard"}
+    else:  # no epoch: not a CF time coordinate, only seconds
+        time_attrs = {"units": "s", "long_name": "time from the survey start"}
+    coords: dict[str, Any] = {
+        "time": (("ping",), survey.time, time_attrs),
         "vehicle_depth": (
             ("ping",),
             survey.vehicle_depth,
-            {"units": "m", "positive": "down", "long_name": "depth of the sonar"},
+            {"standard_name": "depth", "units": "m", "positive": "down", "axis": "Z",
+             "long_name": "depth of the sonar"},
         ),
     }
+    lonlat = _reference_lonlat(survey)
+    if lonlat is not None:
+        lon, lat, which = lonlat
+        coords["lat"] = (("ping",), lat, {"standard_name": "latitude", "units": "degrees_north",
+                                           "long_name": f"latitude of the reference track ({which})"})
+        coords["lon"] = (("ping",), lon, {"standard_name": "longitude", "units": "degrees_east",
+                                           "long_name": f"longitude of the reference track ({which})"})
+    coords["trajectory"] = ((), str(survey.meta.get("name", p.stem)),
+                            {"cf_role": "trajectory_id", "long_name": "survey"})
+    data: dict[str, Any] = {}
     for prefix, pose in (("dr", survey.dr_pose), ("true", survey.true_pose)):
         if pose is None:
             continue
@@ -254,13 +328,16 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
                 {
                     "units": _UNITS[comp],
                     "long_name": f"{'dead-reckoned' if prefix == 'dr' else 'true'} {comp}"
-                    + (" (clockwise from north)" if comp == "heading" else " (local frame)"),
+                    + (" (clockwise from grid north)" if comp == "heading" else " (local frame)"),
                 },
             )
     if survey.attitude is not None:
-        for k, (comp, sense) in enumerate((("pitch", "bow up"), ("roll", "starboard down"))):
+        senses = (("pitch", "bow up", "platform_pitch_fore_up"),
+                  ("roll", "starboard down", "platform_roll_starboard_down"))
+        for k, (comp, sense, standard) in enumerate(senses):
             data[comp] = (("ping",), survey.attitude[:, k],
-                          {"units": "rad", "long_name": f"{comp} of the sonar, positive {sense}"})
+                          {"units": "rad", "standard_name": standard,
+                           "long_name": f"{comp} of the sonar, positive {sense}"})
     for name, long_name in (
         ("beam_forward", "footprint, body x (forward)"),
         ("beam_starboard", "footprint, body y (starboard)"),
@@ -268,26 +345,57 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
     ):
         attrs = {"units": "m", "long_name": long_name}
         if name == "beam_depth":
-            attrs["positive"] = "down"
+            attrs.update(positive="down", standard_name="sea_floor_depth_below_sea_surface")
         data[name] = (("ping", "beam"), getattr(survey, name), attrs)
-    ds = xr.Dataset(
-        data,
-        attrs={
-            "Conventions": "CF-1.8",
-            "title": "tangraph survey",
-            "tangraph_survey_version": SCHEMA_VERSION,
-            "source": f"tangraph {tangraph.__version__}",
-            "tangraph_meta": json.dumps(survey.meta, sort_keys=True),
-        },
-    )
-    encoding = {k: {"zlib": True, "complevel": 4} for k in data}
-    p = Path(path)
+    attrs = {
+        "Conventions": "CF-1.8",
+        "title": "tangraph survey",
+        "featureType": "trajectory",
+        "tangraph_survey_version": SCHEMA_VERSION,
+        "source": f"tangraph {tangraph.__version__}",
+        "tangraph_meta": json.dumps(survey.meta, sort_keys=True),
+    }
+    ds = xr.Dataset(data, coords=coords, attrs=attrs)
+    # xarray lists the coordinates (time, lat, lon, vehicle_depth, trajectory) in each variable's
+    # ``coordinates`` attribute
+    encoding: dict[str, dict] = {k: {"zlib": True, "complevel": 4} for k in data}
+    encoding.update({k: {"zlib": True, "complevel": 4, "_FillValue": None}
+                     for k in coords if k != "trajectory"})
+    encoding["trajectory"] = {"dtype": "S1"}  # a char array: CF-1.8 checkers refuse vlen strings
     write_atomically(p, overwrite, lambda tmp: ds.to_netcdf(tmp, encoding=encoding))
     return p
 
 
+def _seconds_from_start(p: Path, time, meta: dict) -> np.ndarray:
+    """``Survey.time`` from the ``time`` variable: plain seconds (version 1, or no start time),
+    or ``<unit> since <epoch>`` taken relative to ``meta["start_time"]`` (set to the first ping
+    when missing)."""
+    values = np.asarray(time.values, dtype=np.float64)
+    units = str(time.attrs.get("units", "s")).strip()
+    if " since " not in units:
+        return values
+    unit = units.split(" since ")[0].strip().lower()
+    if unit not in _SECONDS_PER:
+        raise SurveyError(f"{p}: time has units {units!r}; expected seconds (or minutes ...) since an epoch")
+    import cftime
+
+    try:
+        epoch = cftime.num2date(0.0, "seconds since " + units.split(" since ", 1)[1],
+                                calendar=str(time.attrs.get("calendar", "standard")),
+                                only_use_cftime_datetimes=False, only_use_python_datetimes=True)
+    except (ValueError, TypeError) as exc:
+        raise SurveyError(f"{p}: time units {units!r} are not understood ({exc})") from None
+    seconds = values * _SECONDS_PER[unit]
+    start = _utc(meta.get("start_time"))
+    if start is None:  # the first ping (to the microsecond in meta)
+        meta["start_time"] = (epoch + datetime.timedelta(seconds=float(seconds[0]))).isoformat() + "Z"
+        return seconds - seconds[0]
+    return seconds + (epoch - start).total_seconds()
+
+
 def read_survey(path: str | os.PathLike) -> Survey:
-    """Read and validate a survey NetCDF file; every error names the file and the variable."""
+    """Read and validate a survey NetCDF file (schema version 1 or 2); every error names the
+    file and the variable."""
     import xarray as xr
 
     p = Path(path)
@@ -299,9 +407,11 @@ def read_survey(path: str | os.PathLike) -> Survey:
         raise SurveyError(f"{p}: not a readable NetCDF file ({exc})") from None
     with ds:
         version = ds.attrs.get("tangraph_survey_version")
-        if version != SCHEMA_VERSION:
+        if version not in _READABLE_VERSIONS:
+            shown = version.item() if isinstance(version, np.generic) else version
             raise SurveyError(
-                f"{p}: tangraph_survey_version is {version!r}, this tangraph reads {SCHEMA_VERSION}"
+                f"{p}: tangraph_survey_version is {shown!r}, this tangraph reads "
+                f"{' and '.join(map(str, _READABLE_VERSIONS))}"
             )
         required = [
             "time",
@@ -330,9 +440,10 @@ def read_survey(path: str | os.PathLike) -> Survey:
             meta = json.loads(ds.attrs.get("tangraph_meta", "{}"))
         except json.JSONDecodeError as exc:
             raise SurveyError(f"{p}: attribute tangraph_meta is not JSON ({exc})") from None
+        time = _seconds_from_start(p, ds["time"], meta)
         try:
             return Survey(
-                time=ds["time"].values,
+                time=time,
                 dr_pose=pose["dr"],
                 vehicle_depth=ds["vehicle_depth"].values,
                 beam_forward=ds["beam_forward"].values,
