@@ -92,10 +92,21 @@ def cmd_maps_plot(args: argparse.Namespace) -> None:
 
 
 def cmd_maps_mesh(args: argparse.Namespace) -> None:
-    from tangraph.maps import write_map
+    from tangraph.maps.io import write_atomically
+    from tangraph.maps.mesh import write_mesh
 
-    path = write_map(_load(args), args.output, format="tin", overwrite=args.force)
-    print(f"wrote {path}")
+    sidecar = args.output.with_name(args.output.name + ".json")
+    source = Path(args.map).resolve() if Path(args.map).exists() else None
+    for path in (args.output, sidecar):
+        if path.resolve() == source:
+            raise TangraphError(f"maps mesh: refusing to write over the input map {args.map}")
+        if path.exists() and not args.force:
+            raise FileExistsError(f"{path} exists; pass --force to replace it")
+    m = _load(args)
+    write_atomically(
+        args.output, args.force, lambda tmp: write_mesh(m, tmp, z_up=args.z_up, sidecar=sidecar)
+    )
+    print(f"wrote {args.output}, {sidecar}")
 
 
 def cmd_maps_grid(args: argparse.Namespace) -> None:
@@ -280,28 +291,49 @@ def _graph_config(args: argparse.Namespace):
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
-    """Before any work: no output over the input, none that exists without --force."""
+    """Before any work: no output over an input or over another output, none that exists without
+    --force, --frame only with a TUM output."""
     outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
+    inputs = {"survey": args.survey, "map": args.map, "--dr-model": args.dr_model,
+              "--graph-config": args.graph_config}
+    taken = {Path(p).resolve(): f"the input {what} {p}" for what, p in inputs.items()
+             if p is not None and Path(p).exists()}
     for path in outputs:
-        if path.resolve() == Path(args.survey).resolve():
-            raise TangraphError(f"refusing to write over the input survey {args.survey}")
+        if path.resolve() in taken:
+            raise TangraphError(f"refusing to write {path} over {taken[path.resolve()]}")
+        taken[path.resolve()] = f"another output ({path})"
+    for path in outputs:
         if path.exists() and not args.force:
             raise FileExistsError(f"{path} exists; pass --force to replace it")
+    if args.frame is not None and args.tum is None and args.output.suffix.lower() != ".tum":
+        raise TangraphError("--frame applies to TUM output: -o TRACK.tum or --tum TRACK.tum")
 
 
 def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
-    from tangraph.track import write_track_csv, write_track_tum
+    from tangraph.track import write_track_csv, write_track_geojson, write_track_gpkg, write_track_tum
 
-    if args.output.suffix.lower() == ".tum":
-        write_track_tum(track, args.output, overwrite=args.force)
-    else:
-        write_track_csv(
-            track, args.output, crs=bathymetry.crs, origin=bathymetry.origin,
-            reference=survey.true_pose, overwrite=args.force,
+    suffix = args.output.suffix.lower()
+    if suffix in (".geojson", ".gpkg") and bathymetry.crs is None:
+        raise TangraphError(
+            f"-o {args.output}: the map {bathymetry.name!r} has no CRS, so the track cannot be placed "
+            "on the Earth; pass --map with a map that has a CRS"
         )
+    frame = args.frame or "ned"
+    placed = {
+        "crs": bathymetry.crs, "origin": bathymetry.origin, "reference": survey.true_pose,
+        "start_time": survey.meta.get("start_time"), "overwrite": args.force,
+    }
+    if suffix == ".tum":
+        write_track_tum(track, args.output, frame=frame, overwrite=args.force)
+    elif suffix == ".geojson":
+        write_track_geojson(track, args.output, **placed)
+    elif suffix == ".gpkg":
+        write_track_gpkg(track, args.output, **placed)
+    else:
+        write_track_csv(track, args.output, **placed)
     written = [args.output]
     if args.tum is not None:
-        written.append(write_track_tum(track, args.tum, overwrite=args.force))
+        written.append(write_track_tum(track, args.tum, frame=frame, overwrite=args.force))
     if args.plot is not None:
         from matplotlib.figure import Figure
 
@@ -407,9 +439,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--title", help="figure title (default: the map's name)")
     p.add_argument("--dpi", type=int, default=150)
     p.set_defaults(func=cmd_maps_plot)
-    p = maps_sub.add_parser("mesh", help="export a map as a triangle mesh (NED vertices)")
+    p = maps_sub.add_parser(
+        "mesh", help="export a map as a triangle mesh (NED vertices, or ENU with --z-up)",
+        description="Export a map as a triangle mesh, with its CRS, origin, units and axes in a "
+        "JSON sidecar named after it (lake.ply -> lake.ply.json).",
+    )
     _map_argument(p)
-    _output(p, "mesh file (.ply or .obj)")
+    _output(p, "mesh file (.ply or .obj); its sidecar OUTPUT.json is written too")
+    p.add_argument(
+        "--z-up", action="store_true",
+        help="vertices east, north, elevation (= -depth): a right-handed ENU mesh for viewers "
+        "that expect z up (default: north, east, depth, NED)",
+    )
     p.set_defaults(func=cmd_maps_mesh)
     p = maps_sub.add_parser(
         "grid",
@@ -511,8 +552,18 @@ def build_parser() -> argparse.ArgumentParser:
     def track_outputs(p: argparse.ArgumentParser) -> None:
         p.add_argument("survey", type=Path, help="survey file (.nc)")
         p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
-        _output(p, "track file: .csv (time, lat, lon, north, east, heading, covariance) or .tum")
+        _output(
+            p,
+            "track file by suffix: .csv (time, utc, lat, lon, north, east, heading, covariance), "
+            ".geojson or .gpkg (WGS84 line and per-pose points with those attributes; needs a map "
+            "with a CRS) or .tum",
+        )
         p.add_argument("--tum", type=Path, help="also write the track in TUM format here")
+        p.add_argument(
+            "--frame", choices=["ned", "enu"],
+            help="axes of TUM output: ned (default; x north, y east, z down) or enu (x east, "
+            "y north, z up; for evo and ROS tools)",
+        )
         p.add_argument("--plot", type=Path, help="figure of the track vs DR (and truth) over the map")
         p.add_argument(
             "--dr-model",

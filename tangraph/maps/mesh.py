@@ -390,27 +390,70 @@ def read_mesh(path, *, cell: float, name: str | None = None, **kwargs) -> Bathym
         raise type(err)(f"mesh file {str(path)!r}: {err}") from None
 
 
-def write_mesh(bathymetry: BathymetryMap, path) -> Path:
+def write_mesh(
+    bathymetry: BathymetryMap, path, *, z_up: bool = False, sidecar: bool | str | Path = False
+) -> Path:
     """Write the map's mesh (:func:`to_mesh`) as PLY (binary, float64) or OBJ (text).
 
-    The file holds local ``(north, east, depth)`` coordinates only; the CRS and origin are not
-    stored. OBJ is written here at full precision (Open3D's writer keeps 6 digits).
+    The vertices are local ``(north, east, depth)`` (NED: x north, y east, z down), or with
+    ``z_up`` ``(east, north, elevation = -depth)``: a right-handed ENU mesh (x east, y north, z up)
+    for viewers that expect z up; triangles face up (into the water) either way. OBJ is written
+    here at full precision (Open3D's writer keeps 6 digits).
+
+    The mesh file holds no CRS. ``sidecar=True`` writes it next to the mesh as JSON, named
+    after it (``lake.ply`` -> ``lake.ply.json``; a path: there): ``crs`` (as given) and
+    ``crs_wkt``, ``origin`` (northing, easting in the CRS of local north = east = 0),
+    ``units``, ``axes`` (what x, y, z are), ``up`` and ``frame``; a projected point is
+    ``easting = origin.easting + east``, ``northing = origin.northing + north``.
     """
     path = _mesh_path(path, must_exist=False)
+    axes = ["east", "north", "up"] if z_up else ["north", "east", "down"]
     if path.suffix.lower() == ".obj":
         vertices, triangles = _mesh_arrays(bathymetry)
+        if z_up:
+            vertices = np.column_stack([vertices[:, 1], vertices[:, 0], -vertices[:, 2]])
+        what = "east north elevation (m, ENU, z up)" if z_up else "north east depth (m, NED)"
         try:
             with path.open("w") as f:
-                f.write(f"# {bathymetry.name}: north east depth (m, NED)\n")
+                f.write(f"# {bathymetry.name}: {what}\n")
                 np.savetxt(f, vertices, fmt="v %.17g %.17g %.17g")
                 np.savetxt(f, triangles + 1, fmt="f %d %d %d")
         except OSError as err:
             raise TangraphError(f"cannot write mesh file {str(path)!r}: {err}") from None
-        return path
-    with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        ok = o3d.io.write_triangle_mesh(str(path), to_mesh(bathymetry))
-    if not ok:
-        raise TangraphError(f"cannot write mesh file {str(path)!r}")
+    else:
+        mesh = to_mesh(bathymetry)
+        if z_up:  # a proper rotation (det +1): the winding, and so the up-facing normals, stay
+            v = np.asarray(mesh.vertices)
+            mesh.vertices = o3d.utility.Vector3dVector(np.column_stack([v[:, 1], v[:, 0], -v[:, 2]]))
+            mesh.compute_vertex_normals()
+        with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
+            ok = o3d.io.write_triangle_mesh(str(path), mesh)
+        if not ok:
+            raise TangraphError(f"cannot write mesh file {str(path)!r}")
+    if sidecar is not False:
+        import json
+
+        from tangraph.maps.io import write_atomically
+
+        target = path.with_name(path.name + ".json") if sidecar is True else Path(sidecar)
+        crs_wkt = None
+        if bathymetry.crs is not None:
+            import pyproj
+
+            crs_wkt = pyproj.CRS.from_user_input(bathymetry.crs).to_wkt()
+        about = {
+            "map": bathymetry.name,
+            "crs": bathymetry.crs,
+            "crs_wkt": crs_wkt,
+            "origin": {"northing": bathymetry.origin[0], "easting": bathymetry.origin[1]},
+            "units": "m",
+            "axes": axes,
+            "up": "+z" if z_up else "-z",
+            "frame": "ENU" if z_up else "NED",
+            "z": "elevation (-depth, positive up)" if z_up else "depth (positive down)",
+        }
+        text = json.dumps(about, indent=2) + "\n"
+        write_atomically(target, True, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return path
 
 
