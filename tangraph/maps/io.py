@@ -3,8 +3,11 @@
 Everything enters through :func:`read_map` (or :func:`read_soundings` for scattered points)
 and leaves a `BathymetryMap` in a local metric frame: geographic grids are projected once
 (:mod:`tangraph.maps.projection`), projected grids keep their CRS with the origin at their
-first cell centre. Depth is positive down; a file that stores elevation says so in its
-metadata, or the caller says so with ``sign=``; a file where neither tells is refused.
+first cell centre (tangraph's own files keep the origin they were written with). GeoTIFFs go
+through rasterio (GDAL); NetCDF maps are written with projected ``x``/``y`` and a CF
+``grid_mapping``, so GDAL, GMT and QGIS place them. Depth is positive down; a file that stores
+elevation says so in its metadata, or the caller says so with ``sign=``; a file where neither
+tells is refused.
 """
 
 from __future__ import annotations
@@ -211,7 +214,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         if var.ndim != 2:
             raise MapFormatError(f"{path}: variable {variable!r} has dims {var.dims}, not 2-D")
         if tuple(var.dims) == ("north", "east") and "positive" in var.attrs:  # tangraph's own
-            m = BathymetryMap.from_xarray(var.load(), name=name or path.stem)
+            m = BathymetryMap.from_xarray(var.load(), name=name or str(var.attrs.get("name") or path.stem))
             return m.resample(cell) if cell is not None else m
         kinds = [_axis_kind(d, ds[d].attrs if d in ds.variables else {}) for d in var.dims]
         if (kinds[0][0] == "x" and kinds[1][0] in ("y", None)) or kinds[1][0] == "y":

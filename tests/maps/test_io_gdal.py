@@ -232,3 +232,13 @@ def test_gdal_places_tangraph_netcdf(tmp_path, crs):
         west, south = m.east[0] + m.origin[1] - 1.25, m.north[0] + m.origin[0] - 1.25
         np.testing.assert_allclose(tuple(src.bounds), (west, south, west + 15 * 2.5, south + 12 * 2.5))
         np.testing.assert_allclose(src.read(1)[::-1], m.depth)  # GDAL gives north-up rows
+
+
+def test_netcdf_maps_of_older_tangraph_still_read(tmp_path):
+    """tangraph <= 0.1 wrote dims (north, east) in local metres, CRS and origin as attributes."""
+    m = tangraph_map(local_crs(-37.0, 150.0))
+    m.to_xarray().to_dataset().to_netcdf(tmp_path / "old.nc")
+    back = read_map(tmp_path / "old.nc")
+    assert back.crs == m.crs and back.origin == m.origin and back.name == m.name
+    np.testing.assert_array_equal(back.north, m.north)
+    np.testing.assert_array_equal(back.depth, m.depth)
