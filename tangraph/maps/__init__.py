@@ -3,19 +3,26 @@ terrain statistics and the Open3D bridge."""
 
 import importlib
 
+# eager: the submodule ``catalogue`` would otherwise shadow the function of that name once imported
+from tangraph.maps.catalogue import (
+    CatalogueEntry,
+    catalogue,
+    catalogue_path,
+    list_maps,
+    load,
+    load_any,
+)
+
 #: every public name and the module that defines it; imported when first used, so that
 #: ``import tangraph.maps`` does not load Open3D, numba or pyproj before they are needed
 _WHERE = {
     "BathymetryMap": "tangraph.maps.grid",
-    "CatalogueEntry": "tangraph.maps.catalogue",
     "HAN2020_AREAS": "tangraph.maps.synthetic",
     "SoundingGrid": "tangraph.maps.mesh",
     "Soundings": "tangraph.maps.io",
     "TerrainScene": "tangraph.maps.mesh",
     "block_reduce": "tangraph.maps.gridding",
     "cast_rays": "tangraph.maps.mesh",
-    "catalogue": "tangraph.maps.catalogue",
-    "catalogue_path": "tangraph.maps.catalogue",
     "crlb": "tangraph.maps.statistics",
     "fill_gaps": "tangraph.maps.gridding",
     "fisher_information": "tangraph.maps.statistics",
@@ -26,9 +33,6 @@ _WHERE = {
     "grid_soundings": "tangraph.maps.mesh",
     "grid_surveys": "tangraph.maps.gridding",
     "han2020_chart": "tangraph.maps.synthetic",
-    "list_maps": "tangraph.maps.catalogue",
-    "load": "tangraph.maps.catalogue",
-    "load_any": "tangraph.maps.catalogue",
     "local_crs": "tangraph.maps.projection",
     "polar_chart": "tangraph.maps.synthetic",
     "project_geographic_grid": "tangraph.maps.projection",
