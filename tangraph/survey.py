@@ -293,6 +293,9 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
     from tangraph.maps.io import write_atomically
 
     p = Path(path)
+    # CF names depths below the sea surface; a survey on another datum (a gauge's zero, chart
+    # datum) has none
+    below_surface = survey.meta.get("vertical_datum", "water surface") == "water surface"
     start = _utc(survey.meta["start_time"]) if "start_time" in survey.meta else None
     if start is not None:
         time_attrs = {"standard_name": "time", "long_name": "time of the ping", "axis": "T",
@@ -304,8 +307,8 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
         "vehicle_depth": (
             ("ping",),
             survey.vehicle_depth,
-            {"standard_name": "depth", "units": "m", "positive": "down", "axis": "Z",
-             "long_name": "depth of the sonar"},
+            {**({"standard_name": "depth"} if below_surface else {}), "units": "m", "positive": "down",
+             "axis": "Z", "long_name": "depth of the sonar"},
         ),
     }
     lonlat = _reference_lonlat(survey)
@@ -345,7 +348,9 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
     ):
         attrs = {"units": "m", "long_name": long_name}
         if name == "beam_depth":
-            attrs.update(positive="down", standard_name="sea_floor_depth_below_sea_surface")
+            attrs["positive"] = "down"
+            if below_surface:
+                attrs["standard_name"] = "sea_floor_depth_below_sea_surface"
         data[name] = (("ping", "beam"), getattr(survey, name), attrs)
     attrs = {
         "Conventions": "CF-1.8",

@@ -74,6 +74,13 @@ def test_a_placed_survey_is_a_cf_trajectory(tmp_path, truth):
     assert back.meta == s.meta
 
 
+def test_depths_on_another_datum_have_no_standard_name(tmp_path):
+    path = write_survey(placed_survey(vertical_datum="chart datum"), tmp_path / "s.nc")
+    var = attrs_of(path)[1]
+    assert "standard_name" not in var["beam_depth"][0] and "standard_name" not in var["vehicle_depth"][0]
+    assert var["vehicle_depth"][0]["axis"] == "Z"
+
+
 def test_an_unplaced_survey_has_plain_seconds_and_no_lat_lon(tmp_path):
     s = make_survey(k=12, b=4)
     path = write_survey(s, tmp_path / "sim.nc")

@@ -242,3 +242,14 @@ def test_netcdf_maps_of_older_tangraph_still_read(tmp_path):
     assert back.crs == m.crs and back.origin == m.origin and back.name == m.name
     np.testing.assert_array_equal(back.north, m.north)
     np.testing.assert_array_equal(back.depth, m.depth)
+
+
+def test_large_maps_are_written_tiled(tmp_path):
+    rng = np.random.default_rng(1)
+    m = BathymetryMap(north=np.arange(600) * 1.0, east=np.arange(520) * 1.0,
+                      depth=50 + rng.normal(size=(600, 520)), crs="EPSG:32755", origin=(5.9e6, 7.5e5))
+    path = write_map(m, tmp_path / "big.tif")
+    with rasterio.open(path) as src:
+        assert src.profile["tiled"] and src.block_shapes == [(256, 256)]
+        assert src.profile["compress"] == "deflate"
+    np.testing.assert_allclose(read_map(path).depth, m.depth, atol=1e-5)
