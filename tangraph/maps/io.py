@@ -261,8 +261,9 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
         import pyproj
 
         crs = pyproj.CRS(bathymetry.crs)
-        variables["crs"] = ((), np.int32(0), {**crs.to_cf(), "spatial_ref": crs.to_wkt()})
+        variables["crs"] = ((), np.int32(0), crs.to_cf())  # crs_wkt and the CF parameters
         depth_attrs["grid_mapping"] = "crs"
+    depth_attrs["actual_range"] = np.array([np.nanmin(bathymetry.depth), np.nanmax(bathymetry.depth)])  # GMT
     variables["depth"] = (("y", "x"), np.array(bathymetry.depth), depth_attrs)
     for key, (values, var_attrs) in (extra or {}).items():
         variables[key] = (("y", "x"), np.asarray(values),

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+
 import numpy as np
 import pyproj
 import pytest
@@ -253,3 +256,24 @@ def test_large_maps_are_written_tiled(tmp_path):
         assert src.profile["tiled"] and src.block_shapes == [(256, 256)]
         assert src.profile["compress"] == "deflate"
     np.testing.assert_allclose(read_map(path).depth, m.depth, atol=1e-5)
+
+
+@pytest.mark.skipif(shutil.which("gmt") is None, reason="GMT is not installed")
+def test_gmt_places_tangraph_netcdf(tmp_path):
+    m = tangraph_map("EPSG:32755")
+    path = write_map(m, tmp_path / "m.nc")
+    info = subprocess.run(["gmt", "grdinfo", "-C", str(path)], capture_output=True, text=True, check=True)
+    fields = [float(v) for v in info.stdout.split()[1:]]
+    (west, east, south, north, v_min, v_max, dx, dy, nx, ny), pixel = fields[:10], fields[10]
+    half = 0.5 * pixel  # GMT may take the half-cell coordinates as pixel registration: the same cells
+    assert (nx, ny, dx, dy) == (15, 12, 2.5, 2.5)
+    assert (west + half * dx, east - half * dx) == pytest.approx(
+        (m.east[0] + m.origin[1], m.east[-1] + m.origin[1]))
+    assert (south + half * dy, north - half * dy) == pytest.approx(
+        (m.north[0] + m.origin[0], m.north[-1] + m.origin[0]))
+    assert (v_min, v_max) == pytest.approx((np.nanmin(m.depth), np.nanmax(m.depth)))
+    xyz = subprocess.run(["gmt", "grd2xyz", str(path)], capture_output=True, text=True, check=True)
+    rows = np.loadtxt(xyz.stdout.splitlines())  # cell centres, north row first
+    np.testing.assert_allclose(rows[:, 2].reshape(12, 15)[::-1], m.depth)
+    np.testing.assert_allclose(rows[:15, 0], m.east + m.origin[1])
+    np.testing.assert_allclose(rows[::15, 1][::-1], m.north + m.origin[0])
