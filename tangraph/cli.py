@@ -50,30 +50,27 @@ def cmd_maps_list(args: argparse.Namespace) -> None:
 
 
 def cmd_maps_info(args: argparse.Namespace) -> None:
-    from tangraph.maps import to_lonlat
-    from tangraph.maps.statistics import roughness, slope
+    from tangraph.maps.statistics import describe
 
-    m = _load(args)
-    dn, de = m.cell_size
-    n_lo, n_hi, e_lo, e_hi = m.extent
-    print(f"name         {m.name}")
-    print(f"shape        {m.shape[0]} x {m.shape[1]} cells of {dn:g} x {de:g} m")
-    print(f"extent       north {n_lo:g} .. {n_hi:g} m, east {e_lo:g} .. {e_hi:g} m")
-    print(
-        f"depth        {np.nanmin(m.depth):.2f} .. {np.nanmax(m.depth):.2f} m "
-        f"(mean {np.nanmean(m.depth):.2f}), {m.valid_fraction:.1%} of cells hold data"
-    )
-    print(f"crs          {m.crs}")
-    print(f"origin       northing {m.origin[0]:.3f}, easting {m.origin[1]:.3f}")
-    if m.crs is not None:
-        lat, lon = to_lonlat(m, 0.5 * (n_lo + n_hi), 0.5 * (e_lo + e_hi))
-        print(f"centre       {float(lat):.5f} N, {float(lon):.5f} E")
-    print(f"slope        median {np.nanmedian(slope(m)):.2f} deg")
-    window = 5
-    print(
-        f"roughness    median {np.nanmedian(roughness(m, window)):.3f} m "
-        f"(plane-fit residual std, {window} x {window} cells)"
-    )
+    r = describe(_load(args))
+    if args.json:
+        _print_json(r)
+        return
+    print(f"name         {r['name']}")
+    print(f"shape        {r['shape'][0]} x {r['shape'][1]} cells of "
+          f"{r['cell_m'][0]:g} x {r['cell_m'][1]:g} m")
+    print(f"extent       north {r['extent_m']['north'][0]:g} .. {r['extent_m']['north'][1]:g} m, "
+          f"east {r['extent_m']['east'][0]:g} .. {r['extent_m']['east'][1]:g} m")
+    d = r["depth_m"]
+    print(f"depth        {d['min']:.2f} .. {d['max']:.2f} m (mean {d['mean']:.2f}), "
+          f"{r['valid_fraction']:.1%} of cells hold data")
+    print(f"crs          {r['crs']}")
+    print(f"origin       northing {r['origin']['northing']:.3f}, easting {r['origin']['easting']:.3f}")
+    if "centre" in r:
+        print(f"centre       {r['centre']['lat']:.5f} N, {r['centre']['lon']:.5f} E")
+    print(f"slope        median {r['slope_median_deg']:.2f} deg")
+    w = r["roughness_window"]
+    print(f"roughness    median {r['roughness_median_m']:.3f} m (plane-fit residual std, {w} x {w} cells)")
 
 
 def cmd_maps_plot(args: argparse.Namespace) -> None:
@@ -169,7 +166,11 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 def cmd_survey_info(args: argparse.Namespace) -> None:
     from tangraph.survey import read_survey
 
-    print(read_survey(args.survey).summary())
+    survey = read_survey(args.survey)
+    if args.json:
+        _print_json(survey.report())
+    else:
+        print(survey.summary())
 
 
 def cmd_survey_import(args: argparse.Namespace) -> None:
@@ -355,13 +356,14 @@ def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
             args.plot, args.force, lambda tmp: fig.savefig(tmp, dpi=130, format=args.plot.suffix[1:])
         )
         written.append(args.plot)
-    print("wrote " + ", ".join(str(p) for p in written))
+    # with --json the figures alone go to standard output
+    print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr if args.json else sys.stdout)
 
 
 def cmd_navigate(args: argparse.Namespace) -> None:
     import dataclasses
 
-    from tangraph.navigation import Method, navigate, track_summary
+    from tangraph.navigation import Method, navigate
 
     method = Method(args.method)
     config = _graph_config(args)
@@ -382,20 +384,29 @@ def cmd_navigate(args: argparse.Namespace) -> None:
         config,
         rng=np.random.default_rng(args.seed),
         model=_model(args),
-        progress=not args.quiet,
+        progress=_progress(args),
     )
-    print(track_summary(track, survey))
+    _summary(args, track, survey)
     _write_track(args, track, survey, bathymetry)
 
 
+def _summary(args: argparse.Namespace, track, survey) -> None:
+    from tangraph.navigation import track_report, track_summary
+
+    if args.json:
+        _print_json(track_report(track, survey))
+    else:
+        print(track_summary(track, survey))
+
+
 def cmd_smooth(args: argparse.Namespace) -> None:
-    from tangraph.navigation import navigate, track_summary
+    from tangraph.navigation import navigate
 
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
     track = navigate(survey, bathymetry, "smoother", _graph_config(args), model=_model(args),
-                     progress=not args.quiet)
-    print(track_summary(track, survey))
+                     progress=_progress(args))
+    _summary(args, track, survey)
     for fix in track.meta.get("fixes", []):
         if not fix.accepted:
             log.info("fix at ping %s refused: %s", fix.index, fix.reason)
@@ -411,7 +422,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
         seed=args.seed,
         quick=args.quick,
         force=args.force,
-        progress=not args.quiet,
+        progress=_progress(args),
     )
     print(format_table(result.rows))
     print(f"wrote {result.report} and {len(result.figures)} figures in {result.seconds:.0f} s")
@@ -424,6 +435,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="tangraph", description="Terrain-aided navigation of AUVs.")
     parser.add_argument("--version", action="version", version=f"tangraph {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     sub = parser.add_subparsers(dest="command", required=True)
 
     maps = sub.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid")
@@ -581,7 +593,6 @@ def build_parser() -> argparse.ArgumentParser:
             help="settings of the factor graph (GraphConfig fields, TapConfig ones in [tap]): "
             "window length, fix criterion, gate, robust kernel...",
         )
-        p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
 
     p = sub.add_parser("navigate", help="estimate a survey's track with one method (filters or online graph)")
     track_outputs(p)
@@ -600,9 +611,64 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=7, help="seed of the simulation and the filters")
     p.add_argument("--quick", action="store_true", help="half the survey, fewer particles")
     p.add_argument("--force", action="store_true", help="replace the report folder if it exists")
-    p.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_demo)
+    for name in ("maps info", "survey info", "navigate", "smooth"):
+        _json_option(_subparser(parser, name.split()))
+    for leaf in _leaves(parser):  # -v and -q after the subcommand too; defaults in every help
+        leaf.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                          help="log progress")
+        leaf.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                          help="no progress bars")
+    for each in (parser, *_leaves(parser)):
+        each.formatter_class = DefaultsHelpFormatter
     return parser
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Help that shows an option's default where it has one and its help does not say it."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in text \
+                and not isinstance(action, argparse._VersionAction):
+            text += " (default: %(default)s)"
+        return text
+
+
+def _children(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    found = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return dict(found[0].choices) if found else {}
+
+
+def _leaves(parser: argparse.ArgumentParser) -> list[argparse.ArgumentParser]:
+    children = _children(parser)
+    return [leaf for child in children.values() for leaf in _leaves(child)] if children else [parser]
+
+
+def _subparser(parser: argparse.ArgumentParser, path: list[str]) -> argparse.ArgumentParser:
+    for name in path:
+        parser = _children(parser)[name]
+    return parser
+
+
+def _json_option(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print the figures as one JSON object")
+
+
+def _progress(args: argparse.Namespace) -> bool:
+    """Progress bars only on a terminal, and not with -q."""
+    return not args.quiet and sys.stderr.isatty()
+
+
+def _print_json(report: dict) -> None:
+    import json
+
+    print(json.dumps(report, indent=2, default=_plain))
+
+
+def _plain(value):
+    """numpy scalars and anything else json does not know, as plain Python."""
+    return value.item() if hasattr(value, "item") else str(value)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

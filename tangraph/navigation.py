@@ -17,7 +17,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["Method", "dead_reckoning_track", "in_map_frame", "navigate", "track_summary"]
+__all__ = ["Method", "dead_reckoning_track", "in_map_frame", "navigate", "track_report", "track_summary"]
 
 
 class Method(enum.StrEnum):
@@ -176,39 +176,58 @@ def dead_reckoning_track(survey: Survey) -> Track:
     return Track(time=survey.time, pose=survey.dr_pose, method="dr")
 
 
-def track_summary(track: Track, survey: Survey) -> str:
-    """A few lines on a track: fixes used and refused (graph), divergences (filters), run time,
-    and the errors against the truth where the survey has one."""
-    lines = [
-        f"method       {track.method}: {track.n_poses} poses over {track.time[-1] - track.time[0]:.1f} s"
-    ]
+def track_report(track: Track, survey: Survey) -> dict:
+    """The figures of a track, as data (``tangraph navigate/smooth --json``): poses, fixes by
+    outcome (graph and fix-based filters), divergences, run time, and the errors against the
+    survey's reference track (with the dead reckoning's) where it has one."""
+    report: dict = {"method": track.method, "poses": track.n_poses,
+                    "duration_s": float(track.time[-1] - track.time[0])}
     meta = track.meta
     if "fixes" in meta:
-        reasons: dict[str, int] = {}
+        outcomes: dict[str, int] = {}
         for fix in meta["fixes"]:  # the graph's FixRecords; the fix-based filters keep dicts
             status = fix.status.value if hasattr(fix, "status") else \
                 ("accepted" if fix.get("accepted") else "refused")
-            reasons[status] = reasons.get(status, 0) + 1
-        detail = ", ".join(f"{n} {r}" for r, n in sorted(reasons.items(), key=lambda kv: -kv[1]))
-        lines.append(
-            f"fixes        {meta.get('n_fixes_accepted', 0)} accepted, {meta.get('n_fixes_rejected', 0)} "
-            f"rejected ({detail})"
-        )
+            outcomes[status] = outcomes.get(status, 0) + 1
+        report["fixes"] = {"accepted": int(meta.get("n_fixes_accepted", 0)),
+                           "rejected": int(meta.get("n_fixes_rejected", 0)),
+                           "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}
     if "n_divergences" in meta:
-        lines.append(f"divergences  {meta['n_divergences']} (re-initialised from dead reckoning)")
+        report["divergences"] = int(meta["n_divergences"])
     if track.timings:
-        total = track.timings.get("total", float("nan"))
-        per_step = track.timings.get("per_step", float("nan"))
-        lines.append(f"run time     {total:.2f} s in all, {1e3 * per_step:.2f} ms per step")
+        report["run_time_s"] = float(track.timings.get("total", float("nan")))
+        report["per_step_s"] = float(track.timings.get("per_step", float("nan")))
+    if "calibration" in meta:
+        report["calibration"] = {k: float(v) for k, v in meta["calibration"].items()}
     if survey.true_pose is not None:
         from tangraph.eval import track_metrics
 
+        keys = ("rmse", "median_error", "final_error", "max_error", "anees", "final_nees")
         m = track_metrics(track, survey.true_pose)
         d = track_metrics(dead_reckoning_track(survey), survey.true_pose)
+        report["reference"] = survey.meta.get("reference", "truth")
+        report["error"] = {k: m[k] for k in keys}
+        report["dead_reckoning_error"] = {k: d[k] for k in keys[:4]}
+    return report
+
+
+def track_summary(track: Track, survey: Survey) -> str:
+    """A few lines on a track for a person: :func:`track_report` as text."""
+    r = track_report(track, survey)
+    lines = [f"method       {r['method']}: {r['poses']} poses over {r['duration_s']:.1f} s"]
+    if "fixes" in r:
+        detail = ", ".join(f"{n} {k}" for k, n in r["fixes"]["by_outcome"].items())
+        lines.append(f"fixes        {r['fixes']['accepted']} accepted, {r['fixes']['rejected']} "
+                     f"rejected ({detail})")
+    if "divergences" in r:
+        lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")
+    if "run_time_s" in r:
+        lines.append(f"run time     {r['run_time_s']:.2f} s in all, {1e3 * r['per_step_s']:.2f} ms per step")
+    if "error" in r:
+        m, d = r["error"], r["dead_reckoning_error"]
         lines.append(
             f"error        RMSE {m['rmse']:.2f} m, median {m['median_error']:.2f} m, "
-            f"final {m['final_error']:.2f} m, max {m['max_error']:.2f} m against the "
-            f"{survey.meta.get('reference', 'truth')} "
+            f"final {m['final_error']:.2f} m, max {m['max_error']:.2f} m against the {r['reference']} "
             f"(dead reckoning: RMSE {d['rmse']:.2f} m, median {d['median_error']:.2f} m, "
             f"final {d['final_error']:.2f} m)"
         )

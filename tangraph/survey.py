@@ -203,24 +203,47 @@ class Survey:
             meta={**self.meta, "pings": [start, stop]},
         )
 
-    def summary(self) -> str:
-        """A few lines for a person: duration, pings, beams, soundings, drift if truth is known."""
-        lines = [
-            f"pings        {self.n_pings} over {self.time[-1] - self.time[0]:.1f} s "
-            f"({self.n_pings / max(self.time[-1] - self.time[0], 1e-9):.3g} Hz)",
-            f"beams        {self.n_beams} per ping; {self.n_soundings} soundings "
-            f"({self.n_soundings / self.beam_depth.size:.1%} of beams returned); "
-            f"{self.n_empty_pings} empty pings",
-            f"track        {np.sum(np.hypot(*np.diff(self.dr_pose[:, :2], axis=0).T)):.1f} m (DR)",
-            f"depth        vehicle {self.vehicle_depth.min():.1f}..{self.vehicle_depth.max():.1f} m, "
-            f"seafloor {np.nanmin(self.beam_depth):.1f}..{np.nanmax(self.beam_depth):.1f} m",
-        ]
+    def report(self) -> dict[str, Any]:
+        """The survey's figures, as data (``tangraph survey info --json``)."""
+        span = float(self.time[-1] - self.time[0])
+        r: dict[str, Any] = {
+            "pings": self.n_pings, "duration_s": span, "rate_hz": self.n_pings / max(span, 1e-9),
+            "beams": self.n_beams, "soundings": self.n_soundings,
+            "returned_fraction": self.n_soundings / self.beam_depth.size,
+            "empty_pings": self.n_empty_pings,
+            "dr_track_m": float(np.sum(np.hypot(*np.diff(self.dr_pose[:, :2], axis=0).T))),
+            "vehicle_depth_m": [float(self.vehicle_depth.min()), float(self.vehicle_depth.max())],
+            "seafloor_depth_m": [float(np.nanmin(self.beam_depth)), float(np.nanmax(self.beam_depth))],
+        }
         if self.true_pose is not None:
             err = np.hypot(*(self.dr_pose[:, :2] - self.true_pose[:, :2]).T)
-            lines.append(f"DR error     final {err[-1]:.1f} m, max {err.max():.1f} m")
-        for key in ("map", "scenario", "seed"):
+            r["reference"] = self.meta.get("reference", "truth")
+            r["dr_error_m"] = {"final": float(err[-1]), "max": float(err.max()),
+                               "median": float(np.median(err))}
+        for key in ("map", "scenario", "seed", "crs", "origin", "start_time", "vertical_datum", "format"):
             if key in self.meta:
-                lines.append(f"{key:<13}{self.meta[key]}")
+                r[key] = self.meta[key]
+        r["counts"] = {k: v for k, v in self.meta.items() if k.startswith("n_")}
+        return r
+
+    def summary(self) -> str:
+        """A few lines for a person: :meth:`report` as text."""
+        r = self.report()
+        lines = [
+            f"pings        {r['pings']} over {r['duration_s']:.1f} s ({r['rate_hz']:.3g} Hz)",
+            f"beams        {r['beams']} per ping; {r['soundings']} soundings "
+            f"({r['returned_fraction']:.1%} of beams returned); {r['empty_pings']} empty pings",
+            f"track        {r['dr_track_m']:.1f} m (DR)",
+            f"depth        vehicle {r['vehicle_depth_m'][0]:.1f}..{r['vehicle_depth_m'][1]:.1f} m, "
+            f"seafloor {r['seafloor_depth_m'][0]:.1f}..{r['seafloor_depth_m'][1]:.1f} m",
+        ]
+        if "dr_error_m" in r:
+            e = r["dr_error_m"]
+            lines.append(f"DR error     final {e['final']:.1f} m, max {e['max']:.1f} m "
+                         f"(against the {r['reference']})")
+        for key in ("map", "scenario", "seed"):
+            if key in r:
+                lines.append(f"{key:<13}{r[key]}")
         return "\n".join(lines)
 
 

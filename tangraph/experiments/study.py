@@ -12,19 +12,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from tangraph.cli import DefaultsHelpFormatter
 from tangraph.errors import TangraphError
 
 __all__ = ["output_folder", "study_parser"]
-
-
-class _Defaults(argparse.HelpFormatter):
-    """Help that shows an option's default where it has one and its help does not say it."""
-
-    def _get_help_string(self, action: argparse.Action) -> str:
-        text = action.help or ""
-        if action.default not in (None, False, argparse.SUPPRESS) and "default" not in text:
-            text += " (default: %(default)s)"
-        return text
 
 
 def study_parser(here: Path, description: str, *, runs: int | None, seed: int,
@@ -36,7 +27,7 @@ def study_parser(here: Path, description: str, *, runs: int | None, seed: int,
     """
     parser = argparse.ArgumentParser(
         prog=f"tangraph experiment {here.name}", description=description,
-        formatter_class=_Defaults,
+        formatter_class=DefaultsHelpFormatter,
     )
     where = " (default: the study's config.toml)" if runs is None else ""
     parser.add_argument("--runs", type=int, default=runs, help="runs per configuration" + where)

@@ -34,6 +34,7 @@ from tangraph.maps.grid import BathymetryMap
 
 __all__ = [
     "crlb",
+    "describe",
     "fisher_information",
     "region_entropy",
     "roughness",
@@ -354,3 +355,28 @@ def crlb(information) -> np.ndarray:
         inverse = adjugate / det[..., None, None] + 0.0  # + 0.0 turns -0.0 into 0.0
     inverse[singular] = np.inf
     return inverse
+
+
+def describe(bathymetry: BathymetryMap, *, window: int = 5) -> dict:
+    """A map's figures, as data (``tangraph maps info``, ``--json``): shape, cell, extent, depth
+    range, valid fraction, CRS, origin, centre in latitude/longitude (with a CRS), median slope
+    (deg) and median roughness (plane-fit residual std over ``window`` x ``window`` cells, m)."""
+    m = bathymetry
+    dn, de = m.cell_size
+    n_lo, n_hi, e_lo, e_hi = m.extent
+    report = {
+        "name": m.name, "shape": [int(m.shape[0]), int(m.shape[1])], "cell_m": [float(dn), float(de)],
+        "extent_m": {"north": [float(n_lo), float(n_hi)], "east": [float(e_lo), float(e_hi)]},
+        "depth_m": {"min": float(np.nanmin(m.depth)), "max": float(np.nanmax(m.depth)),
+                    "mean": float(np.nanmean(m.depth))},
+        "valid_fraction": float(m.valid_fraction), "crs": m.crs,
+        "origin": {"northing": float(m.origin[0]), "easting": float(m.origin[1])},
+        "slope_median_deg": float(np.nanmedian(slope(m))),
+        "roughness_median_m": float(np.nanmedian(roughness(m, window))), "roughness_window": window,
+    }
+    if m.crs is not None:
+        from tangraph.maps.projection import to_lonlat
+
+        lat, lon = to_lonlat(m, 0.5 * (n_lo + n_hi), 0.5 * (e_lo + e_hi))
+        report["centre"] = {"lat": float(lat), "lon": float(lon)}
+    return report

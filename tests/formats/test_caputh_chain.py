@@ -75,13 +75,15 @@ def test_import_grid_smooth_on_real_runs(caputh, tmp_path, capsys):
     rec = read_sontek_sum(caputh / "20250327143017.sum")
     east, north = pyproj.Transformer.from_crs("EPSG:4326", "EPSG:25833", always_xy=True).transform(
         rec.lon[0], rec.lat[0])
-    header = track.read_text().splitlines()[0].split(",")
-    rows = np.loadtxt(track, delimiter=",", skiprows=1)
-    ref = rows[:, [header.index("ref_north"), header.index("ref_east")]]
+    import pandas as pd
+
+    table = pd.read_csv(track)
+    assert table["utc"].iloc[0] == "2025-03-27T13:30:17.000000Z"  # 14:30:17 CET, the first sample
+    ref = table[["ref_north", "ref_east"]].to_numpy()
     assert ref[0] + np.asarray(bathymetry.origin) == pytest.approx([north, east], abs=1e-3)
     assert bathymetry.crs == "EPSG:25833" and read_survey(march).meta["vertical_datum"].startswith("zero")
     # on this run the file's boat velocity follows the GPS: the smoothed track must stay near it
-    error = np.hypot(*(rows[:, [header.index("north"), header.index("east")]] - ref).T)
+    error = np.hypot(*(table[["north", "east"]].to_numpy() - ref).T)
     assert np.median(error) < 10.0, np.median(error)
     assert f"median {np.median(error):.2f} m" in printed
 
