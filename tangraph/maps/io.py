@@ -244,7 +244,7 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
                  attrs: dict | None = None) -> None:
     """CF-1.8 NetCDF that GDAL, GMT and QGIS place: dims ``(y, x)`` holding the projected
     coordinates of the cell centres (local + origin), a CF ``grid_mapping`` variable ``crs``
-    (``pyproj.CRS.to_cf``, with ``crs_wkt`` and ``spatial_ref``), depth positive down; the map's
+    (``pyproj.CRS.to_cf``: ``crs_wkt`` and the CF parameters), depth positive down; the map's
     own CRS string, origin and name as attributes of ``depth``, so it reads back in its frame.
 
     ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``; ``attrs`` adds

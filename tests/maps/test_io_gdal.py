@@ -277,3 +277,15 @@ def test_gmt_places_tangraph_netcdf(tmp_path):
     np.testing.assert_allclose(rows[:, 2].reshape(12, 15)[::-1], m.depth)
     np.testing.assert_allclose(rows[:15, 0], m.east + m.origin[1])
     np.testing.assert_allclose(rows[::15, 1][::-1], m.north + m.origin[0])
+
+
+@pytest.mark.skipif(shutil.which("gmt") is None, reason="GMT is not installed")
+@pytest.mark.parametrize("registration", [[], ["-r"]], ids=["gridline", "pixel"])
+def test_grids_written_by_gmt(tmp_path, registration):
+    path = tmp_path / "g.nc"
+    subprocess.run(["gmt", "grdmath", "-R750000/750100/5900000/5900050", "-I10", *registration,
+                    "X", "750000", "SUB", "100", "ADD", "=", str(path)], check=True, capture_output=True)
+    m = read_map(path, crs="EPSG:32755", sign="depth")
+    first = 5.0 if registration else 0.0  # pixel registration: the centre of the first cell
+    assert m.origin == (5_900_000.0 + first, 750_000.0 + first) and m.cell_size == (10.0, 10.0)
+    np.testing.assert_allclose(m.depth, np.broadcast_to(100 + first + m.east, m.shape))
