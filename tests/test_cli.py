@@ -70,3 +70,20 @@ def test_no_subcommand_is_a_usage_error():
     with pytest.raises(SystemExit) as exc:
         main([])
     assert exc.value.code == 2
+
+
+def test_json_figures_and_options_after_the_subcommand(capsys, tmp_path):
+    import json
+
+    from tangraph.cli import build_parser
+
+    assert main(["maps", "info", "merimbula", "--json", "-v"]) == 0
+    figures = json.loads(capsys.readouterr().out)
+    assert figures["name"] == "merimbula" and figures["crs"] == "EPSG:32755"
+    assert figures["shape"] == [413, 509] and 0 < figures["valid_fraction"] < 1
+    args = build_parser().parse_args(["maps", "info", "merimbula", "-q"])
+    assert args.quiet is True and args.verbose is False
+    assert build_parser().parse_args(["-q", "maps", "list"]).quiet is True
+    commands = next(a for a in build_parser()._actions if a.dest == "command")
+    demo_help = commands.choices["demo"].format_help()
+    assert "(default: 7)" in demo_help and "(default: None)" not in demo_help
