@@ -326,12 +326,17 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
     file's (or its mask); GDAL resolves PixelIsArea/PixelIsPoint. A rotated or south-up raster is
     refused. See :func:`read_map`.
     """
+    import warnings
+
     import rasterio
-    from rasterio.errors import RasterioError
+    from rasterio.errors import NotGeoreferencedWarning, RasterioError
 
     path = _existing(path)
     try:
-        with rasterio.open(path) as src:
+        with warnings.catch_warnings():  # refused below, in one line
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            src = rasterio.open(path)
+        with src:
             if src.count != 1:
                 raise MapFormatError(f"{path}: {src.count} bands; one band of depths is expected")
             band = src.read(1, masked=True)

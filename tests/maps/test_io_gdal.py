@@ -289,3 +289,26 @@ def test_grids_written_by_gmt(tmp_path, registration):
     first = 5.0 if registration else 0.0  # pixel registration: the centre of the first cell
     assert m.origin == (5_900_000.0 + first, 750_000.0 + first) and m.cell_size == (10.0, 10.0)
     np.testing.assert_allclose(m.depth, np.broadcast_to(100 + first + m.east, m.shape))
+
+
+def test_unreadable_multiband_and_ungeoreferenced_geotiffs_are_named(tmp_path):
+    (tmp_path / "junk.tif").write_text("junk")
+    with pytest.raises(MapFormatError, match="junk.tif: not a readable GeoTIFF"):
+        read_map(tmp_path / "junk.tif")
+    data = raster()
+    two = tmp_path / "two.tif"
+    with rasterio.open(two, "w", driver="GTiff", height=NY, width=NX, count=2, dtype="float32",
+                       crs="EPSG:32755", transform=Affine(CELL, 0, WEST, 0, -CELL, TOP)) as dst:
+        dst.write(np.stack([data, data]))
+    with pytest.raises(MapFormatError, match="two.tif: 2 bands; one band of depths is expected"):
+        read_map(two)
+    bare = tmp_path / "bare.tif"
+    with pytest.warns(rasterio.errors.NotGeoreferencedWarning):
+        with rasterio.open(bare, "w", driver="GTiff", height=NY, width=NX, count=1, dtype="float32") as dst:
+            dst.write(data, 1)
+    with pytest.raises(MapFormatError, match=r"bare.tif: no georeference"):
+        read_map(bare, sign="depth")
+    no_crs = write_with_rasterio(tmp_path / "nocrs.tif", data, crs=None)
+    with pytest.raises(MapFormatError, match="names no CRS; pass crs="):
+        read_map(no_crs, sign="depth")
+    assert read_map(no_crs, sign="depth", crs="EPSG:32755").crs == "EPSG:32755"
