@@ -515,8 +515,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="a survey recorded by another system: CSV log + XYZ soundings, or SonTek .sum files",
     )
     p.add_argument("--format", choices=["csv-xyz", "sontek-sum", "xtf", "gsf"], default="csv-xyz",
-                   help="csv-xyz (default): FILE is a navigation log and a soundings file; "
-                   "sontek-sum: one or more RiverSurveyor .sum files of one run")
+                   help="csv-xyz: FILE is a navigation log and a soundings file; "
+                   "sontek-sum: one or more RiverSurveyor .sum files of one run; xtf, gsf: one "
+                   "multibeam file (XTF bathymetry packets of type 65, GSF swath pings)")
     p.add_argument("files", nargs="+", type=Path, metavar="FILE",
                    help="csv-xyz: the log (time, north, east or lat, lon, heading deg, depth) and "
                    "the soundings (time x y z)")
