@@ -258,11 +258,16 @@ def test_large_maps_are_written_tiled(tmp_path):
     np.testing.assert_allclose(read_map(path).depth, m.depth, atol=1e-5)
 
 
+def gmt(folder, *args):
+    """Run GMT in ``folder`` (it leaves a gmt.history where it runs)."""
+    return subprocess.run(["gmt", *args], capture_output=True, text=True, check=True, cwd=folder)
+
+
 @pytest.mark.skipif(shutil.which("gmt") is None, reason="GMT is not installed")
 def test_gmt_places_tangraph_netcdf(tmp_path):
     m = tangraph_map("EPSG:32755")
     path = write_map(m, tmp_path / "m.nc")
-    info = subprocess.run(["gmt", "grdinfo", "-C", str(path)], capture_output=True, text=True, check=True)
+    info = gmt(tmp_path, "grdinfo", "-C", str(path))
     fields = [float(v) for v in info.stdout.split()[1:]]
     (west, east, south, north, v_min, v_max, dx, dy, nx, ny), pixel = fields[:10], fields[10]
     half = 0.5 * pixel  # GMT may take the half-cell coordinates as pixel registration: the same cells
@@ -272,7 +277,7 @@ def test_gmt_places_tangraph_netcdf(tmp_path):
     assert (south + half * dy, north - half * dy) == pytest.approx(
         (m.north[0] + m.origin[0], m.north[-1] + m.origin[0]))
     assert (v_min, v_max) == pytest.approx((np.nanmin(m.depth), np.nanmax(m.depth)))
-    xyz = subprocess.run(["gmt", "grd2xyz", str(path)], capture_output=True, text=True, check=True)
+    xyz = gmt(tmp_path, "grd2xyz", str(path))
     rows = np.loadtxt(xyz.stdout.splitlines())  # cell centres, north row first
     np.testing.assert_allclose(rows[:, 2].reshape(12, 15)[::-1], m.depth)
     np.testing.assert_allclose(rows[:15, 0], m.east + m.origin[1])
@@ -283,8 +288,8 @@ def test_gmt_places_tangraph_netcdf(tmp_path):
 @pytest.mark.parametrize("registration", [[], ["-r"]], ids=["gridline", "pixel"])
 def test_grids_written_by_gmt(tmp_path, registration):
     path = tmp_path / "g.nc"
-    subprocess.run(["gmt", "grdmath", "-R750000/750100/5900000/5900050", "-I10", *registration,
-                    "X", "750000", "SUB", "100", "ADD", "=", str(path)], check=True, capture_output=True)
+    gmt(tmp_path, "grdmath", "-R750000/750100/5900000/5900050", "-I10", *registration,
+        "X", "750000", "SUB", "100", "ADD", "=", str(path))
     m = read_map(path, crs="EPSG:32755", sign="depth")
     first = 5.0 if registration else 0.0  # pixel registration: the centre of the first cell
     assert m.origin == (5_900_000.0 + first, 750_000.0 + first) and m.cell_size == (10.0, 10.0)
