@@ -10,8 +10,9 @@ the runs as the bound is on the mean squared error: sqrt(mean RMSE^2 / mean PCRB
 NEES, the estimated speed scale and heading error against the truth (in their reported sigmas),
 and, for the graph, whether each fix it used covers the truth at 95 %.
 
-The summary checks the targets set for the navigation model: smoother RMSE <= 1.25 x its PCRB, online graph <= 1.0 x the
-best filter and <= 2 x the filter PCRB, mean final NEES inside the chi-square band of the runs
+The summary checks the targets set for the navigation model: smoother RMSE <= 1.25 x its PCRB,
+online graph <= 1.0 x the best filter and <= 2 x the filter PCRB, mean final NEES inside the
+chi-square band of the runs
 (exact: independent chi-square(2) samples, ``tangraph.eval.anees_band(R)``), calibration within
 2 sigma of the truth in >= 90 % of runs, fix coverage at 95 % within [0.93, 0.97].
 
