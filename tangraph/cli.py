@@ -16,6 +16,42 @@ from tangraph.errors import TangraphError
 log = logging.getLogger("tangraph")
 
 
+def _bounded(kind, low, high, what: str):
+    """An argparse type: ``kind`` (int or float) within [low, high], refused in one line."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            expected = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"{text!r} is not {expected}") from None
+        if not (low <= value <= high) or (kind is float and not np.isfinite(value)):
+            raise argparse.ArgumentTypeError(f"{what} must lie in [{low:g}, {high:g}], got {text}")
+        return value
+
+    parse.__name__ = what  # argparse names the type in its messages
+    return parse
+
+
+def _figure_file(path: Path) -> None:
+    """Refuse, before any work, a figure file whose suffix matplotlib cannot write."""
+    from matplotlib.figure import Figure
+
+    known = Figure().canvas.get_supported_filetypes()
+    if path.suffix[1:].lower() not in known:
+        raise TangraphError(
+            f"{path}: a figure is written as {', '.join('.' + k for k in sorted(known))}; "
+            f"not {path.suffix or 'a file without a suffix'}"
+        )
+
+
+SEED = _bounded(int, 0, 2**63 - 1, "a seed")
+PARTICLES = _bounded(int, 1, 10_000_000, "the particle count")
+DPI = _bounded(int, 20, 1200, "the resolution (dpi)")
+CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
+FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
+
+
 def _read_options(args: argparse.Namespace) -> dict:
     keys = ("variable", "sign", "crs", "cell")
     return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
@@ -26,7 +62,7 @@ def _map_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--variable", help="grid variable of a NetCDF/NPZ file")
     parser.add_argument("--sign", choices=["depth", "elevation"], help="what the file's values are")
     parser.add_argument("--crs", help="the file's CRS where it does not say (e.g. EPSG:32755)")
-    parser.add_argument("--cell", type=float, help="resample to this cell size (m)")
+    parser.add_argument("--cell", type=CELL, help="resample to this cell size (m)")
 
 
 def _output(parser: argparse.ArgumentParser, help_text: str) -> None:
@@ -79,6 +115,7 @@ def cmd_maps_plot(args: argparse.Namespace) -> None:
     from tangraph.maps.io import write_atomically
     from tangraph.plot import plot_map
 
+    _figure_file(args.output)
     m = _load(args)
     fig = Figure(figsize=(8, 6.5), layout="constrained")
     plot_map(m, fig.add_subplot(), title=args.title)
@@ -244,6 +281,7 @@ def cmd_survey_plot(args: argparse.Namespace) -> None:
     from tangraph.plot import plot_survey
     from tangraph.survey import read_survey
 
+    _figure_file(args.output)
     survey = read_survey(args.survey)
     name = args.map or survey.meta.get("map")
     bathymetry = load_any(name) if name else None
@@ -294,6 +332,8 @@ def _graph_config(args: argparse.Namespace):
 def _check_outputs(args: argparse.Namespace) -> None:
     """Before any work: no output over an input or over another output, none that exists without
     --force, --frame only with a TUM output."""
+    if args.plot is not None:
+        _figure_file(args.plot)
     outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
     inputs = {"survey": args.survey, "map": args.map, "--dr-model": args.dr_model,
               "--graph-config": args.graph_config}
@@ -436,6 +476,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"tangraph {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
 
     maps = sub.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid")
@@ -449,7 +490,7 @@ def build_parser() -> argparse.ArgumentParser:
     _map_argument(p)
     _output(p, "figure file (.png, .pdf, .svg)")
     p.add_argument("--title", help="figure title (default: the map's name)")
-    p.add_argument("--dpi", type=int, default=150)
+    p.add_argument("--dpi", type=DPI, default=150, help="resolution of a raster figure")
     p.set_defaults(func=cmd_maps_plot)
     p = maps_sub.add_parser(
         "mesh", help="export a map as a triangle mesh (NED vertices, or ENU with --z-up)",
@@ -473,13 +514,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
                    help="survey files (.nc), or one x/east y/north z text file")
-    p.add_argument("--cell", type=float, required=True, help="cell size (m)")
+    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
     p.add_argument(
         "--statistic", choices=["mean", "median"], default="median",
         help="the statistic that becomes the map's depth (default: median, robust to outliers)",
     )
     p.add_argument(
-        "--fill", type=int, default=0, metavar="CELLS",
+        "--fill", type=FILL, default=0, metavar="CELLS",
         help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
         "farther cells stay no-data (default: 0, no fill)",
     )
@@ -501,7 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
         "scenario", metavar="SCENARIO.toml|NAME", help="a scenario file or a shipped scenario name"
     )
     p.add_argument("--map", metavar="NAME|PATH", help="run on this map instead of the scenario's")
-    p.add_argument("--seed", type=int, help="seed (default: the scenario's)")
+    p.add_argument("--seed", type=SEED, help="seed (default: the scenario's)")
     _output(p, "survey file (.nc)")
     p.set_defaults(func=cmd_simulate)
 
@@ -598,8 +639,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("navigate", help="estimate a survey's track with one method (filters or online graph)")
     track_outputs(p)
     p.add_argument("--method", choices=[m.value for m in Method], default="isam2", help="the estimator")
-    p.add_argument("--seed", type=int, default=0, help="seed of a particle filter")
-    p.add_argument("--particles", type=int, help="particle count (default: the filter's)")
+    p.add_argument("--seed", type=SEED, default=0, help="seed of a particle filter")
+    p.add_argument("--particles", type=PARTICLES, help="particle count (default: the filter's)")
     p.set_defaults(func=cmd_navigate)
 
     p = sub.add_parser("smooth", help="re-navigate a recorded survey with the batch factor-graph smoother")
@@ -609,7 +650,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="simulate, navigate with every method, and write a report")
     p.add_argument("--map", default="merimbula", help="map with a demo survey (default: merimbula)")
     p.add_argument("--out", type=Path, default=Path("demo"), help="report folder (default: ./demo)")
-    p.add_argument("--seed", type=int, default=7, help="seed of the simulation and the filters")
+    p.add_argument("--seed", type=SEED, default=7, help="seed of the simulation and the filters")
     p.add_argument("--quick", action="store_true", help="half the survey, fewer particles")
     p.add_argument("--force", action="store_true", help="replace the report folder if it exists")
     p.set_defaults(func=cmd_demo)
@@ -673,7 +714,13 @@ def _plain(value):
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``tangraph`` command; returns the exit status."""
+    """Entry point of the ``tangraph`` command; returns the exit status.
+
+    0: done. 2: a usage error or bad input (the arguments, or a file that cannot be read as
+    what it should be), one line naming it. 1: a runtime error (a folder that cannot be
+    written, memory, anything unforeseen), one line; ``--debug`` shows its traceback. 130: an
+    interrupt (Ctrl-C). 141: standard output closed early (``tangraph ... | head``).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
     logging.basicConfig(
@@ -686,13 +733,43 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ.setdefault("DASK_LOGGING__DISTRIBUTED", "warning")
     try:
         args.func(args)
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141
     except (TangraphError, FileNotFoundError, FileExistsError) as exc:
-        print(f"tangraph: error: {exc}", file=sys.stderr)
+        if args.debug:
+            raise
+        print(f"tangraph: error: {_one_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("tangraph: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:  # the contract: one line, never a traceback unless asked
+        if args.debug:
+            raise
+        if type(exc).__name__ == "CRSError":  # pyproj's: a CRS the user gave is not known
+            print(f"tangraph: error: the CRS is not understood by pyproj: {_one_line(exc)}", file=sys.stderr)
+            return 2
+        kind = "out of memory" if isinstance(exc, MemoryError) else type(exc).__name__
+        print(f"tangraph: error: {kind}: {_one_line(exc)} (--debug shows where)", file=sys.stderr)
+        return 1
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _quiet_stdout()
+        return 141
     return 0
+
+
+def _one_line(exc: BaseException) -> str:
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 400 else text[:397] + "..."
+
+
+def _quiet_stdout() -> None:
+    """After a closed pipe: point stdout at /dev/null so that the interpreter's last flush is quiet."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
 
 
 if __name__ == "__main__":

@@ -1,0 +1,98 @@
+"""The command line's error contract: one line, exit status 2 for usage errors and bad input, 1
+for runtime errors, no traceback unless --debug; a closed pipe ends quietly.
+
+Each case is (arguments, expected status, text the message must hold).
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from tangraph.cli import main
+
+USAGE = [
+    (["navigate", "s.nc", "--particles", "1e9", "-o", "x.csv"], "'1e9' is not an integer"),
+    (["navigate", "s.nc", "--particles", "1000000000", "-o", "x.csv"], "the particle count must lie in"),
+    (["navigate", "s.nc", "--seed", "-1", "-o", "x.csv"], "a seed must lie in [0,"),
+    (["maps", "plot", "merimbula", "--dpi", "0", "-o", "x.png"], "the resolution (dpi) must lie in"),
+    (["maps", "plot", "merimbula", "--dpi", "100000", "-o", "x.png"], "the resolution (dpi) must lie in"),
+    (["maps", "grid", "a.xyz", "--sign", "depth", "--cell", "0.001", "-o", "g.nc"],
+     "the cell size (m) must lie in"),
+    (["maps", "info", "merimbula", "--cell", "nan"], "the cell size (m) must lie in"),
+]
+
+
+@pytest.mark.parametrize(("args", "text"), USAGE)
+def test_usage_errors_are_one_line_with_status_2(args, text, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(args)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and text in err and "Traceback" not in err
+
+
+def test_a_figure_to_an_unknown_suffix_is_refused_before_any_work(tmp_path, capsys):
+    out = tmp_path / "map.xyz"
+    assert main(["maps", "plot", "merimbula", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "a figure is written as" in err and ".png" in err and not out.exists()
+
+
+def test_a_read_only_folder_is_a_runtime_error_in_one_line(tmp_path, capsys):
+    if os.geteuid() == 0:
+        pytest.skip("root writes into read-only folders")
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    folder.chmod(0o500)
+    try:
+        status = main(["maps", "plot", "merimbula", "-o", str(folder / "m.png")])
+    finally:
+        folder.chmod(0o700)
+    err = capsys.readouterr().err
+    assert status == 1 and err.count("\n") == 1 and "PermissionError" in err
+
+
+def test_an_unforeseen_error_is_one_line_and_debug_shows_it(monkeypatch, capsys):
+    import tangraph.maps.statistics
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("something deep\nwent wrong")
+
+    monkeypatch.setattr(tangraph.maps.statistics, "describe", broken)
+    assert main(["maps", "info", "merimbula"]) == 1
+    err = capsys.readouterr().err
+    assert err == "tangraph: error: RuntimeError: something deep went wrong (--debug shows where)\n"
+    with pytest.raises(RuntimeError, match="something deep"):
+        main(["--debug", "maps", "info", "merimbula"])
+
+
+def test_a_closed_pipe_ends_quietly():
+    # the reader closes the pipe before the command writes (as head does after its lines)
+    script = ("import sys, time; from tangraph.cli import main; time.sleep(1.0); "
+              "sys.exit(main(['maps', 'info', 'merimbula', '--json']))")
+    with subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE) as p:
+        p.stdout.close()
+        err = p.stderr.read().decode()
+        status = p.wait(timeout=60)
+    assert "Traceback" not in err and "BrokenPipe" not in err, err
+    assert status == 141
+
+
+def test_an_unknown_crs_is_bad_input(tmp_path, capsys):
+    xyz = tmp_path / "a.xyz"
+    xyz.write_text("0 0 10\n10 0 11\n0 10 12\n10 10 13\n")
+    args = ["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5", "--crs", "EPSG:999999",
+            "-o", str(tmp_path / "g.nc")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "the CRS is not understood by pyproj" in err and "EPSG:999999" in err
+    assert not (tmp_path / "g.nc").exists()
+
+
+def test_status_values_are_documented():
+    doc = main.__doc__
+    assert all(str(code) in doc for code in (0, 1, 2, 130, 141))
