@@ -36,13 +36,13 @@ class CatalogueEntry:
     seed: int | None = None
     read: dict[str, Any] = dataclasses.field(default_factory=dict)
     shallowest: float | None = None
+    folder: str = ""  #: the folder of its catalogue.toml (where ``file`` lies)
 
 
 def catalogue_path() -> Path:
-    """The folder holding the catalogue's files."""
-    candidates = [Path(os.environ["TANGRAPH_MAPS"])] if "TANGRAPH_MAPS" in os.environ else []
+    """The folder holding the shipped catalogue's files."""
     here = Path(__file__).resolve().parent
-    candidates += [here.parent / "_catalogue", here.parents[1] / "maps"]
+    candidates = [here.parent / "_catalogue", here.parents[1] / "maps"]
     for folder in candidates:
         if (folder / "catalogue.toml").is_file():
             return folder
@@ -53,10 +53,34 @@ def catalogue_path() -> Path:
 
 @functools.cache
 def catalogue() -> dict[str, CatalogueEntry]:
-    """All catalogue entries by name."""
-    with open(catalogue_path() / "catalogue.toml", "rb") as f:
-        table = tomllib.load(f)
-    return {name: CatalogueEntry(name=name, **fields) for name, fields in table.items()}
+    """All catalogue entries by name: the shipped maps, and those of a private catalogue (a
+    folder with its own ``catalogue.toml``) named by the environment variable
+    ``TANGRAPH_MAPS``, which add to them; a private map may not take a shipped map's name."""
+    folders = [catalogue_path()]
+    if os.environ.get("TANGRAPH_MAPS"):
+        private = Path(os.environ["TANGRAPH_MAPS"])
+        if not (private / "catalogue.toml").is_file():
+            raise TangraphError(f"TANGRAPH_MAPS={private}: no catalogue.toml in that folder")
+        folders.append(private)
+    entries: dict[str, CatalogueEntry] = {}
+    for folder in folders:
+        path = folder / "catalogue.toml"
+        try:
+            with open(path, "rb") as f:
+                table = tomllib.load(f)
+        except tomllib.TOMLDecodeError as exc:
+            raise TangraphError(f"{path}: not valid TOML ({exc})") from None
+        for name, fields in table.items():
+            if name in entries:
+                raise TangraphError(
+                    f"{path}: map {name!r} is also in {Path(entries[name].folder) / 'catalogue.toml'}; "
+                    "give the private one another name"
+                )
+            try:
+                entries[name] = CatalogueEntry(name=name, folder=str(folder), **fields)
+            except TypeError as exc:
+                raise TangraphError(f"{path}: map {name!r}: {exc}") from None
+    return entries
 
 
 def list_maps() -> list[str]:
@@ -88,7 +112,7 @@ def load(name: str) -> BathymetryMap:
         generate = getattr(importlib.import_module(module), function)
         bathymetry = generate(rng=np.random.default_rng(entry.seed))
     else:
-        bathymetry = read_map(catalogue_path() / str(entry.file), name=name, **entry.read)
+        bathymetry = read_map(Path(entry.folder) / str(entry.file), name=name, **entry.read)
     if entry.shallowest is not None:
         shift = entry.shallowest - float(np.nanmin(bathymetry.depth))
         bathymetry = bathymetry.replace(depth=bathymetry.depth + shift)
@@ -96,9 +120,21 @@ def load(name: str) -> BathymetryMap:
 
 
 def load_any(name_or_path: str | os.PathLike, **read_options) -> BathymetryMap:
-    """A catalogue map if ``name_or_path`` is a catalogue name, else :func:`read_map` of a file."""
-    if str(name_or_path) in catalogue() and not read_options:
-        return load(str(name_or_path))
+    """A catalogue map if ``name_or_path`` is a catalogue name, else :func:`read_map` of a file.
+
+    A catalogue map takes ``cell`` (it is resampled); the options that say how to read a file
+    (``sign``, ``variable``, ``crs``, ...) do not apply to it and are refused.
+    """
+    if str(name_or_path) in catalogue():
+        options = {k: v for k, v in read_options.items() if v is not None}
+        cell = options.pop("cell", None)
+        if options:
+            raise TangraphError(
+                f"{', '.join(sorted(options))} {'does' if len(options) == 1 else 'do'} not apply to the "
+                f"catalogue map {str(name_or_path)!r}: it is read as its catalogue entry says"
+            )
+        bathymetry = load(str(name_or_path))
+        return bathymetry if cell is None else bathymetry.resample(float(cell))
     path = Path(name_or_path)
     if not path.exists() and path.suffix == "":
         raise TangraphError(

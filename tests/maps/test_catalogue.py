@@ -58,3 +58,35 @@ def test_unknown_name_lists_the_known_ones(tmp_path):
         load_any("atlantis")
     with pytest.raises(FileNotFoundError):
         load_any(tmp_path / "atlantis.nc")
+
+
+def test_a_private_catalogue_adds_to_the_shipped_maps(tmp_path, monkeypatch):
+    from tangraph.maps import catalogue, write_map
+    from tangraph.maps.synthetic import fractal
+
+    write_map(fractal((20, 20), 5.0, rng=np.random.default_rng(1)), tmp_path / "mine.nc")
+    (tmp_path / "catalogue.toml").write_text(
+        '[my-lake]\ntitle = "a private map"\nfile = "mine.nc"\nlicence = "mine"\nsource = "test"\n'
+    )
+    monkeypatch.setenv("TANGRAPH_MAPS", str(tmp_path))
+    catalogue.cache_clear()
+    try:
+        names = list(catalogue())
+        assert "my-lake" in names and "merimbula" in names
+        assert load_any("my-lake").shape == (20, 20)
+        (tmp_path / "catalogue.toml").write_text(
+            '[merimbula]\ntitle = "x"\nfile = "mine.nc"\nlicence = "x"\nsource = "x"\n'
+        )
+        catalogue.cache_clear()
+        with pytest.raises(TangraphError, match="map 'merimbula' is also in"):
+            catalogue()
+    finally:
+        monkeypatch.delenv("TANGRAPH_MAPS")
+        catalogue.cache_clear()
+
+
+def test_a_catalogue_map_takes_a_cell_but_not_file_options():
+    m = load_any("merimbula", cell=20.0)
+    assert m.cell_size == (20.0, 20.0) and m.name == "merimbula"
+    with pytest.raises(TangraphError, match="sign does not apply to the catalogue map 'merimbula'"):
+        load_any("merimbula", sign="depth")
