@@ -52,17 +52,28 @@ CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
 FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
 
 
+_READ = ("variable", "sign", "crs", "units", "nodata", "cell")
+
+
 def _read_options(args: argparse.Namespace) -> dict:
-    keys = ("variable", "sign", "crs", "cell")
-    return {k: getattr(args, k) for k in keys if getattr(args, k, None) is not None}
+    return {k: getattr(args, k) for k in _READ if getattr(args, k, None) is not None}
 
 
 def _map_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("map", metavar="NAME|PATH", help="a catalogue map name or a map file")
-    parser.add_argument("--variable", help="grid variable of a NetCDF/NPZ file")
-    parser.add_argument("--sign", choices=["depth", "elevation"], help="what the file's values are")
-    parser.add_argument("--crs", help="the file's CRS where it does not say (e.g. EPSG:32755)")
-    parser.add_argument("--cell", type=CELL, help="resample to this cell size (m)")
+    _map_read_options(parser)
+
+
+def _map_read_options(parser: argparse.ArgumentParser, *, crs: bool = True) -> None:
+    """How to read a map file, on every command that takes a map (``crs=False`` where the
+    command has a ``--crs`` of its own)."""
+    parser.add_argument("--variable", help="map file: its grid variable (NetCDF/NPZ)")
+    parser.add_argument("--sign", choices=["depth", "elevation"], help="map file: what its values are")
+    if crs:
+        parser.add_argument("--crs", help="map file: its CRS where it does not say (e.g. EPSG:32755)")
+    parser.add_argument("--units", help="map file: the unit of its values where it does not say (m, ft)")
+    parser.add_argument("--nodata", type=float, help="map file: the value that marks no data")
+    parser.add_argument("--cell", type=CELL, help="resample the map to this cell size (m)")
 
 
 def _output(parser: argparse.ArgumentParser, help_text: str) -> None:
@@ -192,9 +203,12 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     from tangraph.survey import write_survey
 
     scenario = load_scenario(args.scenario)
-    bathymetry = load_any(args.map or scenario.map)
+    bathymetry = load_any(args.map or scenario.map, **_read_options(args))
     seed = scenario.seed if args.seed is None else args.seed
     survey = simulate(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry, seed=seed)
+    if args.map is not None and Path(args.map).exists():  # a file: smooth must find it again
+        survey = survey.replace(meta={**survey.meta, "map": str(Path(args.map).resolve()),
+                                      "map_read": _read_options(args)})
     write_survey(survey, args.output, overwrite=args.force)
     print(survey.summary())
     print(f"wrote {args.output}")
@@ -284,7 +298,8 @@ def cmd_survey_plot(args: argparse.Namespace) -> None:
     _figure_file(args.output)
     survey = read_survey(args.survey)
     name = args.map or survey.meta.get("map")
-    bathymetry = load_any(name) if name else None
+    options = _read_options(args) if args.map else {**survey.meta.get("map_read", {}), **_read_options(args)}
+    bathymetry = load_any(name, **options) if name else None
     fig = Figure(figsize=(8, 7), layout="constrained")
     plot_survey(survey, bathymetry, fig.add_subplot())
     write_atomically(
@@ -313,7 +328,8 @@ def _survey_and_map(args: argparse.Namespace):
     name = args.map or survey.meta.get("map")
     if not name:
         raise TangraphError(f"{args.survey} names no map: pass --map NAME|PATH")
-    bathymetry = load_any(name)
+    options = _read_options(args) if args.map else {**survey.meta.get("map_read", {}), **_read_options(args)}
+    bathymetry = load_any(name, **options)
     return in_map_frame(survey, bathymetry), bathymetry
 
 
@@ -542,6 +558,7 @@ def build_parser() -> argparse.ArgumentParser:
         "scenario", metavar="SCENARIO.toml|NAME", help="a scenario file or a shipped scenario name"
     )
     p.add_argument("--map", metavar="NAME|PATH", help="run on this map instead of the scenario's")
+    _map_read_options(p)
     p.add_argument("--seed", type=SEED, help="seed (default: the scenario's)")
     _output(p, "survey file (.nc)")
     p.set_defaults(func=cmd_simulate)
@@ -588,6 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("survey", type=Path, help="survey file (.nc)")
     p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
+    _map_read_options(p)
     _output(p, "figure file (.png, .pdf, .svg)")
     p.set_defaults(func=cmd_survey_plot)
 
@@ -606,6 +624,7 @@ def build_parser() -> argparse.ArgumentParser:
     def track_outputs(p: argparse.ArgumentParser) -> None:
         p.add_argument("survey", type=Path, help="survey file (.nc)")
         p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
+        _map_read_options(p)
         _output(
             p,
             "track file by suffix: .csv (time, utc, lat, lon, north, east, heading, covariance), "
