@@ -19,8 +19,10 @@ def test_maps_info_of_a_name_and_of_a_file(capsys, tmp_path):
     assert main(["maps", "info", "lidar-dem"]) == 0
     out = capsys.readouterr().out
     assert "400 x 400 cells of 1 x 1 m" in out and "EPSG:26915" in out
-    assert main(["maps", "info", "lidar-dem", "--cell", "4"]) == 2  # a name takes no read options
-    assert "neither a catalogue map" in capsys.readouterr().err
+    assert main(["maps", "info", "lidar-dem", "--cell", "4"]) == 0  # a name is resampled
+    assert "100 x 100 cells of 4 x 4 m" in capsys.readouterr().out
+    assert main(["maps", "info", "lidar-dem", "--sign", "depth"]) == 2  # file options do not apply
+    assert "does not apply to the catalogue map 'lidar-dem'" in capsys.readouterr().err
 
 
 def test_maps_plot_writes_a_png_and_does_not_clobber(tmp_path, capsys):

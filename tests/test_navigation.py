@@ -142,3 +142,21 @@ def test_graph_config_option(survey_file, tmp_path, capsys):
     args = ["smooth", str(survey_file), "-q", "--graph-config", str(graph), "-o", str(out), "--force"]
     assert main(args) == 2
     assert "unknown GraphConfig field 'n_ping'" in capsys.readouterr().err
+
+
+def test_a_survey_simulated_on_a_map_file_finds_it_again(tmp_path, capsys):
+    from tangraph.maps import write_map
+
+    grid = tmp_path / "merimbula.nc"
+    write_map(load("merimbula"), grid)
+    survey = tmp_path / "wang.nc"
+    assert main(["simulate", "wang2019", "--map", str(grid), "--seed", "3", "-o", str(survey)]) == 0
+    from tangraph.survey import read_survey
+
+    assert read_survey(survey).meta["map"] == str(grid.resolve())
+    out = tmp_path / "s.csv"
+    assert main(["smooth", str(survey), "-q", "-o", str(out)]) == 0  # no --map: the file it was made on
+    assert "RMSE" in capsys.readouterr().out
+    # and the map-read options exist on the commands that take --map
+    assert main(["smooth", str(survey), "-q", "--map", str(grid), "--nodata", "-99999", "-o",
+                 str(tmp_path / "t.csv")]) == 0
