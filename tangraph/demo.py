@@ -7,8 +7,10 @@ figures: the tracks over the hill-shaded map, the position error against time wi
 of RMSE, final error, NEES, time per step and fixes used.
 
 The report folder is built beside the destination and renamed into place only when complete,
-so an interrupted demo leaves no half-written report, and an existing folder is replaced only
-when asked (``force``).
+so an interrupted demo (Ctrl-C or SIGTERM) leaves no half-written report, and an existing folder
+is replaced only when asked (``force``). The hidden folder is ``.NAME.partial-PID``; one left by a
+process that was killed outright (SIGKILL, a power cut) is removed by the next demo writing to the
+same place, never one whose process still runs.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import logging
 import os
 import shutil
 import time
@@ -24,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.outputs import Terminated, deferred_signals, remove_stale_partials, sigterm_exits
 from tangraph.track import Track
 
 __all__ = ["DEMO_SCENARIOS", "DemoResult", "run_demo"]
@@ -36,6 +40,8 @@ DEMO_SCENARIOS = {
     "polar500": "chen2022",
 }
 FILTERS = ("pf", "ipf", "sjcpf")
+
+log = logging.getLogger(__name__)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -264,71 +270,80 @@ def run_demo(
         raise FileExistsError(f"{out} exists; pass force=True (CLI: --force) to replace it")
     bathymetry = load(map_name)
     seeds = np.random.SeedSequence(seed).spawn(1 + len(FILTERS))
+    remove_stale_partials(out)
     partial = out.parent / f".{out.name}.partial-{os.getpid()}"
-    shutil.rmtree(partial, ignore_errors=True)
-    (partial / "tracks").mkdir(parents=True)
     bar, names = _stages(progress)
-    try:
-        bar.set_postfix_str(names[0])
-        survey = simulate(scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry, seed=seed)
-        if quick:
-            survey = survey.pings(0, survey.n_pings // 2)
-        write_survey(survey, partial / "survey.nc")
-        bar.update()
-        tracks: dict[str, Track] = {"dead reckoning": dead_reckoning_track(survey)}
-        n_particles = 300 if quick else 1000
-        for name, child in zip(["isam2", "smoother", *FILTERS], [None, None, *seeds[1:]], strict=True):
-            bar.set_postfix_str(name)
-            config = None
-            if child is not None:
-                from tangraph.filters import default_config
-
-                config = dataclasses.replace(default_config(name), n_particles=n_particles)
-            rng = None if child is None else np.random.default_rng(child)
-            tracks[name] = navigate(survey, bathymetry, name, config, rng=rng)
-            bar.update()
-        bar.set_postfix_str("figures")
-        figures = _figures(partial, survey, bathymetry, tracks)
-        bar.update()
-        for label, track in tracks.items():
-            write_track_csv(
-                track,
-                partial / "tracks" / f"{label.replace(' ', '_')}.csv",
-                crs=bathymetry.crs,
-                origin=bathymetry.origin,
+    with sigterm_exits():  # SIGTERM unwinds like Ctrl-C: the partial folder goes
+        try:
+            shutil.rmtree(partial, ignore_errors=True)  # this process's name: ours to replace
+            (partial / "tracks").mkdir(parents=True)
+            bar.set_postfix_str(names[0])
+            survey = simulate(
+                scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry, seed=seed
             )
-        from tangraph.eval import posterior_crb
-        from tangraph.sensors import NavigationModel
+            if quick:
+                survey = survey.pings(0, survey.n_pings // 2)
+            write_survey(survey, partial / "survey.nc")
+            bar.update()
+            tracks: dict[str, Track] = {"dead reckoning": dead_reckoning_track(survey)}
+            n_particles = 300 if quick else 1000
+            methods = ["isam2", "smoother", *FILTERS]
+            for name, child in zip(methods, [None, None, *seeds[1:]], strict=True):
+                bar.set_postfix_str(name)
+                config = None
+                if child is not None:
+                    from tangraph.filters import default_config
 
-        model = NavigationModel.from_survey(survey)
-        bounds = {kind: posterior_crb(survey, bathymetry, model, kind=kind)
-                  for kind in ("smoother", "filter")}
-        rows = [_row(label, track, survey, bounds) for label, track in tracks.items()]
-        settings = {
-            "map": map_name,
-            "scenario": scenario.as_dict(),
-            "seed": seed,
-            "quick": quick,
-            "n_particles": n_particles,
-            "filter_configs": {k: tracks[k].meta.get("config") for k in FILTERS},
-            "graph_configs": {k: tracks[k].meta.get("config") for k in ("isam2", "smoother")},
-        }
-        (partial / "settings.json").write_text(json.dumps(settings, indent=2, default=str))
-        (partial / "results.json").write_text(json.dumps(rows, indent=2))
-        seconds = time.perf_counter() - started
-        report = _report(partial, survey, bathymetry, rows, settings, seconds)
-    except BaseException:
-        shutil.rmtree(partial, ignore_errors=True)
-        raise
-    finally:
-        bar.close()
-    if out.exists():  # force: the old report goes only once the new one is complete
-        old = out.parent / f".{out.name}.old-{os.getpid()}"
-        out.rename(old)
-        partial.rename(out)
-        shutil.rmtree(old, ignore_errors=True)
-    else:
-        partial.rename(out)
+                    config = dataclasses.replace(default_config(name), n_particles=n_particles)
+                rng = None if child is None else np.random.default_rng(child)
+                tracks[name] = navigate(survey, bathymetry, name, config, rng=rng)
+                bar.update()
+            bar.set_postfix_str("figures")
+            figures = _figures(partial, survey, bathymetry, tracks)
+            bar.update()
+            for label, track in tracks.items():
+                write_track_csv(
+                    track,
+                    partial / "tracks" / f"{label.replace(' ', '_')}.csv",
+                    crs=bathymetry.crs,
+                    origin=bathymetry.origin,
+                )
+            from tangraph.eval import posterior_crb
+            from tangraph.sensors import NavigationModel
+
+            model = NavigationModel.from_survey(survey)
+            bounds = {kind: posterior_crb(survey, bathymetry, model, kind=kind)
+                      for kind in ("smoother", "filter")}
+            rows = [_row(label, track, survey, bounds) for label, track in tracks.items()]
+            settings = {
+                "map": map_name,
+                "scenario": scenario.as_dict(),
+                "seed": seed,
+                "quick": quick,
+                "n_particles": n_particles,
+                "filter_configs": {k: tracks[k].meta.get("config") for k in FILTERS},
+                "graph_configs": {k: tracks[k].meta.get("config") for k in ("isam2", "smoother")},
+            }
+            (partial / "settings.json").write_text(json.dumps(settings, indent=2, default=str))
+            (partial / "results.json").write_text(json.dumps(rows, indent=2))
+            seconds = time.perf_counter() - started
+            report = _report(partial, survey, bathymetry, rows, settings, seconds)
+        except BaseException as exc:
+            with deferred_signals():  # a second Ctrl-C does not stop the clean-up half-way
+                shutil.rmtree(partial, ignore_errors=True)
+            if isinstance(exc, Terminated):
+                log.warning("demo stopped by SIGTERM; its unfinished report %s is removed", partial)
+            raise
+        finally:
+            bar.close()
+        with deferred_signals():  # never the old report gone and the new one not yet in place
+            if out.exists():  # force: the old report goes only once the new one is complete
+                old = out.parent / f".{out.name}.old-{os.getpid()}"
+                out.rename(old)
+                partial.rename(out)
+                shutil.rmtree(old, ignore_errors=True)
+            else:
+                partial.rename(out)
     return DemoResult(
         out=out,
         report=out / report.name,
