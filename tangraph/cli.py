@@ -441,6 +441,7 @@ def cmd_navigate(args: argparse.Namespace) -> None:
         rng=np.random.default_rng(args.seed),
         model=_model(args),
         progress=_progress(args),
+        other_map=args.other_map,
     )
     _summary(args, track, survey)
     _write_track(args, track, survey, bathymetry)
@@ -461,7 +462,7 @@ def cmd_smooth(args: argparse.Namespace) -> None:
     _check_outputs(args)
     survey, bathymetry = _survey_and_map(args)
     track = navigate(survey, bathymetry, "smoother", _graph_config(args), model=_model(args),
-                     progress=_progress(args))
+                     progress=_progress(args), other_map=args.other_map)
     _summary(args, track, survey)
     for fix in track.meta.get("fixes", []):
         if not fix.accepted:
@@ -625,6 +626,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("survey", type=Path, help="survey file (.nc)")
         p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
         _map_read_options(p)
+        p.add_argument("--other-map", action="store_true",
+                       help="navigate a survey simulated on one map on another (refused otherwise)")
         _output(
             p,
             "track file by suffix: .csv (time, utc, lat, lon, north, east, heading, covariance), "
