@@ -17,7 +17,16 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["Method", "dead_reckoning_track", "in_map_frame", "navigate", "track_report", "track_summary"]
+__all__ = [
+    "Method",
+    "check_map",
+    "dead_reckoning_track",
+    "in_map_frame",
+    "map_identity",
+    "navigate",
+    "track_report",
+    "track_summary",
+]
 
 
 class Method(enum.StrEnum):
@@ -54,6 +63,7 @@ def navigate(
     rng: np.random.Generator | None = None,
     model=None,
     progress: bool = False,
+    other_map: bool = False,
 ) -> Track:
     """Run one estimator on a survey.
 
@@ -77,10 +87,15 @@ def navigate(
         survey needs one (``load_navigation_model``).
     progress : bool
         Show a progress bar over the pings.
+    other_map : bool
+        Navigate a survey simulated on one map on another (:func:`check_map` refuses it
+        otherwise).
     """
     from tangraph.sensors import survey_navigation_model
 
     method = _method(method)
+    if not other_map:
+        check_map(survey, bathymetry)
     model = survey_navigation_model(survey, model)
     if method is Method.ISAM2 or method is Method.SMOOTHER:
         from tangraph import graph
@@ -95,6 +110,48 @@ def navigate(
 
     return filters.run_filter(method.value, survey, bathymetry, config, model=model, rng=rng,
                               progress=progress)
+
+
+def map_identity(bathymetry: BathymetryMap) -> dict:
+    """What identifies a map: its name, CRS, shape, cell, the projected extent of its cell
+    centres and a content hash (SHA-256 of its depths, NaN included), as recorded in a survey
+    simulated on it (``meta["map_identity"]``)."""
+    import hashlib
+
+    depth = np.ascontiguousarray(bathymetry.depth, dtype=np.float64)
+    n_lo, n_hi, e_lo, e_hi = bathymetry.extent
+    north0, east0 = bathymetry.origin
+    return {
+        "name": bathymetry.name, "crs": bathymetry.crs, "shape": [int(v) for v in depth.shape],
+        "cell": [float(v) for v in bathymetry.cell_size],
+        "extent": [float(n_lo + north0), float(n_hi + north0), float(e_lo + east0), float(e_hi + east0)],
+        "sha256": hashlib.sha256(depth.tobytes()).hexdigest()[:32],
+    }
+
+
+def check_map(survey: Survey, bathymetry: BathymetryMap) -> None:
+    """Refuse to navigate a survey simulated on one map with another: the fixes would be made
+    against a seafloor the soundings never saw. A survey without ``meta["map_identity"]`` (a
+    recorded one) is not checked.
+
+    Raises
+    ------
+    TangraphError
+        The map's content, extent or CRS differs from the one the survey records; names both and
+        the option that navigates anyway (``other_map=True``, CLI: ``--other-map``).
+    """
+    recorded = survey.meta.get("map_identity")
+    if not recorded:
+        return
+    here = map_identity(bathymetry)
+    if recorded.get("sha256") == here["sha256"]:
+        return
+    what = [k for k in ("crs", "shape", "cell", "extent") if recorded.get(k) != here[k]] or ["depths"]
+    raise TangraphError(
+        f"the survey was simulated on map {recorded.get('name')!r}, not on {bathymetry.name!r} "
+        f"(they differ in {', '.join(what)}); pass the map it was made on, or other_map=True "
+        "(CLI: --other-map) to navigate it on this one anyway"
+    )
 
 
 def in_map_frame(survey: Survey, bathymetry: BathymetryMap) -> Survey:

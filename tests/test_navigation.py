@@ -160,3 +160,22 @@ def test_a_survey_simulated_on_a_map_file_finds_it_again(tmp_path, capsys):
     # and the map-read options exist on the commands that take --map
     assert main(["smooth", str(survey), "-q", "--map", str(grid), "--nodata", "-99999", "-o",
                  str(tmp_path / "t.csv")]) == 0
+
+
+def test_a_survey_is_refused_on_a_map_it_was_not_made_on(wang_survey, survey_file, tmp_path, capsys):
+    from tangraph.navigation import check_map, map_identity
+
+    survey, bathymetry = wang_survey
+    assert survey.meta["map_identity"] == map_identity(bathymetry)
+    check_map(survey, bathymetry)  # its own map
+    other = load("lidar-dem")
+    with pytest.raises(TangraphError, match="simulated on map 'merimbula', not on 'lidar-dem'.*--other-map"):
+        navigate(survey, other, "smoother")
+    shifted = bathymetry.replace(depth=bathymetry.depth + 0.5)  # same frame, other depths
+    with pytest.raises(TangraphError, match=r"differ in depths"):
+        check_map(survey, shifted)
+    out = tmp_path / "x.csv"
+    assert main(["smooth", str(survey_file), "--map", "lidar-dem", "-q", "-o", str(out)]) == 2
+    assert "--other-map" in capsys.readouterr().err and not out.exists()
+    recorded = survey.replace(meta={k: v for k, v in survey.meta.items() if k != "map_identity"})
+    check_map(recorded, other)  # a recorded survey records no map: nothing to check

@@ -289,9 +289,11 @@ def simulate(
     vehicle_depth = np.full(time.size, scenario.vehicle_depth)
     pings = simulate_pings(raycasting_scene(bathymetry), true_pose, vehicle_depth, scenario.sonar, rng=rng)
     import tangraph
+    from tangraph.navigation import map_identity
 
     meta = {
         "map": bathymetry.name,
+        "map_identity": map_identity(bathymetry),
         "scenario": scenario.name,
         "seed": seed,
         "software": f"tangraph {tangraph.__version__}",
