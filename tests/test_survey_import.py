@@ -424,3 +424,16 @@ def test_cli_hands_sontek_files_and_options_to_the_sontek_import(tmp_path, capsy
                  str(tmp_path / "one.nc")]) == 0
     assert calls[0][1] == {"crs": None, "timezone": None, "water_level": None,
                            "water_level_interpolate": False}
+
+
+def test_soundings_on_another_clock_than_the_log_are_refused(tmp_path):
+    nav, xyz = tmp_path / "nav.csv", tmp_path / "s.xyz"
+    t = np.arange(0.0, 101.0)
+    np.savetxt(nav, np.column_stack([t, 10 * t, 0 * t, 0 * t, 0 * t + 1]), delimiter=",",
+               header="time,north,east,heading,depth", comments="")
+    ms = np.arange(0.0, 100_001.0, 500.0)  # the soundings' times in milliseconds
+    np.savetxt(xyz, np.column_stack([ms, 0 * ms, 0 * ms, 0 * ms + 20]))
+    with pytest.raises(SurveyError, match=r"do not fit the log's .* are both in seconds on one clock"):
+        import_csv_xyz(nav, xyz)
+    np.savetxt(xyz, np.column_stack([ms / 1000, 0 * ms, 0 * ms, 0 * ms + 20]))
+    assert import_csv_xyz(nav, xyz).n_pings == ms.size

@@ -347,6 +347,7 @@ def import_csv_xyz(
     t_nav = t_nav[order]
     inside = (t_s >= t_nav[0]) & (t_s <= t_nav[-1])
     n_dropped = int((~inside).sum())
+    _check_clocks(t_nav, t_s, inside, nav_path, xyz_path)
     t_s, x_s, y_s, z_s = t_s[inside], x_s[inside], y_s[inside], z_s[inside]
     if t_s.size == 0:
         raise SurveyError(
@@ -392,6 +393,22 @@ def import_csv_xyz(
         beam_depth=depth,
         meta=meta,
     )
+
+
+def _check_clocks(t_nav: np.ndarray, t_s: np.ndarray, inside: np.ndarray, nav_path, xyz_path) -> None:
+    """Refuse two files whose clocks do not agree: most soundings outside the log's span, or
+    spans whose lengths differ by more than 10 times (milliseconds beside seconds, say)."""
+    span_nav = float(t_nav[-1] - t_nav[0])
+    span_s = float(np.nanmax(t_s) - np.nanmin(t_s)) if t_s.size else 0.0
+    outside = 1.0 - float(np.mean(inside)) if t_s.size else 0.0
+    unlike = span_nav > 0 and span_s > 0 and max(span_nav / span_s, span_s / span_nav) > 10.0
+    if outside > 0.5 or unlike:
+        raise SurveyError(
+            f"{xyz_path}: the soundings' times ({np.nanmin(t_s):.6g} .. {np.nanmax(t_s):.6g}, a span of "
+            f"{span_s:.6g}) do not fit the log's in {nav_path} ({t_nav[0]:.6g} .. {t_nav[-1]:.6g}, "
+            f"{span_nav:.6g}; {outside:.0%} of the soundings outside it): are both in seconds on one "
+            "clock? (time_format=, CLI: --time-format)"
+        )
 
 
 def _project_log(nav: _Table, cols, lat, lon, heading, lat_s, lon_s, crs, target):
