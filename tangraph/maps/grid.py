@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
@@ -43,6 +44,32 @@ def _check_axis(values: np.ndarray, name: str, where: str) -> tuple[float, float
             f"a step deviates by {worst!r}); resample the grid first"
         )
     return float(values[0]), float(spacing)
+
+
+@functools.lru_cache(maxsize=64)
+def _crs_problem(crs: str) -> str | None:
+    """Why ``crs`` cannot hold a metric local frame (None if it can)."""
+    import pyproj
+
+    try:
+        parsed = pyproj.CRS(crs)
+    except pyproj.exceptions.CRSError:
+        return None  # named where the CRS is used (to_lonlat, the survey's frame)
+    if parsed.is_geographic:
+        return (f"its CRS {parsed.name!r} is geographic (degrees), but north/east are metres; "
+                "read geographic grids with tangraph.maps.read_map (crs=) or "
+                "tangraph.maps.project_geographic_grid")
+    axes = [a for a in parsed.axis_info if a.direction in ("north", "east", "south", "west")]
+    if axes and any(abs(a.unit_conversion_factor - 1.0) > 1e-12 for a in axes):
+        return (f"its CRS {parsed.name!r} has axes in {axes[0].unit_name} "
+                "(north/east/origin must be metres); read it with tangraph.maps.read_map")
+    return None
+
+
+def _check_projected(crs: str, where: str) -> None:
+    problem = _crs_problem(crs)
+    if problem is not None:
+        raise MapFormatError(f"{where}: {problem}")
 
 
 def _as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
@@ -117,6 +144,8 @@ class BathymetryMap:
             raise MapFormatError(f"{where}: depth holds infinite values; mark no-data with NaN")
         if not np.any(np.isfinite(depth)):
             raise MapFormatError(f"{where}: depth is all NaN (no data at all)")
+        if self.crs is not None:
+            _check_projected(str(self.crs), where)
         origin = tuple(float(v) for v in self.origin)
         if len(origin) != 2 or not all(np.isfinite(origin)):
             raise MapFormatError(f"{where}: origin must be two finite numbers, got {self.origin!r}")

@@ -68,8 +68,9 @@ def _existing(path: str | os.PathLike) -> Path:
 def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | None, where: str) -> float:
     """+1 if ``values`` are depths (positive down), -1 if elevations; raise if it can't be told.
 
-    Order: ``given``; the attributes ``positive`` and ``standard_name``; the variable's
-    name, checked against the data (a "depth" that is mostly negative is ambiguous).
+    Order: ``given``; the attribute ``positive``; a guess from ``standard_name`` or the
+    variable's name, checked against the data in both directions (a "depth" mostly negative, or
+    an "elevation" of a water-named variable mostly positive, is refused naming ``sign=``).
     """
     if given is not None:
         if given not in ("depth", "elevation"):
@@ -79,37 +80,158 @@ def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | No
     if positive in ("down", "up"):
         return 1.0 if positive == "down" else -1.0
     standard = str(attrs.get("standard_name", "")).lower()
-    if "depth" in standard:
-        return 1.0
-    if any(k in standard for k in ("height", "altitude", "elevation")):
-        return -1.0
     name = variable.lower()
     valid = values[np.isfinite(values)]
     negative = float(np.mean(valid < 0)) if valid.size else 0.0
-    if name.startswith(_DEPTH_NAMES):
-        if negative > 0.5:
-            raise MapFormatError(
-                f"{where}: variable {variable!r} is named like a depth but {negative:.0%} of its "
-                "values are negative; say which it is with sign='depth' or sign='elevation' (CLI: --sign)"
-            )
-        return 1.0
-    if name.startswith(_ELEVATION_NAMES):
-        return -1.0
+    guess = _guessed_sign(standard, name)
+    if guess is not None:
+        _check_guess(guess, negative, attrs, variable, where)
+        return guess
     raise MapFormatError(
         f"{where}: cannot tell whether variable {variable!r} holds depths or elevations (no "
         "'positive' or 'standard_name' attribute); pass sign='depth' or sign='elevation' (CLI: --sign)"
     )
 
 
+_WATER_WORDS = ("bathy", "depth", "sounding", "seafloor", "sea_floor", "sea floor", "profondeur", "tiefe")
+
+
+def _guessed_sign(standard: str, name: str) -> float | None:
+    """The sign a ``standard_name`` or a variable's name suggests (None if neither does)."""
+    if "depth" in standard:
+        return 1.0
+    if any(k in standard for k in ("height", "altitude", "elevation")):
+        return -1.0
+    if name.startswith(_DEPTH_NAMES):
+        return 1.0
+    if name.startswith(_ELEVATION_NAMES):
+        return -1.0
+    return None
+
+
+def _check_guess(guess: float, negative: float, attrs: dict, variable: str, where: str) -> None:
+    """Refuse a guessed sign the data contradict: a "depth" mostly above sea level, or an
+    "elevation" of a water-named variable (bathy, bathymetrie, ...) mostly below it."""
+    basis = (f"standard_name {attrs['standard_name']!r}" if attrs.get("standard_name")
+             else f"its name {variable!r}")
+    if guess > 0 and negative > 0.5:
+        raise MapFormatError(
+            f"{where}: variable {variable!r} is named like a depth but {negative:.0%} of its values "
+            f"are negative (the guess came from {basis}); say which it is with sign='depth' or "
+            "sign='elevation' (CLI: --sign)"
+        )
+    else:
+        words = f"{variable} {attrs.get('long_name', '')}".lower()
+        if guess > 0 or not any(w in words for w in _WATER_WORDS) or negative >= 0.5:
+            return
+    raise MapFormatError(
+        f"{where}: variable {variable!r} (long_name {attrs.get('long_name', '')!r}) names water but would "
+        f"be read as elevations from {basis}, and {1 - negative:.0%} of its values are positive (above "
+        "sea level as elevations); say which it is with sign='depth' or sign='elevation' (CLI: --sign)"
+    )
+
+
+# Deeper than any ocean (Challenger Deep ~10 935 m), higher than any mountain.
+_PLAUSIBLE_DEPTH = 12_000.0
+_UNITS = {
+    "m": 1.0, "meter": 1.0, "meters": 1.0, "metre": 1.0, "metres": 1.0, "metre(s)": 1.0,
+    "ft": 0.3048, "feet": 0.3048, "foot": 0.3048, "international foot": 0.3048, "international_foot": 0.3048,
+    "us survey foot": 1200.0 / 3937.0, "us_survey_foot": 1200.0 / 3937.0, "ftus": 1200.0 / 3937.0,
+    "us-ft": 1200.0 / 3937.0, "survey foot": 1200.0 / 3937.0, "us survey feet": 1200.0 / 3937.0,
+    "fathom": 1.8288, "fathoms": 1.8288, "fm": 1.8288, "km": 1000.0, "cm": 0.01,
+}
+
+
+def unit_factor(unit: str, where: str, what: str) -> float:
+    """Metres per ``unit`` (``"m"``, ``"ft"``, ``"US survey foot"``, ``"fathom"``, ...)."""
+    key = " ".join(str(unit).strip().lower().split())
+    if key in _UNITS:
+        return _UNITS[key]
+    raise MapFormatError(
+        f"{where}: {what} has units {unit!r}, which tangraph does not know; known: m, ft, "
+        "US survey foot, fathom, km, cm; pass units='m' (or 'ft', 'US survey foot') (CLI: --units)"
+    )
+
+
+def _depth_factor(attr_unit, given: str | None, crs_unit: float, where: str, variable: str) -> float:
+    """Metres per unit of the depths: the variable's ``units`` attribute, else ``units=``; a file
+    whose CRS is not in metres and that says nothing about its depths is refused."""
+    if given is not None:
+        return unit_factor(given, where, "units=")
+    if attr_unit is not None and str(attr_unit).strip():
+        return unit_factor(str(attr_unit), where, f"variable {variable!r}")
+    if crs_unit != 1.0:
+        raise MapFormatError(
+            f"{where}: the CRS is in units of {crs_unit:g} m but variable {variable!r} has no units "
+            "attribute; pass units='m' (or 'ft', 'US survey foot') (CLI: --units)"
+        )
+    return 1.0
+
+
+def _mask_nodata(values: np.ndarray, nodata: float | None) -> np.ndarray:
+    values = np.array(values, dtype=float)
+    if nodata is not None and np.isfinite(nodata):
+        values[np.isclose(values, nodata, rtol=1e-6, atol=0)] = np.nan
+    return values
+
+
+def _check_plausible(depth: np.ndarray, where: str, variable: str) -> None:
+    """Refuse depths (metres) no ocean or mountain has: an unmarked fill value."""
+    finite = np.isfinite(depth)
+    bad = finite & (np.abs(np.where(finite, depth, 0.0)) > _PLAUSIBLE_DEPTH)
+    if np.any(bad):
+        k = np.unravel_index(int(np.argmax(bad)), depth.shape)
+        raise MapFormatError(
+            f"{where}: variable {variable!r} holds {int(bad.sum())} value(s) beyond "
+            f"{_PLAUSIBLE_DEPTH:.0f} m (e.g. {depth[k]:g} m at index {tuple(int(i) for i in k)}), "
+            "deeper or higher than any seafloor; an unmarked fill value? pass nodata=VALUE (CLI: --nodata)"
+        )
+
+
+def metric_crs(crs: str | None, where: str) -> tuple[str | None, float]:
+    """The CRS with its axes in metres and the metres per unit of the original's axes.
+
+    A projected CRS in feet becomes the same projection in metres (same WKT, axis unit metre);
+    coordinates read in the original are multiplied by the factor.
+    """
+    if crs is None:
+        return None, 1.0
+    import pyproj
+
+    try:
+        parsed = pyproj.CRS(crs)
+    except pyproj.exceptions.CRSError as exc:
+        raise MapFormatError(f"{where}: CRS {crs!r} is not understood by pyproj ({exc}); "
+                             "pass crs= (CLI: --crs)") from None
+    if parsed.is_geographic or not parsed.axis_info:
+        return crs, 1.0
+    factor = float(parsed.axis_info[0].unit_conversion_factor)
+    if parsed.axis_info[0].unit_name in ("metre", "meter") or abs(factor - 1.0) < 1e-12:
+        return crs, 1.0
+    if parsed.is_compound:
+        parsed = parsed.sub_crs_list[0]
+    spec = parsed.to_json_dict()
+    for axis in spec.get("coordinate_system", {}).get("axis", []):
+        axis["unit"] = "metre"
+    spec["name"] = f"{spec.get('name', 'CRS')} (metre axes)"
+    spec.pop("id", None)
+    return pyproj.CRS.from_json_dict(spec).to_wkt(), factor
+
+
 def _grid_to_map(
     y: np.ndarray, x: np.ndarray, depth: np.ndarray, *, geographic: bool, crs: str | None,
     cell: float | None, name: str, where: str, origin: tuple[float, float] | None = None,
+    variable: str = "z", max_scale_error: float = 1e-3,
 ) -> BathymetryMap:
-    """Flip descending axes, then project (geographic) or shift to a local origin (projected):
-    ``origin`` if given, else the first cell centre (``(0, 0)`` without a CRS)."""
+    """Refuse implausible depths (metres), flip descending axes, then project (geographic) or
+    shift to a local origin (projected, axes converted to metres): ``origin`` if given, else the
+    first cell centre (``(0, 0)`` without a CRS)."""
     y = np.asarray(y, float)
     x = np.asarray(x, float)
     depth = np.asarray(depth, float)
+    _check_plausible(depth, where, variable)
+    if not geographic and crs is not None and _is_geographic(crs):
+        geographic = True  # a geographic CRS, whatever the axes are called: the one projection step
     if y.size > 1 and y[0] > y[-1]:
         y, depth = y[::-1], depth[::-1]
     if x.size > 1 and x[0] > x[-1]:
@@ -117,7 +239,9 @@ def _grid_to_map(
     try:
         if geographic:
             return project_geographic_grid(y, x, depth, cell=cell, name=name,
-                                           source_crs=crs or "EPSG:4326")
+                                           source_crs=crs or "EPSG:4326", max_scale_error=max_scale_error)
+        crs, scale = metric_crs(crs, where)
+        y, x = y * scale, x * scale
         if origin is None:
             origin = (float(y[0]), float(x[0])) if crs else (0.0, 0.0)
         m = BathymetryMap(north=y - origin[0], east=x - origin[1], depth=depth, crs=crs,
@@ -154,7 +278,7 @@ def _axis_kind(name: str, attrs: dict) -> tuple[str | None, bool]:
     axis = str(attrs.get("axis", "")).upper()
     lname = name.lower()
     geographic = units.startswith("degree") or standard in ("latitude", "longitude") or long_name in (
-        "latitude", "longitude")
+        "latitude", "longitude") or (not units and lname in ("lat", "latitude", "lon", "long", "longitude"))
     if units == "degrees_north" or "latitude" in (standard, long_name) or axis == "Y" or lname in (
             "lat", "latitude", "y", "northing", "north") or lname.endswith("_y"):
         return "y", geographic
@@ -187,11 +311,48 @@ def _netcdf_crs(ds, var) -> str | None:
     return None
 
 
-def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=None) -> BathymetryMap:
+def _check_complete_classic(path: Path) -> None:
+    """Refuse a classic (CDF-1/2) NetCDF whose variables run past the end of the file.
+
+    The netCDF library reads a cut file as if complete (the missing bytes as zeros or fill);
+    scipy's reader reads every variable in full and fails on a short one.
+    """
+    import scipy.io
+
+    with open(path, "rb") as f:
+        magic = f.read(4)
+    if magic[:3] != b"CDF" or magic[3:] not in (b"\x01", b"\x02"):
+        return
+    seen: list[tuple] = []
+
+    class _Probe(scipy.io.netcdf_file):
+        def _read_var(self):  # records which variable is being read when a read fails
+            info = super()._read_var()
+            seen.append(info)
+            return info
+
+    try:
+        _Probe(path, mmap=False).close()
+    except (ValueError, TypeError, OSError, IndexError) as exc:
+        size = path.stat().st_size
+        if seen:
+            var_name, *_, begin, vsize = seen[-1]
+            var_name = var_name.decode() if isinstance(var_name, bytes) else var_name
+            detail = (f"variable {var_name!r} declares {vsize} bytes from byte {begin} (to {begin + vsize}) "
+                      f"but the file has {size} bytes")
+        else:
+            detail = f"its header does not read ({exc})"
+        raise MapFormatError(f"{path}: truncated classic NetCDF: {detail}; the file is incomplete "
+                             "(copy or download it again)") from None
+
+
+def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=None, nodata=None,
+                units=None, max_scale_error=1e-3) -> BathymetryMap:
     """A grid from a NetCDF (COARDS/CF) or GMT ``.grd`` file; see :func:`read_map`."""
     import xarray as xr
 
     path = _existing(path)
+    _check_complete_classic(path)
     try:
         ds = xr.open_dataset(path, decode_times=False)
     except Exception as exc:  # netCDF4/h5 raise many types for a bad file
@@ -223,21 +384,39 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         ydim, xdim = var.dims
         if ydim not in ds.variables or xdim not in ds.variables:
             raise MapFormatError(f"{path}: variable {variable!r} has no coordinate values for {var.dims}")
-        values = np.asarray(var.values, dtype=float)
-        factor = resolve_sign(values, var.attrs, variable, sign, f"{path}")
-        geographic = kinds[0][1] or kinds[1][1]
+        where = f"{path}:{variable}"
+        try:
+            values = _mask_nodata(np.asarray(var.values, dtype=float), nodata)
+        except Exception as exc:  # a cut NetCDF-4/HDF5 file fails here, in many types
+            raise MapFormatError(f"{where}: the data do not read in full ({exc}); the file is "
+                                 "incomplete or damaged") from None
         try:
             file_crs = _netcdf_crs(ds, var)
         except MapFormatError as exc:
-            raise MapFormatError(f"{path}:{variable}: {exc}") from None
+            raise MapFormatError(f"{where}: {exc}") from None
+        the_crs = crs or file_crs
+        geographic = kinds[0][1] or kinds[1][1] or (the_crs is not None and _is_geographic(the_crs))
+        crs_unit = 1.0 if geographic else metric_crs(the_crs, where)[1]
+        values = values * _depth_factor(var.attrs.get("units"), units, crs_unit, where, variable)
+        factor = resolve_sign(values, var.attrs, variable, sign, f"{path}")
+        y, x = np.asarray(ds[ydim].values, float), np.asarray(ds[xdim].values, float)
+        if not geographic and crs_unit == 1.0:  # axes in feet with no CRS (or a metric one) saying so
+            y = y * _axis_factor(ds[ydim].attrs, where, ydim)
+            x = x * _axis_factor(ds[xdim].attrs, where, xdim)
         origin = None  # tangraph's own maps keep their origin
         if not geographic and {"origin_northing", "origin_easting"} <= var.attrs.keys():
             origin = (float(var.attrs["origin_northing"]), float(var.attrs["origin_easting"]))
         return _grid_to_map(
-            ds[ydim].values, ds[xdim].values, factor * values, geographic=geographic,
-            crs=crs or file_crs, cell=cell, origin=origin,
-            name=name or str(var.attrs.get("name", "")) or path.stem, where=f"{path}:{variable}",
+            y, x, factor * values, geographic=geographic, crs=the_crs, cell=cell, origin=origin,
+            name=name or str(var.attrs.get("name", "")) or path.stem, where=where, variable=variable,
+            max_scale_error=max_scale_error,
         )
+
+
+def _axis_factor(attrs: dict, where: str, axis: str) -> float:
+    """Metres per unit of a projected coordinate, from its ``units`` attribute (metres if none)."""
+    unit = str(attrs.get("units", "")).strip()
+    return unit_factor(unit, where, f"coordinate {axis!r}") if unit else 1.0
 
 
 def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] | None = None,
@@ -319,7 +498,8 @@ def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = Fals
 _DEPTH_TAGS = {"positive": "down", "standard_name": "sea_floor_depth_below_sea_surface", "units": "m"}
 
 
-def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) -> BathymetryMap:
+def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None,
+                 units=None, max_scale_error=1e-3) -> BathymetryMap:
     """A grid from a north-up GeoTIFF (any compression, tiled or COG), read by rasterio.
 
     The CRS is the file's (an EPSG code where it is one exactly, else its WKT); no-data is the
@@ -343,6 +523,7 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
             transform, file_crs = src.transform, src.crs
             tags, band_tags = src.tags(), src.tags(1)
             variable = src.descriptions[0] or "band 1"
+            band_unit = (src.units[0] if src.units else None) or band_tags.get("units")
     except RasterioError as exc:
         raise MapFormatError(f"{path}: not a readable GeoTIFF ({exc})") from None
     values = np.ma.filled(band.astype(float), np.nan)
@@ -359,20 +540,22 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
     if tags.get("TANGRAPH_NAME") is not None:
         own = {"name": tags["TANGRAPH_NAME"], "crs": tags.get("TANGRAPH_CRS") or None,
                "positive": band_tags.get("positive")}
-    if nodata is not None and np.isfinite(nodata):
-        values[np.isclose(values, nodata, rtol=1e-6, atol=0)] = np.nan
+    values = _mask_nodata(values, nodata)
     ny, nx = values.shape
     x = c + (np.arange(nx) + 0.5) * a  # GDAL's geotransform is PixelIsArea (it shifts Point files)
     y = f + (np.arange(ny) + 0.5) * e
     if crs is None:
         crs = _geotiff_crs(file_crs, own, path)
     geographic = crs is not None and _is_geographic(crs)
+    crs_unit = 1.0 if geographic else metric_crs(crs, str(path))[1]
+    values = values * _depth_factor(band_unit, units, crs_unit, str(path), variable)
     attrs = band_tags if "positive" in band_tags or "standard_name" in band_tags else {}
     if own and sign is None and own.get("positive") in ("down", "up"):
         attrs = {"positive": own["positive"]}
     factor = resolve_sign(values, attrs, variable, sign, str(path))
     return _grid_to_map(y, x, factor * values, geographic=geographic, crs=crs, cell=cell,
-                        name=name or own.get("name") or path.stem, where=str(path))
+                        name=name or own.get("name") or path.stem, where=str(path), variable=variable,
+                        max_scale_error=max_scale_error)
 
 
 def _tangraph_description(text: str) -> dict:
@@ -452,7 +635,8 @@ def _is_numeric_row(line: str, delimiter: str | None) -> bool:
     return True
 
 
-def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) -> BathymetryMap:
+def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None,
+             units=None, max_scale_error=1e-3) -> BathymetryMap:
     """A regular grid from an ``x y z`` text file (x east/longitude, y north/latitude)."""
     path = _existing(path)
     data = _load_xyz(path)
@@ -465,16 +649,16 @@ def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None) ->
             f"({y_values.size} x {x_values.size}); scattered soundings are gridded with "
             "tangraph.maps.grid_soundings or `tangraph maps grid`"
         )
-    z = data[:, 2].copy()
-    if nodata is not None:
-        z[z == nodata] = np.nan
+    geographic = crs is not None and _is_geographic(crs)
+    crs_unit = 1.0 if geographic else metric_crs(crs, str(path))[1]
+    z = _mask_nodata(data[:, 2], nodata) * _depth_factor(None, units, crs_unit, str(path), "z")
     grid = np.full(x_values.size * y_values.size, np.nan)
     grid[flat] = z
     grid = grid.reshape(y_values.size, x_values.size)
     factor = resolve_sign(grid, {}, "z", sign, str(path))
-    geographic = crs is not None and _is_geographic(crs)
     return _grid_to_map(y_values, x_values, factor * grid, geographic=geographic,
-                        crs=crs, cell=cell, name=name or path.stem, where=str(path))
+                        crs=crs, cell=cell, name=name or path.stem, where=str(path),
+                        max_scale_error=max_scale_error)
 
 
 def _is_geographic(crs: str) -> bool:
@@ -503,7 +687,8 @@ class Soundings:
     source: str
 
 
-def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, nodata=None) -> Soundings:
+def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, nodata=None,
+                   units: str | None = None) -> Soundings:
     """Scattered soundings from an ``x y z`` text file, in a local frame.
 
     Geographic points (``crs`` geographic) are projected to a transverse Mercator centred on
@@ -514,12 +699,13 @@ def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, no
 
     path = _existing(path)
     data = _load_xyz(path)
-    z = data[:, 2].copy()
-    if nodata is not None:
-        z[z == nodata] = np.nan
+    geographic = crs is not None and _is_geographic(crs)
+    crs, scale = (crs, 1.0) if geographic else metric_crs(crs, str(path))
+    z = _mask_nodata(data[:, 2], nodata) * _depth_factor(None, units, scale, str(path), "z")
     depth = resolve_sign(z, {}, "z", sign, str(path)) * z
-    x, y = data[:, 0], data[:, 1]
-    if crs is not None and _is_geographic(crs):
+    _check_plausible(depth, str(path), "z")
+    x, y = data[:, 0] * scale, data[:, 1] * scale
+    if geographic:
         import pyproj
 
         local = local_crs(float(np.mean(y)), float(np.mean(x)))
@@ -530,7 +716,8 @@ def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, no
 
 
 # -- NPZ ------------------------------------------------------------------------------------
-def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None) -> BathymetryMap:
+def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None, nodata=None,
+             units=None, max_scale_error=1e-3) -> BathymetryMap:
     """A grid from ``.npz``: tangraph's own (north, east, depth, ...) or (lat, lon, values)."""
     path = _existing(path)
     try:
@@ -538,8 +725,11 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None) 
     except (OSError, ValueError) as exc:
         raise MapFormatError(f"{path}: not a readable .npz file ({exc})") from None
     if {"north", "east", "depth"} <= data.keys() and variable is None:
+        scale = unit_factor(units, str(path), "units=") if units else 1.0
+        depth = _mask_nodata(data["depth"], nodata) * scale
+        _check_plausible(depth, f"{path}:depth", "depth")
         m = BathymetryMap(
-            north=data["north"], east=data["east"], depth=data["depth"],
+            north=data["north"], east=data["east"], depth=depth,
             crs=str(data["crs"]) if "crs" in data and str(data["crs"]) else None,
             origin=tuple(data.get("origin", (0.0, 0.0))), name=name or str(data.get("name", path.stem)),
         )
@@ -553,11 +743,13 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None) 
             f"{path}: keys {sorted(data)}; expected north/east/depth, or lat/lon (or x/y) with one "
             "2-D variable (choose it with variable=)"
         )
-    values = np.asarray(data[variable], float)
-    factor = resolve_sign(values, {}, variable, sign, str(path))
     geographic = (y_key.startswith("lat") and crs is None) or (crs is not None and _is_geographic(crs))
+    crs_unit = 1.0 if geographic else metric_crs(crs, str(path))[1]
+    values = _mask_nodata(data[variable], nodata) * _depth_factor(None, units, crs_unit, str(path), variable)
+    factor = resolve_sign(values, {}, variable, sign, str(path))
     return _grid_to_map(data[y_key], data[x_key], factor * values, geographic=geographic, crs=crs,
-                        cell=cell, name=name or path.stem, where=f"{path}:{variable}")
+                        cell=cell, name=name or path.stem, where=f"{path}:{variable}", variable=variable,
+                        max_scale_error=max_scale_error)
 
 
 def write_npz(bathymetry: BathymetryMap, path: Path) -> None:
@@ -618,6 +810,8 @@ def read_map(
     cell: float | None = None,
     name: str | None = None,
     nodata: float | None = None,
+    units: str | None = None,
+    max_scale_error: float = 1e-3,
 ) -> BathymetryMap:
     """Read a bathymetry grid from a file into a local metric `BathymetryMap`.
 
@@ -639,7 +833,16 @@ def read_map(
     name : str, optional
         Name of the map (default: the file's stem).
     nodata : float, optional
-        A value that marks missing data, besides NaN and the file's own fill value.
+        A value that marks missing data, besides NaN and the file's own fill value (every
+        format). Values beyond 12 000 m (deeper than any ocean) are refused as an unmarked
+        fill value until it is named here.
+    units : str, optional
+        Unit of the depths where the file does not say (``"m"``, ``"ft"``, ``"US survey
+        foot"``, ``"fathom"``); a ``units`` attribute of the variable wins. Coordinates are
+        converted to metres from the CRS's axis unit (or the coordinates' ``units``).
+    max_scale_error : float, optional
+        Geographic grids: the largest scale error of the one transverse Mercator allowed at the
+        grid's edge (default 0.1 %); a wider grid is refused with its figure.
 
     Returns
     -------
@@ -655,13 +858,17 @@ def read_map(
     p = Path(path)
     fmt = _format_of(p, format)
     if fmt == "netcdf":
-        return read_netcdf(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name)
+        return read_netcdf(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name,
+                           nodata=nodata, units=units, max_scale_error=max_scale_error)
     if fmt == "geotiff":
-        return read_geotiff(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata)
+        return read_geotiff(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata, units=units,
+                            max_scale_error=max_scale_error)
     if fmt == "xyz":
-        return read_xyz(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata)
+        return read_xyz(p, sign=sign, crs=crs, cell=cell, name=name, nodata=nodata, units=units,
+                        max_scale_error=max_scale_error)
     if fmt == "npz":
-        return read_npz(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name)
+        return read_npz(p, variable=variable, sign=sign, crs=crs, cell=cell, name=name,
+                        nodata=nodata, units=units, max_scale_error=max_scale_error)
     return read_tin(p, sign=sign, crs=crs, cell=cell, name=name)
 
 

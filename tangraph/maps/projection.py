@@ -79,6 +79,7 @@ def project_geographic_grid(
     cell: float | None = None,
     name: str = "map",
     source_crs: str = _WGS84,
+    max_scale_error: float = 1e-3,
 ) -> BathymetryMap:
     """Resample a regular latitude/longitude grid of depths onto a local metric grid.
 
@@ -97,6 +98,9 @@ def project_geographic_grid(
         Name of the map.
     source_crs : str
         The geographic CRS of ``lat`` and ``lon``.
+    max_scale_error : float
+        The largest scale error of the transverse Mercator allowed at the grid's edge (default
+        0.1 %, about 285 km from the central meridian); a wider grid is refused with its figure.
 
     Returns
     -------
@@ -127,6 +131,7 @@ def project_geographic_grid(
     edge_lat = np.concatenate([lat, lat, np.full(lon.size, lat[0]), np.full(lon.size, lat[-1])])
     edge_lon = np.concatenate([np.full(lat.size, lon[0]), np.full(lat.size, lon[-1]), lon, lon])
     x, y = to_local.transform(_wrap(edge_lon), edge_lat)
+    _check_scale_error(crs, _wrap(edge_lon), edge_lat, lon, name, max_scale_error)
     north = np.arange(np.ceil(np.min(y) / cell), np.floor(np.max(y) / cell) + 1) * cell
     east = np.arange(np.ceil(np.min(x) / cell), np.floor(np.max(x) / cell) + 1) * cell
     nn, ee = np.meshgrid(north, east, indexing="ij")
@@ -137,6 +142,20 @@ def project_geographic_grid(
     return BathymetryMap(
         north=north, east=east, depth=indexed.depth_at(i, j), crs=crs, origin=(0.0, 0.0), name=name
     )
+
+
+def _check_scale_error(crs: str, edge_lon: np.ndarray, edge_lat: np.ndarray, lon: np.ndarray,
+                       name: str, limit: float) -> None:
+    """Refuse a grid too wide for one transverse Mercator (scale error beyond 0.1 % at its edge)."""
+    factors = pyproj.Proj(crs).get_factors(edge_lon, edge_lat)
+    error = float(np.nanmax(np.abs(np.asarray(factors.meridional_scale) - 1.0)))
+    if not np.isfinite(error) or error > limit:
+        raise MapFormatError(
+            f"{name}: the grid spans {lon[-1] - lon[0]:.3g} degrees of longitude; on one transverse "
+            f"Mercator centred on it the scale error reaches {error:.2%} at its edge (limit "
+            f"{limit:.2%}); crop it (gmt grdcut, gdal_translate -projwin) or accept the error with "
+            f"max_scale_error={np.ceil(error * 1e3) / 1e3:g}"
+        )
 
 
 def _wrap(lon: np.ndarray) -> np.ndarray:
