@@ -7,7 +7,13 @@ first cell centre (tangraph's own files keep the origin they were written with).
 through rasterio (GDAL); NetCDF maps are written with projected ``x``/``y`` and a CF
 ``grid_mapping``, so GDAL, GMT and QGIS place them. Depth is positive down; a file that stores
 elevation says so in its metadata, or the caller says so with ``sign=``; a file where neither
-tells is refused.
+tells, or whose data contradict the guess from its names, is refused.
+
+A map is never read wrongly without a word: a truncated classic NetCDF, values beyond 12 000 m
+(an unmarked fill value: ``nodata=``), an unknown unit (``units=``) and a geographic grid too
+wide for one transverse Mercator (``max_scale_error=``) are refused in one line naming the
+file, the variable, the value and the option. Depths in feet (the variable's ``units``) and
+coordinates in feet (the CRS's axis unit) are converted to metres.
 """
 
 from __future__ import annotations

@@ -198,3 +198,25 @@ def test_grid_too_wide_for_one_transverse_mercator_is_refused_with_its_figure(tm
     with pytest.raises(MapFormatError, match=r"wide\.npz:depth_grid: .*scale error.*max_scale_error="):
         read_map(path, sign="depth")
     assert read_map(path, sign="depth", max_scale_error=0.02).crs.startswith("+proj=tmerc")
+
+
+def test_geotiff_in_us_survey_feet_reads_in_metres(tmp_path):
+    rasterio = pytest.importorskip("rasterio")
+    from rasterio.transform import Affine
+
+    ft = 1200 / 3937
+    path = tmp_path / "ft.tif"
+    profile = {"driver": "GTiff", "height": 4, "width": 5, "count": 1, "dtype": "float32",
+               "crs": rasterio.crs.CRS.from_epsg(2227),
+               "transform": Affine(10.0, 0.0, 6_000_000.0, 0.0, -10.0, 2_100_040.0)}
+    with rasterio.open(path, "w", **profile) as dst:
+        dst.write(np.full((4, 5), 100.0, dtype=np.float32), 1)
+        dst.update_tags(1, positive="down")
+    with pytest.raises(MapFormatError, match=r"ft\.tif: the CRS is in units of 0\.3048\d* m.*pass units="):
+        read_map(path)
+    with rasterio.open(path, "r+") as dst:
+        dst.units = ("US survey foot",)
+    m = read_map(path)
+    assert m.cell_size == pytest.approx((10 * ft, 10 * ft))
+    assert np.allclose(m.depth, 100 * ft)
+    assert m.origin == pytest.approx(((2_100_000.0 + 5.0) * ft, (6_000_000.0 + 5.0) * ft))
