@@ -25,11 +25,9 @@ def test_catalogue_lists_real_and_synthetic_maps_with_provenance():
         assert (entry.file is None) != (entry.generator is None)
 
 
-# arabian-sea is 13 degrees wide (0.64 % scale error on one transverse Mercator): refused by the
-# 0.1 % limit until catalogue.toml accepts it (read option max_scale_error = 0.007)
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.xfail(
-    n == "arabian-sea", reason="wider than one transverse Mercator", raises=TangraphError, strict=False))
-    for n in REAL])
+# arabian-sea is 13 degrees wide (0.64 % scale error on one transverse Mercator): its catalogue
+# entry accepts that (read option max_scale_error = 0.007)
+@pytest.mark.parametrize("name", list(REAL))
 def test_real_maps_load_in_place(name):
     (lat, lon), (lo, hi) = REAL[name]
     m = load(name)
