@@ -256,6 +256,12 @@ def run_demo(
         Seeds the simulation and every filter (children of one ``SeedSequence``).
     quick : bool
         Half the survey and fewer particles: a check that everything runs, in about a minute.
+
+    Raises
+    ------
+    tangraph.outputs.Terminated
+        On SIGTERM (in the main thread, where no other handler is set), once the unfinished
+        report folder is removed; it is a ``SystemExit`` with status 143.
     """
     from tangraph.maps import load
     from tangraph.navigation import dead_reckoning_track, navigate
