@@ -102,10 +102,11 @@ def _alive(pid: int) -> bool:
 def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
     """Remove ``.NAME.partial-PID`` beside ``target`` (named NAME) whose process has ended.
 
-    The folder or file of a process that still runs, and this process's own, are kept. Also
-    removes a stale ``.NAME.old-PID`` (the previous version kept while a new one is renamed into
-    place), but only while ``target`` itself exists: otherwise it may be the one copy left.
-    Returns what was removed.
+    Also the temporary files of :class:`OutputSet` (``.STEM.partial-PID-XXXX.SUFFIX``). The
+    folder or file of a process that still runs, and this process's own, are kept. A stale
+    ``.NAME.old-PID`` or ``.STEM.old-PID-XXXX`` (the previous version kept while a new one is
+    renamed into place) goes too, but only while ``target`` itself exists: otherwise it may be
+    the one copy left. Returns what was removed.
 
     Examples
     --------
@@ -116,7 +117,10 @@ def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
     ['.demo.partial-999999999']
     """
     target = Path(target)
-    pattern = re.compile(rf"^\.{re.escape(target.name)}\.(partial|old)-(\d+)$")
+    name, stem, suffix = (re.escape(t) for t in (target.name, target.stem, target.suffix))
+    pattern = re.compile(
+        rf"^(?:\.{name}\.(partial|old)-(\d+)|\.{stem}\.(partial|old)-(\d+)-[A-Za-z0-9_]+{suffix})$"
+    )
     removed = []
     try:
         entries = list(target.parent.iterdir())
@@ -126,7 +130,8 @@ def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
         match = pattern.match(entry.name)
         if match is None:
             continue
-        kind, pid = match.group(1), int(match.group(2))
+        kind, pid = (match.group(1), match.group(2)) if match.group(1) else (match.group(3), match.group(4))
+        pid = int(pid)
         if pid == os.getpid() or _alive(pid) or (kind == "old" and not target.exists()):
             continue
         if entry.is_dir() and not entry.is_symlink():
@@ -180,6 +185,7 @@ class OutputSet:
             raise ValueError(f"{target} is already an output of this set")
         self._refuse_existing(target)
         target.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale_partials(target)
         fd, tmp = tempfile.mkstemp(
             prefix=f".{target.stem}.partial-{os.getpid()}-", suffix=target.suffix, dir=target.parent
         )
@@ -220,7 +226,9 @@ class OutputSet:
         try:
             for target, tmp in self._pending.items():
                 if target.exists():
-                    fd, backup = tempfile.mkstemp(prefix=f".{target.stem}.old-", dir=target.parent)
+                    fd, backup = tempfile.mkstemp(
+                        prefix=f".{target.stem}.old-{os.getpid()}-", suffix=target.suffix, dir=target.parent
+                    )
                     os.close(fd)
                     os.replace(target, backup)
                     backups[target] = Path(backup)

@@ -141,6 +141,23 @@ def test_a_stale_partial_folder_goes_and_a_live_one_stays(tmp_path):
     assert remove_stale_partials(tmp_path / "nowhere" / "demo") == []
 
 
+def test_an_output_set_removes_the_stale_temporary_files_of_its_targets(tmp_path):
+    dead, alive = _dead_pid(), os.getppid()
+    stale = tmp_path / f".track.partial-{dead}-k3x_9q.csv"
+    running = tmp_path / f".track.partial-{alive}-abc123.csv"
+    backup = tmp_path / f".track.old-{dead}-zz9.csv"  # the only copy while track.csv is missing
+    other = tmp_path / f".track.partial-{dead}-k3x_9q.tum"  # another target's
+    for path in (stale, running, backup, other):
+        path.write_text("left over")
+    with OutputSet() as outputs:
+        outputs.path(tmp_path / "track.csv").write_text("new")
+    assert not stale.exists() and running.exists() and backup.exists() and other.exists()
+    with OutputSet(overwrite=True) as outputs:  # now track.csv exists: the backup is stale
+        outputs.path(tmp_path / "track.csv").write_text("newer")
+    assert not backup.exists() and running.exists() and other.exists()
+    assert (tmp_path / "track.csv").read_text() == "newer"
+
+
 def test_the_next_demo_removes_a_stale_partial_folder(tmp_path, monkeypatch):
     stale = tmp_path / f".demo.partial-{_dead_pid()}"
     (stale / "tracks").mkdir(parents=True)
