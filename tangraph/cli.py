@@ -347,9 +347,7 @@ def _graph_config(args: argparse.Namespace):
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Before any work: no output over an input or over another output, none that exists without
-    --force, --frame only with a TUM output."""
-    if args.plot is not None:
-        _figure_file(args.plot)
+    --force, --frame only with a TUM output, a figure only to a suffix matplotlib writes."""
     outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
     inputs = {"survey": args.survey, "map": args.map, "--dr-model": args.dr_model,
               "--graph-config": args.graph_config}
@@ -364,9 +362,14 @@ def _check_outputs(args: argparse.Namespace) -> None:
             raise FileExistsError(f"{path} exists; pass --force to replace it")
     if args.frame is not None and args.tum is None and args.output.suffix.lower() != ".tum":
         raise TangraphError("--frame applies to TUM output: -o TRACK.tum or --tum TRACK.tum")
+    if args.plot is not None:
+        _figure_file(args.plot)
 
 
 def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
+    """Write the track, its TUM copy and its figure as one: all of them, or (after an error,
+    Ctrl-C or SIGTERM) none, and no existing file touched."""
+    from tangraph.outputs import OutputSet, sigterm_exits
     from tangraph.track import write_track_csv, write_track_geojson, write_track_gpkg, write_track_tum
 
     suffix = args.output.suffix.lower()
@@ -378,40 +381,38 @@ def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
     frame = args.frame or "ned"
     placed = {
         "crs": bathymetry.crs, "origin": bathymetry.origin, "reference": survey.true_pose,
-        "start_time": survey.meta.get("start_time"), "overwrite": args.force,
+        "start_time": survey.meta.get("start_time"), "overwrite": True,  # onto the set's temporary file
     }
-    if suffix == ".tum":
-        write_track_tum(track, args.output, frame=frame, overwrite=args.force)
-    elif suffix == ".geojson":
-        write_track_geojson(track, args.output, **placed)
-    elif suffix == ".gpkg":
-        write_track_gpkg(track, args.output, **placed)
-    else:
-        write_track_csv(track, args.output, **placed)
-    written = [args.output]
-    if args.tum is not None:
-        written.append(write_track_tum(track, args.tum, frame=frame, overwrite=args.force))
-    if args.plot is not None:
-        from matplotlib.figure import Figure
+    written = [p for p in (args.output, args.tum, args.plot) if p is not None]
+    with sigterm_exits(), OutputSet(overwrite=args.force) as outputs:
+        output = outputs.path(args.output)
+        if suffix == ".tum":
+            write_track_tum(track, output, frame=frame, overwrite=True)
+        elif suffix == ".geojson":
+            write_track_geojson(track, output, **placed)
+        elif suffix == ".gpkg":
+            write_track_gpkg(track, output, **placed)
+        else:
+            write_track_csv(track, output, **placed)
+        if args.tum is not None:
+            write_track_tum(track, outputs.path(args.tum), frame=frame, overwrite=True)
+        if args.plot is not None:
+            from matplotlib.figure import Figure
 
-        from tangraph.maps.io import write_atomically
-        from tangraph.navigation import dead_reckoning_track
-        from tangraph.plot import plot_tracks
+            from tangraph.navigation import dead_reckoning_track
+            from tangraph.plot import plot_tracks
 
-        fig = Figure(figsize=(8, 7.5), layout="constrained")
-        tracks = {"dead reckoning": dead_reckoning_track(survey), track.method: track}
-        plot_tracks(
-            tracks,
-            bathymetry,
-            fig.add_subplot(),
-            truth=survey.true_pose,
-            ellipses=track.method,
-            title=f"{track.method} on {bathymetry.name}",
-        )
-        write_atomically(
-            args.plot, args.force, lambda tmp: fig.savefig(tmp, dpi=130, format=args.plot.suffix[1:])
-        )
-        written.append(args.plot)
+            fig = Figure(figsize=(8, 7.5), layout="constrained")
+            tracks = {"dead reckoning": dead_reckoning_track(survey), track.method: track}
+            plot_tracks(
+                tracks,
+                bathymetry,
+                fig.add_subplot(),
+                truth=survey.true_pose,
+                ellipses=track.method,
+                title=f"{track.method} on {bathymetry.name}",
+            )
+            fig.savefig(outputs.path(args.plot), dpi=130, format=args.plot.suffix[1:])
     # with --json the figures alone go to standard output
     print("wrote " + ", ".join(str(p) for p in written), file=sys.stderr if args.json else sys.stdout)
 
