@@ -1,8 +1,8 @@
 """tangraph: terrain-aided navigation of AUVs on bathymetry maps."""
 
-import importlib
 from importlib.metadata import PackageNotFoundError, version
 
+from tangraph._lazy import lazy_names
 from tangraph.errors import MapFormatError, TangraphError
 
 try:
@@ -20,17 +20,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(importlib.import_module(_WHERE[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
-
+__getattr__, __dir__ = lazy_names(globals(), _WHERE)
 
 __all__ = [
     "BathymetryMap",

@@ -244,20 +244,7 @@ def load_graph_config(path) -> GraphConfig:
     """A :class:`GraphConfig` from a TOML file: its fields at the top level or in a ``[graph]``
     table, TapConfig fields in ``[graph.tap]`` (or ``[tap]``); fields not given keep their
     defaults (CLI: ``--graph-config``)."""
-    import tomllib
-    from pathlib import Path
+    from tangraph.tomlfile import read_table
 
-    path = Path(path)
-    if not path.is_file():
-        raise TangraphError(f"graph config file {path} does not exist")
-    try:
-        with open(path, "rb") as f:
-            table = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise TangraphError(f"{path}: not valid TOML ({exc})") from None
-    if "graph" in table:
-        extra = sorted(set(table) - {"graph"})
-        if extra:
-            raise TangraphError(f"{path}: keys outside [graph]: {', '.join(extra)}")
-        table = table["graph"]
+    table = read_table(path, "graph", "graph config file")
     return GraphConfig.from_mapping(table, str(path))

@@ -1,7 +1,7 @@
 """Bathymetry maps: the grid, its readers and writers, the catalogue, synthetic terrain,
 terrain statistics and the Open3D bridge."""
 
-import importlib
+from tangraph._lazy import lazy_names
 
 # eager: the submodule ``catalogue`` would otherwise shadow the function of that name once imported
 from tangraph.maps.catalogue import (
@@ -56,17 +56,7 @@ _WHERE = {
 }
 
 
-def __getattr__(name: str):
-    if name in _WHERE:
-        value = getattr(importlib.import_module(_WHERE[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_WHERE))
-
+__getattr__, __dir__ = lazy_names(globals(), _WHERE)
 
 __all__ = [
     "HAN2020_AREAS",

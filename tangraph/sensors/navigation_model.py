@@ -20,8 +20,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import tomllib
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -29,6 +27,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.sensors.dead_reckoning import DeadReckoningModel
 from tangraph.sensors.dead_reckoning import _check_number as _number
+from tangraph.tomlfile import read_table
 
 __all__ = ["NavigationModel", "load_navigation_model", "survey_navigation_model"]
 
@@ -266,17 +265,5 @@ def load_navigation_model(path: str | os.PathLike) -> NavigationModel:
         initial_position_std = 5.0   # m
         sounding_std = 0.3           # m
     """
-    path = Path(path)
-    if not path.is_file():
-        raise TangraphError(f"navigation model file {path} does not exist")
-    try:
-        with open(path, "rb") as f:
-            table = tomllib.load(f)
-    except tomllib.TOMLDecodeError as exc:
-        raise TangraphError(f"{path}: not valid TOML ({exc})") from None
-    if "navigation" in table:
-        extra = sorted(set(table) - {"navigation"})
-        if extra:
-            raise TangraphError(f"{path}: keys outside [navigation]: {', '.join(extra)}")
-        table = table["navigation"]
+    table = read_table(path, "navigation", "navigation model file")
     return NavigationModel.from_mapping(table, str(path))
