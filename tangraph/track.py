@@ -90,6 +90,16 @@ class Track:
     def n_poses(self) -> int:
         return int(self.time.size)
 
+    @property
+    def lost(self) -> np.ndarray:
+        """``(K,)`` bool: the poses the estimator flagged as lost (``meta["lost_steps"]``: it
+        knew its position was not what the map said, so the pose is not to be trusted whatever
+        its covariance)."""
+        flags = np.zeros(self.n_poses, bool)
+        steps = np.asarray(self.meta.get("lost_steps", []), np.int64)
+        flags[steps[(steps >= 0) & (steps < self.n_poses)]] = True
+        return flags
+
 
 def position_errors(track: Track, true_pose: np.ndarray) -> np.ndarray:
     """Horizontal error (m) of each pose against the truth at the same times, shape (K,)."""

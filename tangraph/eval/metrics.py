@@ -56,12 +56,17 @@ def anees_band(n: int, dof: int = 2, probability: float = 0.95) -> tuple[float, 
     return float(lo), float(hi)
 
 
-def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict[str, float]:
+def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0,
+                  nees_limit: float = 20.0) -> dict[str, float]:
     """RMSE, mean, median, final and maximum horizontal error (m), ANEES and final NEES of a track.
 
     Over independent runs, the final NEES values are independent chi-square(2) samples, so their
     mean can be checked against :func:`anees_band` exactly; the ANEES of one track averages
     correlated poses and is a guide only.
+
+    ``lost_fraction`` is the share of poses the estimator flagged as lost (``Track.lost``) and
+    ``confident_wrong`` the share of the others whose NEES exceeds ``nees_limit`` (a confident
+    wrong answer: the estimator neither knew the truth nor said it was lost).
 
     ``skip`` leaves out the first poses (a filter's convergence) from every figure.
     """
@@ -70,7 +75,10 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0) -> dict
         raise TangraphError(f"track_metrics: skip={skip} leaves no pose of {track.n_poses}")
     nees = position_nees(track, true_pose)[skip:]
     known = np.isfinite(nees)
+    lost = track.lost[skip:]
     return {
+        "lost_fraction": float(np.mean(lost)),
+        "confident_wrong": float(np.mean(~lost & (nees > nees_limit))),
         "rmse": float(np.sqrt(np.mean(errors**2))),
         "mean_error": float(np.mean(errors)),
         "median_error": float(np.median(errors)),

@@ -41,6 +41,7 @@ from tangraph.filters.ipf import IPFConfig, ipf, ipf_step
 from tangraph.filters.jbpf import JBPFConfig, jbpf, jbpf_step
 from tangraph.filters.likelihood import (
     FilterDivergence,
+    OffMap,
     TerrainLikelihood,
     effective_sample_size,
     log_normalise,
@@ -64,6 +65,7 @@ __all__ = [
     "MLEConfig",
     "Measurement",
     "MotionModel",
+    "OffMap",
     "PFConfig",
     "ParticleConfig",
     "Ping",

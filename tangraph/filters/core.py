@@ -30,6 +30,10 @@ the dead-reckoned position of that ping with a wider spread (``reinit_std``, tim
 ``reinit_growth`` for each further consecutive divergence, capped at the larger of the map's
 diagonal and the first re-initialisation spread), weights it by the ping if any particle can
 explain it, and goes on. ``meta["n_divergences"]`` and ``meta["divergence_steps"]`` record it.
+A ping under which no particle has the map (the vehicle off the map: every particle has a
+sounding without a map depth) is no evidence at all: the step is the prediction alone (the
+cloud moves with the dead reckoning and its covariance grows by the DR model's), recorded in
+``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a divergence.
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ from scipy import stats
 
 from tangraph.errors import TangraphError
 from tangraph.filters.config import ParticleConfig, check_count, check_number
-from tangraph.filters.likelihood import FilterDivergence, effective_sample_size, log_normalise
+from tangraph.filters.likelihood import FilterDivergence, OffMap, effective_sample_size, log_normalise
 from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
 from tangraph.filters.resampling import Resampler, resample
 from tangraph.maps.grid import BathymetryMap
@@ -543,9 +547,14 @@ def reweight(belief: Belief, log_factor: np.ndarray, *, where: str) -> Belief:
 
     Raises
     ------
+    OffMap
+        Every factor is zero because no particle has the map under the ping (``-inf`` is the
+        likelihood of a particle with a sounding off the map).
     FilterDivergence
         Every new weight is zero.
     """
+    if np.all(np.isneginf(log_factor)):
+        raise OffMap(f"{where}: no particle has the map under every sounding (off the map)")
     logw = belief.log_weights + log_factor
     _, log_total = log_normalise(logw, where=where)
     return belief.replace(log_weights=logw - log_total)
@@ -728,7 +737,8 @@ def run_particle_filter(
     ``model`` is the run's :class:`~tangraph.sensors.NavigationModel` (None:
     ``NavigationModel.from_survey(survey)``). The track's heading is the dead-reckoned one (its
     variance NaN). ``meta`` holds ``ess`` (per step: of the weights the step's estimate is taken
-    from), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_lost``, ``lost_steps``
+    from), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_lost``, ``lost_steps``,
+    ``n_off_map``, ``off_map_steps``
     (see the module docstring), ``n_tempered`` (pings whose update took more than one stage),
     ``calibration`` (:func:`calibration_estimate` at the last ping), ``n_particles``,
     ``sounding_std`` (the likelihood's, map error included), ``navigation_model``
@@ -762,6 +772,7 @@ def run_particle_filter(
     fixes: list[dict[str, Any]] = []
     divergence_steps: list[int] = []
     lost_steps: list[int] = []
+    off_map_steps: list[int] = []
     n_resampled = consecutive = streak = 0
     first_spread = config.reinit_spread(navigation.initial_position_std)
     n_min, n_max, e_min, e_max = bathymetry.extent
@@ -772,6 +783,11 @@ def run_particle_filter(
         try:
             result = step(belief, pings[k], filter_model, config, rng=rng)
             consecutive = 0
+        except OffMap:  # no information: the prediction alone, its covariance grown by the DR's
+            off_map_steps.append(k)
+            moved = predict(belief, pings[k], filter_model, rng=rng)
+            mean_k, cov_k = weighted_moments(moved)
+            result = StepResult(moved, mean_k, cov_k, effective_sample_size(moved.weights))
         except FilterDivergence as exc:
             consecutive += 1
             spread = min(first_spread * config.reinit_growth ** (consecutive - 1), largest)
@@ -792,6 +808,9 @@ def run_particle_filter(
     elapsed = _time.perf_counter() - started
     if lost_steps:
         _log.warning("%s: lost at %d pings (first %d)", method, len(lost_steps), lost_steps[0])
+    if off_map_steps:
+        _log.warning("%s: %d pings off the map (first %d): dead reckoning only there", method,
+                     len(off_map_steps), off_map_steps[0])
     meta: dict[str, Any] = {
         "ess": ess.tolist(),
         "n_resampled": n_resampled,
@@ -799,6 +818,8 @@ def run_particle_filter(
         "divergence_steps": divergence_steps,
         "n_lost": len(lost_steps),
         "lost_steps": lost_steps,
+        "n_off_map": len(off_map_steps),
+        "off_map_steps": off_map_steps,
         "calibration": calibration_estimate(belief),
         "n_particles": config.n_particles,
         "sounding_std": filter_model.terrain.sounding_std,

@@ -21,11 +21,16 @@ from tangraph.errors import TangraphError
 from tangraph.maps._interp import _FASTMATH, _bilinear
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["FilterDivergence", "TerrainLikelihood", "effective_sample_size", "log_normalise"]
+__all__ = ["FilterDivergence", "OffMap", "TerrainLikelihood", "effective_sample_size", "log_normalise"]
 
 
 class FilterDivergence(TangraphError):
     """Every particle has zero likelihood: the filter has lost the vehicle."""
+
+
+class OffMap(FilterDivergence):
+    """No particle has the map under every sounding of a ping: the ping says nothing about where
+    the vehicle is (it is not evidence against any particle)."""
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")

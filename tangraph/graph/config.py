@@ -109,6 +109,33 @@ class GraphConfig:
         set of accepted fixes stays the same.
     rematch_tolerance : float
         Metres (see ``rematch_iterations``).
+    lost_windows : int or None
+        Lost and relocalisation of the online navigator. After this many TAP windows whose best
+        match lies on the edge of the search (``FixStatus.OUTSIDE_SEARCH``: the truth seems to
+        lie beyond it) with no fix accepted between them, the navigator is *lost*: it widens its
+        belief by a *break* (the odometry into that key gets an extra position std of the
+        search's half-width, so the next searches are four times as wide and the covariance it
+        reports says how little it knows), searches that window again, and widens again after
+        every further ``lost_windows`` such windows. It relocalises on ``relocalise_fixes``
+        consecutive fixes that agree with each other through the DR (informative, unimodal,
+        inside the search) and whose windows span at least ``2 * n_pings`` pings (more than one
+        block of bad pings can fake). Fixes refused only by the gate are held the same way: when
+        enough of them agree over that span, the prediction was the wrong one, and the navigator
+        breaks its odometry by their distance and takes the newest. The pings from the last fix
+        it trusted to the relocalisation are flagged lost (``Track.meta["lost_steps"]``). None:
+        never lost (default 4).
+    relocalise_fixes : int
+        Consecutive agreeing fixes that end a lost episode (default 3).
+    robust_solve : {"gnc", "none"}
+        Batch smoother: ``"gnc"`` decides which fixes (those the online pass accepted, gated or
+        held as relocalisation candidates) and whether the start position prior are inliers by
+        graduated non-convexity with a truncated least-squares loss (Yang et al. 2020, the rules
+        of GTSAM's ``GncOptimizer``; see :mod:`tangraph.graph.robust`), then solves with the
+        inliers only, so the covariances are those of the fixes kept; ``"none"``: the fixes the
+        online pass accepted, under ``robust_kernel``.
+    gnc_probability : float
+        A GNC candidate is an inlier while its whitened squared error is below the
+        ``chi2(dim)`` quantile of this probability (default 0.99).
 
     Examples
     --------
@@ -148,6 +175,10 @@ class GraphConfig:
     smoother_covariance: Literal["all", "none"] = "all"
     rematch_iterations: int = 2
     rematch_tolerance: float = 0.5
+    lost_windows: int | None = 4
+    relocalise_fixes: int = 3
+    robust_solve: Literal["gnc", "none"] = "gnc"
+    gnc_probability: float = 0.99
 
     @classmethod
     def from_mapping(cls, fields, where: str = "GraphConfig") -> GraphConfig:
@@ -188,7 +219,7 @@ class GraphConfig:
                 f"min_half_width_cells ({self.min_half_width_cells})"
             )
         for name, low in (("n_pings", 1), ("relinearize_skip", 1), ("max_iterations", 1),
-                          ("rematch_iterations", 0)):
+                          ("rematch_iterations", 0), ("relocalise_fixes", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
                 raise TangraphError(f"GraphConfig.{name} must be an integer >= {low}, got {value!r}")
@@ -212,6 +243,14 @@ class GraphConfig:
             raise TangraphError(
                 f"GraphConfig.isam_window must be None or an integer >= 2, got {self.isam_window!r}"
             )
+        if self.lost_windows is not None and (isinstance(self.lost_windows, bool) or not isinstance(
+                self.lost_windows, int | np.integer) or self.lost_windows < 1):
+            raise TangraphError(
+                f"GraphConfig.lost_windows must be None or an integer >= 1, got {self.lost_windows!r}"
+            )
+        if not 0.0 < float(self.gnc_probability) < 1.0:
+            raise TangraphError(
+                f"GraphConfig.gnc_probability must lie in (0, 1), got {self.gnc_probability!r}")
         if self.gate_probability is not None and not 0.0 < float(self.gate_probability) < 1.0:
             raise TangraphError(
                 f"GraphConfig.gate_probability must be None or lie in (0, 1), got {self.gate_probability!r}"
@@ -221,7 +260,8 @@ class GraphConfig:
         for name, allowed in (("robust_kernel", ("huber", "cauchy", "none")),
                               ("half_width_rule", ("marginal", "fixed")),
                               ("optimizer", ("lm", "gn", "dogleg")),
-                              ("smoother_covariance", ("all", "none"))):
+                              ("smoother_covariance", ("all", "none")),
+                              ("robust_solve", ("gnc", "none"))):
             if getattr(self, name) not in allowed:
                 raise TangraphError(
                     f"GraphConfig.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}"

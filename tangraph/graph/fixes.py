@@ -24,6 +24,7 @@ __all__ = [
     "FixOutcome",
     "FixRecord",
     "FixStatus",
+    "LostEpisode",
     "fix_name",
     "judge_fix",
     "make_fix",
@@ -46,6 +47,15 @@ class FixStatus(enum.StrEnum):
     UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
     MATCH_FAILED = "match failed"  #: no fix could be made (``detail`` says why)
     INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
+    OUTSIDE_SEARCH = "outside search"  #: the best match lies on the search's edge: the truth may lie beyond
+    UNCONFIRMED = "unconfirmed"  #: a relocalisation candidate that no following fix agreed with
+    OUTLIER = "outlier"  #: the batch smoother's robust solve found it inconsistent with the rest
+
+    @property
+    def says_lost(self) -> bool:
+        """Whether a window with this outcome says the prediction it was searched around is
+        wrong (the evidence that makes a navigator lost)."""
+        return self in (FixStatus.GATE, FixStatus.OUTSIDE_SEARCH)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -88,9 +98,30 @@ class FixRecord:
         return {**dataclasses.asdict(self), "status": self.status.value}
 
 
+@dataclasses.dataclass
+class LostEpisode:
+    """A time an online navigator was lost (``Track.meta["lost_episodes"]``): from ``start`` (the
+    last fix it trusted, or the first ping) through ``declared`` (the window that made it lost)
+    to ``end`` (the ping where it relocalised; None if it never did), and the ``breaks``: the
+    extra position stds (m) by which it widened its belief."""
+
+    start: int
+    declared: int
+    end: int | None = None
+    breaks: list[float] = dataclasses.field(default_factory=list)
+
+    def pings(self, n_pings: int) -> range:
+        """The pings flagged lost."""
+        return range(self.start, n_pings if self.end is None else self.end + 1)
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
 @dataclasses.dataclass(frozen=True)
 class FixOutcome:
-    """What became of one fix: its record for ``Track.meta["fixes"]`` and, if accepted, the fix."""
+    """What became of one fix: its record for ``Track.meta["fixes"]`` and the fix judged (with
+    the covariance the graph gives it; None when no fix could be made)."""
 
     record: FixRecord
     fix: TapFix | None
@@ -177,8 +208,13 @@ def failed(index: int, error: Exception, half_width: float,
     return FixOutcome(_record(index, None, status, np.nan, half_width, str(error)), None)
 
 
-def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float) -> FixOutcome:
+def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float, *,
+              strict: bool = False) -> FixOutcome:
     """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
+
+    A fix whose best match lies on the edge of the search is ``OUTSIDE_SEARCH``; ``strict``
+    (a lost navigator's relocalisation candidates) refuses a multimodal fix whatever
+    ``config.accept_multimodal`` says.
 
     Raises
     ------
@@ -189,7 +225,10 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
                 cov + np.asarray(predicted_cov, float)[:2, :2])
     detail = "; ".join(fix.quality.reasons)
-    if fix.quality.multimodal and not (config.accept_multimodal and config.tap.covariance == "region"):
+    if fix.quality.outside:
+        status = FixStatus.OUTSIDE_SEARCH
+    elif fix.quality.multimodal and (strict or not (config.accept_multimodal
+                                                    and config.tap.covariance == "region")):
         status = FixStatus.MULTIMODAL
     elif not fix.quality.informative:
         status = FixStatus.UNINFORMATIVE
@@ -198,4 +237,4 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     else:
         status = FixStatus.ACCEPTED
     record = _record(fix.index, fix, status, value, half_width, detail)
-    return FixOutcome(record, fix if record.accepted else None)
+    return FixOutcome(record, fix)

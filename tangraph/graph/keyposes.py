@@ -116,6 +116,11 @@ class PoseGraph:
     the key poses are in the DR frame about ``origin`` and the graph holds the calibration
     variable: position fixes and :meth:`add_start` measure world positions through it. Without
     it (None) poses are world poses and a fix is a plain translation prior.
+
+    ``breaks`` maps a key to the extra position std (m) of the odometry into it: where an online
+    navigator that found itself lost widened its belief (see ``GraphConfig.lost_windows``);
+    ``start`` is the start's position prior ``(key, pose, covariance)`` (:meth:`add_start`), which
+    a robust batch solve may find wrong.
     """
 
     calibration_std: np.ndarray | None = None
@@ -131,8 +136,10 @@ class PoseGraph:
     odometry: list[tuple[int, int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     pose_priors: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     fixes: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
-    _factors: dict = dataclasses.field(default_factory=lambda: {"prior": [], "odometry": [], "fix": []},
-                                       repr=False)
+    breaks: dict[int, float] = dataclasses.field(default_factory=dict)
+    start: tuple[int, np.ndarray, np.ndarray] | None = None
+    _factors: dict = dataclasses.field(
+        default_factory=lambda: {"prior": [], "start": [], "odometry": [], "fix": []}, repr=False)
 
     def __post_init__(self) -> None:
         self.origin = np.asarray(self.origin, float).copy()
@@ -153,16 +160,28 @@ class PoseGraph:
         ``position_std`` (through the calibration), and its DR-frame heading the DR heading with
         std ``heading_std`` (the constant heading error is the calibration's). Returns the factors."""
         pose = np.asarray(pose, float)
+        cov = np.diag([position_std**2, position_std**2, heading_std**2])
+        self.start = (int(key), pose, cov)
+        self.pose_priors.append(self.start)
         if not self.calibrated:
-            cov = np.diag([position_std**2, position_std**2, heading_std**2])
-            return [self.add_pose_prior(key, pose, cov)]
-        self.pose_priors.append((int(key), pose, np.diag([position_std**2] * 2 + [heading_std**2])))
+            factor = self.start_factor()
+            self._factors["start"].append(factor)
+            return [factor]
         heading = gtsam.PriorFactorPose2(
             int(key), gtsam.Pose2(*pose),
             gtsam.noiseModel.Diagonal.Sigmas(np.array([1e4, 1e4, heading_std])))
-        position = world_position_factor(key, pose[:2], np.eye(2) * position_std**2, self.origin)
-        self._factors["prior"].extend([heading, position])
+        position = self.start_factor()
+        self._factors["prior"].append(heading)
+        self._factors["start"].append(position)
         return [heading, position]
+
+    def start_factor(self, weight: float = 1.0) -> gtsam.NonlinearFactor:
+        """The factor of the start's position (a pose prior without the calibration), its
+        information multiplied by ``weight``."""
+        key, pose, cov = self.start
+        if not self.calibrated:
+            return pose_prior_factor(key, pose, cov / weight)
+        return world_position_factor(key, pose[:2], cov[:2, :2] / weight, self.origin)
 
     def add_pose(self, key: int, time: float, initial_pose) -> None:
         """A key pose at ping ``key`` with its initial estimate ``(north, east, psi)``."""
@@ -181,42 +200,65 @@ class PoseGraph:
         self._factors["prior"].append(factor)
         return factor
 
-    def add_odometry(self, i: int, j: int, increment, increment_cov) -> gtsam.NonlinearFactor:
-        """The DR increment from pose ``i`` to pose ``j`` with its covariance (frame of ``i``)."""
+    def add_odometry(self, i: int, j: int, increment, increment_cov, *, break_std: float = 0.0
+                     ) -> gtsam.NonlinearFactor:
+        """The DR increment from pose ``i`` to pose ``j`` with its covariance (frame of ``i``);
+        ``break_std`` (m) widens its position part (a lost navigator's break, kept in ``breaks``)."""
         increment = np.asarray(increment, float)
         cov = between_noise(increment, increment_cov, self.min_std, self.min_heading_std)
         self.odometry.append((int(i), int(j), increment, cov))
-        factor = gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
-                                          gtsam.noiseModel.Gaussian.Covariance(cov))
+        if break_std > 0:
+            self.breaks[int(j)] = float(break_std)
+        factor = self._odometry_factor(i, j, increment, cov, break_std)
         self._factors["odometry"].append(factor)
         return factor
+
+    @staticmethod
+    def _odometry_factor(i, j, increment, cov, break_std: float = 0.0) -> gtsam.NonlinearFactor:
+        cov = cov + np.diag([break_std**2, break_std**2, 0.0])  # isotropic: the same in any frame
+        return gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
+                                        gtsam.noiseModel.Gaussian.Covariance(cov))
 
     def add_position_fix(self, key: int, position, cov) -> gtsam.NonlinearFactor:
         """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model."""
         self.fixes.append((int(key), np.asarray(position, float), np.asarray(cov, float)))
-        if self.calibrated:
-            factor = world_position_factor(key, position, cov, self.origin, self.robust_kernel,
-                                           self.robust_parameter)
-        else:
-            factor = position_fix_factor(key, position, cov, self.robust_kernel, self.robust_parameter)
+        factor = self.fix_factor(key, position, cov)
         self._factors["fix"].append(factor)
         return factor
 
-    def with_fixes(self, fixes) -> PoseGraph:
-        """A copy with the position fixes replaced by ``fixes``, ``(key, position, covariance)`` each."""
+    def fix_factor(self, key: int, position, cov, kernel: str | None = None) -> gtsam.NonlinearFactor:
+        """The factor of a position fix on pose ``key`` (not added to the graph), under
+        ``kernel`` (default the graph's ``robust_kernel``)."""
+        kernel = self.robust_kernel if kernel is None else kernel
+        if self.calibrated:
+            return world_position_factor(key, position, cov, self.origin, kernel, self.robust_parameter)
+        return position_fix_factor(key, position, cov, kernel, self.robust_parameter)
+
+    def with_fixes(self, fixes, *, start: bool = True, breaks: bool = True) -> PoseGraph:
+        """A copy with the position fixes replaced by ``fixes``, ``(key, position, covariance)``
+        each; without the start's position prior (``start=False``), or with the odometry of the
+        breaks restored to the DR's own (``breaks=False``)."""
+        factors = {kind: list(fs) for kind, fs in self._factors.items()} | {"fix": []}
+        priors = list(self.pose_priors)
+        if not start and self.start is not None:
+            factors["start"] = []
+            priors = [p for p in priors if p is not self.start]
+        kept = dict(self.breaks) if breaks else {}
+        if not breaks and self.breaks:
+            factors["odometry"] = [self._odometry_factor(*odo) for odo in self.odometry]
         graph = dataclasses.replace(
             self, keys=list(self.keys), times=list(self.times), initial=list(self.initial),
-            odometry=list(self.odometry), pose_priors=list(self.pose_priors), fixes=[],
-            _factors={kind: list(factors) for kind, factors in self._factors.items()} | {"fix": []},
+            odometry=list(self.odometry), pose_priors=priors, fixes=[], breaks=kept,
+            start=self.start if start else None, _factors=factors,
         )
         for key, position, cov in fixes:
             graph.add_position_fix(key, position, cov)
         return graph
 
-    def factor_graph(self) -> gtsam.NonlinearFactorGraph:
-        """Every factor, as one GTSAM graph."""
+    def factor_graph(self, kinds=("prior", "start", "odometry", "fix")) -> gtsam.NonlinearFactorGraph:
+        """Every factor (or those of ``kinds``), as one GTSAM graph."""
         graph = gtsam.NonlinearFactorGraph()
-        for kind in ("prior", "odometry", "fix"):
+        for kind in kinds:
             for factor in self._factors[kind]:
                 graph.add(factor)
         return graph

@@ -16,8 +16,10 @@ is the latest key estimate composed with the DR increment, its covariance grown 
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time as _time
+from typing import NamedTuple
 
 import gtsam
 import numpy as np
@@ -31,11 +33,12 @@ from tangraph.graph.calibration import (
     world_jacobian,
 )
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
+from tangraph.graph.factors import check_fix_covariance, compose, gate_threshold, nis, propagate_joint
 from tangraph.graph.fixes import (
     FixOutcome,
     FixRecord,
     FixStatus,
+    LostEpisode,
     failed,
     fix_name,
     judge_fix,
@@ -46,13 +49,25 @@ from tangraph.graph.fixes import (
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix, soundings_per_cell
-from tangraph.sensors import NavigationModel, odometry, survey_navigation_model
+from tangraph.sensors import NavigationModel, odometry, rotation_matrix, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = ["GraphNavigator", "navigate_online"]
 
 log = logging.getLogger(__name__)
+
+
+class _Candidate(NamedTuple):
+    """A relocalisation candidate: the key, the first ping of its window, its fix (with the
+    covariance the graph gives it), the predicted DR-frame pose of the key and the index of its
+    record."""
+
+    key: int
+    first: int
+    fix: TapFix
+    pose: np.ndarray
+    record: int
 
 
 class GraphNavigator:
@@ -130,6 +145,13 @@ class GraphNavigator:
         self.pose = np.full((n, 3), np.nan)
         self.covariance = np.full((n, 3, 3), np.nan)
         self.fixes: list[FixRecord] = []
+        # lost and relocalisation (GraphConfig.lost_windows): windows since the last accepted fix
+        # that said the prediction is wrong, the episodes, and the candidates of the current one
+        self.lost = False
+        self.episodes: list[LostEpisode] = []
+        self._outside = 0
+        self._last_accepted: int | None = None
+        self._consensus: list[_Candidate] = []
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
@@ -196,24 +218,120 @@ class GraphNavigator:
         self._update(0)
         self._rebase(0)
 
-    def _add_fix(self, k: int, pose, joint, fix: TapFix | None) -> None:
+    def _add_fix(self, k: int, pose, joint, fix: TapFix | None) -> float:
         """Make (or take) the fix of ping ``k`` (DR-frame ``pose`` and its ``joint`` covariance),
-        judge it, and add it to the new factors if accepted."""
+        judge it, add it to the new factors if accepted, and keep the lost state (see
+        ``GraphConfig.lost_windows``). Returns the std (m) of the break to put on the odometry
+        into key ``k`` (0 for none)."""
         if fix is None and not self._is_end[k]:
-            return
-        outcome = self._judge(k, pose, joint, fix)
+            return 0.0
+        outcome = self._judge(k, pose, joint, fix, strict=self.lost)
         self.fixes.append(outcome.record)
-        if outcome.accepted:
+        if not self.lost and outcome.accepted:
             fixed = outcome.fix
             self._new_factors.add(self.graph.add_position_fix(k, fixed.position, fixed.covariance))
+            self._last_accepted, self._outside, self._consensus = k, 0, []
+            return 0.0
+        extra = 0.0
+        status = outcome.record.status
+        if status is FixStatus.OUTSIDE_SEARCH or (self.lost and status is FixStatus.GATE):
+            self._outside += 1  # the truth seems to lie beyond the search: widen it
+            if self.config.lost_windows is not None and self._outside >= self.config.lost_windows and k > 0:
+                self._outside = 0
+                extra = self._widen(k, outcome.record.half_width)
+                if extra > 0:
+                    joint = joint.copy()
+                    joint[0, 0] += extra**2
+                    joint[1, 1] += extra**2
+                    outcome = self._judge(k, pose, joint, fix, strict=True)
+                    self.fixes[-1] = outcome.record
+        # relocalisation candidates: while lost, fixes that pass everything; while tracking, fixes
+        # that only the gate refused (the prediction may be the wrong one)
+        usable = outcome.accepted if self.lost else (
+            outcome.record.status is FixStatus.GATE and not outcome.fix.quality.multimodal)
+        if not usable or self.config.lost_windows is None:
+            return extra
+        if self.lost:
+            self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
+                                                 detail="relocalisation candidate")
+        candidate = _Candidate(k, self.window_first.get(k, k), outcome.fix, np.asarray(pose, float).copy(),
+                               len(self.fixes) - 1)
+        if self._consensus and not self._agree(self._consensus[-1], candidate, joint):
+            self._consensus = []
+        self._consensus.append(candidate)
+        first = self._consensus[0].first
+        if len(self._consensus) >= self.config.relocalise_fixes and k - first + 1 >= 2 * self.config.n_pings:
+            extra = float(np.hypot(extra, self._relocalise(k, pose, joint)))
+        return extra
+
+    def _widen(self, k: int, half_width: float) -> float:
+        """Start (or go on with) a lost episode at key ``k`` and return the std (m) of its next
+        break: the search's half-width (the truth lies beyond it), up to what the widest search
+        can still see (0 once there)."""
+        config = self.config
+        if not self.lost:
+            self.lost = True
+            start = 0 if self._last_accepted is None else self._last_accepted
+            self.episodes.append(LostEpisode(start=start, declared=k))
+            log.warning("graph: lost at ping %d (the best matches lie beyond the search since ping %d)",
+                        k, start)
+        episode = self.episodes[-1]
+        cap = config.max_half_width_cells * float(min(self.bathymetry.cell_size)) / config.half_width_sigmas
+        if episode.breaks and episode.breaks[-1] >= cap:
+            return 0.0
+        episode.breaks.append(min(float(half_width), cap))
+        self._consensus = []  # candidates behind a break are tied to the old belief
+        return episode.breaks[-1]
+
+    def _relocalise(self, k: int, pose, joint) -> float:
+        """Enough agreeing candidates: take them. A lost navigator adds them all (they follow
+        its last break); a tracking one whose gate refused them breaks the odometry into ``k`` by
+        their distance from the prediction and adds the newest. Returns that break's std."""
+        extra = 0.0
+        if self.lost:
+            episode = self.episodes[-1]
+            taken = self._consensus
+        else:
+            newest = self._consensus[-1]
+            world, _ = self._world(pose, joint)
+            extra = max(float(np.hypot(*(newest.fix.position - world[:2]))),
+                        float(min(self.bathymetry.cell_size)))
+            start = 0 if self._last_accepted is None else self._last_accepted
+            episode = LostEpisode(start=start, declared=self._consensus[0].key, breaks=[extra])
+            self.episodes.append(episode)
+            taken = [newest]
+        for c in taken:
+            self._new_factors.add(self.graph.add_position_fix(c.key, c.fix.position, c.fix.covariance))
+            self.fixes[c.record] = dataclasses.replace(self.fixes[c.record], status=FixStatus.ACCEPTED,
+                                                       detail="relocalised")
+        episode.end = k
+        log.warning("graph: relocalised at ping %d (lost since ping %d)", k, episode.start)
+        self.lost, self._consensus, self._outside, self._last_accepted = False, [], 0, k
+        return extra
+
+    def _agree(self, a: _Candidate, b: _Candidate, joint) -> bool:
+        """Whether candidate ``b`` agrees with the earlier ``a`` through the DR between them: the
+        NIS of the difference of their fixes against the DR's world displacement (white DR noise
+        of the increment and the calibration's covariance from ``joint``) is within the gate."""
+        positions = np.array([a.pose, b.pose])
+        world = to_world(positions, self.calibration, self.origin)
+        jac = world_jacobian(positions, self.calibration, self.origin)[:, :2, 3:]
+        _, q = increments(self.white, self.survey.time, self.survey.dr_pose, [a.key], [b.key])
+        rot = rotation_matrix(world[0, 2])
+        shape = jac[1] - jac[0]
+        cov = (a.fix.covariance + b.fix.covariance + rot @ q[0, :2, :2] @ rot.T
+               + shape @ joint[3:, 3:] @ shape.T)
+        error = b.fix.position - a.fix.position - (world[1, :2] - world[0, :2])
+        return nis(error, cov) <= gate_threshold(self.config.gate_probability or 0.999)
 
     def _key_step(self, k: int, fix: TapFix | None) -> None:
         prev = self.graph.keys[-1]
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
         self._new_values.insert(k, gtsam.Pose2(*pose))
-        self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k]))
-        self._add_fix(k, pose, joint, fix)
+        extra = self._add_fix(k, pose, joint, fix)
+        self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
+                                                      break_std=extra))
         self._update(k)
         self._rebase(k)
 
@@ -231,12 +349,13 @@ class GraphNavigator:
             self._delta[idx], self._delta_cov[idx] = increments(
                 self.white, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx)
 
-    def _judge(self, k: int, pose, joint, fix: TapFix | None) -> FixOutcome:
+    def _judge(self, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
         world, cov = self._world(pose, joint)
         half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
         laid = self._laid(k, pose)
         if fix is not None:
-            return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width)
+            return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width,
+                             strict=strict)
         started = _time.perf_counter()
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
@@ -247,7 +366,8 @@ class GraphNavigator:
         finally:
             self.tap_times.append(_time.perf_counter() - started)
         try:
-            return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width)
+            return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width,
+                             strict=strict)
         except TangraphError as exc:
             log.warning("%s", exc)
             return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
@@ -343,12 +463,17 @@ class GraphNavigator:
         return calibration_summary(self.calibration, joint, pose, self.survey.dr_pose[k, 2])
 
     def meta(self) -> dict:
-        """``fixes``, their counts, ``key_indices``, ``calibration``, the configuration and model."""
+        """``fixes``, their counts, the pings flagged lost (``n_lost``, ``lost_steps``) and the
+        ``lost_episodes``, ``key_indices``, ``calibration``, the configuration and model."""
         accepted = sum(f.accepted for f in self.fixes)
+        lost = sorted({p for e in self.episodes for p in e.pings(self.index + 1)})
         return {
             "fixes": list(self.fixes),
             "n_fixes_accepted": int(accepted),
             "n_fixes_rejected": len(self.fixes) - int(accepted),
+            "n_lost": len(lost),
+            "lost_steps": lost,
+            "lost_episodes": [e.as_dict() for e in self.episodes],
             "key_indices": [int(k) for k in self.graph.keys],
             "calibration": self.calibration_report(),
             "config": self.config.as_dict(),

@@ -29,6 +29,7 @@ from tangraph.graph.factors import compose, inverse_increment_covariance, propag
 from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
+from tangraph.graph.robust import gnc
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError
 from tangraph.sensors import DeadReckoningModel, NavigationModel, odometry, rotation_matrix
@@ -246,14 +247,11 @@ def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSol
             world_covariance(pose, joint, solution.calibration, origin))
 
 
-def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previous: list[FixRecord]
-             ) -> tuple[list[FixRecord], list, bool]:
-    """Fixes re-made around the smoothed world track; returns records, accepted fixes and whether
-    they moved."""
+def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list[FixRecord]:
+    """Fixes re-made around the smoothed world track ``pose``, searched and gated with the
+    smoothed covariances ``cov``: one record per TAP window."""
     config = nav.config
-    records, accepted = [], []
-    changed = False
-    before = {r.index: r for r in previous}
+    records = []
     joint = np.zeros((5, 5))
     joint[3:, 3:] = solution.calibration_cov
     nav.calibration = solution.calibration
@@ -271,16 +269,101 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution, previou
         except TangraphError as exc:
             outcome = failed(end, exc, half_width, FixStatus.INVALID_COVARIANCE)
         records.append(outcome.record)
-        if outcome.accepted:
-            accepted.append((end, np.asarray(outcome.fix.position, float),
-                             np.asarray(outcome.fix.covariance, float)))
-        old = before.get(end)
-        if old is None or old.accepted != outcome.accepted:
-            changed = True
-        elif outcome.accepted and np.hypot(old.north - outcome.record.north,
-                                           old.east - outcome.record.east) > config.rematch_tolerance:
-            changed = True
-    return records, accepted, changed
+    return records
+
+
+def _moved(before: list[FixRecord], after: list[FixRecord], tolerance: float) -> bool:
+    """Whether the set of fixes used changed, or one of them moved by more than ``tolerance`` m."""
+    old = {r.index: r for r in before}
+    for record in after:
+        previous = old.get(record.index)
+        if previous is None or previous.accepted != record.accepted:
+            return True
+        if record.accepted and np.hypot(previous.north - record.north,
+                                        previous.east - record.east) > tolerance:
+            return True
+    return False
+
+
+#: Outcomes whose fix the robust solve weighs: used online, refused by the online gate (which
+#: may have been wrong), or held as a relocalisation candidate.
+_CANDIDATES = (FixStatus.ACCEPTED, FixStatus.GATE, FixStatus.UNCONFIRMED, FixStatus.OUTLIER)
+
+
+def _solve(graph: PoseGraph, records: list[FixRecord], config: GraphConfig, initial, calibration
+           ) -> tuple[SmootherSolution, list[FixRecord], bool]:
+    """The batch solve of ``graph`` with the fixes of ``records``: with ``robust_solve="gnc"``
+    the candidates' inliers (and whether the start prior is one) by :func:`~tangraph.graph.robust.gnc`,
+    then the solve with the inliers only; otherwise the accepted fixes. Returns the solution,
+    the records with their final status and whether the start prior was kept."""
+    if config.robust_solve != "gnc":
+        fixes = [(r.index, r.position, r.covariance) for r in records if r.accepted]
+        return smooth_pose_graph(graph.with_fixes(fixes), config, initial=initial,
+                                 calibration=calibration), records, True
+    chosen = [n for n, r in enumerate(records) if r.status in _CANDIDATES]
+    fixes = [(records[n].index, records[n].position, records[n].covariance) for n in chosen]
+    inlier, keep_start = _gnc_inliers(graph, fixes, config, initial, calibration)
+    kept = [fix for fix, ok in zip(fixes, inlier, strict=True) if ok]
+    final = graph.with_fixes(kept, start=keep_start, breaks=False)
+    solution = smooth_pose_graph(final, config, initial=initial, calibration=calibration)
+    records = list(records)
+    for n, ok in zip(chosen, inlier, strict=True):
+        r = records[n]
+        if ok and not r.accepted:
+            records[n] = dataclasses.replace(r, status=FixStatus.ACCEPTED,
+                                             detail=f"kept by the robust solve (online: {r.status.value})")
+        elif not ok:
+            records[n] = dataclasses.replace(
+                r, status=FixStatus.OUTLIER,
+                detail="inconsistent with the other fixes and the dead reckoning (robust solve)")
+    return solution, records, keep_start
+
+
+def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibration
+                 ) -> tuple[np.ndarray, bool]:
+    """GNC over ``fixes`` and the start's position prior, the rest of the graph (odometry without
+    the online breaks, the calibration and heading priors) known inliers. Returns the fixes'
+    inlier mask and whether the start prior is an inlier. The start prior stays a known inlier
+    when the graph would not be determined without it."""
+    base = graph.with_fixes([], start=False, breaks=False)
+    known = base.factor_graph()
+    fixed = [known.at(i) for i in range(known.size())]
+    start = graph.start is not None
+    keys = {int(f[0]) for f in fixes}
+
+    def candidate(i: int, weight: float):
+        if i < len(fixes):
+            key, position, cov = fixes[i]
+            return base.fix_factor(key, position, np.asarray(cov) / weight, kernel="none")
+        return graph.start_factor(weight)
+
+    full = graph.with_fixes(fixes, breaks=False)
+    values = full.values(initial, calibration)
+    ordering = _ordering(full.factor_graph(), graph.calibrated)
+
+    def solve(factors, values):
+        if graph.calibrated:
+            return _gauss_newton(factors, values, ordering, config.max_iterations)[0]
+        optimizer = _optimizer(factors, values, config, ordering)
+        return optimizer.optimize()
+
+    as_candidate = start and len(keys) >= 2  # with fewer fixes the start is all there is
+    if not as_candidate and start:
+        fixed.append(graph.start_factor())
+    try:
+        result = gnc(fixed, candidate, len(fixes) + int(as_candidate), values, solve,
+                     probability=config.gnc_probability)
+    except RuntimeError as exc:  # a weighted graph GTSAM finds indeterminant
+        if not as_candidate:
+            raise _translate(exc, graph) from None
+        fixed.append(graph.start_factor())
+        result = gnc(fixed, candidate, len(fixes), values, solve, probability=config.gnc_probability)
+        as_candidate = False
+    inlier = result.inliers[: len(fixes)]
+    keep_start = not as_candidate or bool(result.inliers[-1])
+    if not keep_start and len({int(f[0]) for f, ok in zip(fixes, inlier, strict=True) if ok}) < 2:
+        keep_start = True  # nothing else would tie the graph to the map
+    return inlier, keep_start
 
 
 def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
@@ -327,20 +410,19 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     graph = nav.graph
     initial = _frame_poses(nav.pose[graph.keys], nav.calibration, nav.origin) if graph.calibrated \
         else nav.pose[graph.keys]
-    solution = smooth_pose_graph(graph, config, initial=initial, calibration=nav.calibration)
-    records = nav.fixes
+    solution, records, start_kept = _solve(graph, nav.fixes, config, initial, nav.calibration)
     dense = dense_track(survey, nav.white, solution, nav.origin)
     rounds = 0
     for rounds in range(1, config.rematch_iterations + 1):
-        new_records, accepted, changed = _rematch(nav, dense[0], dense[1], solution, records)
-        if not changed:
+        remade = _rematch(nav, dense[0], dense[1], solution)
+        new_solution, new_records, new_start = _solve(graph, remade, config, solution.pose,
+                                                      solution.calibration)
+        if not _moved(records, new_records, config.rematch_tolerance):
             rounds -= 1
             break
-        records = new_records
-        graph = graph.with_fixes(accepted)
-        solution = smooth_pose_graph(graph, config, initial=solution.pose, calibration=solution.calibration)
+        solution, records, start_kept = new_solution, new_records, new_start
         dense = dense_track(survey, nav.white, solution, nav.origin)
-        log.info("re-match %d: %d fixes accepted", rounds, len(accepted))
+        log.info("re-match %d: %d fixes accepted", rounds, sum(r.accepted for r in records))
     pose, cov = dense
     if config.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
@@ -351,13 +433,19 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     joint[3:, 3:] = solution.calibration_cov
     if config.smoother_covariance == "all" and solution.keys[-1] == last:
         joint = solution.covariance[-1]
+    last_inlier = max((r.index for r in records if r.accepted), default=-1)
+    lost = sorted({p for e in nav.episodes if e.end is None  # never relocalised online and
+                   for p in range(max(e.start, last_inlier + 1), survey.n_pings)})  # no fix after
     meta.update({
+        "n_lost": len(lost),
+        "lost_steps": lost,
         "fixes": records,
         "n_fixes_accepted": int(n_accepted),
         "n_fixes_rejected": len(records) - int(n_accepted),
         "calibration": calibration_summary(solution.calibration, joint, solution.pose[-1],
                                            survey.dr_pose[last, 2]),
         "rematch_iterations": int(rounds),
+        "start_prior": "kept" if start_kept else "outlier",
         "optimizer_iterations": solution.iterations,
         "final_error": solution.error,
     })

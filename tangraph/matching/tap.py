@@ -119,6 +119,13 @@ class FixQuality:
     area_fraction: float  # calibrated region area / search area
     touches_edge: bool  # the calibrated region reaches the edge of the search grid
     reasons: tuple[str, ...]  # why the fix is flagged; empty if it is not
+    best_on_edge: bool = False  # the best candidate lies on the outer ring of the search grid
+
+    @property
+    def outside(self) -> bool:
+        """The best match lies on the edge of the search: the best fit is likely outside it
+        (the prediction the search was centred on is wrong by more than its half-width)."""
+        return self.best_on_edge
 
     @property
     def informative(self) -> bool:
@@ -435,11 +442,15 @@ def _quality(q, q_min, region: Region, config: TapConfig) -> FixQuality:
     )
     others = minima & ~main
     peak_ratio = float(filled[others].min() / q_min) if others.any() and q_min > 0 else np.inf
+    i, j = np.unravel_index(np.argmin(filled), q.shape)
+    on_edge = bool(i in (0, q.shape[0] - 1) or j in (0, q.shape[1] - 1))
     reasons = []
+    if on_edge:
+        reasons.append("outside: the best match lies on the edge of the search grid")
     if n_basins > 1:
         reasons.append(f"multimodal: the calibrated region has {n_basins} separate parts")
     if touches:
         reasons.append("uninformative: the calibrated region reaches the edge of the search grid")
     if area_fraction > config.max_area_fraction:
         reasons.append(f"uninformative: the calibrated region covers {area_fraction:.0%} of the search area")
-    return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons))
+    return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons), on_edge)

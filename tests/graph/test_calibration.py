@@ -146,7 +146,7 @@ def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
     used = judge_fix(two, predicted, cov, config, 50.0)
     assert used.accepted and used.record.status is FixStatus.ACCEPTED and "multimodal" in used.record.reason
     refused = judge_fix(two, predicted, cov, dataclasses.replace(config, accept_multimodal=False), 50.0)
-    assert refused.record.status is FixStatus.MULTIMODAL and refused.fix is None
+    assert refused.record.status is FixStatus.MULTIMODAL and not refused.accepted
     flat = judge_fix(_flagged(fix, "uninformative: touches the edge"), predicted, cov, config, 50.0)
     assert flat.record.status is FixStatus.UNINFORMATIVE
     far = judge_fix(fix, predicted + np.array([200.0, 0.0, 0.0]), cov, config, 50.0)
