@@ -117,15 +117,26 @@ class GraphConfig:
         search's half-width, so the next searches are four times as wide and the covariance it
         reports says how little it knows), searches that window again, and widens again after
         every further ``lost_windows`` such windows. It relocalises on ``relocalise_fixes``
-        consecutive fixes that agree with each other through the DR (informative, unimodal,
-        inside the search) and whose windows span at least ``2 * n_pings`` pings (more than one
-        block of bad pings can fake). Fixes refused only by the gate are held the same way: when
-        enough of them agree over that span, the prediction was the wrong one, and the navigator
-        breaks its odometry by their distance and takes the newest. The pings from the last fix
-        it trusted to the relocalisation are flagged lost (``Track.meta["lost_steps"]``). None:
+        fixes that agree with each other through the DR (informative, unimodal, inside the
+        search) from windows that share no ping (which one block of bad pings cannot fake).
+        Fixes refused only by the gate are held the same way: when enough of them agree, the
+        prediction was the wrong one, and the navigator breaks its odometry by their distance
+        from it and takes the newest. The pings from the last fix it trusted to the
+        relocalisation are flagged lost (``Track.meta["lost_steps"]``). None:
         never lost (default 4).
     relocalise_fixes : int
-        Consecutive agreeing fixes that end a lost episode (default 3).
+        Agreeing fixes, from windows that share no ping, that end a lost episode (default 2).
+    confirm_probability : float or None
+        The online navigator uses a fix at once when its NIS against the prediction is below
+        the ``chi2(2)`` quantile of this probability; one between that and the gate waits for the
+        next accepted fix to agree with it through the DR (it is used then, late, or dropped as
+        ``UNCONFIRMED``): a fix from a window spoiled by a few bad pings is seldom confirmed.
+        None: every fix within the gate is used at once (default 0.9).
+    misfit_ratio : float or None
+        A fix whose residual std at its best match exceeds this many times the navigation
+        model's ``measurement_std`` is refused as ``MISFIT`` (the window's soundings fit the map
+        nowhere: part of its pings in error, or the wrong map) and is no evidence of being lost;
+        None: no such test (default 3).
     robust_solve : {"gnc", "none"}
         Batch smoother: ``"gnc"`` decides which fixes (those the online pass accepted, gated or
         held as relocalisation candidates) and whether the start position prior are inliers by
@@ -176,7 +187,9 @@ class GraphConfig:
     rematch_iterations: int = 2
     rematch_tolerance: float = 0.5
     lost_windows: int | None = 4
-    relocalise_fixes: int = 3
+    relocalise_fixes: int = 2
+    confirm_probability: float | None = 0.9
+    misfit_ratio: float | None = 3.0
     robust_solve: Literal["gnc", "none"] = "gnc"
     gnc_probability: float = 0.99
 
@@ -251,6 +264,11 @@ class GraphConfig:
         if not 0.0 < float(self.gnc_probability) < 1.0:
             raise TangraphError(
                 f"GraphConfig.gnc_probability must lie in (0, 1), got {self.gnc_probability!r}")
+        if self.misfit_ratio is not None:
+            _number(self, "misfit_ratio")
+        if self.confirm_probability is not None and not 0.0 < float(self.confirm_probability) < 1.0:
+            raise TangraphError("GraphConfig.confirm_probability must be None or lie in (0, 1), "
+                                f"got {self.confirm_probability!r}")
         if self.gate_probability is not None and not 0.0 < float(self.gate_probability) < 1.0:
             raise TangraphError(
                 f"GraphConfig.gate_probability must be None or lie in (0, 1), got {self.gate_probability!r}"

@@ -47,6 +47,7 @@ class FixStatus(enum.StrEnum):
     UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
     MATCH_FAILED = "match failed"  #: no fix could be made (``detail`` says why)
     INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
+    MISFIT = "misfit"  #: the soundings fit the map nowhere in the search: bad data, not a position
     OUTSIDE_SEARCH = "outside search"  #: the best match lies on the search's edge: the truth may lie beyond
     UNCONFIRMED = "unconfirmed"  #: a relocalisation candidate that no following fix agreed with
     OUTLIER = "outlier"  #: the batch smoother's robust solve found it inconsistent with the rest
@@ -209,10 +210,13 @@ def failed(index: int, error: Exception, half_width: float,
 
 
 def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float, *,
-              strict: bool = False) -> FixOutcome:
+              strict: bool = False, noise: float | None = None) -> FixOutcome:
     """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
 
-    A fix whose best match lies on the edge of the search is ``OUTSIDE_SEARCH``; ``strict``
+    A fix whose residual std at its best match exceeds ``config.misfit_ratio`` times ``noise``
+    (the navigation model's ``measurement_std``) is ``MISFIT``: the window's soundings fit the
+    map nowhere (a depth bias on part of its pings, a wrong map), which says nothing of where the
+    vehicle is. A fix whose best match lies on the edge of the search is ``OUTSIDE_SEARCH``; ``strict``
     (a lost navigator's relocalisation candidates) refuses a multimodal fix whatever
     ``config.accept_multimodal`` says.
 
@@ -225,7 +229,10 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
                 cov + np.asarray(predicted_cov, float)[:2, :2])
     detail = "; ".join(fix.quality.reasons)
-    if fix.quality.outside:
+    if noise is not None and config.misfit_ratio is not None and fix.sigma > config.misfit_ratio * noise:
+        status = FixStatus.MISFIT
+        detail = f"residual std {fix.sigma:.3g} m at the best match, {fix.sigma / noise:.1f} x the model's"
+    elif fix.quality.outside:
         status = FixStatus.OUTSIDE_SEARCH
     elif fix.quality.multimodal and (strict or not (config.accept_multimodal
                                                     and config.tap.covariance == "region")):

@@ -58,6 +58,15 @@ __all__ = ["GraphNavigator", "navigate_online"]
 log = logging.getLogger(__name__)
 
 
+def _disjoint(candidates) -> int:
+    """How many of ``candidates`` (in ping order) form a chain of windows that share no ping."""
+    count, end = 0, -1
+    for c in candidates:
+        if c.first > end:
+            count, end = count + 1, c.key
+    return count
+
+
 class _Candidate(NamedTuple):
     """A relocalisation candidate: the key, the first ping of its window, its fix (with the
     covariance the graph gives it), the predicted DR-frame pose of the key and the index of its
@@ -152,6 +161,7 @@ class GraphNavigator:
         self._outside = 0
         self._last_accepted: int | None = None
         self._consensus: list[_Candidate] = []
+        self._held: _Candidate | None = None  # an accepted fix waiting for a later one to agree
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
@@ -227,11 +237,9 @@ class GraphNavigator:
             return 0.0
         outcome = self._judge(k, pose, joint, fix, strict=self.lost)
         self.fixes.append(outcome.record)
-        if not self.lost and outcome.accepted:
-            fixed = outcome.fix
-            self._new_factors.add(self.graph.add_position_fix(k, fixed.position, fixed.covariance))
-            self._last_accepted, self._outside, self._consensus = k, 0, []
-            return 0.0
+        if not self.lost:
+            if self._confirm(k, pose, joint, outcome):
+                return 0.0
         extra = 0.0
         status = outcome.record.status
         if status is FixStatus.OUTSIDE_SEARCH or (self.lost and status is FixStatus.GATE):
@@ -254,15 +262,54 @@ class GraphNavigator:
         if self.lost:
             self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
                                                  detail="relocalisation candidate")
-        candidate = _Candidate(k, self.window_first.get(k, k), outcome.fix, np.asarray(pose, float).copy(),
-                               len(self.fixes) - 1)
+        candidate = self._candidate(k, pose, outcome)
         if self._consensus and not self._agree(self._consensus[-1], candidate, joint):
             self._consensus = []
         self._consensus.append(candidate)
-        first = self._consensus[0].first
-        if len(self._consensus) >= self.config.relocalise_fixes and k - first + 1 >= 2 * self.config.n_pings:
+        if _disjoint(self._consensus) >= self.config.relocalise_fixes:
             extra = float(np.hypot(extra, self._relocalise(k, pose, joint)))
         return extra
+
+    def _candidate(self, k: int, pose, outcome: FixOutcome) -> _Candidate:
+        return _Candidate(k, self.window_first.get(k, k), outcome.fix, np.asarray(pose, float).copy(),
+                          len(self.fixes) - 1)
+
+    def _confirm(self, k: int, pose, joint, outcome: FixOutcome) -> bool:
+        """A tracking navigator's accepted fix: used at once when it is close to the prediction,
+        held for the next fix to agree with when its NIS is above the ``confirm_probability``
+        quantile (``GraphConfig``); a held fix is used once a later accepted fix agrees with it
+        through the DR, dropped (``UNCONFIRMED``) when one disagrees or after two windows.
+        Returns whether the outcome was accepted (used or held)."""
+        held, agreed = self._held, False
+        if held is not None and (outcome.accepted or k - held.key > 2 * self.config.spacing):
+            agreed = outcome.accepted and self._agree(held, self._candidate(k, pose, outcome), joint)
+            if agreed:
+                self._use(held, f"confirmed by the fix at ping {k}")
+            else:
+                self.fixes[held.record] = dataclasses.replace(
+                    self.fixes[held.record], status=FixStatus.UNCONFIRMED,
+                    detail="held for confirmation; the next fix did not agree")
+            self._held = None
+        if not outcome.accepted:
+            return False
+        limit = self.config.confirm_probability
+        if limit is not None and outcome.record.nis > gate_threshold(limit) and (held is None or not agreed):
+            self._held = self._candidate(k, pose, outcome)
+            self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
+                                                 detail="held until a later fix agrees")
+            return True
+        self._use(self._candidate(k, pose, outcome), "")
+        return True
+
+    def _use(self, candidate: _Candidate, detail: str) -> None:
+        """Add a fix to the graph and mark its record accepted."""
+        fix = candidate.fix
+        self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance))
+        record = self.fixes[candidate.record]
+        self.fixes[candidate.record] = dataclasses.replace(record, status=FixStatus.ACCEPTED,
+                                                           detail=detail or record.detail)
+        self._last_accepted = max(candidate.key, self._last_accepted or 0)
+        self._outside, self._consensus = 0, []
 
     def _widen(self, k: int, half_width: float) -> float:
         """Start (or go on with) a lost episode at key ``k`` and return the std (m) of its next
@@ -271,6 +318,11 @@ class GraphNavigator:
         config = self.config
         if not self.lost:
             self.lost = True
+            if self._held is not None:  # searched around the belief now given up
+                self.fixes[self._held.record] = dataclasses.replace(
+                    self.fixes[self._held.record], status=FixStatus.UNCONFIRMED,
+                    detail="held for confirmation; the navigator was lost before a fix agreed")
+                self._held = None
             start = 0 if self._last_accepted is None else self._last_accepted
             self.episodes.append(LostEpisode(start=start, declared=k))
             log.warning("graph: lost at ping %d (the best matches lie beyond the search since ping %d)",
@@ -301,12 +353,10 @@ class GraphNavigator:
             self.episodes.append(episode)
             taken = [newest]
         for c in taken:
-            self._new_factors.add(self.graph.add_position_fix(c.key, c.fix.position, c.fix.covariance))
-            self.fixes[c.record] = dataclasses.replace(self.fixes[c.record], status=FixStatus.ACCEPTED,
-                                                       detail="relocalised")
+            self._use(c, "relocalised")
         episode.end = k
         log.warning("graph: relocalised at ping %d (lost since ping %d)", k, episode.start)
-        self.lost, self._consensus, self._outside, self._last_accepted = False, [], 0, k
+        self.lost, self._held = False, None
         return extra
 
     def _agree(self, a: _Candidate, b: _Candidate, joint) -> bool:
@@ -355,7 +405,7 @@ class GraphNavigator:
         laid = self._laid(k, pose)
         if fix is not None:
             return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width,
-                             strict=strict)
+                             strict=strict, noise=self.model.measurement_std)
         started = _time.perf_counter()
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
@@ -367,7 +417,7 @@ class GraphNavigator:
             self.tap_times.append(_time.perf_counter() - started)
         try:
             return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width,
-                             strict=strict)
+                             strict=strict, noise=self.model.measurement_std)
         except TangraphError as exc:
             log.warning("%s", exc)
             return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)

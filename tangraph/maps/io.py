@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 import os
 import tempfile
 from collections.abc import Callable
@@ -69,6 +70,42 @@ def _existing(path: str | os.PathLike) -> Path:
     if p.is_dir():
         raise MapFormatError(f"{p} is a folder, not a map file")
     return p
+
+
+#: bytes a grid cell costs while a map is read: the float64 values, their masks and the map's copy
+_BYTES_PER_CELL = 32
+
+
+def available_memory() -> int:
+    """Bytes of physical memory free now (the total where the system does not say)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_AVPHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # not POSIX: no refusal on memory
+        return 1 << 62
+
+
+def check_memory(shape, where: str) -> None:
+    """Refuse, before allocating, a grid of ``shape`` cells that reading would not fit in the
+    memory free now (about 32 bytes a cell), naming its size and what to do instead.
+
+    Raises
+    ------
+    MemoryError
+        With that message (the CLI's runtime error, status 1).
+    """
+    cells = math.prod(int(n) for n in shape)
+    need, free = cells * _BYTES_PER_CELL, available_memory()
+    if need > free:
+        dims = " x ".join(str(int(n)) for n in shape)
+        raise MemoryError(
+            f"{where}: the grid has {dims} cells; reading it needs about {_gib(need)} of memory, "
+            f"{_gib(free)} are free; crop it to the survey area first (gdal_translate -projwin, "
+            "gmt grdcut) or read a coarser copy"
+        )
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB" if n < 2**40 else f"{n / 2**40:.1f} TiB"
 
 
 def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | None, where: str) -> float:
@@ -380,6 +417,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         var = ds[variable]
         if var.ndim != 2:
             raise MapFormatError(f"{path}: variable {variable!r} has dims {var.dims}, not 2-D")
+        check_memory(var.shape, f"{path}:{variable}")
         if tuple(var.dims) == ("north", "east") and "positive" in var.attrs:  # tangraph's own
             m = BathymetryMap.from_xarray(var.load(), name=name or str(var.attrs.get("name") or path.stem))
             return m.resample(cell) if cell is not None else m
@@ -525,6 +563,7 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
         with src:
             if src.count != 1:
                 raise MapFormatError(f"{path}: {src.count} bands; one band of depths is expected")
+            check_memory((src.height, src.width), str(path))
             band = src.read(1, masked=True)
             transform, file_crs = src.transform, src.crs
             tags, band_tags = src.tags(), src.tags(1)

@@ -76,6 +76,7 @@ class TapConfig:
     alpha: float = 0.05
     covariance: Literal["region", "curvature", "crlb"] = "region"
     calibrate: bool = True
+    jackknife: bool = True
     min_soundings: int = 10
     search_method: Literal["auto", "direct", "fft"] = "auto"
     max_area_fraction: float = 0.5
@@ -267,12 +268,18 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
     )
+    covariance = covariances[config.covariance]
+    if config.jackknife:
+        jack = _jackknife(bathymetry, patch, grid, i, j, step)
+        if jack is not None:
+            covariances["jackknife"] = jack
+            covariance = _larger(covariance, jack)
     quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config)
     return TapFix(
         index=patch.reference,
         first=patch.first,
         position=position,
-        covariance=covariances[config.covariance],
+        covariance=covariance,
         tide=-tide,  # the search's sums hold map - measured
         sigma=float(np.sqrt(sigma2[k_h, i, j])),
         n_soundings=n,
@@ -415,6 +422,55 @@ def _covariances(
         region = moments + np.eye(2) * step**2 / 12
     curvature = region if curvature is None else curvature
     return {"region": region, "curvature": curvature, "crlb": crlb}
+
+
+def _jackknife(bathymetry, patch, grid, i, j, step, reach: int = 20) -> np.ndarray | None:
+    """Ping-jackknife covariance of the fix: the fix of the window without each of its ``P``
+    pings in turn (the minimum of ``Q`` without that ping's soundings, the tide profiled over the
+    rest, refined by a quadric), ``(P - 1) / P`` times the scatter of those ``P`` positions about
+    their mean. Pings are the clusters of the window's errors (attitude, sound velocity, a bad
+    ping), so this is the cluster-robust variance of the fix; it is large when the fix rests on
+    one ping (a ping in error can move a whole window's fix on gentle terrain). Searched within
+    ``reach`` steps of the fix, on the patch as turned by the best heading; None with fewer than
+    five pings."""
+    pings, cluster = np.unique(patch.ping, return_inverse=True)
+    if pings.size < 5:
+        return None
+    nn, ne = grid.shape[1:]
+    rows = slice(max(i - reach, 0), min(i + reach + 1, nn))
+    cols = slice(max(j - reach, 0), min(j + reach + 1, ne))
+    sub = CandidateGrid(grid.north[rows], grid.east[cols])
+    shape = (pings.size, sub.north.size, sub.east.size)
+    s1, s2, count = np.zeros(shape), np.zeros(shape), np.bincount(cluster).astype(float)
+    for n in range(pings.size):
+        mine = cluster == n
+        sums = criterion_sums(bathymetry, patch.offsets[mine], patch.depths[mine], sub, method="direct")
+        s1[n], s2[n] = sums.sum_d[0], sums.sum_d2[0]
+    total1, total2, total = s1.sum(axis=0), s2.sum(axis=0), count.sum()
+    positions = np.empty((pings.size, 2))
+    for n in range(pings.size):
+        q = (total2 - s2[n]) - (total1 - s1[n]) ** 2 / (total - count[n])
+        if not np.any(np.isfinite(q)):
+            return None
+        a, b = np.unravel_index(np.nanargmin(q), q.shape)
+        shift, _ = _quadric(q, a, b, step)
+        positions[n] = (sub.north[a] + shift[0], sub.east[b] + shift[1])
+    d = positions - positions.mean(axis=0)
+    return (pings.size - 1) / pings.size * (d.T @ d)
+
+
+def _larger(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest covariance at least as large as ``a`` and as ``b`` in every direction of
+    ``a``'s generalised eigenvectors (``a`` where ``b`` is smaller everywhere; ``a`` if it is not
+    positive definite)."""
+    try:
+        low = np.linalg.cholesky(a)
+    except np.linalg.LinAlgError:
+        return a
+    inv = np.linalg.inv(low)
+    w, v = np.linalg.eigh(inv @ b @ inv.T)
+    out = low @ (v * np.maximum(w, 1.0)) @ v.T @ low.T
+    return 0.5 * (out + out.T)
 
 
 def _crlb(bathymetry, patch, position, s2) -> np.ndarray:

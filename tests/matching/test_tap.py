@@ -179,3 +179,46 @@ def test_calibrated_region_covers_the_truth_at_its_level():
     coverage = np.mean(inside)
     assert abs(coverage - 0.95) < 4 * np.sqrt(0.95 * 0.05 / runs), coverage
     assert 1.0 < np.mean(nees_values) < 2.0 + 4 * 2.0 / np.sqrt(runs), np.mean(nees_values)
+
+
+def test_a_clean_window_keeps_its_region_covariance_under_the_jackknife():
+    m = rough_map(2)
+    s = survey_on(m, noise=0.3, seed=2)
+    with_jack = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0, step=2.5))
+    plain = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0, step=2.5, jackknife=False))
+    np.testing.assert_allclose(with_jack.position, plain.position)
+    assert "jackknife" in with_jack.covariances
+    # every ping carries a tenth of the information: leaving one out moves the fix little
+    grown = np.linalg.eigvalsh(np.linalg.solve(plain.covariance, with_jack.covariance)).max()
+    assert 1.0 - 1e-9 <= grown < 4.0
+
+
+def test_a_fix_that_rests_on_one_ping_gets_the_jackknifes_large_covariance():
+    """A flat seabed with one mound under one ping's swath only: the fix holds only while that
+    ping is in the window, so the jackknife over pings says it is not known."""
+    north = east = np.arange(0, 1500.0, CELL)
+    nn, ee = np.meshgrid(north - 520.0, east - 460.0, indexing="ij")  # under ping 3 (pings 20 m apart)
+    m = BathymetryMap(north=north, east=east, depth=80.0 - 4.0 * np.exp(-(nn**2 + ee**2) / (2 * 4.0**2)))
+    s = survey_on(m, noise=0.05, seed=3, spacing=20.0)
+    plain = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0, jackknife=False))
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0))
+    assert np.sqrt(np.linalg.eigvalsh(plain.covariance).max()) < 3.0  # the mound pins it down...
+    assert np.sqrt(np.linalg.eigvalsh(fix.covariance).max()) > 10.0  # ...but one ping sees it
+
+
+def test_larger_covariance_is_the_larger_in_every_direction():
+    from tangraph.matching.tap import _larger
+
+    np.testing.assert_allclose(_larger(np.diag([1.0, 4.0]), np.diag([4.0, 1.0])), np.diag([4.0, 4.0]))
+    a = np.array([[2.0, 0.5], [0.5, 1.0]])
+    np.testing.assert_allclose(_larger(a, 0.1 * a), a)
+
+
+def test_a_best_match_on_the_search_edge_says_the_truth_may_lie_beyond():
+    m = rough_map(4)
+    s = survey_on(m, noise=0.1, seed=4, offset=(0.0, 0.0))
+    prior = s.true_pose[9, :2] + np.array([55.0, 0.0])  # the truth is 55 m away, the search 40 m
+    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0), prior=prior)
+    assert fix.quality.outside and not fix.accepted
+    inside = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0), prior=s.true_pose[9, :2] + 10.0)
+    assert not inside.quality.outside

@@ -1,0 +1,99 @@
+"""The online graph knows when it is lost: it widens its search, relocalises on agreeing fixes,
+flags what it could not trust, and never reports a confident wrong pose."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.eval import position_nees, track_metrics
+from tangraph.graph import FixStatus, GraphConfig, GraphNavigator, navigate_online, smooth_survey
+from tangraph.graph.fixes import judge_fix
+from tangraph.matching import TapConfig, tap_fix
+from tangraph.sim.faults import offset_start
+
+CONFIG = GraphConfig(key_interval=20.0)
+
+
+@pytest.fixture(scope="module")
+def wrong_start(small_survey):
+    """The DR starts 120 m from the truth while the model says 10 m (std)."""
+    return offset_start(small_survey, [90.0, -80.0])
+
+
+def test_a_wrong_start_is_found_lost_and_relocalised(wrong_start, rough_map):
+    track = navigate_online(wrong_start, rough_map, CONFIG)
+    episodes = track.meta["lost_episodes"]
+    assert len(episodes) >= 1 and episodes[0]["start"] == 0 and episodes[0]["end"] is not None
+    assert episodes[0]["breaks"][0] >= 40.0  # the belief was widened by at least the first search
+    statuses = {f.status for f in track.meta["fixes"]}
+    assert FixStatus.OUTSIDE_SEARCH in statuses
+    after = episodes[-1]["end"] + 1
+    errors = np.hypot(*(track.pose[after:, :2] - wrong_start.true_pose[after:, :2]).T)
+    assert np.sqrt(np.mean(errors**2)) < 5.0
+    nees = position_nees(track, wrong_start.true_pose)
+    assert np.all(track.lost | (nees <= 20.0))  # never confidently wrong
+    assert track_metrics(track, wrong_start.true_pose)["confident_wrong"] == 0.0
+
+
+def test_without_the_lost_test_the_wrong_start_is_a_confident_wrong_answer(wrong_start, rough_map):
+    track = navigate_online(wrong_start, rough_map, dataclasses.replace(CONFIG, lost_windows=None))
+    assert track.meta["lost_episodes"] == [] and not track.lost.any()
+    assert track_metrics(track, wrong_start.true_pose)["confident_wrong"] > 0.5
+
+
+def test_the_smoother_relocalises_the_whole_track(wrong_start, rough_map):
+    track = smooth_survey(wrong_start, rough_map, CONFIG)
+    errors = np.hypot(*(track.pose[:, :2] - wrong_start.true_pose[:, :2]).T)
+    assert track.meta["start_prior"] == "outlier" and np.sqrt(np.mean(errors**2)) < 3.0
+    assert track_metrics(track, wrong_start.true_pose)["confident_wrong"] == 0.0
+    assert not track.lost.any()  # the smoother's answer holds from the first ping
+
+
+def test_a_clean_survey_is_never_lost(small_survey, rough_map):
+    track = navigate_online(small_survey, rough_map, CONFIG)
+    assert track.meta["lost_episodes"] == [] and track.meta["n_lost"] == 0
+
+
+def _fix_at(survey, bathymetry, k, offset):
+    fix = tap_fix(survey, bathymetry, k, CONFIG.n_pings, dataclasses.replace(CONFIG.tap, half_width=30.0),
+                  prior=survey.true_pose[k, :2])
+    return dataclasses.replace(fix, position=survey.true_pose[k, :2] + np.asarray(offset, float),
+                               covariance=np.eye(2))
+
+
+def _navigator_at(survey, bathymetry, k):
+    nav = GraphNavigator(survey, bathymetry, CONFIG)
+    for _ in range(k):
+        nav.step()
+    return nav
+
+
+@pytest.mark.parametrize(("second", "confirmed"), [((0.0, 0.0), True), ((25.0, -20.0), False)])
+def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, second, confirmed):
+    """A fix whose NIS is between the confirmation quantile and the gate is held; the next fix
+    confirms it (both used) or, disagreeing, drops it (UNCONFIRMED)."""
+    k1, k2 = 99, 109  # window ends (spacing 10)
+    nav = _navigator_at(small_survey, rough_map, k1)
+    _, cov = nav.predicted(k1)
+    spread = float(np.sqrt(cov[0, 0] + 2.2))  # the prediction's and the fix's (as the graph grows it)
+    nav.step(fix=_fix_at(small_survey, rough_map, k1, [2.9 * spread, 0.0]))
+    held = nav.fixes[-1]
+    assert 4.6 < held.nis < 13.8  # between the confirmation quantile and the gate
+    assert held.status is FixStatus.UNCONFIRMED and "held" in held.detail
+    while nav.index + 1 < k2:
+        nav.step()
+    nav.step(fix=_fix_at(small_survey, rough_map, k2, second))
+    first = next(f for f in nav.fixes if f.index == k1)
+    assert (first.status is FixStatus.ACCEPTED) == confirmed
+
+
+def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):
+    fix = tap_fix(small_survey, rough_map, 59, 20, TapConfig(half_width=30.0),
+                  prior=small_survey.true_pose[59, :2])
+    outcome = judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0, noise=fix.sigma / 5.0)
+    assert outcome.record.status is FixStatus.MISFIT and "5.0 x the model's" in outcome.record.detail
+    assert judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0,
+                     noise=fix.sigma).record.status is not FixStatus.MISFIT
