@@ -180,7 +180,8 @@ def test_outlier_fixes_do_not_pull_the_track(small_survey, rough_map, rate):
 
 
 def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
-    config = GraphConfig(key_interval=20.0, gate_probability=None, confirm_probability=None, lost_windows=None)
+    config = GraphConfig(key_interval=20.0, gate_probability=None, confirm_probability=None,
+                         lost_windows=None)
     truth = small_survey.true_pose
     bad = outlier_fixes(small_survey, rough_map, config, 0.1, np.random.default_rng(5))
     tracks = {}
