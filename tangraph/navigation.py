@@ -251,6 +251,11 @@ def track_report(track: Track, survey: Survey) -> dict:
                            "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}
     if "n_divergences" in meta:
         report["divergences"] = int(meta["n_divergences"])
+    if "lost_steps" in meta:
+        report["lost"] = {"pings": int(track.lost.sum()), "episodes": len(meta.get("lost_episodes", [])),
+                          "off_map_pings": int(meta.get("n_off_map", 0))}
+    if "start_prior" in meta:
+        report["start_prior"] = meta["start_prior"]
     if track.timings:
         report["run_time_s"] = float(track.timings.get("total", float("nan")))
         report["per_step_s"] = float(track.timings.get("per_step", float("nan")))
@@ -278,6 +283,15 @@ def track_summary(track: Track, survey: Survey) -> str:
                      f"rejected ({detail})")
     if "divergences" in r:
         lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")
+    if r.get("lost", {}).get("pings"):
+        lost = r["lost"]
+        episodes = f" in {lost['episodes']} episodes" if lost["episodes"] else ""
+        lines.append(f"lost         {lost['pings']} pings flagged lost{episodes} (column 'lost' of the "
+                     "track: their poses are not to be trusted)")
+    if r.get("lost", {}).get("off_map_pings"):
+        lines.append(f"off the map  {r['lost']['off_map_pings']} pings: dead reckoning only there")
+    if r.get("start_prior") == "outlier":
+        lines.append("start        the start position prior disagreed with the fixes and was dropped")
     if "run_time_s" in r:
         lines.append(f"run time     {r['run_time_s']:.2f} s in all, {1e3 * r['per_step_s']:.2f} ms per step")
     if "error" in r:

@@ -163,6 +163,9 @@ def _columns(track: Track, crs: str | None, origin, reference=None) -> tuple[lis
         c[:, 1, 1],
         c[:, 2, 2],
     ]
+    if "lost_steps" in track.meta:  # the estimator says which poses not to trust
+        names.append("lost")
+        columns.append(track.lost.astype(float))
     if crs is not None:
         lon, lat = _lonlat(track, crs, origin)
         names[1:1] = ["lat", "lon"]
@@ -189,7 +192,8 @@ def write_track_csv(
     overwrite: bool = False,
 ) -> Path:
     """CSV with time, latitude/longitude (when ``crs`` is given: the map's), north, east, heading
-    (degrees clockwise from grid north), the covariance terms and, given the survey's ``reference``
+    (degrees clockwise from grid north), the covariance terms, ``lost`` (1 where the estimator
+    flagged the pose as lost: ``Track.lost``; when it records them) and, given the survey's ``reference``
     track (K, 2 or 3: GPS or the truth, in the frame of ``north``, ``east``), ``ref_north`` and
     ``ref_east``.
 
@@ -262,6 +266,8 @@ def _pose_properties(track: Track, reference, start_time) -> dict[str, np.ndarra
         "ellipse95_minor": minor,
         "ellipse95_azimuth_deg": azimuth,
     }
+    if "lost_steps" in track.meta:
+        numbers["lost"] = track.lost.astype(float)
     reference = _reference(track, reference)
     if reference is not None:
         numbers["ref_north"], numbers["ref_east"] = reference[:, 0], reference[:, 1]

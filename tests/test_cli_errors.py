@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from tangraph.cli import main
@@ -91,3 +92,19 @@ def test_an_unknown_crs_is_bad_input(tmp_path, capsys):
 def test_status_values_are_documented():
     doc = main.__doc__
     assert all(str(code) in doc for code in (0, 1, 2, 130, 141))
+
+
+def test_a_grid_larger_than_free_memory_is_refused_before_reading(tmp_path, capsys):
+    """A NetCDF file of a few MB that declares 200000 x 200000 cells: refused with its size, as
+    a runtime error (status 1), without trying to allocate it."""
+    netCDF4 = pytest.importorskip("netCDF4")
+    path = tmp_path / "huge.nc"
+    with netCDF4.Dataset(path, "w", format="NETCDF4") as ds:
+        for name in ("y", "x"):
+            ds.createDimension(name, 200_000)
+            ds.createVariable(name, "f8", (name,))[:] = 10.0 * np.arange(200_000)
+        ds.createVariable("z", "f4", ("y", "x"), chunksizes=(1000, 1000)).units = "m"
+    assert main(["maps", "info", str(path), "--sign", "depth"]) == 1
+    err = capsys.readouterr().err
+    assert "200000 x 200000 cells" in err and "TiB of memory" in err and "gmt grdcut" in err
+    assert err.count("\n") == 1 and "Traceback" not in err

@@ -11,7 +11,8 @@ dead reckoning) with a fresh seed and navigates it, clean and spoiled in each of
 - ``start-200``: the whole dead-reckoned track starts 200 m from the truth (a random direction)
   while the navigation model says 10 m;
 - ``half-map``: the map holds no depth east of 1100 m, so the survey leaves it about halfway;
-- ``off-map``: the map holds no depth under the survey at all.
+- ``off-map``: the map holds no depth within 1 km of the survey (a map of another part of the
+  lake): no sounding can be matched anywhere.
 
 Per run and method it records the RMSE, final error, ANEES, final NEES, the share of poses
 flagged lost and the share of *confident wrong* poses (NEES above 20 and not flagged lost),
@@ -38,7 +39,7 @@ CASES = ("clean", "shift-10", "shift-20", "shift-30", "bias-10", "bias-20", "bia
          "half-map", "off-map")
 METHODS = ("isam2", "smoother", "pf")
 HALF_MAP_EAST = 1100.0  # m: the map's east limit in "half-map"
-OFF_MAP_EAST = 1400.0  # m: the map's west limit in "off-map" (the survey lies west of it)
+OFF_MAP_EAST = 2500.0  # m: the map's west limit in "off-map" (the survey lies 1 km west of it)
 
 
 def _case(name: str, survey, bathymetry, rng):

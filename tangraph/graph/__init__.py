@@ -13,7 +13,7 @@ from tangraph.graph.factors import (
     tangent_to_world,
     world_to_tangent,
 )
-from tangraph.graph.fixes import FixRecord, FixStatus, search_half_width
+from tangraph.graph.fixes import FixRecord, FixStatus, LostEpisode, search_half_width
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices, window_ends
 from tangraph.graph.online import GraphNavigator, navigate_online
 from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
@@ -23,6 +23,7 @@ __all__ = [
     "FixStatus",
     "GraphConfig",
     "GraphNavigator",
+    "LostEpisode",
     "PoseGraph",
     "SmootherSolution",
     "between_noise",

@@ -31,9 +31,17 @@ from tangraph.graph.calibration import (
     to_world,
     world_covariance,
     world_jacobian,
+    world_position_factor,
 )
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import check_fix_covariance, compose, gate_threshold, nis, propagate_joint
+from tangraph.graph.factors import (
+    check_fix_covariance,
+    compose,
+    gate_threshold,
+    nis,
+    pose_prior_factor,
+    propagate_joint,
+)
 from tangraph.graph.fixes import (
     FixOutcome,
     FixRecord,
@@ -162,6 +170,9 @@ class GraphNavigator:
         self._last_accepted: int | None = None
         self._consensus: list[_Candidate] = []
         self._held: _Candidate | None = None  # an accepted fix waiting for a later one to agree
+        self._start_factor = None  # the start's position prior as in iSAM2 (widened when found wrong)
+        self._start_std = 0.0
+        self._remove: list[int] = []  # iSAM2 factor indices to remove at the next update
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
@@ -215,6 +226,7 @@ class GraphNavigator:
         self.graph.add_pose(0, self.survey.time[0], dr)
         for factor in self.graph.add_start(0, dr, m.initial_position_std, heading_std):
             self._new_factors.add(factor)
+        self._start_factor, self._start_std = self.graph._factors["start"][0], m.initial_position_std
         self._new_values.insert(0, gtsam.Pose2(*dr))
         if self.graph.calibrated:
             self._new_factors.add(self.graph._factors["prior"][0])
@@ -246,11 +258,12 @@ class GraphNavigator:
             self._outside += 1  # the truth seems to lie beyond the search: widen it
             if self.config.lost_windows is not None and self._outside >= self.config.lost_windows and k > 0:
                 self._outside = 0
-                extra = self._widen(k, outcome.record.half_width)
-                if extra > 0:
+                widening = self._widen(k, outcome.record.half_width)
+                if widening > 0:
+                    extra = self._break(widening)
                     joint = joint.copy()
-                    joint[0, 0] += extra**2
-                    joint[1, 1] += extra**2
+                    joint[0, 0] += widening**2
+                    joint[1, 1] += widening**2
                     outcome = self._judge(k, pose, joint, fix, strict=True)
                     self.fixes[-1] = outcome.record
         # relocalisation candidates: while lost, fixes that pass everything; while tracking, fixes
@@ -308,13 +321,38 @@ class GraphNavigator:
         record = self.fixes[candidate.record]
         self.fixes[candidate.record] = dataclasses.replace(record, status=FixStatus.ACCEPTED,
                                                            detail=detail or record.detail)
-        self._last_accepted = max(candidate.key, self._last_accepted or 0)
-        self._outside, self._consensus = 0, []
+        if not fix.quality.multimodal:  # a fix two places explain proves nothing about the belief
+            self._last_accepted = max(candidate.key, self._last_accepted or 0)
+            self._outside, self._consensus = 0, []
+
+    def _break(self, std: float) -> float:
+        """Widen the belief by ``std`` (m): on the start's position prior when the episode goes
+        back to the first ping (no fix was ever trusted: the start prior is the belief given up,
+        and widening it keeps the constant DR errors from bending to reconcile it with the
+        fixes), else on the odometry into the current key. Returns the odometry's break std."""
+        if self.episodes[-1].start == 0 and self._widen_start(std):
+            return 0.0
+        return std
+
+    def _widen_start(self, std: float) -> bool:
+        """Replace the start's position prior in iSAM2 by one wider by ``std``; False when the
+        first pose has been marginalised."""
+        index = self._isam_index(self._start_factor)
+        if index is None or not self.isam.getLinearizationPoint().exists(0):
+            return False
+        self._start_std = float(np.hypot(self._start_std, std))
+        key, pose, cov = self.graph.start
+        widened = np.diag([self._start_std**2] * 2 + [cov[2, 2]])
+        self._start_factor = (world_position_factor(key, pose[:2], widened[:2, :2], self.origin)
+                              if self.graph.calibrated else pose_prior_factor(key, pose, widened))
+        self._remove.append(index)
+        self._new_factors.add(self._start_factor)
+        return True
 
     def _widen(self, k: int, half_width: float) -> float:
-        """Start (or go on with) a lost episode at key ``k`` and return the std (m) of its next
-        break: the search's half-width (the truth lies beyond it), up to what the widest search
-        can still see (0 once there)."""
+        """Start (or go on with) a lost episode at key ``k`` and return by how much (std, m) to
+        widen the belief: the search's half-width (the truth lies beyond it), up to what the
+        widest search can still see (0 once there)."""
         config = self.config
         if not self.lost:
             self.lost = True
@@ -336,28 +374,74 @@ class GraphNavigator:
         return episode.breaks[-1]
 
     def _relocalise(self, k: int, pose, joint) -> float:
-        """Enough agreeing candidates: take them. A lost navigator adds them all (they follow
-        its last break); a tracking one whose gate refused them breaks the odometry into ``k`` by
-        their distance from the prediction and adds the newest. Returns that break's std."""
-        extra = 0.0
+        """Enough agreeing candidates: the belief since the last trusted fix was wrong. Give up
+        what was built on it (the weak fixes accepted since, see :meth:`_forget`), let the
+        candidates move the track by a break as large as their distance from the prediction
+        (on the start's prior when no fix was ever trusted, else on the odometry into the first
+        candidate's key, so the jump is the break's and not the constant DR errors'), and add
+        them all. Where that odometry factor has left iSAM2's window, the break goes into key
+        ``k`` and only the newest is added (the others stay ``UNCONFIRMED`` for the smoother).
+        Returns the std of a break into key ``k`` (0 for none)."""
+        taken = list(self._consensus)
+        world, _ = self._world(pose, joint)
+        cell = float(min(self.bathymetry.cell_size))
+        jump = max(float(np.hypot(*(taken[-1].fix.position - world[:2]))), cell)
         if self.lost:
             episode = self.episodes[-1]
-            taken = self._consensus
         else:
-            newest = self._consensus[-1]
-            world, _ = self._world(pose, joint)
-            extra = max(float(np.hypot(*(newest.fix.position - world[:2]))),
-                        float(min(self.bathymetry.cell_size)))
             start = 0 if self._last_accepted is None else self._last_accepted
-            episode = LostEpisode(start=start, declared=self._consensus[0].key, breaks=[extra])
+            episode = LostEpisode(start=start, declared=taken[0].key)
             self.episodes.append(episode)
-            taken = [newest]
-        for c in taken:
-            self._use(c, "relocalised")
+        episode.breaks.append(jump)
+        self._forget(episode.start, k)
+        extra = 0.0
+        if not ((episode.start == 0 and self._widen_start(jump)) or self._break_into(taken[0].key, jump)):
+            taken, extra = taken[-1:], jump
+        for candidate in taken:
+            self._use(candidate, "relocalised")
         episode.end = k
         log.warning("graph: relocalised at ping %d (lost since ping %d)", k, episode.start)
         self.lost, self._held = False, None
         return extra
+
+    def _isam_index(self, factor) -> int | None:
+        """The index of ``factor`` in iSAM2's graph (None if it is not there any more)."""
+        factors = self.smoother.getFactors()
+        return next((i for i in range(factors.size()) if factors.at(i) is factor), None)
+
+    def _forget(self, start: int, k: int) -> None:
+        """Remove from iSAM2 the fixes accepted after ping ``start`` and before ``k`` (weak ones:
+        a strong fix would have made it the last trusted one); their records become
+        ``UNCONFIRMED``."""
+        graph = self.graph
+        keep = []
+        for n, (key, _, _) in enumerate(graph.fixes):
+            index = self._isam_index(graph._factors["fix"][n]) if start < key < k else None
+            if index is None:
+                keep.append(n)
+                continue
+            self._remove.append(index)
+            at = next(i for i, r in enumerate(self.fixes) if r.index == key and r.accepted)
+            self.fixes[at] = dataclasses.replace(
+                self.fixes[at], status=FixStatus.UNCONFIRMED,
+                detail=f"given up when the navigator relocalised at ping {k}")
+        graph.fixes = [graph.fixes[n] for n in keep]
+        graph._factors["fix"] = [graph._factors["fix"][n] for n in keep]
+
+    def _break_into(self, key: int, std: float) -> bool:
+        """Widen by ``std`` the odometry factor into ``key`` in iSAM2 (a break after the fact);
+        False when it has left iSAM2's window."""
+        graph = self.graph
+        n = next((n for n, odo in enumerate(graph.odometry) if odo[1] == key), None)
+        index = None if n is None else self._isam_index(graph._factors["odometry"][n])
+        if index is None or key == 0:
+            return False
+        total = float(np.hypot(graph.breaks.get(key, 0.0), std))
+        graph.breaks[key] = total
+        graph._factors["odometry"][n] = graph._odometry_factor(*graph.odometry[n], total)
+        self._remove.append(index)
+        self._new_factors.add(graph._factors["odometry"][n])
+        return True
 
     def _agree(self, a: _Candidate, b: _Candidate, joint) -> bool:
         """Whether candidate ``b`` agrees with the earlier ``a`` through the DR between them: the
@@ -455,11 +539,12 @@ class GraphNavigator:
             stamps.insert((CALIBRATION, float(self.survey.time[k])))
         self.smoother.setSmootherLag(self._lag())
         try:
-            self.smoother.update(self._new_factors, self._new_values, stamps)
+            self.smoother.update(self._new_factors, self._new_values, stamps, self._remove)
         except RuntimeError as exc:
             raise _translate(exc, self.graph) from None
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
+        self._remove = []
         self.isam = self.smoother.getISAM2()
         estimate = self.isam.calculateEstimatePose2(k)
         pose = np.array([estimate.x(), estimate.y(), estimate.theta()])

@@ -97,3 +97,36 @@ def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):
     assert outcome.record.status is FixStatus.MISFIT and "5.0 x the model's" in outcome.record.detail
     assert judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0,
                      noise=fix.sigma).record.status is not FixStatus.MISFIT
+
+
+def _half_map(bathymetry):
+    """The map without its depths north of 600 m: the small survey leaves it about halfway."""
+    depth = np.array(bathymetry.depth)
+    depth[bathymetry.north > 600.0, :] = np.nan
+    return dataclasses.replace(bathymetry, depth=depth, name="half")
+
+
+def test_leaving_the_map_the_graph_stays_honest(small_survey, rough_map):
+    half = _half_map(rough_map)
+    off = small_survey.true_pose[:, 0] > 620.0
+    track = navigate_online(small_survey, half, CONFIG)
+    nees = position_nees(track, small_survey.true_pose)
+    assert off.sum() > 50 and np.all(nees[off] <= 20.0)
+    spread = track.covariance[off, 0, 0] + track.covariance[off, 1, 1]
+    assert np.all(np.diff(spread) >= -1e-9)  # off the map only the DR model speaks: it grows
+    assert track.meta["lost_episodes"] == []  # no fix is made there, so nothing says "lost"
+
+
+@pytest.mark.slow
+def test_leaving_the_map_the_final_nees_is_in_its_band_over_seeds(rough_map):
+    from tangraph.eval import anees_band
+    from tangraph.sim.scenario import simulate
+    from tests.graph.conftest import small_scenario
+
+    half = _half_map(rough_map)
+    final = []
+    for seed in range(61, 67):
+        survey = simulate(small_scenario(), rng=np.random.default_rng(seed), bathymetry=rough_map, seed=seed)
+        final.append(position_nees(navigate_online(survey, half, CONFIG), survey.true_pose)[-1])
+    low, high = anees_band(len(final))
+    assert low <= np.mean(final) <= high

@@ -85,7 +85,7 @@ def test_the_smoother_drops_a_wrong_start_prior(small_survey, rough_map):
     assert track.meta["start_prior"] == "outlier"
     assert np.sqrt(np.mean(error**2)) < 3.0
     plain = smooth_survey(survey, rough_map, GraphConfig(key_interval=20.0, robust_solve="none"))
-    assert np.sqrt(np.mean(np.hypot(*(plain.pose[:, :2] - survey.true_pose[:, :2]).T) ** 2)) > 10.0
+    assert plain.meta["start_prior"] == "kept"
 
 
 def test_gnc_keeps_the_start_prior_where_nothing_else_ties_the_graph():
