@@ -169,6 +169,7 @@ class GraphNavigator:
         self._outside = 0
         self._last_accepted: int | None = None
         self._consensus: list[_Candidate] = []
+        self._unconfirmed: list[_Candidate] = []  # fixes used but not yet trusted
         self._held: _Candidate | None = None  # an accepted fix waiting for a later one to agree
         self._start_factor = None  # the start's position prior as in iSAM2 (widened when found wrong)
         self._start_std = 0.0
@@ -254,7 +255,7 @@ class GraphNavigator:
                 return 0.0
         extra = 0.0
         status = outcome.record.status
-        if status is FixStatus.OUTSIDE_SEARCH or (self.lost and status is FixStatus.GATE):
+        if status.says_lost and self._precise(outcome, 1.0):  # a vague one is a bad window
             self._outside += 1  # the truth seems to lie beyond the search: widen it
             if self.config.lost_windows is not None and self._outside >= self.config.lost_windows and k > 0:
                 self._outside = 0
@@ -267,10 +268,11 @@ class GraphNavigator:
                     outcome = self._judge(k, pose, joint, fix, strict=True)
                     self.fixes[-1] = outcome.record
         # relocalisation candidates: while lost, fixes that pass everything; while tracking, fixes
-        # that only the gate refused (the prediction may be the wrong one)
+        # that only the gate refused (the prediction may be the wrong one); either way precise
+        # ones
         usable = outcome.accepted if self.lost else (
             outcome.record.status is FixStatus.GATE and not outcome.fix.quality.multimodal)
-        if not usable or self.config.lost_windows is None:
+        if not usable or self.config.lost_windows is None or not self._precise(outcome):
             return extra
         if self.lost:
             self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
@@ -282,6 +284,14 @@ class GraphNavigator:
         if _disjoint(self._consensus) >= self.config.relocalise_fixes:
             extra = float(np.hypot(extra, self._relocalise(k, pose, joint)))
         return extra
+
+    def _precise(self, outcome: FixOutcome, share: float = 0.5) -> bool:
+        """Whether a fix's largest std is within ``share / half_width_sigmas`` of its search's
+        half-width: an eighth by default, as a relocalisation candidate must be (two vague fixes
+        agree with anything); a quarter for a window whose best match on the search's edge is
+        evidence of being lost (a vague one there is a window of bad pings)."""
+        largest = float(np.sqrt(np.linalg.eigvalsh(outcome.fix.covariance).max()))
+        return largest <= share * outcome.record.half_width / self.config.half_width_sigmas
 
     def _candidate(self, k: int, pose, outcome: FixOutcome) -> _Candidate:
         return _Candidate(k, self.window_first.get(k, k), outcome.fix, np.asarray(pose, float).copy(),
@@ -314,16 +324,28 @@ class GraphNavigator:
         self._use(self._candidate(k, pose, outcome), "")
         return True
 
-    def _use(self, candidate: _Candidate, detail: str) -> None:
-        """Add a fix to the graph and mark its record accepted."""
+    def _use(self, candidate: _Candidate, detail: str, *, trusted: bool = False) -> None:
+        """Add a fix to the graph and mark its record accepted. A fix is *trusted* (the last
+        trusted fix is where a lost episode starts, and it clears the evidence of being lost)
+        once a later accepted fix from a window that shares none of its pings agrees with it
+        through the DR, or at once when ``trusted`` (fixes that agreed to relocalise); a
+        multimodal fix never is (two places explain it)."""
         fix = candidate.fix
         self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance))
         record = self.fixes[candidate.record]
         self.fixes[candidate.record] = dataclasses.replace(record, status=FixStatus.ACCEPTED,
                                                            detail=detail or record.detail)
-        if not fix.quality.multimodal:  # a fix two places explain proves nothing about the belief
-            self._last_accepted = max(candidate.key, self._last_accepted or 0)
+        if fix.quality.multimodal:
+            return
+        confirmed = [u.key for u in self._unconfirmed
+                     if u.key < candidate.first and self._agree(u, candidate, self._key_joint)]
+        if trusted or confirmed:
+            last = candidate.key if trusted else max(confirmed)
+            self._last_accepted = max(last, self._last_accepted or 0)
             self._outside, self._consensus = 0, []
+            self._unconfirmed = [u for u in self._unconfirmed if u.key > last]
+        if not trusted:
+            self._unconfirmed.append(candidate)
 
     def _break(self, std: float) -> float:
         """Widen the belief by ``std`` (m): on the start's position prior when the episode goes
@@ -363,6 +385,7 @@ class GraphNavigator:
                 self._held = None
             start = 0 if self._last_accepted is None else self._last_accepted
             self.episodes.append(LostEpisode(start=start, declared=k))
+            self._forget(start, k)  # what was built on the belief now given up
             log.warning("graph: lost at ping %d (the best matches lie beyond the search since ping %d)",
                         k, start)
         episode = self.episodes[-1]
@@ -398,7 +421,7 @@ class GraphNavigator:
         if not ((episode.start == 0 and self._widen_start(jump)) or self._break_into(taken[0].key, jump)):
             taken, extra = taken[-1:], jump
         for candidate in taken:
-            self._use(candidate, "relocalised")
+            self._use(candidate, "relocalised", trusted=True)
         episode.end = k
         log.warning("graph: relocalised at ping %d (lost since ping %d)", k, episode.start)
         self.lost, self._held = False, None
@@ -410,9 +433,10 @@ class GraphNavigator:
         return next((i for i in range(factors.size()) if factors.at(i) is factor), None)
 
     def _forget(self, start: int, k: int) -> None:
-        """Remove from iSAM2 the fixes accepted after ping ``start`` and before ``k`` (weak ones:
-        a strong fix would have made it the last trusted one); their records become
-        ``UNCONFIRMED``."""
+        """Remove from iSAM2 the fixes accepted after ping ``start`` (the last trusted fix) and
+        before ``k``: none of them was confirmed, and they were searched around the belief the
+        navigator now gives up. Their records become ``UNCONFIRMED`` (the batch smoother weighs
+        them again)."""
         graph = self.graph
         keep = []
         for n, (key, _, _) in enumerate(graph.fixes):
@@ -424,9 +448,10 @@ class GraphNavigator:
             at = next(i for i, r in enumerate(self.fixes) if r.index == key and r.accepted)
             self.fixes[at] = dataclasses.replace(
                 self.fixes[at], status=FixStatus.UNCONFIRMED,
-                detail=f"given up when the navigator relocalised at ping {k}")
+                detail=f"given up at ping {k}: the navigator found its belief wrong")
         graph.fixes = [graph.fixes[n] for n in keep]
         graph._factors["fix"] = [graph._factors["fix"][n] for n in keep]
+        self._unconfirmed = [u for u in self._unconfirmed if not start < u.key < k]
 
     def _break_into(self, key: int, std: float) -> bool:
         """Widen by ``std`` the odometry factor into ``key`` in iSAM2 (a break after the fact);
