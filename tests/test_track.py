@@ -62,3 +62,29 @@ def test_csv_with_a_reference_track_and_its_shape_checked(tmp_path):
     np.testing.assert_array_equal(rows[:, header.index("ref_east")], [2.5, 4.5])
     with pytest.raises(TangraphError, match="reference track has shape"):
         write_track_csv(track, tmp_path / "u.csv", reference=ref[:1])
+
+
+def test_poses_flagged_lost_are_a_column_and_a_property(tmp_path):
+    flagged = Track(time=np.arange(5.0), pose=np.zeros((5, 3)), meta={"lost_steps": [1, 2, 7]})
+    assert flagged.lost.tolist() == [False, True, True, False, False]  # a step past the end ignored
+    path = write_track_csv(flagged, tmp_path / "t.csv")
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    assert data["lost"].tolist() == [0.0, 1.0, 1.0, 0.0, 0.0]
+    plain = write_track_csv(make_track(), tmp_path / "u.csv")  # no record of lost poses: no column
+    assert "lost" not in plain.read_text().splitlines()[0].split(",")
+    assert not make_track().lost.any()
+
+
+def test_the_summary_says_which_poses_are_lost():
+    from tangraph.navigation import track_summary
+    from tangraph.survey import Survey
+
+    survey = Survey(time=np.arange(5.0), dr_pose=np.zeros((5, 3)), vehicle_depth=np.zeros(5),
+                    beam_forward=np.zeros((5, 1)), beam_starboard=np.zeros((5, 1)),
+                    beam_depth=np.full((5, 1), 10.0))
+    track = Track(time=np.arange(5.0), pose=np.zeros((5, 3)),
+                  meta={"lost_steps": [1, 2], "lost_episodes": [{"start": 1}], "n_off_map": 3,
+                        "start_prior": "outlier"})
+    text = track_summary(track, survey)
+    assert "2 pings flagged lost in 1 episodes" in text and "3 pings: dead reckoning only" in text
+    assert "start position prior disagreed" in text

@@ -274,16 +274,39 @@ class GraphNavigator:
             outcome.record.status is FixStatus.GATE and not outcome.fix.quality.multimodal)
         if not usable or self.config.lost_windows is None or not self._precise(outcome):
             return extra
+        candidate = self._candidate(k, pose, outcome)
+        if self.lost and self._resumes(candidate, pose, joint):
+            return extra
         if self.lost:
             self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
                                                  detail="relocalisation candidate")
-        candidate = self._candidate(k, pose, outcome)
         if self._consensus and not self._agree(self._consensus[-1], candidate, joint):
             self._consensus = []
         self._consensus.append(candidate)
         if _disjoint(self._consensus) >= self.config.relocalise_fixes:
             extra = float(np.hypot(extra, self._relocalise(k, pose, joint)))
         return extra
+
+    def _resumes(self, candidate: _Candidate, pose, joint) -> bool:
+        """A lost navigator's candidate that agrees with the belief it gave up (the prediction
+        without this episode's breaks, within the gate): the evidence was bad windows, not a wrong
+        belief. The candidate is used, trusted, and the episode ends where it is."""
+        widened = float(np.sum(np.square(self.episodes[-1].breaks)))
+        old = joint.copy()
+        old[0, 0] -= widened
+        old[1, 1] -= widened
+        world, cov = self._world(pose, old)
+        total = cov[:2, :2] + candidate.fix.covariance
+        gate = gate_threshold(self.config.gate_probability or 0.999)
+        if np.linalg.eigvalsh(total).min() <= 0 or nis(candidate.fix.position - world[:2], total) > gate:
+            return False
+        episode = self.episodes[-1]
+        self._use(candidate, "the belief held", trusted=True)
+        episode.end = candidate.key
+        log.warning("graph: back on track at ping %d: the fix agrees with the belief held before ping %d",
+                    candidate.key, episode.declared)
+        self.lost, self._consensus = False, []
+        return True
 
     def _precise(self, outcome: FixOutcome, share: float = 0.5) -> bool:
         """Whether a fix's largest std is within ``share / half_width_sigmas`` of its search's

@@ -130,3 +130,23 @@ def test_leaving_the_map_the_final_nees_is_in_its_band_over_seeds(rough_map):
         final.append(position_nees(navigate_online(survey, half, CONFIG), survey.true_pose)[-1])
     low, high = anees_band(len(final))
     assert low <= np.mean(final) <= high
+
+
+def test_a_false_alarm_ends_when_a_fix_agrees_with_the_belief_held(small_survey, rough_map):
+    """Two precise fixes 40 m off in a row (as a block of shifted pings gives) make the navigator
+    lost with ``lost_windows=2``; the next genuine fix agrees with the belief it gave up, so the
+    episode ends there, with no jump, and the track stays as good as the clean one."""
+    config = dataclasses.replace(CONFIG, lost_windows=2)
+    bad = {k: _fix_at(small_survey, rough_map, k, [40.0, -10.0]) for k in (99, 109)}
+    nav = GraphNavigator(small_survey, rough_map, config)
+    for k in range(small_survey.n_pings):
+        nav.step(fix=bad.get(k))
+    track = nav.track()
+    clean = navigate_online(small_survey, rough_map, config)
+    episodes = track.meta["lost_episodes"]
+    assert len(episodes) == 1 and episodes[0]["declared"] == 109 and episodes[0]["end"] is not None
+    assert any(f.detail == "the belief held" for f in track.meta["fixes"])
+    truth = small_survey.true_pose[:, :2]
+    rmse = {name: float(np.sqrt(np.mean(np.sum((t.pose[:, :2] - truth) ** 2, axis=1))))
+            for name, t in (("clean", clean), ("spoiled", track))}
+    assert rmse["spoiled"] <= 1.5 * rmse["clean"]
