@@ -102,6 +102,12 @@ class ParticleConfig:
     lost_pings : int
         A ping is *lost* (``Track.meta["lost_steps"]``) when it and the ``lost_pings - 1``
         previous pings with soundings are all inconsistent.
+    ping_gate : bool
+        An inconsistent ping (the lost test's, above) does not weigh the cloud: the soundings
+        no particle can explain are bad data or a sign of being lost, and in both cases
+        weighing by them drags the cloud to a wrong place with a small spread. The cloud then
+        moves with the dead reckoning, its spread grows, and a run of such pings is flagged
+        lost (``meta["n_gated"]`` counts them). False weighs every ping.
     reinit_std : float or None
         Spread (m) of the cloud drawn after a divergence; None: ``3 * max(s, 1)``, ``s`` the
         model's ``initial_position_std``.
@@ -120,6 +126,7 @@ class ParticleConfig:
     max_stages: int = 20
     lost_alpha: float = 1e-3
     lost_pings: int = 3
+    ping_gate: bool = True
     reinit_std: float | None = None
     reinit_growth: float = 2.0
 
@@ -134,6 +141,7 @@ class ParticleConfig:
         check_count(self, "max_stages")
         check_number(self, "lost_alpha", open_low=True, high=1.0)
         check_count(self, "lost_pings")
+        object.__setattr__(self, "ping_gate", bool(self.ping_gate))
         check_number(self, "reinit_growth", low=1.0)
         if self.reinit_std is not None:
             check_number(self, "reinit_std", open_low=True)

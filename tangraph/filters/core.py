@@ -33,7 +33,9 @@ explain it, and goes on. ``meta["n_divergences"]`` and ``meta["divergence_steps"
 A ping under which no particle has the map (the vehicle off the map: every particle has a
 sounding without a map depth) is no evidence at all: the step is the prediction alone (the
 cloud moves with the dead reckoning and its covariance grows by the DR model's), recorded in
-``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a divergence.
+``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a divergence. An inconsistent ping
+(soundings no particle explains: a block of bad pings, or a cloud that has lost the vehicle)
+does not weigh the cloud (``ParticleConfig.ping_gate``); a run of them is flagged lost.
 """
 
 from __future__ import annotations
@@ -68,6 +70,7 @@ __all__ = [
     "calibration_estimate",
     "check_run_inputs",
     "evaluate",
+    "gated",
     "initial_belief",
     "innovation",
     "jitter",
@@ -281,6 +284,7 @@ class Measurement:
     innovation: Innovation | None = None
     exponents: tuple[float, ...] = ()
     stage_ess: tuple[float, ...] = ()
+    gated: bool = False
 
     @property
     def tempered(self) -> bool:
@@ -641,6 +645,8 @@ def measure(
         return Measurement(belief, None)
     update = evaluate(belief, ping, model) if update is None else update
     first = innovation(belief, update, ping, model)
+    if gated(first, config):
+        return Measurement(belief, None, first, gated=True)
     tempering = config is not None and config.tempering and rng is not None
     current, remaining = belief, ping.weight
     exponents: list[float] = []
@@ -663,6 +669,13 @@ def measure(
         update = evaluate(current, ping, model)
     new = weighted.replace(tide=update.tide, tide_var=update.tide_var)
     return Measurement(new, update, first, tuple(exponents), tuple(stage_ess))
+
+
+def gated(check: Innovation | None, config: ParticleConfig | None) -> bool:
+    """Whether a ping whose :class:`Innovation` is ``check`` is refused by ``config.ping_gate``
+    (inconsistent at ``config.lost_alpha``)."""
+    return bool(config is not None and getattr(config, "ping_gate", False) and check is not None
+                and check.inconsistent(config.lost_alpha))
 
 
 def resample_belief(
@@ -738,9 +751,10 @@ def run_particle_filter(
     ``NavigationModel.from_survey(survey)``). The track's heading is the dead-reckoned one (its
     variance NaN). ``meta`` holds ``ess`` (per step: of the weights the step's estimate is taken
     from), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_lost``, ``lost_steps``,
-    ``n_off_map``, ``off_map_steps``
-    (see the module docstring), ``n_tempered`` (pings whose update took more than one stage),
-    ``calibration`` (:func:`calibration_estimate` at the last ping), ``n_particles``,
+    ``n_off_map``, ``off_map_steps`` (see the module docstring), ``n_tempered`` (pings whose
+    update took more than one stage), ``n_gated`` (pings the ping gate refused,
+    ``ParticleConfig.ping_gate``), ``calibration`` (:func:`calibration_estimate` at the last
+    ping), ``n_particles``,
     ``sounding_std`` (the likelihood's, map error included), ``navigation_model``
     (``model.as_dict()``), ``config``, ``seed`` (the seed of ``rng`` at the start,
     :func:`rng_seed`: ``{"entropy", "spawn_key"}``, or None when it has no
@@ -768,7 +782,7 @@ def run_particle_filter(
     cov = np.full((k_total, 3, 3), np.nan)
     ess = np.empty(k_total)
     seconds = np.empty(k_total)
-    counts: dict[str, int] = dict.fromkeys(("n_tempered", *count_keys), 0)
+    counts: dict[str, int] = dict.fromkeys(("n_tempered", "n_gated", *count_keys), 0)
     fixes: list[dict[str, Any]] = []
     divergence_steps: list[int] = []
     lost_steps: list[int] = []

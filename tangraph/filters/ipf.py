@@ -47,6 +47,7 @@ from tangraph.filters.core import (
     StepResult,
     _kernel_floor,
     evaluate,
+    gated,
     innovation,
     measure,
     predict,
@@ -110,6 +111,10 @@ def ipf_step(
         return StepResult(moved, mean, cov, effective_sample_size(moved.weights))
     update = evaluate(moved, ping, model)
     check = innovation(moved, update, ping, model)
+    if gated(check, config):  # soundings no particle explains: the prediction alone
+        mean, cov = weighted_moments(moved)
+        return StepResult(moved, mean, cov, effective_sample_size(moved.weights), innovation=check,
+                          counts={"n_gated": 1})
     weighted = reweight(moved, ping.weight * update.log_likelihood, where=f"ping {ping.index}").replace(
         tide=update.tide, tide_var=update.tide_var
     )

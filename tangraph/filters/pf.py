@@ -62,7 +62,8 @@ def pf_step(
     new, index, ess = resample_if_needed(weighted, config, rng=rng, model=model)
     info = {"exponents": measured.exponents, "stage_ess": measured.stage_ess}
     return StepResult(
-        new, mean, cov, ess, resampled=index is not None, counts={"n_tempered": int(measured.tempered)},
+        new, mean, cov, ess, resampled=index is not None,
+        counts={"n_tempered": int(measured.tempered), "n_gated": int(measured.gated)},
         info=info, innovation=measured.innovation,
     )  # fmt: skip
 

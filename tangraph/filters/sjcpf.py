@@ -148,7 +148,8 @@ def sjcpf_step(
     mean, cov = weighted_moments(weighted)
     new, index, ess = resample_if_needed(weighted, config, rng=rng, model=model)
     return StepResult(
-        new, mean, cov, ess, resampled=index is not None, counts={"n_tempered": int(measured.tempered)},
+        new, mean, cov, ess, resampled=index is not None,
+        counts={"n_tempered": int(measured.tempered), "n_gated": int(measured.gated)},
         info={"ancestors": index, "exponents": measured.exponents}, innovation=measured.innovation,
     )  # fmt: skip
 

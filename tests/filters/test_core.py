@@ -411,3 +411,28 @@ def test_a_filter_on_a_shared_map_error_model_is_less_confident():
                         rng=np.random.default_rng(4))
     det = [np.linalg.det(t.covariance[-1, :2, :2]) for t in (plain, shared)]
     assert det[1] > det[0], det
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf", "sjcpf"])
+def test_pings_no_particle_explains_do_not_drag_the_cloud(method):
+    """Two blocks of 10 pings with every depth 5 m off: with the ping gate they are not weighed
+    (the cloud keeps to the dead reckoning through them, and says so); without it they drag it."""
+    from tangraph.sim.faults import outlier_blocks
+
+    survey = multibeam_survey(MAP, pings=80, seed=2)
+    model = navigation(survey, initial_position_std=10.0, sounding_std=0.5)
+    spoiled = outlier_blocks(survey, "depth_bias", 0.25, rng=np.random.default_rng(1), block=10,
+                             bias=(5.0, 5.0))
+    cls = {"pf": PFConfig, "ipf": IPFConfig, "sjcpf": SJCPFConfig}[method]
+    errors = {}
+    for gate in (True, False):
+        track = run_filter(method, spoiled, MAP, cls(n_particles=500, ping_gate=gate), model=model,
+                           rng=np.random.default_rng(3))
+        errors[gate] = float(np.sqrt(np.mean(np.sum((track.pose[:, :2] - survey.true_pose[:, :2]) ** 2,
+                                                    axis=1))))
+        if gate:
+            assert track.meta["n_gated"] >= 10
+    clean = run_filter(method, survey, MAP, cls(n_particles=500), model=model, rng=np.random.default_rng(3))
+    rmse_clean = float(np.sqrt(np.mean(np.sum((clean.pose[:, :2] - survey.true_pose[:, :2]) ** 2, axis=1))))
+    assert clean.meta["n_gated"] == 0
+    assert errors[True] <= 1.5 * rmse_clean + 1.0 < errors[False]

@@ -130,7 +130,8 @@ def test_sjcpf_does_not_correct_before_the_window_is_full():
 
 
 def test_sjcpf_history_follows_the_particles_through_resampling():
-    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=1.0, tempering=False)
+    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=1.0, tempering=False,
+                         ping_gate=False)
     model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 0.5, 0.0))
     belief = sjcpf_belief()
     ping = survey_pings(SURVEY)[1]
