@@ -382,9 +382,13 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     """Re-navigate a recorded survey with a batch smoother over all key poses and fixes.
 
     A forward pass of :class:`~tangraph.graph.GraphNavigator` makes and gates the fixes; the whole
-    graph, the DR's calibration included, is then solved at once (:func:`smooth_pose_graph`),
-    with optional re-matching around the smoothed track (``GraphConfig.rematch_iterations``),
-    and the ping-rate track is recovered from the key poses and the DR (:func:`dense_track`).
+    graph, the DR's calibration included, is then solved at once (:func:`smooth_pose_graph`).
+    With ``GraphConfig.robust_solve="gnc"`` (the default) the fixes the forward pass accepted,
+    gated or held, and the start prior, are weighed by graduated non-convexity
+    (:mod:`tangraph.graph.robust`) and the graph is solved with the inliers alone, the online
+    pass's breaks undone. Re-matching around the smoothed track follows
+    (``GraphConfig.rematch_iterations``), and the ping-rate track is recovered from the key poses
+    and the DR (:func:`dense_track`).
 
     Parameters
     ----------
@@ -401,8 +405,10 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     Track
         ``method="smoother"``; ``meta`` has ``fixes``, ``n_fixes_accepted``, ``n_fixes_rejected``,
         ``key_indices``, ``calibration`` (smoothed: ``speed_scale``, ``heading_bias``,
-        ``heading_error`` at the last ping, with stds), ``rematch_iterations`` (re-matches run)
-        and ``optimizer_iterations``.
+        ``heading_error`` at the last ping, with stds), ``rematch_iterations`` (re-matches run),
+        ``optimizer_iterations``, ``start_prior`` (``"kept"``, or ``"outlier"`` when the robust
+        solve found the start wrong), ``lost_episodes`` (the forward pass's) and ``lost_steps``
+        (the pings after the last fix kept, when the forward pass was lost to the end).
     """
     started = _time.perf_counter()
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
