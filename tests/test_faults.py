@@ -67,7 +67,10 @@ def test_offset_start_moves_the_whole_dead_reckoning_only():
     (("depth_bias", 1.0), "fraction must lie in"),
     (("depth_bias", 0.99), "do not fit"),
     (("sideways", 0.1), "kind must be"),
+    (("footprint_shift", 0.1, {"shift": "far"}), "shift must be a number"),
+    (("depth_bias", 0.1, {"bias": 5.0}), "bias a range"),
 ])
 def test_bad_settings_are_refused(args, text):
+    options = args[2] if len(args) > 2 else {}
     with pytest.raises(TangraphError, match=text):
-        outlier_blocks(_survey(), *args, rng=np.random.default_rng(0))
+        outlier_blocks(_survey(), *args[:2], rng=np.random.default_rng(0), **options)

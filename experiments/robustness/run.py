@@ -23,7 +23,8 @@ NEES inside its chi-square band; no confident wrong pose after a wrong start; ho
 the map; a particle filter entirely off the map no worse than the dead reckoning and as honest.
 
     tangraph experiment robustness [--runs 12] [--seed 13] [--workers 2] [--cases ...]
-                                   [--methods isam2 smoother pf] [--quick] [--out DIR]
+                                   [--methods isam2 smoother pf] [--graph FIELD=VALUE ...]
+                                   [--quick] [--out DIR]
 """
 
 from __future__ import annotations
@@ -90,9 +91,14 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         tracks = {"dr": dead_reckoning_track(spoiled)}
         seconds = {"dr": 0.0}
         for method in config["methods"]:
+            settings = None
+            if method in ("isam2", "smoother") and config.get("graph"):
+                from tangraph.graph import GraphConfig
+
+                settings = GraphConfig.from_mapping(config["graph"], where="--graph")
             started = time.perf_counter()
             tracks[method] = navigate(spoiled, chart, method, rng=streams[2 + 2 * n], model=model,
-                                      other_map=case in ("half-map", "off-map"))
+                                      config=settings, other_map=case in ("half-map", "off-map"))
             seconds[method] = time.perf_counter() - started
         for method, track in tracks.items():
             metrics = track_metrics(track, spoiled.true_pose)
@@ -205,12 +211,17 @@ def main(argv=None) -> int:
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
     parser.add_argument("--methods", nargs="+", default=list(METHODS),
                         choices=["isam2", "smoother", "pf", "ipf", "sjcpf"])
+    parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
+                        help="GraphConfig settings of the graph's runs (values as Python literals)")
     args = parser.parse_args(argv)
     args.out = output_folder(args, HERE)
     runs = 3 if args.quick else args.runs
     cases = ["clean", "shift-30", "start-200"] if args.quick else args.cases
     methods = ["isam2", "smoother"] if args.quick else args.methods
-    config = {"cases": cases, "methods": methods}
+    import ast
+
+    graph = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.graph)}
+    config = {"cases": cases, "methods": methods, "graph": graph}
     table = run_many(one_run, [config], runs, args.seed, scheduler=args.scheduler, workers=args.workers)
     failed = table["error"].notna()
     if failed.any():
@@ -219,9 +230,11 @@ def main(argv=None) -> int:
         return 1
     table = table[~failed]
     rows = summarise(table)
-    tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "")
+    tag = (f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "")
+           + "".join(f"_{item}" for item in args.graph))
     command = (f"tangraph experiment robustness --runs {runs} --seed {args.seed}"
-               + (" --quick" if args.quick else f" --cases {' '.join(cases)} --methods {' '.join(methods)}"))
+               + (" --quick" if args.quick else f" --cases {' '.join(cases)} --methods {' '.join(methods)}")
+               + ("" if not args.graph else f" --graph {' '.join(args.graph)}"))
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table, args.out / f"rmse_{tag}.png")
     text = markdown(rows)

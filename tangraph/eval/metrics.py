@@ -65,8 +65,9 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0,
     correlated poses and is a guide only.
 
     ``lost_fraction`` is the share of poses the estimator flagged as lost (``Track.lost``) and
-    ``confident_wrong`` the share of the others whose NEES exceeds ``nees_limit`` (a confident
-    wrong answer: the estimator neither knew the truth nor said it was lost).
+    ``confident_wrong`` the share of all poses that are not flagged and whose NEES exceeds
+    ``nees_limit`` (a confident wrong answer: the estimator neither knew the truth nor said it
+    was lost).
 
     ``skip`` leaves out the first poses (a filter's convergence) from every figure.
     """

@@ -108,6 +108,13 @@ class ParticleConfig:
         weighing by them drags the cloud to a wrong place with a small spread. The cloud then
         moves with the dead reckoning, its spread grows, and a run of such pings is flagged
         lost (``meta["n_gated"]`` counts them). False weighs every ping.
+    gate_pings : int
+        The gate's way out: after this many consecutive gated pings (longer than a block of bad
+        pings should last) the cloud, not the pings, is taken to be wrong: it is drawn afresh
+        around its mean with the first re-initialisation spread (``reinit_std``), calibration
+        from the model's prior, and weighed by the ping (``meta["redraw_steps"]``). The spread
+        does not grow with further redraws: a wide cloud on a gentle seabed settles on a wrong
+        match more often than it finds the right one.
     reinit_std : float or None
         Spread (m) of the cloud drawn after a divergence; None: ``3 * max(s, 1)``, ``s`` the
         model's ``initial_position_std``.
@@ -127,6 +134,7 @@ class ParticleConfig:
     lost_alpha: float = 1e-3
     lost_pings: int = 3
     ping_gate: bool = True
+    gate_pings: int = 30
     reinit_std: float | None = None
     reinit_growth: float = 2.0
 
@@ -141,6 +149,7 @@ class ParticleConfig:
         check_count(self, "max_stages")
         check_number(self, "lost_alpha", open_low=True, high=1.0)
         check_count(self, "lost_pings")
+        check_count(self, "gate_pings")
         object.__setattr__(self, "ping_gate", bool(self.ping_gate))
         check_number(self, "reinit_growth", low=1.0)
         if self.reinit_std is not None:

@@ -35,7 +35,9 @@ sounding without a map depth) is no evidence at all: the step is the prediction 
 cloud moves with the dead reckoning and its covariance grows by the DR model's), recorded in
 ``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a divergence. An inconsistent ping
 (soundings no particle explains: a block of bad pings, or a cloud that has lost the vehicle)
-does not weigh the cloud (``ParticleConfig.ping_gate``); a run of them is flagged lost.
+does not weigh the cloud (``ParticleConfig.ping_gate``); a run of them is flagged lost, and
+after ``gate_pings`` of them the cloud is taken to be the wrong one and drawn afresh around its
+mean with the first re-initialisation spread (``meta["n_redraws"]``, ``meta["redraw_steps"]``).
 """
 
 from __future__ import annotations
@@ -719,10 +721,13 @@ def _recover(
     spread: float,
     history_length: int,
     rng: np.random.Generator,
+    centre: np.ndarray | None = None,
 ) -> StepResult:
+    """A fresh cloud of ``spread`` (m) around ``centre`` (default the ping's dead-reckoned
+    position), weighed by the ping when any particle explains it."""
+    centre = survey.dr_pose[ping.index, :2] if centre is None else centre
     fresh = model_belief(
-        survey.dr_pose[ping.index, :2], model, config.n_particles, rng=rng, std=spread,
-        history_length=history_length,
+        centre, model, config.n_particles, rng=rng, std=spread, history_length=history_length,
     )  # fmt: skip
     try:
         fresh = measure(fresh, ping, model).belief
@@ -751,7 +756,8 @@ def run_particle_filter(
     ``NavigationModel.from_survey(survey)``). The track's heading is the dead-reckoned one (its
     variance NaN). ``meta`` holds ``ess`` (per step: of the weights the step's estimate is taken
     from), ``n_resampled``, ``n_divergences``, ``divergence_steps``, ``n_lost``, ``lost_steps``,
-    ``n_off_map``, ``off_map_steps`` (see the module docstring), ``n_tempered`` (pings whose
+    ``n_off_map``, ``off_map_steps``, ``n_redraws``, ``redraw_steps`` (see the module
+    docstring), ``n_tempered`` (pings whose
     update took more than one stage), ``n_gated`` (pings the ping gate refused,
     ``ParticleConfig.ping_gate``), ``calibration`` (:func:`calibration_estimate` at the last
     ping), ``n_particles``,
@@ -787,7 +793,8 @@ def run_particle_filter(
     divergence_steps: list[int] = []
     lost_steps: list[int] = []
     off_map_steps: list[int] = []
-    n_resampled = consecutive = streak = 0
+    n_resampled = consecutive = streak = gated_run = 0
+    redraw_steps: list[int] = []
     first_spread = config.reinit_spread(navigation.initial_position_std)
     n_min, n_max, e_min, e_max = bathymetry.extent
     largest = max(float(np.hypot(n_max - n_min, e_max - e_min)), first_spread)  # cap on the spread
@@ -812,6 +819,14 @@ def run_particle_filter(
             streak = streak + 1 if result.innovation.inconsistent(config.lost_alpha) else 0
             if streak >= config.lost_pings:
                 lost_steps.append(k)
+            gated_run = gated_run + 1 if result.counts.get("n_gated") else 0
+            if gated_run >= config.gate_pings:  # the gate's way out: the cloud is the wrong one
+                redraw_steps.append(k)
+                _log.info("%s: %d pings in a row gated at ping %d; cloud drawn afresh around its mean",
+                          method, gated_run, k)
+                result = _recover(survey, pings[k], filter_model, config, first_spread, history_length,
+                                  rng, centre=result.mean)
+                gated_run = 0
         belief = result.belief
         mean[k], cov[k, :2, :2], ess[k] = result.mean, result.covariance, result.ess
         n_resampled += bool(result.resampled)
@@ -834,6 +849,8 @@ def run_particle_filter(
         "lost_steps": lost_steps,
         "n_off_map": len(off_map_steps),
         "off_map_steps": off_map_steps,
+        "n_redraws": len(redraw_steps),
+        "redraw_steps": redraw_steps,
         "calibration": calibration_estimate(belief),
         "n_particles": config.n_particles,
         "sounding_std": filter_model.terrain.sounding_std,

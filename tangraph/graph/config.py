@@ -110,20 +110,23 @@ class GraphConfig:
     rematch_tolerance : float
         Metres (see ``rematch_iterations``).
     lost_windows : int or None
-        Lost and relocalisation of the online navigator. After this many TAP windows whose best
-        match lies on the edge of the search (``FixStatus.OUTSIDE_SEARCH``: the truth seems to
-        lie beyond it) with no fix accepted between them, the navigator is *lost*: it widens its
-        belief by a *break* (the odometry into that key gets an extra position std of the
-        search's half-width, so the next searches are four times as wide and the covariance it
-        reports says how little it knows), searches that window again, and widens again after
-        every further ``lost_windows`` such windows. It relocalises on ``relocalise_fixes``
-        fixes that agree with each other through the DR (informative, unimodal, inside the
-        search) from windows that share no ping (which one block of bad pings cannot fake).
-        Fixes refused only by the gate are held the same way: when enough of them agree, the
-        prediction was the wrong one, and the navigator breaks its odometry by their distance
-        from it and takes the newest. The pings from the last fix it trusted to the
-        relocalisation are flagged lost (``Track.meta["lost_steps"]``). None:
-        never lost (default 4).
+        Lost and relocalisation of the online navigator (:mod:`tangraph.graph.lost`). After this
+        many TAP windows since the last *trusted* fix (one a later fix from a disjoint window
+        agreed with) whose precise fix says the prediction is wrong (its best match on the edge
+        of the search, ``FixStatus.OUTSIDE_SEARCH``, or beyond the gate, ``GATE``), the navigator
+        is *lost*: it gives up the fixes used since the last trusted one, widens its belief by a
+        *break* (the start's prior when no fix was ever trusted, else the odometry into that
+        key gets an extra position std of the search's half-width, so the next searches are
+        four times as wide, up to ``max_half_width_cells``, and the covariance it reports says
+        how little it knows), searches that window again, and widens again after every further
+        ``lost_windows`` such windows. It relocalises on ``relocalise_fixes`` precise fixes that
+        agree with each other through the DR (informative, unimodal, inside the search) from
+        windows that share no ping (which one block of bad pings cannot fake), or ends the
+        episode when a precise fix agrees with the belief it gave up. Fixes refused only by the
+        gate while tracking are weighed the same way: when enough of them agree, the prediction
+        was the wrong one, and the navigator breaks its odometry by their distance from it and
+        adds them. The pings from the last trusted fix to the end of the episode are flagged
+        lost (``Track.meta["lost_steps"]``). None: never lost (default 4).
     relocalise_fixes : int
         Agreeing fixes, from windows that share no ping, that end a lost episode (default 2).
     confirm_probability : float or None

@@ -31,7 +31,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tangraph.graph.calibration import to_world, world_jacobian, world_position_factor
-from tangraph.graph.factors import gate_threshold, nis, pose_prior_factor
+from tangraph.graph.factors import compose, gate_threshold, nis, pose_prior_factor
 from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
 from tangraph.graph.keyposes import increments
 from tangraph.matching import TapFix
@@ -40,6 +40,19 @@ from tangraph.sensors import rotation_matrix
 __all__ = ["Relocalisation"]
 
 log = logging.getLogger("tangraph.graph.online")
+
+
+def _gate(config) -> float:
+    """The NIS limit of agreement between fixes: the gate's, at 0.999 when the gate is off."""
+    return gate_threshold(config.gate_probability or 0.999)
+
+
+def _widened(joint, variance: float) -> np.ndarray:
+    """A joint covariance with ``variance`` (m^2) added to its position's (a break's)."""
+    joint = np.array(joint, float)
+    joint[0, 0] += variance
+    joint[1, 1] += variance
+    return joint
 
 
 def _disjoint(candidates) -> int:
@@ -93,17 +106,16 @@ class Relocalisation:
             if self._confirm(k, pose, joint, outcome):
                 return 0.0
         extra = 0.0
-        status = outcome.record.status
-        if status.says_lost and self._precise(outcome, 1.0):  # a vague one is a bad window
+        # a window that says the prediction is wrong (a vague one is a bad window)
+        evidence = outcome.record.status.says_lost and self._precise(outcome, 1.0)
+        if evidence:
             self._outside += 1  # the truth seems to lie beyond the search: widen it
             if self.config.lost_windows is not None and self._outside >= self.config.lost_windows and k > 0:
                 self._outside = 0
                 widening = self._widen(k, outcome.record.half_width)
                 if widening > 0:
                     extra = self._break(widening)
-                    joint = joint.copy()
-                    joint[0, 0] += widening**2
-                    joint[1, 1] += widening**2
+                    joint = _widened(joint, widening**2)
                     outcome = self._judge(k, pose, joint, fix, strict=True)
                     self.fixes[-1] = outcome.record
         # relocalisation candidates: while lost, fixes that pass everything; while tracking, fixes
@@ -114,7 +126,7 @@ class Relocalisation:
         if not usable or self.config.lost_windows is None or not self._precise(outcome):
             return extra
         candidate = self._candidate(k, pose, outcome)
-        if self.lost and self._resumes(candidate, pose, joint):
+        if self.lost and not evidence and self._resumes(candidate, pose, joint):
             return extra
         if self.lost:
             self.fixes[-1] = dataclasses.replace(outcome.record, status=FixStatus.UNCONFIRMED,
@@ -131,13 +143,10 @@ class Relocalisation:
         without this episode's breaks, within the gate): the evidence was bad windows, not a wrong
         belief. The candidate is used, trusted, and the episode ends where it is."""
         widened = float(np.sum(np.square(self.episodes[-1].breaks)))
-        old = joint.copy()
-        old[0, 0] -= widened
-        old[1, 1] -= widened
-        world, cov = self._world(pose, old)
+        world, cov = self._world(pose, _widened(joint, -widened))
         total = cov[:2, :2] + candidate.fix.covariance
-        gate = gate_threshold(self.config.gate_probability or 0.999)
-        if np.linalg.eigvalsh(total).min() <= 0 or nis(candidate.fix.position - world[:2], total) > gate:
+        innovation = candidate.fix.position - world[:2]
+        if np.linalg.eigvalsh(total).min() <= 0 or nis(innovation, total) > _gate(self.config):
             return False
         episode = self.episodes[-1]
         self._use(candidate, "the belief held", trusted=True)
@@ -156,7 +165,7 @@ class Relocalisation:
         return largest <= share * outcome.record.half_width / self.config.half_width_sigmas
 
     def _candidate(self, k: int, pose, outcome: FixOutcome) -> _Candidate:
-        return _Candidate(k, self.window_first.get(k, k), outcome.fix, np.asarray(pose, float).copy(),
+        return _Candidate(k, int(outcome.fix.first), outcome.fix, np.asarray(pose, float).copy(),
                           len(self.fixes) - 1)
 
     def _confirm(self, k: int, pose, joint, outcome: FixOutcome) -> bool:
@@ -171,9 +180,7 @@ class Relocalisation:
             if agreed:
                 self._use(held, f"confirmed by the fix at ping {k}")
             else:
-                self.fixes[held.record] = dataclasses.replace(
-                    self.fixes[held.record], status=FixStatus.UNCONFIRMED,
-                    detail="held for confirmation; the next fix did not agree")
+                self._drop_held("the next fix did not agree" if outcome.accepted else "no fix came to agree")
             self._held = None
         if not outcome.accepted:
             return False
@@ -184,7 +191,16 @@ class Relocalisation:
                                                  detail="held until a later fix agrees")
             return True
         self._use(self._candidate(k, pose, outcome), "")
+        self._consensus = []  # the prediction held: the gate's refusals before were bad windows
         return True
+
+    def _drop_held(self, why: str) -> None:
+        """Give up the held fix (if any): ``UNCONFIRMED``, saying ``why``."""
+        if self._held is not None:
+            self.fixes[self._held.record] = dataclasses.replace(
+                self.fixes[self._held.record], status=FixStatus.UNCONFIRMED,
+                detail=f"held for confirmation; {why}")
+            self._held = None
 
     def _use(self, candidate: _Candidate, detail: str, *, trusted: bool = False) -> None:
         """Add a fix to the graph and mark its record accepted. A fix is *trusted* (the last
@@ -193,8 +209,13 @@ class Relocalisation:
         through the DR, or at once when ``trusted`` (fixes that agreed to relocalise); a
         multimodal fix never is (two places explain it)."""
         fix = candidate.fix
-        self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance))
         record = self.fixes[candidate.record]
+        key = candidate.key
+        if not (self.isam.getLinearizationPoint().exists(key) or self._new_values.exists(key)):
+            self.fixes[candidate.record] = dataclasses.replace(  # left to the batch smoother
+                record, status=FixStatus.UNCONFIRMED, detail="its key has left iSAM2's window")
+            return
+        self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance))
         self.fixes[candidate.record] = dataclasses.replace(record, status=FixStatus.ACCEPTED,
                                                            detail=detail or record.detail)
         if fix.quality.multimodal:
@@ -240,11 +261,7 @@ class Relocalisation:
         config = self.config
         if not self.lost:
             self.lost = True
-            if self._held is not None:  # searched around the belief now given up
-                self.fixes[self._held.record] = dataclasses.replace(
-                    self.fixes[self._held.record], status=FixStatus.UNCONFIRMED,
-                    detail="held for confirmation; the navigator was lost before a fix agreed")
-                self._held = None
+            self._drop_held("the navigator was lost before a fix agreed")  # searched around the old belief
             start = 0 if self._last_accepted is None else self._last_accepted
             self.episodes.append(LostEpisode(start=start, declared=k))
             self._forget(start, k)  # what was built on the belief now given up
@@ -252,9 +269,10 @@ class Relocalisation:
                         k, start)
         episode = self.episodes[-1]
         cap = config.max_half_width_cells * float(min(self.bathymetry.cell_size)) / config.half_width_sigmas
-        if episode.breaks and episode.breaks[-1] >= cap:
+        widened = float(np.sqrt(np.sum(np.square(episode.breaks))))
+        if widened >= cap:
             return 0.0
-        episode.breaks.append(min(float(half_width), cap))
+        episode.breaks.append(min(float(half_width), float(np.sqrt(cap**2 - widened**2))))
         self._consensus = []  # candidates behind a break are tied to the old belief
         return episode.breaks[-1]
 
@@ -286,7 +304,8 @@ class Relocalisation:
             self._use(candidate, "relocalised", trusted=True)
         episode.end = k
         log.warning("graph: relocalised at ping %d (lost since ping %d)", k, episode.start)
-        self.lost, self._held = False, None
+        self._drop_held("the navigator relocalised before a fix agreed")
+        self.lost = False
         return extra
 
     def _isam_index(self, factor) -> int | None:
@@ -332,15 +351,18 @@ class Relocalisation:
 
     def _agree(self, a: _Candidate, b: _Candidate, joint) -> bool:
         """Whether candidate ``b`` agrees with the earlier ``a`` through the DR between them: the
-        NIS of the difference of their fixes against the DR's world displacement (white DR noise
-        of the increment and the calibration's covariance from ``joint``) is within the gate."""
-        positions = np.array([a.pose, b.pose])
+        NIS of the difference of their fixes against the DR's world displacement from ``a``'s
+        predicted pose (white DR noise of the increment, ``a``'s heading and the calibration's
+        covariance from ``joint``) is within the gate. ``b``'s own prediction is not used: it
+        holds the corrections of the fixes used since ``a``, ``a``'s own among them."""
+        delta, q = increments(self.white, self.survey.time, self.survey.dr_pose, [a.key], [b.key])
+        positions = np.array([a.pose, compose(a.pose, delta[0])])
         world = to_world(positions, self.calibration, self.origin)
-        jac = world_jacobian(positions, self.calibration, self.origin)[:, :2, 3:]
-        _, q = increments(self.white, self.survey.time, self.survey.dr_pose, [a.key], [b.key])
-        rot = rotation_matrix(world[0, 2])
-        shape = jac[1] - jac[0]
+        jac = world_jacobian(positions, self.calibration, self.origin)
+        rot = jac[1, :2, :2] @ rotation_matrix(a.pose[2])  # a's frame to the world
+        turn = jac[1, :2, :2] @ rotation_matrix(a.pose[2] + np.pi / 2) @ delta[0, :2]  # d / d heading
+        shape = jac[1, :2, 3:] - jac[0, :2, 3:]
         cov = (a.fix.covariance + b.fix.covariance + rot @ q[0, :2, :2] @ rot.T
-               + shape @ joint[3:, 3:] @ shape.T)
+               + shape @ joint[3:, 3:] @ shape.T + np.outer(turn, turn) * joint[2, 2])
         error = b.fix.position - a.fix.position - (world[1, :2] - world[0, :2])
-        return nis(error, cov) <= gate_threshold(self.config.gate_probability or 0.999)
+        return nis(error, cov) <= _gate(self.config)

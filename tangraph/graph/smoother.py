@@ -287,7 +287,8 @@ def _moved(before: list[FixRecord], after: list[FixRecord], tolerance: float) ->
 
 
 #: Outcomes whose fix the robust solve weighs: used online, refused by the online gate (which
-#: may have been wrong), or held as a relocalisation candidate.
+#: may have been wrong), held as a relocalisation candidate or given up online, or found an
+#: outlier by an earlier robust solve (records passed in again are weighed afresh).
 _CANDIDATES = (FixStatus.ACCEPTED, FixStatus.GATE, FixStatus.UNCONFIRMED, FixStatus.OUTLIER)
 
 
@@ -358,7 +359,10 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
         if not as_candidate:
             raise _translate(exc, graph) from None
         fixed.append(graph.start_factor())
-        result = gnc(fixed, candidate, len(fixes), values, solve, probability=config.gnc_probability)
+        try:
+            result = gnc(fixed, candidate, len(fixes), values, solve, probability=config.gnc_probability)
+        except RuntimeError as again:
+            raise _translate(again, graph) from None
         as_candidate = False
     inlier = result.inliers[: len(fixes)]
     keep_start = not as_candidate or bool(result.inliers[-1])

@@ -274,7 +274,7 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         if jack is not None:
             covariances["jackknife"] = jack
             covariance = _larger(covariance, jack)
-    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config)
+    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config, (i, j))
     return TapFix(
         index=patch.reference,
         first=patch.first,
@@ -462,7 +462,10 @@ def _jackknife(bathymetry, patch, grid, i, j, step, reach: int = 20) -> np.ndarr
 def _larger(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest covariance at least as large as ``a`` and as ``b`` in every direction of
     ``a``'s generalised eigenvectors (``a`` where ``b`` is smaller everywhere; ``a`` if it is not
-    positive definite)."""
+    positive definite or either is not finite: an infinite one says the window is
+    uninformative)."""
+    if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+        return a
     try:
         low = np.linalg.cholesky(a)
     except np.linalg.LinAlgError:
@@ -486,7 +489,7 @@ def _crlb(bathymetry, patch, position, s2) -> np.ndarray:
     return np.linalg.inv(information)
 
 
-def _quality(q, q_min, region: Region, config: TapConfig) -> FixQuality:
+def _quality(q, q_min, region: Region, config: TapConfig, best: tuple[int, int]) -> FixQuality:
     labels, n_basins = ndimage.label(region.mask)
     mask = region.mask
     touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
@@ -498,7 +501,7 @@ def _quality(q, q_min, region: Region, config: TapConfig) -> FixQuality:
     )
     others = minima & ~main
     peak_ratio = float(filled[others].min() / q_min) if others.any() and q_min > 0 else np.inf
-    i, j = np.unravel_index(np.argmin(filled), q.shape)
+    i, j = best  # the node the criterion chose
     on_edge = bool(i in (0, q.shape[0] - 1) or j in (0, q.shape[1] - 1))
     reasons = []
     if on_edge:

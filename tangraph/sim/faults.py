@@ -82,7 +82,8 @@ def outlier_blocks(
     -------
     Survey
         ``meta["faults"]`` gains one record per block: ``kind``, ``first`` and ``last`` ping,
-        and ``shift_north``/``shift_east`` (m, world frame) or ``bias`` (m, added to the depths).
+        and ``shift_north``/``shift_east`` (m, in the world frame of the footprints as the
+        dead reckoning lays them) or ``bias`` (m, added to the depths).
 
     Examples
     --------
@@ -94,9 +95,14 @@ def outlier_blocks(
         raise TangraphError(f"outlier_blocks: kind must be footprint_shift or depth_bias, got {kind!r}")
     n = survey.n_pings
     count = _check_fraction(fraction, block, n)
+    try:
+        shift = float(shift)
+        low, high = (float(v) for v in bias)
+    except (TypeError, ValueError):
+        raise TangraphError(f"outlier_blocks: shift must be a number and bias a range (low, high), "
+                            f"got shift={shift!r}, bias={bias!r}") from None
     if not (np.isfinite(shift) and shift >= 0):
         raise TangraphError(f"outlier_blocks: shift must be a finite number >= 0, got {shift!r}")
-    low, high = (float(v) for v in bias)
     if not (np.isfinite(low) and np.isfinite(high) and 0 <= low <= high):
         raise TangraphError(
             f"outlier_blocks: bias must be a range (low, high) with 0 <= low <= high, got {bias!r}")
@@ -112,7 +118,9 @@ def outlier_blocks(
         if kind == "footprint_shift":
             direction = rng.uniform(0.0, 2.0 * np.pi)  # world frame, clockwise from north
             north, east = shift * np.cos(direction), shift * np.sin(direction)
-            psi = survey.dr_pose[pings, 2][:, None]  # into each ping's body frame
+            # into each ping's body frame by the DR heading: the shift is (north, east) in the
+            # footprints a navigator lays with the dead reckoning (the recorded values)
+            psi = survey.dr_pose[pings, 2][:, None]
             forward[pings] += np.cos(psi) * north + np.sin(psi) * east
             starboard[pings] += -np.sin(psi) * north + np.cos(psi) * east
             record.update(shift_north=float(north), shift_east=float(east))

@@ -436,3 +436,23 @@ def test_pings_no_particle_explains_do_not_drag_the_cloud(method):
     rmse_clean = float(np.sqrt(np.mean(np.sum((clean.pose[:, :2] - survey.true_pose[:, :2]) ** 2, axis=1))))
     assert clean.meta["n_gated"] == 0
     assert errors[True] <= 1.5 * rmse_clean + 1.0 < errors[False]
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf"])
+def test_a_cloud_every_ping_disagrees_with_is_drawn_afresh(method):
+    """The DR starts 25 m off while the model says 2 m: every ping is gated, the cloud keeps the
+    wrong start; after ``gate_pings`` gated pings in a row it is drawn afresh around its mean
+    (spread ``reinit_std``) and finds the vehicle. With no way out it stays off."""
+    from tangraph.sim.faults import offset_start
+
+    survey = multibeam_survey(MAP, pings=85, seed=5)
+    model = navigation(survey, initial_position_std=2.0, sounding_std=0.5)
+    wrong = offset_start(survey, [20.0, -15.0])
+    cls = {"pf": PFConfig, "ipf": IPFConfig}[method]
+    final = {}
+    for gate_pings in (10, 10_000):
+        config = cls(n_particles=500, gate_pings=gate_pings, reinit_std=40.0)
+        track = run_filter(method, wrong, MAP, config, model=model, rng=np.random.default_rng(6))
+        final[gate_pings] = float(np.hypot(*(track.pose[-1, :2] - survey.true_pose[-1, :2])))
+        assert (track.meta["n_redraws"] >= 1) == (gate_pings == 10)
+    assert final[10] < 5.0 < 15.0 < final[10_000]

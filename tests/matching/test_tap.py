@@ -212,6 +212,9 @@ def test_larger_covariance_is_the_larger_in_every_direction():
     np.testing.assert_allclose(_larger(np.diag([1.0, 4.0]), np.diag([4.0, 1.0])), np.diag([4.0, 4.0]))
     a = np.array([[2.0, 0.5], [0.5, 1.0]])
     np.testing.assert_allclose(_larger(a, 0.1 * a), a)
+    infinite = np.full((2, 2), np.inf)  # an uninformative window's (the CRLB's when singular)
+    assert np.array_equal(_larger(infinite, a), infinite)
+    assert np.array_equal(_larger(a, infinite), a)
 
 
 def test_a_best_match_on_the_search_edge_says_the_truth_may_lie_beyond():
