@@ -120,7 +120,8 @@ class PoseGraph:
     ``breaks`` maps a key to the extra position std (m) of the odometry into it: where an online
     navigator that found itself lost widened its belief (see ``GraphConfig.lost_windows``);
     ``start`` is the start's position prior ``(key, pose, covariance)`` (:meth:`add_start`), which
-    a robust batch solve may find wrong.
+    a robust batch solve may find wrong; ``start_break`` the extra position std (m) a lost
+    navigator gave it (:meth:`widen_start`).
     """
 
     calibration_std: np.ndarray | None = None
@@ -138,6 +139,7 @@ class PoseGraph:
     fixes: list[tuple[int, np.ndarray, np.ndarray]] = dataclasses.field(default_factory=list)
     breaks: dict[int, float] = dataclasses.field(default_factory=dict)
     start: tuple[int, np.ndarray, np.ndarray] | None = None
+    start_break: float = 0.0
     _factors: dict = dataclasses.field(
         default_factory=lambda: {"prior": [], "start": [], "odometry": [], "fix": []}, repr=False)
 
@@ -176,12 +178,21 @@ class PoseGraph:
         return [heading, position]
 
     def start_factor(self, weight: float = 1.0) -> gtsam.NonlinearFactor:
-        """The factor of the start's position (a pose prior without the calibration), its
-        information multiplied by ``weight``."""
+        """The factor of the start's position (a pose prior without the calibration), widened
+        by ``start_break``, its information multiplied by ``weight``."""
         key, pose, cov = self.start
+        cov = cov + np.diag([self.start_break**2, self.start_break**2, 0.0])
         if not self.calibrated:
             return pose_prior_factor(key, pose, cov / weight)
         return world_position_factor(key, pose[:2], cov[:2, :2] / weight, self.origin)
+
+    def widen_start(self, std: float) -> gtsam.NonlinearFactor:
+        """Widen the start's position prior by ``std`` (m; a lost navigator's break when no fix
+        was ever trusted) and return its new factor (which replaces the old one here)."""
+        self.start_break = float(np.hypot(self.start_break, std))
+        factor = self.start_factor()
+        self._factors["start"] = [factor]
+        return factor
 
     def add_pose(self, key: int, time: float, initial_pose) -> None:
         """A key pose at ping ``key`` with its initial estimate ``(north, east, psi)``."""
@@ -237,7 +248,7 @@ class PoseGraph:
     def with_fixes(self, fixes, *, start: bool = True, breaks: bool = True) -> PoseGraph:
         """A copy with the position fixes replaced by ``fixes``, ``(key, position, covariance)``
         each; without the start's position prior (``start=False``), or with the odometry of the
-        breaks restored to the DR's own (``breaks=False``)."""
+        breaks and the start's prior restored to the DR's and the model's own (``breaks=False``)."""
         factors = {kind: list(fs) for kind, fs in self._factors.items()} | {"fix": []}
         priors = list(self.pose_priors)
         if not start and self.start is not None:
@@ -249,8 +260,11 @@ class PoseGraph:
         graph = dataclasses.replace(
             self, keys=list(self.keys), times=list(self.times), initial=list(self.initial),
             odometry=list(self.odometry), pose_priors=priors, fixes=[], breaks=kept,
-            start=self.start if start else None, _factors=factors,
+            start=self.start if start else None, start_break=self.start_break if breaks else 0.0,
+            _factors=factors,
         )
+        if start and self.start is not None and not breaks and self.start_break:
+            graph._factors["start"] = [graph.start_factor()]
         for key, position, cov in fixes:
             graph.add_position_fix(key, position, cov)
         return graph

@@ -30,8 +30,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tangraph.graph.calibration import to_world, world_jacobian, world_position_factor
-from tangraph.graph.factors import compose, gate_threshold, nis, pose_prior_factor
+from tangraph.graph.calibration import to_world, world_jacobian
+from tangraph.graph.factors import compose, gate_threshold, nis
 from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
 from tangraph.graph.keyposes import increments
 from tangraph.matching import TapFix
@@ -90,7 +90,6 @@ class Relocalisation:
         self._unconfirmed: list[_Candidate] = []  # fixes used but not yet trusted
         self._held: _Candidate | None = None  # an accepted fix waiting for a later one to agree
         self._start_factor = None  # the start's position prior as in iSAM2 (widened when found wrong)
-        self._start_std = 0.0
         self._remove: list[int] = []  # iSAM2 factor indices to remove at the next update
 
     def _add_fix(self, k: int, pose, joint, fix: TapFix | None) -> float:
@@ -240,17 +239,14 @@ class Relocalisation:
         return std
 
     def _widen_start(self, std: float) -> bool:
-        """Replace the start's position prior in iSAM2 by one wider by ``std``; False when the
-        first pose has been marginalised."""
+        """Replace the start's position prior in iSAM2 by one wider by ``std``
+        (:meth:`~tangraph.graph.PoseGraph.widen_start`); False when the first pose has been
+        marginalised."""
         index = self._isam_index(self._start_factor)
         if index is None or not self.isam.getLinearizationPoint().exists(0):
             return False
-        self._start_std = float(np.hypot(self._start_std, std))
-        key, pose, cov = self.graph.start
-        widened = np.diag([self._start_std**2] * 2 + [cov[2, 2]])
-        self._start_factor = (world_position_factor(key, pose[:2], widened[:2, :2], self.origin)
-                              if self.graph.calibrated else pose_prior_factor(key, pose, widened))
         self._remove.append(index)
+        self._start_factor = self.graph.widen_start(std)
         self._new_factors.add(self._start_factor)
         return True
 

@@ -191,7 +191,7 @@ class GraphNavigator(Relocalisation):
         self.graph.add_pose(0, self.survey.time[0], dr)
         for factor in self.graph.add_start(0, dr, m.initial_position_std, heading_std):
             self._new_factors.add(factor)
-        self._start_factor, self._start_std = self.graph._factors["start"][0], m.initial_position_std
+        self._start_factor = self.graph._factors["start"][0]
         self._new_values.insert(0, gtsam.Pose2(*dr))
         if self.graph.calibrated:
             self._new_factors.add(self.graph._factors["prior"][0])

@@ -328,6 +328,7 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
     inlier mask and whether the start prior is an inlier. The start prior stays a known inlier
     when the graph would not be determined without it."""
     base = graph.with_fixes([], start=False, breaks=False)
+    plain = graph.with_fixes([], breaks=False)  # the start's prior as the model gave it
     known = base.factor_graph()
     fixed = [known.at(i) for i in range(known.size())]
     start = graph.start is not None
@@ -337,7 +338,7 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
         if i < len(fixes):
             key, position, cov = fixes[i]
             return base.fix_factor(key, position, np.asarray(cov) / weight, kernel="none")
-        return graph.start_factor(weight)
+        return plain.start_factor(weight)
 
     full = graph.with_fixes(fixes, breaks=False)
     values = full.values(initial, calibration)
@@ -351,14 +352,14 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
 
     as_candidate = start and len(keys) >= 2  # with fewer fixes the start is all there is
     if not as_candidate and start:
-        fixed.append(graph.start_factor())
+        fixed.append(plain.start_factor())
     try:
         result = gnc(fixed, candidate, len(fixes) + int(as_candidate), values, solve,
                      probability=config.gnc_probability)
     except RuntimeError as exc:  # a weighted graph GTSAM finds indeterminant
         if not as_candidate:
             raise _translate(exc, graph) from None
-        fixed.append(graph.start_factor())
+        fixed.append(plain.start_factor())
         try:
             result = gnc(fixed, candidate, len(fixes), values, solve, probability=config.gnc_probability)
         except RuntimeError as again:

@@ -233,3 +233,22 @@ def test_with_fixes_leaves_the_original_graph_alone():
     other.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3) * 0.01)
     assert graph.keys == [0] and len(graph.odometry) == 0 and len(graph.fixes) == 1
     assert graph.factor_graph().size() == 2 and other.factor_graph().size() == 2
+
+
+def test_a_widened_start_is_kept_and_undone_with_the_breaks():
+    from tangraph.graph import PoseGraph
+
+    graph = PoseGraph()
+    graph.add_pose(0, 0.0, [0.0, 0.0, 0.0])
+    graph.add_start(0, [0.0, 0.0, 0.0], 10.0, 0.01)
+    wide = graph.widen_start(200.0)
+    assert graph.start_break == pytest.approx(200.0) and graph._factors["start"] == [wide]
+
+    def position_std(g):
+        cov = gtsam.Marginals(g.factor_graph(), g.values(None, None)).marginalCovariance(0)
+        return float(np.sqrt(cov[0, 0]))
+
+    assert position_std(graph) == pytest.approx(np.hypot(10.0, 200.0), rel=1e-6)
+    assert position_std(graph.with_fixes([])) == pytest.approx(np.hypot(10.0, 200.0), rel=1e-6)
+    assert position_std(graph.with_fixes([], breaks=False)) == pytest.approx(10.0, rel=1e-6)
+    assert graph.start_break == pytest.approx(200.0)  # the original keeps its break

@@ -205,3 +205,11 @@ def test_a_fix_whose_key_left_the_isam2_window_is_left_to_the_smoother(small_sur
     assert nav.fixes[at].status is FixStatus.UNCONFIRMED and "left iSAM2" in nav.fixes[at].detail
     nav.run()
     assert np.all(np.isfinite(nav.track().pose))
+
+
+def test_without_the_robust_solve_the_smoother_keeps_the_widened_start(wrong_start, rough_map):
+    """With ``robust_solve="none"`` the smoother solves the online graph as it is: the start
+    prior the lost navigator widened stays widened, so the fixes that relocalised it hold."""
+    track = smooth_survey(wrong_start, rough_map, dataclasses.replace(CONFIG, robust_solve="none"))
+    errors = np.hypot(*(track.pose[:, :2] - wrong_start.true_pose[:, :2]).T)
+    assert np.sqrt(np.mean(errors**2)) < 5.0
