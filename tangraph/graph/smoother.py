@@ -412,8 +412,9 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         ``key_indices``, ``calibration`` (smoothed: ``speed_scale``, ``heading_bias``,
         ``heading_error`` at the last ping, with stds), ``rematch_iterations`` (re-matches run),
         ``optimizer_iterations``, ``start_prior`` (``"kept"``, or ``"outlier"`` when the robust
-        solve found the start wrong), ``lost_episodes`` (the forward pass's) and ``lost_steps``
-        (the pings after the last fix kept, when the forward pass was lost to the end).
+        solve found the start wrong), ``lost_steps`` (the pings after the last fix kept, when the
+        forward pass was lost to the end), ``lost_episodes`` (the forward pass's episodes those
+        pings belong to) and ``forward_lost_episodes`` (all of the forward pass's).
     """
     started = _time.perf_counter()
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
@@ -446,11 +447,14 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     if config.smoother_covariance == "all" and solution.keys[-1] == last:
         joint = solution.covariance[-1]
     last_inlier = max((r.index for r in records if r.accepted), default=-1)
-    lost = sorted({p for e in nav.episodes if e.end is None  # never relocalised online and
-                   for p in range(max(e.start, last_inlier + 1), survey.n_pings)})  # no fix after
+    tails = [e for e in nav.episodes  # never relocalised online and no fix kept after
+             if e.end is None and max(e.start, last_inlier + 1) < survey.n_pings]
+    lost = sorted({p for e in tails for p in range(max(e.start, last_inlier + 1), survey.n_pings)})
     meta.update({
         "n_lost": len(lost),
         "lost_steps": lost,
+        "lost_episodes": [e.as_dict() for e in tails],
+        "forward_lost_episodes": meta["lost_episodes"],
         "fixes": records,
         "n_fixes_accepted": int(n_accepted),
         "n_fixes_rejected": len(records) - int(n_accepted),
