@@ -39,7 +39,7 @@ from tangraph.sensors import rotation_matrix
 
 __all__ = ["Relocalisation"]
 
-log = logging.getLogger("tangraph.graph.online")
+log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, one logger for them
 
 
 def _gate(config) -> float:

@@ -430,9 +430,11 @@ def _jackknife(bathymetry, patch, grid, i, j, step, reach: int = 20) -> np.ndarr
     rest, refined by a quadric), ``(P - 1) / P`` times the scatter of those ``P`` positions about
     their mean. Pings are the clusters of the window's errors (attitude, sound velocity, a bad
     ping), so this is the cluster-robust variance of the fix; it is large when the fix rests on
-    one ping (a ping in error can move a whole window's fix on gentle terrain). Searched within
-    ``reach`` steps of the fix, on the patch as turned by the best heading; None with fewer than
-    five pings."""
+    one ping (a ping in error can move a whole window's fix on gentle terrain). Always on ``Q``
+    (the MLE criterion), where the regions and the other covariances live too. Searched within
+    ``reach`` steps of the fix, on the patch as turned by the best heading: a leave-one-out
+    minimum beyond that is taken on the edge, which understates a spread that is then large
+    anyway. None with fewer than five pings."""
     pings, cluster = np.unique(patch.ping, return_inverse=True)
     if pings.size < 5:
         return None
