@@ -15,7 +15,6 @@ compass heading (``compass``), and each with a constant +3 deg heading and +3 % 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
 import logging
 import subprocess
@@ -24,6 +23,8 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+
+from tangraph.experiments.study import per_process
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[1].parent / "shared" / "data" / "caputh"
@@ -46,7 +47,7 @@ def run_files(data: Path, month: str) -> list[Path]:
     return sorted(p for p in data.glob(f"{stem}*.sum"))
 
 
-@functools.cache
+@per_process
 def import_run(path: str, water_level: str, dr_heading: str, options: tuple) -> object:
     from tangraph.formats import import_sontek_sum
 
@@ -173,7 +174,7 @@ def in_map(survey, bathymetry):
 
 
 # -- one run: one March run, one DR case, one method -----------------------------------------------
-@functools.cache
+@per_process
 def _map(path: str):
     from tangraph.maps import read_map
 

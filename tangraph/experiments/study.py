@@ -10,12 +10,37 @@ it asks for ``--out``. A folder that already holds files is written into only wi
 from __future__ import annotations
 
 import argparse
+import functools
 from pathlib import Path
 
 from tangraph.cli import DefaultsHelpFormatter
 from tangraph.errors import TangraphError
 
-__all__ = ["output_folder", "study_parser"]
+__all__ = ["output_folder", "per_process", "study_parser"]
+
+_CACHE: dict = {}  # per process, here in the package: see per_process
+
+
+def per_process(fn):
+    """Cache ``fn``'s results (hashable arguments) for the life of the process.
+
+    A study's module travels to the workers by value (:func:`~tangraph.experiments.run_many`), so
+    ``functools.cache`` on one of its functions cannot be unpickled there, and a cache dict of
+    its own would travel, full, with every task. This one lives in the package, which each worker
+    imports by name: every worker fills its own.
+    """
+    name = f"{fn.__module__}.{fn.__qualname__}"
+
+    @functools.wraps(fn)
+    def cached(*args):
+        from tangraph.experiments import study  # by name in the worker, not by value
+
+        key = (name, args)
+        if key not in study._CACHE:
+            study._CACHE[key] = fn(*args)
+        return study._CACHE[key]
+
+    return cached
 
 
 def study_parser(here: Path, description: str, *, runs: int | None, seed: int,

@@ -61,6 +61,8 @@ __all__ = ["GraphNavigator", "navigate_online"]
 
 log = logging.getLogger(__name__)
 
+MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
+
 
 class GraphNavigator(Relocalisation):
     """Online navigator: one :meth:`step` per ping, iSAM2 updated at key poses only.
@@ -138,6 +140,7 @@ class GraphNavigator(Relocalisation):
         self.covariance = np.full((n, 3, 3), np.nan)
         self.fixes: list[FixRecord] = []
         self._init_lost()
+        self._residuals: dict[int, float] = {}  # the last windows' residual stds (_misfit_noise)
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
@@ -236,7 +239,7 @@ class GraphNavigator(Relocalisation):
         laid = self._laid(k, pose)
         if fix is not None:
             return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width,
-                             strict=strict, noise=self.model.measurement_std)
+                             strict=strict, noise=self._misfit_noise(k, fix.sigma))
         started = _time.perf_counter()
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
@@ -248,10 +251,25 @@ class GraphNavigator(Relocalisation):
             self.tap_times.append(_time.perf_counter() - started)
         try:
             return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width,
-                             strict=strict, noise=self.model.measurement_std)
+                             strict=strict, noise=self._misfit_noise(k, made.sigma))
         except TangraphError as exc:
             log.warning("%s", exc)
             return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
+
+    def _misfit_noise(self, k: int, sigma: float) -> float:
+        """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
+        against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
+        over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger. While
+        the DR's constant errors are still unknown every window's patch is laid distorted and fits
+        the map worse than the soundings' noise (2-3 m on steep terrain at the start of a survey
+        with a 3.5 deg heading bias): that says nothing of the data. A window that fits far worse
+        than the ones around it does."""
+        if np.isfinite(sigma):
+            self._residuals[k] = float(sigma)
+            while len(self._residuals) > MISFIT_WINDOWS:
+                del self._residuals[next(iter(self._residuals))]
+        recent = float(np.median(list(self._residuals.values()))) if self._residuals else 0.0
+        return max(self.model.measurement_std, recent)
 
     def _laid(self, k: int, pose) -> np.ndarray | None:
         """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the

@@ -451,7 +451,7 @@ def test_a_cloud_every_ping_disagrees_with_is_drawn_afresh(method):
     cls = {"pf": PFConfig, "ipf": IPFConfig}[method]
     final = {}
     for gate_pings in (10, 10_000):
-        config = cls(n_particles=500, gate_pings=gate_pings, reinit_std=40.0)
+        config = cls(n_particles=500, ping_gate=True, gate_pings=gate_pings, reinit_std=40.0)
         track = run_filter(method, wrong, MAP, config, model=model, rng=np.random.default_rng(6))
         final[gate_pings] = float(np.hypot(*(track.pose[-1, :2] - survey.true_pose[-1, :2])))
         assert (track.meta["n_redraws"] >= 1) == (gate_pings == 10)

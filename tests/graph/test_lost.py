@@ -213,3 +213,21 @@ def test_without_the_robust_solve_the_smoother_keeps_the_widened_start(wrong_sta
     track = smooth_survey(wrong_start, rough_map, dataclasses.replace(CONFIG, robust_solve="none"))
     errors = np.hypot(*(track.pose[:, :2] - wrong_start.true_pose[:, :2]).T)
     assert np.sqrt(np.mean(errors**2)) < 5.0
+
+
+def test_the_misfit_test_holds_a_window_against_the_ones_around_it(small_survey, rough_map):
+    """At the start of a survey every patch is laid with DR whose constant errors are unknown and
+    fits the map worse than the soundings' noise: windows that all fit as badly are not refused;
+    one that fits far worse than those around it is."""
+    nav = GraphNavigator(small_survey, rough_map, CONFIG)
+    noise = nav.model.measurement_std
+    assert nav._misfit_noise(9, 0.5 * noise) == noise  # never below the model's
+    bad = [8.0, 9.0, 10.0, 8.5, 9.5, 9.0, 8.0, 10.0, 9.0, 8.5]
+    for k, sigma in zip(range(19, 119, 10), bad, strict=True):
+        limit = CONFIG.misfit_ratio * nav._misfit_noise(k, sigma * noise)
+        assert sigma * noise < limit  # all as bad: none refused
+    for k in range(119, 239, 10):
+        nav._misfit_noise(k, noise)  # the DR's errors known: the windows fit
+    assert 5.0 * noise > CONFIG.misfit_ratio * nav._misfit_noise(239, 5.0 * noise)  # one bad one
+    assert nav._misfit_noise(239, 5.0 * noise) == nav._misfit_noise(239, 5.0 * noise)  # judged twice
+    assert len(nav._residuals) == 10
