@@ -137,9 +137,9 @@ class GraphConfig:
         None: every fix within the gate is used at once (default 0.9).
     misfit_ratio : float or None
         A fix whose residual std at its best match exceeds this many times the navigation
-        model's ``measurement_std``, and as many times the median of the last ten windows' (a
-        patch laid with DR whose constant errors are not yet known fits the map worse, window
-        after window), is refused as ``MISFIT`` (the window's soundings fit the map nowhere:
+        model's ``measurement_std``, and (from the survey's third window) as many times the
+        median of the last ten windows' (a patch laid with DR whose constant errors are not yet
+        known fits the map worse, window after window), is refused as ``MISFIT`` (the window's soundings fit the map nowhere:
         part of its pings in error) and is no evidence of being lost; None: no such test
         (default 3).
     robust_solve : {"gnc", "none"}

@@ -259,7 +259,8 @@ class GraphNavigator(Relocalisation):
     def _misfit_noise(self, k: int, sigma: float) -> float:
         """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
         against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
-        over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger. While
+        over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger (from
+        the ``MISFIT_WINDOWS // 3``-th window of the survey on). While
         the DR's constant errors are still unknown every window's patch is laid distorted and fits
         the map worse than the soundings' noise (2-3 m on steep terrain at the start of a survey
         with a 3.5 deg heading bias): that says nothing of the data. A window that fits far worse
@@ -268,8 +269,9 @@ class GraphNavigator(Relocalisation):
             self._residuals[k] = float(sigma)
             while len(self._residuals) > MISFIT_WINDOWS:
                 del self._residuals[next(iter(self._residuals))]
-        recent = float(np.median(list(self._residuals.values()))) if self._residuals else 0.0
-        return max(self.model.measurement_std, recent)
+        if len(self._residuals) < MISFIT_WINDOWS // 3:  # too few to say what fits
+            return self.model.measurement_std
+        return max(self.model.measurement_std, float(np.median(list(self._residuals.values()))))
 
     def _laid(self, k: int, pose) -> np.ndarray | None:
         """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
