@@ -139,9 +139,9 @@ class GraphConfig:
         A fix whose residual std at its best match exceeds this many times the navigation
         model's ``measurement_std``, and (from the survey's third window) as many times the
         median of the last ten windows' (a patch laid with DR whose constant errors are not yet
-        known fits the map worse, window after window), is refused as ``MISFIT`` (the window's soundings fit the map nowhere:
-        part of its pings in error) and is no evidence of being lost; None: no such test
-        (default 3).
+        known fits the map worse, window after window), is refused as ``MISFIT`` (the window's
+        soundings fit the map nowhere: part of its pings in error) and is no evidence of being
+        lost; None: no such test (default 3).
     robust_solve : {"gnc", "none"}
         Batch smoother: ``"gnc"`` decides which fixes (those the online pass accepted, gated or
         held as relocalisation candidates) and whether the start position prior are inliers by
