@@ -35,7 +35,8 @@ sounding without a map depth) is no evidence at all: the step is the prediction 
 cloud moves with the dead reckoning and its covariance grows by the DR model's), recorded in
 ``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a divergence. An inconsistent ping
 (soundings no particle explains: a block of bad pings, or a cloud that has lost the vehicle)
-does not weigh the cloud (``ParticleConfig.ping_gate``); a run of them is flagged lost, and
+does not weigh the cloud with ``ParticleConfig.ping_gate`` (off by default); a run of them is
+flagged lost, and
 after ``gate_pings`` of them the cloud is taken to be the wrong one and drawn afresh around its
 mean with the first re-initialisation spread (``meta["n_redraws"]``, ``meta["redraw_steps"]``).
 """

@@ -180,7 +180,7 @@ class Relocalisation:
                 self._use(held, f"confirmed by the fix at ping {k}")
             else:
                 self._drop_held("the next fix did not agree" if outcome.accepted else "no fix came to agree")
-            self._held = None
+            self._held = None  # used, or dropped
         if not outcome.accepted:
             return False
         limit = self.config.confirm_probability
@@ -206,7 +206,8 @@ class Relocalisation:
         trusted fix is where a lost episode starts, and it clears the evidence of being lost)
         once a later accepted fix from a window that shares none of its pings agrees with it
         through the DR, or at once when ``trusted`` (fixes that agreed to relocalise); a
-        multimodal fix never is (two places explain it)."""
+        multimodal fix never is (two places explain it). A fix whose key pose has left iSAM2's
+        window (``isam_window``) is not added: it stays ``UNCONFIRMED``, for the batch smoother."""
         fix = candidate.fix
         record = self.fixes[candidate.record]
         key = candidate.key
