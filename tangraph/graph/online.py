@@ -260,11 +260,11 @@ class GraphNavigator(Relocalisation):
         """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
         against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
         over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger (from
-        the ``MISFIT_WINDOWS // 3``-th window of the survey on). While
-        the DR's constant errors are still unknown every window's patch is laid distorted and fits
-        the map worse than the soundings' noise (2-3 m on steep terrain at the start of a survey
-        with a 3.5 deg heading bias): that says nothing of the data. A window that fits far worse
-        than the ones around it does."""
+        the ``MISFIT_WINDOWS // 3``-th window of the survey on). While the DR's constant errors
+        are still unknown every window's patch is laid distorted and fits the map worse than
+        the soundings' noise (2-3 m on steep terrain at the start of a survey with a 3.5 deg
+        heading bias): that says nothing of the data. A window that fits far worse than the
+        ones around it does."""
         if np.isfinite(sigma):
             self._residuals[k] = float(sigma)
             while len(self._residuals) > MISFIT_WINDOWS:
