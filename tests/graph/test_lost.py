@@ -232,3 +232,17 @@ def test_the_misfit_test_holds_a_window_against_the_ones_around_it(small_survey,
     assert 5.0 * noise > CONFIG.misfit_ratio * nav._misfit_noise(239, 5.0 * noise)  # one bad one
     assert nav._misfit_noise(239, 5.0 * noise) == nav._misfit_noise(239, 5.0 * noise)  # judged twice
     assert len(nav._residuals) == 10
+
+
+def test_a_forward_pass_lost_to_the_end_leaves_only_the_smoothers_unfixed_tail_lost(wrong_start, rough_map):
+    """An online navigator that never relocalises is lost to the end; the smoother, which weighs
+    every fix again, flags only the pings after the last fix it kept, and keeps the forward
+    pass's episodes apart."""
+    config = dataclasses.replace(CONFIG, relocalise_fixes=10_000)
+    online = navigate_online(wrong_start, rough_map, config)
+    assert online.meta["lost_episodes"][-1]["end"] is None and online.lost[-1]
+    track = smooth_survey(wrong_start, rough_map, config)
+    last = max(f.index for f in track.meta["fixes"] if f.accepted)
+    assert track.meta["lost_steps"] == list(range(last + 1, wrong_start.n_pings))
+    assert track.meta["forward_lost_episodes"] == online.meta["lost_episodes"]
+    assert len(track.meta["lost_episodes"]) == (1 if track.meta["lost_steps"] else 0)
