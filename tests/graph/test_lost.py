@@ -246,3 +246,16 @@ def test_a_forward_pass_lost_to_the_end_leaves_only_the_smoothers_unfixed_tail_l
     assert track.meta["lost_steps"] == list(range(last + 1, wrong_start.n_pings))
     assert track.meta["forward_lost_episodes"] == online.meta["lost_episodes"]
     assert len(track.meta["lost_episodes"]) == (1 if track.meta["lost_steps"] else 0)
+
+
+def test_without_confirmation_a_surprising_fix_is_used_at_once(small_survey, rough_map):
+    """``confirm_probability=None``: a fix within the gate is used at once, however surprising."""
+    config = dataclasses.replace(CONFIG, confirm_probability=None)
+    k = 99
+    nav = GraphNavigator(small_survey, rough_map, config)
+    for _ in range(k):
+        nav.step()
+    _, cov = nav.predicted(k)
+    spread = float(np.sqrt(cov[0, 0] + 2.2))
+    nav.step(fix=_fix_at(small_survey, rough_map, k, [2.9 * spread, 0.0]))
+    assert 4.6 < nav.fixes[-1].nis < 13.8 and nav.fixes[-1].status is FixStatus.ACCEPTED
