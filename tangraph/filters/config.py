@@ -109,9 +109,9 @@ class ParticleConfig:
         moves with the dead reckoning, its spread grows, and a run of such pings is flagged
         lost (``meta["n_gated"]`` counts them). Off by default (every ping weighs the cloud):
         where the dead reckoning's constant errors are still unknown, many good pings look
-        inconsistent (on the ``han2020`` survey with the demo's drifting DR the gate took the
-        PF from 1.0 to 9.6 m RMSE); on for data with blocks of bad pings (10 % of shifted
-        pings: 34 x the clean RMSE without it, 1.8 x with it; the robustness study).
+        inconsistent and a gated filter learns those errors late (on the ``han2020`` survey
+        with the demo's drifting DR its RMSE was several times the ungated one); on for data
+        with blocks of bad pings (the robustness study measures both).
     gate_pings : int
         The gate's way out: after this many consecutive gated pings (longer than a block of bad
         pings should last) the cloud, not the pings, is taken to be wrong: it is drawn afresh

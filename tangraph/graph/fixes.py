@@ -214,11 +214,12 @@ def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_w
     """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
 
     A fix whose residual std at its best match exceeds ``config.misfit_ratio`` times ``noise``
-    (the navigation model's ``measurement_std``) is ``MISFIT``: the window's soundings fit the
-    map nowhere (a depth bias on part of its pings, a wrong map), which says nothing of where the
-    vehicle is. A fix whose best match lies on the edge of the search is ``OUTSIDE_SEARCH``; ``strict``
-    (a lost navigator's relocalisation candidates) refuses a multimodal fix whatever
-    ``config.accept_multimodal`` says.
+    (the residual std it is held against: the navigation model's ``measurement_std``, or the
+    online navigator's median of recent windows when larger) is ``MISFIT``: the window's
+    soundings fit the map nowhere (a depth bias on part of its pings), which says nothing of
+    where the vehicle is. A fix whose best match lies on the edge of the search is
+    ``OUTSIDE_SEARCH``; ``strict`` (a lost navigator's relocalisation candidates) refuses a
+    multimodal fix whatever ``config.accept_multimodal`` says.
 
     Raises
     ------
