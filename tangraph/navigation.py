@@ -196,6 +196,15 @@ def _projected(crs, whose: str):
         raise TangraphError(f"{whose} CRS {crs!r} is not understood by pyproj") from None
     if not parsed.is_projected:
         raise TangraphError(f"{whose} CRS {crs!r} is not projected (metres): cannot reproject the survey")
+    unit = parsed.axis_info[0] if parsed.axis_info else None
+    if unit is not None and abs(unit.unit_conversion_factor - 1.0) > 1e-12:
+        # tangraph's importers record a CRS in feet as the same projection in metres
+        # (tangraph.maps.io.metric_crs); one in feet comes from a file written before they did
+        raise TangraphError(
+            f"{whose} CRS {crs!r} has axes in {unit.unit_name}, but a survey's frame is metres and "
+            "its positions may have been taken as metres: import the survey again (tangraph survey "
+            "import converts a CRS in feet to metres)"
+        )
     return parsed
 
 

@@ -2,8 +2,9 @@
 
 The log's columns by name or position, with or without a header, any of ``;``, ``,``, tab or
 whitespace between fields; times as seconds, epoch seconds or ISO 8601; positions as projected
-metres or latitude/longitude (projected into the CRS given, headings turned to its grid north).
-Every error names the file, the line and the column.
+metres (or the unit of the CRS given: feet are converted to metres) or latitude/longitude
+(projected into the CRS given, headings turned to its grid north). Every error names the file,
+the line and the column.
 """
 
 from __future__ import annotations
@@ -237,6 +238,7 @@ def import_csv_xyz(
     time_format: TimeFormat = "auto",
     timezone: str | None = None,
     time_tolerance: float = 1e-3,
+    units: str | None = None,
 ) -> Survey:
     """A survey from a CSV navigation log and an XYZ soundings file.
 
@@ -244,20 +246,23 @@ def import_csv_xyz(
     ----------
     navigation : path
         A text table (comma, semicolon, tab or whitespace separated; ``#`` comments) with the
-        columns ``time``, ``north`` and ``east`` in metres (or ``lat`` and ``lon`` in decimal
-        degrees, WGS84), ``heading`` in degrees clockwise from north (from true north for a
-        lat/lon log, from the grid north of ``crs`` otherwise), ``depth`` (the vehicle's, metres).
+        columns ``time``, ``north`` and ``east`` in the unit of ``crs``'s axes (metres, or feet:
+        converted to metres) or ``lat`` and ``lon`` in decimal degrees (WGS84), ``heading`` in
+        degrees clockwise from north (from true north for a lat/lon log, from the grid north of
+        ``crs`` otherwise), ``depth`` (the vehicle's, in ``units``).
     soundings : path
         Rows ``time x y z`` (a header row is detected; further columns ignored): the ping time on
         the log's clock, the footprint's east and north (or longitude and latitude when the log
-        has lat/lon) and its depth (NaN: no return).
+        has lat/lon, in the same unit as the log's) and its depth (in ``units``; NaN: no return).
     sign : {"depth", "elevation"}
         Whether ``z`` is a depth (positive down) or an elevation (positive up).
     crs : str, optional
-        The projected CRS of the survey. With north/east, theirs (recorded); with lat/lon, the
-        one they are projected into. Without it a lat/lon log goes into a transverse Mercator
-        centred on the log (:func:`~tangraph.maps.local_crs`, recorded). A geographic CRS is
-        refused.
+        The projected CRS of the survey. With north/east, theirs; with lat/lon, the one they are
+        projected into. Without it a lat/lon log goes into a transverse Mercator centred on the
+        log (:func:`~tangraph.maps.local_crs`). A geographic CRS is refused. A CRS whose axes are
+        not in metres (``EPSG:2278``, US survey feet) is recorded as the same projection in
+        metres (the survey's frame is metres; ``meta["crs_given"]`` keeps the CRS given, its
+        unit and the metres per unit) and north/east read in it are converted.
     columns : mapping, optional
         Column name (case-insensitive) or 0-based position per key ``time``, ``north``,
         ``east``, ``lat``, ``lon``, ``heading``, ``depth``; by default the key is the name.
@@ -273,6 +278,11 @@ def import_csv_xyz(
         Zone (IANA name) of ISO 8601 times written without one; such times are refused without it.
     time_tolerance : float
         Soundings whose times differ by less than this (s) belong to one ping.
+    units : str, optional
+        The unit of the depths ``z`` and of the log's ``depth`` (``"m"``, ``"ft"``, ``"US survey
+        foot"``, ``"fathom"``: :func:`tangraph.maps.io.unit_factor`); metres by default. Required
+        when north/east are given in a CRS that is not in metres: their depths may be in its
+        unit or in metres, and the files do not say.
 
     Returns
     -------
@@ -291,7 +301,8 @@ def import_csv_xyz(
     SurveyError
         A missing column, text in a number column or an unreadable time (each naming the file,
         line and column), a time without zone and no ``timezone``, the two files on different
-        clocks, a CRS that is not projected, repeated log times, no sounding within the log.
+        clocks, a CRS that is not projected, north/east in a CRS not in metres without
+        ``units``, an unknown unit, repeated log times, no sounding within the log.
 
     Examples
     --------
@@ -308,6 +319,8 @@ def import_csv_xyz(
     nav_path, xyz_path = Path(navigation), Path(soundings)
     nav = _read_rows(nav_path, "navigation log", bool(header))
     cols, geographic = _nav_columns(nav, columns)
+    feet = None if geographic or target is None or not target.converted else target  # north/east to metres
+    depth_unit = _depth_unit(units, feet, nav_path, xyz_path)
     xyz = _read_rows(xyz_path, "soundings file", None)
     if xyz.min_fields < 4:
         i = next(i for i, r in enumerate(xyz.rows) if len(r) < 4)
@@ -331,12 +344,17 @@ def import_csv_xyz(
     n_nav, e_nav = nav.numbers(*cols[a]), nav.numbers(*cols[b])
     heading = np.radians(nav.numbers(*cols["heading"]))
     y_s, x_s = xyz.numbers(2, "2 (y)"), xyz.numbers(1, "1 (x)")
-    z_s = xyz.numbers(3, "3 (z)", finite=False) * (1 if sign == "depth" else -1)
+    z_s = xyz.numbers(3, "3 (z)", finite=False) * (depth_unit if sign == "depth" else -depth_unit)
+    if feet is not None:
+        n_nav, e_nav, y_s, x_s = (v * feet.metres_per_unit for v in (n_nav, e_nav, y_s, x_s))
 
     local = geographic and crs is None  # a transverse Mercator centred on the log: origin (0, 0)
+    recorded = {"crs": crs} if target is None else target.meta()
     if geographic:
         crs, (n_nav, e_nav, heading, y_s, x_s) = _project_log(nav, cols, n_nav, e_nav, heading,
                                                              y_s, x_s, crs, target)
+        if local:
+            recorded = {"crs": crs}
     if crs is None or local:
         origin = (0.0, 0.0)
     else:
@@ -376,11 +394,11 @@ def import_csv_xyz(
     forward, starboard = to_body(pose, north, east)
     meta = {
         "source": {"navigation": str(nav_path), "soundings": str(xyz_path)},
-        "crs": crs,
+        **recorded,
         "origin": list(origin),
         "n_dropped_outside_navigation": n_dropped,
     }
-    vehicle_depth = np.interp(ping_time, t_nav, nav.numbers(*cols["depth"])[order])
+    vehicle_depth = np.interp(ping_time, t_nav, nav.numbers(*cols["depth"])[order]) * depth_unit
     if absolute:
         meta["start_time"] = _utc_iso(float(ping_time[0]))
         ping_time = ping_time - ping_time[0]
@@ -393,6 +411,21 @@ def import_csv_xyz(
         beam_depth=depth,
         meta=meta,
     )
+
+
+def _depth_unit(units: str | None, feet, nav_path, xyz_path) -> float:
+    """Metres per unit of the depths: ``units``, else metres; refused without ``units`` when
+    north/east are in a CRS not in metres (``feet``), where the depths may be in either."""
+    if units is not None:
+        from tangraph.maps.io import unit_factor
+
+        return unit_factor(units, f"{nav_path}, {xyz_path}", "units=")
+    if feet is not None:
+        raise SurveyError(
+            f"crs={feet.given!r} has axes in {feet.unit}: give the unit of the depths in {nav_path} "
+            f"and {xyz_path} (units='m' or units='ft', 'US survey foot'; CLI: --units)"
+        )
+    return 1.0
 
 
 def _check_clocks(t_nav: np.ndarray, t_s: np.ndarray, inside: np.ndarray, nav_path, xyz_path) -> None:
@@ -428,8 +461,10 @@ def _project_log(nav: _Table, cols, lat, lon, heading, lat_s, lon_s, crs, target
                               f"is not a {'latitude' if key == 'lat' else 'longitude'} in degrees")
     if crs is None:
         crs = local_crs(float(np.mean(lat)), float(np.mean(lon)))
-        target = crs
-    t = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True)
+        into = crs
+    else:
+        into = target.crs  # in metres
+    t = pyproj.Transformer.from_crs("EPSG:4326", into, always_xy=True)
     n, e, turn = north_in_grid(t.transform, lon, lat, 1.0 / 111_320.0)
     e_s, n_s = (np.asarray(v) for v in t.transform(lon_s, lat_s))
     if not (np.all(np.isfinite([e, n, turn])) and np.all(np.isfinite([e_s, n_s]))):

@@ -119,7 +119,9 @@ def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
         The ``.gsf`` file.
     crs : str
         Projected CRS of the survey's frame (e.g. ``EPSG:32658``); the pings' latitude and
-        longitude are projected into it, the heading turned from true to grid north.
+        longitude are projected into it, the heading turned from true to grid north. One in
+        feet is recorded as the same projection in metres (``meta["crs_given"]`` keeps the one
+        given).
 
     Returns
     -------
@@ -144,7 +146,7 @@ def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
         raise SurveyError(f"{p}: ping time does not increase at swath ping {i + 1}")
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
     north, east, convergence = north_in_grid(transform, r["lon"], r["lat"], 1e-5)
     if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
         raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
@@ -166,7 +168,7 @@ def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
         "reference": "GSF ping position",
         "reference_note": "the swath pings' latitude/longitude; dr_pose is the same track "
                           "(the file has no separate dead reckoning)",
-        "crs": target.to_string(),
+        **target.meta(),
         "origin": list(origin),
         "start_time": np.datetime_as_string(start, unit="ms") + "Z",
         "vertical_datum": "GSF depth (water line, the file's depth and tide correctors applied)",

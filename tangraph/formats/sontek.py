@@ -209,7 +209,8 @@ def import_sontek_sum(
         The ``.sum`` files; several must follow each other within 10 s.
     crs : str
         Projected CRS of the survey's frame (e.g. ``EPSG:25833``); required, and checked
-        against the positions (they must lie in its area of use).
+        against the positions (they must lie in its area of use). One in feet is recorded as
+        the same projection in metres (``meta["crs_given"]`` keeps the one given).
     timezone : str
         Zone of the file's local clock (e.g. ``Europe/Berlin``, ``UTC``); required, since the
         file does not say.
@@ -290,7 +291,7 @@ def import_sontek_sum(
 
     target = projected_crs(crs)
     _check_area(target, crs, rec)
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
     n, e, convergence = north_in_grid(transform, rec.lon, rec.lat, 1e-5)
     reference, n_repeated = _gps_track(time, n, e, rec)
     origin = (float(np.floor(reference[:, 0].min())), float(np.floor(reference[:, 1].min())))
@@ -316,7 +317,7 @@ def import_sontek_sum(
         "source": [r.path for r in records],
         "reference": "GPS",
         "reference_note": "the RiverSurveyor's internal receiver: DGPS, a few metres",
-        "crs": target.to_string(),
+        **target.meta(),
         "origin": list(origin),
         "start_time": np.datetime_as_string(t_utc[0], unit="s") + "Z",
         "timezone": timezone,
@@ -369,7 +370,7 @@ def _concatenate(records: list[SontekRecord]) -> SontekRecord:
 
 def _check_area(target, crs: str, rec: SontekRecord) -> None:
     """Refuse a CRS whose area of use does not hold the positions (a wrong zone or a typo)."""
-    area = target.area_of_use
+    area = target.crs.area_of_use
     if area is None:
         return
     margin = 1.0  # degrees: UTM zones are used a little beyond their edges

@@ -194,7 +194,9 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         The ``.xtf`` file.
     crs : str
         Projected CRS of the survey's frame (e.g. ``EPSG:32610``); the file's latitude and
-        longitude are projected into it, the heading turned from true to grid north.
+        longitude are projected into it, the heading turned from true to grid north. One in
+        feet is recorded as the same projection in metres (``meta["crs_given"]`` keeps the one
+        given).
     draft : float
         Depth of the transducer below the water surface, m (the file has none: QINSy leaves the
         ping header's sensor depth at 0). Depths are then ``draft - heave + range * cos``.
@@ -234,7 +236,7 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
     else:
         lat, lon = np.array([q.lat for q in pings]), np.array([q.lon for q in pings])
         position_source = "ping headers (type 65)"
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target, always_xy=True).transform
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
     north, east, convergence = north_in_grid(transform, lon, lat, 1e-5)
     if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
         raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
@@ -260,7 +262,7 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         "reference": "GNSS",
         "reference_note": f"vessel position from the {position_source}; dr_pose is the same track "
                           "(the file has no separate dead reckoning)",
-        "crs": target.to_string(),
+        **target.meta(),
         "origin": list(origin),
         "start_time": np.datetime_as_string(start, unit="ms") + "Z",
         "vertical_datum": "water surface (draft - heave), no tide",
