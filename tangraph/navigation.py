@@ -2,8 +2,10 @@
 
 :func:`navigate` runs the method named (``pf``, ``ipf``, ``sjcpf``, ``jbpf``, ``tercom-pf``,
 ``mle``, ``isam2`` or ``smoother``) on a survey and a map and returns its
-:class:`~tangraph.track.Track`; :func:`dead_reckoning_track` is the baseline every estimator
-must beat; :func:`track_summary` is the text the CLI and the demo print.
+:class:`~tangraph.track.Track`, in the map's frame; :func:`survey_on_map` is what it does to
+the survey first (the map it was simulated on, the map's frame, the overlap with the map's
+data), in one place for the library and the CLI; :func:`dead_reckoning_track` is the baseline
+every estimator must beat; :func:`track_summary` is the text the CLI and the demo print.
 """
 
 from __future__ import annotations
@@ -18,15 +20,26 @@ from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = [
+    "MIN_MAP_OVERLAP",
     "Method",
     "check_map",
+    "check_overlap",
     "dead_reckoning_track",
     "in_map_frame",
     "map_identity",
     "navigate",
+    "survey_on_map",
     "track_report",
     "track_summary",
 ]
+
+#: A survey is navigated on a map only when at least this share of its pings with soundings has
+#: a sounding on the map's data (footprints laid with the dead reckoning in the map's frame). A
+#: survey that leaves the map, or starts off it, is navigated; one that (nearly) never meets it
+#: is refused: its map is another place's, or its CRS or origin is wrong.
+MIN_MAP_OVERLAP = 0.05
+#: beams per ping looked at by the overlap test (evenly spread over the swath)
+_OVERLAP_BEAMS = 16
 
 
 class Method(enum.StrEnum):
@@ -67,6 +80,11 @@ def navigate(
 ) -> Track:
     """Run one estimator on a survey.
 
+    The survey is first made ready for the map by :func:`survey_on_map` (checked against the
+    map it was simulated on, put into the map's frame: a recorded survey in its own CRS and
+    origin is shifted or reprojected; refused when it does not overlap the map's data), so a
+    survey read from a file can be passed as it is.
+
     Parameters
     ----------
     survey, bathymetry
@@ -88,14 +106,34 @@ def navigate(
     progress : bool
         Show a progress bar over the pings.
     other_map : bool
-        Navigate a survey simulated on one map on another (:func:`check_map` refuses it
-        otherwise).
+        Navigate a survey on a map that is not its own: one simulated on another map
+        (:func:`check_map` refuses it otherwise), or one that does not overlap the map's data
+        (:func:`check_overlap` refuses it otherwise; the estimators then keep the dead
+        reckoning).
+
+    Returns
+    -------
+    Track
+        Poses in the map's frame (``bathymetry.crs``, ``bathymetry.origin``: write it with
+        those to get latitude and longitude).
+
+    Raises
+    ------
+    TangraphError
+        An unknown method, a random method without ``rng``, and whatever
+        :func:`survey_on_map` refuses.
+
+    Examples
+    --------
+    >>> from tangraph.survey import read_survey
+    >>> from tangraph.maps import read_map
+    >>> track = navigate(read_survey("run.nc"), read_map("grid.nc"), "smoother",
+    ...                  model=load_navigation_model("dr.toml"))  # doctest: +SKIP
     """
     from tangraph.sensors import survey_navigation_model
 
     method = _method(method)
-    if not other_map:
-        check_map(survey, bathymetry)
+    survey = survey_on_map(survey, bathymetry, other_map=other_map)
     model = survey_navigation_model(survey, model)
     if method is Method.ISAM2 or method is Method.SMOOTHER:
         from tangraph import graph
@@ -110,6 +148,174 @@ def navigate(
 
     return filters.run_filter(method.value, survey, bathymetry, config, model=model, rng=rng,
                               progress=progress)
+
+
+def survey_on_map(survey: Survey, bathymetry: BathymetryMap, *, other_map: bool = False) -> Survey:
+    """The survey as every estimator takes it: in the map's frame, on the map.
+
+    The one place where a survey meets its map, used by :func:`navigate` and the CLI: refused
+    on a map it was not simulated on (:func:`check_map`), put into the map's frame
+    (:func:`in_map_frame`), refused when it does not overlap the map's data
+    (:func:`check_overlap`). A survey already in the map's frame is returned as it is, so
+    calling it twice is harmless.
+
+    Parameters
+    ----------
+    survey : Survey
+        A simulated survey, or a recorded one in the CRS and origin it was imported in
+        (``meta["crs"]``, ``meta["origin"]``).
+    bathymetry : BathymetryMap
+        The prior map.
+    other_map : bool
+        Skip :func:`check_map` and :func:`check_overlap`: navigate the survey on this map
+        whatever it was made on and wherever it lies.
+
+    Returns
+    -------
+    Survey
+        Its poses (DR and reference) in the map's frame.
+
+    Raises
+    ------
+    TangraphError
+        What :func:`check_map`, :func:`in_map_frame` and :func:`check_overlap` refuse.
+    """
+    if not other_map:
+        check_map(survey, bathymetry)
+    framed = in_map_frame(survey, bathymetry)
+    if not other_map:
+        problem = _overlap_problem(framed, bathymetry, survey)
+        if problem:
+            raise TangraphError(problem)
+    return framed
+
+
+def check_overlap(survey: Survey, bathymetry: BathymetryMap) -> None:
+    """Refuse a survey that (nearly) never meets the map's data.
+
+    The survey is put into the map's frame (:func:`in_map_frame`) and its soundings laid with
+    the dead reckoning (up to 16 beams per ping, spread over the swath). It is refused when
+    fewer than :data:`MIN_MAP_OVERLAP` (5 %) of its pings with soundings have one on the map's
+    data (a cell that is not NaN). A survey that partly leaves the map, or starts off it,
+    passes: off the map the estimators keep the dead reckoning.
+
+    Raises
+    ------
+    TangraphError
+        One line naming how many pings meet the map, the survey's extent and the map's (in
+        latitude/longitude where both have a CRS, else in the map's local metres), the two CRSs
+        where they differ, and the option that navigates it anyway (``other_map=True``, CLI:
+        ``--other-map``).
+    """
+    problem = _overlap_problem(in_map_frame(survey, bathymetry), bathymetry, survey)
+    if problem:
+        raise TangraphError(problem)
+
+
+def _overlap_problem(framed: Survey, bathymetry: BathymetryMap, original: Survey) -> str | None:
+    """Why ``framed`` (in the map's frame) is not to be navigated on the map, or None;
+    ``original`` is the survey as given (its own CRS), for its extent in latitude/longitude."""
+    n_beams = framed.beam_depth.shape[1]
+    beams = np.unique(np.linspace(0, n_beams - 1, min(n_beams, _OVERLAP_BEAMS)).astype(int))
+    north, east = framed.footprints()
+    has = np.isfinite(framed.beam_depth[:, beams])
+    rows = has.any(axis=1)  # pings with a sounding among the beams looked at
+    on_data = np.isfinite(bathymetry.depth_at(np.where(has, north[:, beams], np.nan)[rows],
+                                              np.where(has, east[:, beams], np.nan)[rows])).any(axis=1)
+    total, met = int(rows.sum()), int(on_data.sum())
+    if total == 0 or met >= MIN_MAP_OVERLAP * total:
+        return None
+    pose = original.dr_pose
+    survey_box = _lonlat_box(original.meta.get("crs"), original.meta.get("origin"),
+                             (pose[:, 0].min(), pose[:, 0].max()), (pose[:, 1].min(), pose[:, 1].max()))
+    finite = np.isfinite(bathymetry.depth)
+    data_box = None
+    if finite.any():
+        rows_, cols = np.flatnonzero(finite.any(axis=1)), np.flatnonzero(finite.any(axis=0))
+        n_span = (bathymetry.north[rows_[0]], bathymetry.north[rows_[-1]])
+        e_span = (bathymetry.east[cols[0]], bathymetry.east[cols[-1]])
+        data_box = _lonlat_box(bathymetry.crs, bathymetry.origin, n_span, e_span)
+        data_text = _box_text(data_box) if data_box is not None else _local_text(n_span, e_span)
+    else:
+        data_text = "(none: every cell is NaN)"
+    if survey_box is not None and data_box is not None:
+        survey_text = _box_text(survey_box)
+    else:
+        n, e = framed.dr_pose[:, 0], framed.dr_pose[:, 1]
+        survey_text = _local_text((n.min(), n.max()), (e.min(), e.max()))
+    apart = ""
+    if survey_box is not None and data_box is not None:
+        km = _distance_km(survey_box, data_box)
+        crs, map_crs = original.meta.get("crs"), bathymetry.crs
+        if km > 100.0:
+            apart = f"; it lies {km:,.0f} km from them"
+            if not _same_crs(crs, map_crs):
+                apart += f" (its CRS {_crs_name(crs)}, the map's {_crs_name(map_crs)}: another region?)"
+    return (
+        f"the survey does not overlap map {bathymetry.name!r}: {met} of its {total} pings with soundings "
+        f"({met / total:.1%}; at least {MIN_MAP_OVERLAP:.0%} needed) have a sounding on the map's data; "
+        f"the survey spans {survey_text}, the map's data {data_text}{apart}; pass the map of the "
+        "survey's area (or other_map=True, CLI: --other-map, to run it on this one anyway)"
+    )
+
+
+def _lonlat_box(crs, origin, north_span, east_span) -> np.ndarray | None:
+    """(lat min, lat max, lon min, lon max) of a local box in ``crs`` with ``origin``, or None
+    where there is no CRS or it does not go to latitude/longitude."""
+    import pyproj
+
+    if crs is None or origin is None:
+        return None
+    north, east = np.meshgrid(np.asarray(north_span, float), np.asarray(east_span, float))
+    try:
+        to_wgs84 = pyproj.Transformer.from_crs(crs, "EPSG:4326", always_xy=True)
+        lon, lat = to_wgs84.transform(east.ravel() + float(origin[1]), north.ravel() + float(origin[0]))
+    except (pyproj.exceptions.CRSError, pyproj.exceptions.ProjError):
+        return None
+    lon, lat = np.asarray(lon, float), np.asarray(lat, float)
+    if not (np.all(np.isfinite(lon)) and np.all(np.isfinite(lat))):
+        return None
+    return np.array([lat.min(), lat.max(), lon.min(), lon.max()])
+
+
+def _box_text(box: np.ndarray) -> str:
+    return f"lat {box[0]:.4f}..{box[1]:.4f}, lon {box[2]:.4f}..{box[3]:.4f}"
+
+
+def _local_text(north_span, east_span) -> str:
+    (n0, n1), (e0, e1) = north_span, east_span
+    return f"north {n0:.0f}..{n1:.0f} m, east {e0:.0f}..{e1:.0f} m (the map's frame)"
+
+
+def _distance_km(a: np.ndarray, b: np.ndarray) -> float:
+    """Distance (km, WGS84 ellipsoid) between the centres of two latitude/longitude boxes."""
+    import pyproj
+
+    _, _, metres = pyproj.Geod(ellps="WGS84").inv(
+        (a[2] + a[3]) / 2, (a[0] + a[1]) / 2, (b[2] + b[3]) / 2, (b[0] + b[1]) / 2)
+    return float(metres) / 1000.0
+
+
+def _same_crs(a, b) -> bool:
+    import pyproj
+
+    try:
+        return pyproj.CRS.from_user_input(a).equals(pyproj.CRS.from_user_input(b))
+    except pyproj.exceptions.CRSError:
+        return a == b
+
+
+def _crs_name(crs) -> str:
+    import pyproj
+
+    try:
+        parsed = pyproj.CRS.from_user_input(crs)
+    except pyproj.exceptions.CRSError:
+        return repr(crs)
+    code = parsed.to_authority()
+    if code:
+        return f"{code[0]}:{code[1]} ({parsed.name})"
+    return repr(parsed.name) if parsed.name != "unknown" else repr(str(crs))
 
 
 def map_identity(bathymetry: BathymetryMap) -> dict:
