@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
@@ -15,9 +16,18 @@ from tangraph.maps._interp import depth_kernel, gradient_kernel
 if TYPE_CHECKING:
     import xarray as xr
 
-__all__ = ["BathymetryMap"]
+__all__ = ["BathymetryMap", "check_correlation_length", "check_depth_std"]
 
 Order = Literal[1, 3]
+
+#: the attribute (of depth, in NetCDF and xarray) that holds the correlation length of the map's error
+CORRELATION_ATTRIBUTE = "error_correlation_length_m"
+#: CF attributes of the error layer
+DEPTH_STD_ATTRS = {
+    "long_name": "standard deviation of the error of depth",
+    "standard_name": "sea_floor_depth_below_sea_surface standard_error",
+    "units": "m",
+}
 
 # Relative tolerance on the spacing of "regular" coordinates (float32 files round them).
 _SPACING_RTOL = 1e-4
@@ -72,6 +82,46 @@ def _check_projected(crs: str, where: str) -> None:
         raise MapFormatError(f"{where}: {problem}")
 
 
+def check_depth_std(std, depth: np.ndarray, where: str) -> np.ndarray:
+    """The error layer ``std`` as a new float64 array, NaN wherever ``depth`` is NaN; or a
+    one-line `MapFormatError` beginning with ``where`` (which names the file or map and the field).
+
+    Refused: another shape than ``depth``; infinite or negative values; NaN where ``depth``
+    holds data. A finite std over a no-data cell is set to NaN without a word.
+    """
+    std = np.array(std, dtype=np.float64)
+    if std.shape != depth.shape:
+        raise MapFormatError(f"{where} has shape {std.shape}, expected the depth's {depth.shape}")
+    nodata = np.isnan(depth)
+    std[nodata] = np.nan
+    for problem, bad in (("infinite", np.isinf(std)), ("negative", std < 0),
+                         ("NaN", np.isnan(std) & ~nodata)):
+        if np.any(bad):
+            k = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), std.shape))
+            if problem == "NaN":
+                raise MapFormatError(
+                    f"{where} is NaN in {int(bad.sum())} cell(s) where depth holds data (e.g. at index "
+                    f"{k}); every cell with a depth needs its standard deviation"
+                )
+            raise MapFormatError(
+                f"{where} holds {int(bad.sum())} {problem} value(s) (e.g. {std[k]:g} m at index {k}); "
+                "a standard deviation is finite and >= 0"
+            )
+    return std
+
+
+def check_correlation_length(value, where: str) -> float:
+    """``value`` as a float if it is a finite length > 0 (metres), else a one-line
+    `MapFormatError` beginning with ``where``."""
+    try:
+        length = float(value)
+    except (TypeError, ValueError):
+        length = math.nan
+    if isinstance(value, bool) or not (math.isfinite(length) and length > 0):
+        raise MapFormatError(f"{where} must be a finite length > 0 m, got {value!r}")
+    return length
+
+
 def _as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
     n = np.asarray(north, dtype=np.float64)
     e = np.asarray(east, dtype=np.float64)
@@ -103,11 +153,19 @@ class BathymetryMap:
         ``(northing, easting)`` in ``crs`` of the local point ``north = east = 0``.
     name : str
         A short name, used in figures and errors.
+    depth_std : ndarray, shape (ny, nx), optional
+        The map's error as data: per cell, the standard deviation of the error of ``depth``
+        (metres; NaN exactly where ``depth`` is NaN: a finite value over a no-data cell is set
+        to NaN). None: the map does not say (the navigation model's stated default applies).
+    correlation_length : float, optional
+        The correlation length of the map's error, metres (> 0). None: not known.
 
     Notes
     -----
     The arrays are copied and made read-only, so a map never changes and never aliases
-    the caller's data.
+    the caller's data. Every map built from this one (:meth:`crop`, :meth:`resample`,
+    :meth:`replace`, :meth:`to_dataset`/:meth:`from_xarray`, every writer of
+    :func:`tangraph.maps.write_map` but XYZ without the column) carries the error layer.
 
     Examples
     --------
@@ -119,6 +177,9 @@ class BathymetryMap:
     102.5
     >>> bool(np.isnan(m.depth_at(-1.0, 0.0)))  # off the map
     True
+    >>> e = m.replace(depth_std=np.full((3, 4), 0.2), correlation_length=25.0)
+    >>> float(e.depth_std_at(5.0, 5.0))
+    0.2
     """
 
     north: np.ndarray
@@ -127,6 +188,8 @@ class BathymetryMap:
     crs: str | None = None
     origin: tuple[float, float] = (0.0, 0.0)
     name: str = "map"
+    depth_std: np.ndarray | None = None
+    correlation_length: float | None = None
 
     def __post_init__(self) -> None:
         where = f"map {self.name!r}"
@@ -149,8 +212,16 @@ class BathymetryMap:
         origin = tuple(float(v) for v in self.origin)
         if len(origin) != 2 or not all(np.isfinite(origin)):
             raise MapFormatError(f"{where}: origin must be two finite numbers, got {self.origin!r}")
+        depth_std = None
+        if self.depth_std is not None:
+            depth_std = check_depth_std(self.depth_std, depth, f"{where}: depth_std")
+            depth_std.setflags(write=False)
+        if self.correlation_length is not None:
+            length = check_correlation_length(self.correlation_length, f"{where}: correlation_length")
+            object.__setattr__(self, "correlation_length", length)
         for a in (north, east, depth):
             a.setflags(write=False)
+        object.__setattr__(self, "depth_std", depth_std)
         object.__setattr__(self, "north", north)
         object.__setattr__(self, "east", east)
         object.__setattr__(self, "depth", depth)
@@ -185,8 +256,37 @@ class BathymetryMap:
         return (
             f"BathymetryMap(name={self.name!r}, shape={self.shape}, cell=({dn:g}, {de:g}) m, "
             f"north=[{n_lo:g}, {n_hi:g}], east=[{e_lo:g}, {e_hi:g}], "
-            f"depth=[{np.nanmin(self.depth):g}, {np.nanmax(self.depth):g}] m, crs={self.crs!r})"
+            f"depth=[{np.nanmin(self.depth):g}, {np.nanmax(self.depth):g}] m{self._error_repr()}, "
+            f"crs={self.crs!r})"
         )
+
+    def _error_repr(self) -> str:
+        text = ""
+        if self.depth_std is not None:
+            text += f", depth_std=[{np.nanmin(self.depth_std):g}, {np.nanmax(self.depth_std):g}] m"
+        if self.correlation_length is not None:
+            text += f", correlation_length={self.correlation_length:g} m"
+        return text
+
+    def error_summary(self) -> dict:
+        """The error layer's figures as data: ``depth_std_m`` (median and max over the cells
+        with data) and ``correlation_length_m``, each only if the map has it (``{}`` if neither).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> m = BathymetryMap(north=[0.0, 1], east=[0.0, 1], depth=np.ones((2, 2)),
+        ...                   depth_std=[[0.1, 0.2], [0.3, 0.5]], correlation_length=4.0)
+        >>> m.error_summary()
+        {'depth_std_m': {'median': 0.25, 'max': 0.5}, 'correlation_length_m': 4.0}
+        """
+        summary: dict = {}
+        if self.depth_std is not None:
+            summary["depth_std_m"] = {"median": float(np.nanmedian(self.depth_std)),
+                                      "max": float(np.nanmax(self.depth_std))}
+        if self.correlation_length is not None:
+            summary["correlation_length_m"] = self.correlation_length
+        return summary
 
     # -- queries --------------------------------------------------------------------------
     def _query(self, north, east, order: Order, with_grad: bool):
@@ -231,13 +331,47 @@ class BathymetryMap:
         _, grad, shape = self._query(north, east, order, with_grad=True)
         return grad.reshape(*shape, 2)
 
+    def depth_std_at(self, north, east) -> np.ndarray:
+        """Standard deviation of the map's depth error at points ``(north, east)``, bilinear.
+
+        The same compiled kernel as :meth:`depth_at` on the ``depth_std`` layer: NaN off the map
+        and next to no-data cells (exactly where bilinear :meth:`depth_at` is NaN).
+
+        Raises
+        ------
+        TangraphError
+            The map has no ``depth_std`` (check ``m.depth_std is not None`` first).
+        """
+        if self.depth_std is None:
+            raise TangraphError(
+                f"map {self.name!r} has no depth_std (error layer); read it from a file that carries "
+                "one, grid the map with tangraph.maps.grid_surveys, or use the model's default map std"
+            )
+        n, e, shape = _as_query(north, east)
+        out = np.empty(n.size)
+        n0, e0, dn, de = self._grid  # type: ignore[attr-defined]
+        depth_kernel(self.depth_std, n0, e0, 1.0 / dn, 1.0 / de, n, e, 1, out)
+        return out.reshape(shape)[()]
+
     def contains(self, north, east) -> np.ndarray:
         """True where :meth:`depth_at` returns data: inside the grid and not next to a NaN."""
         return np.isfinite(self.depth_at(north, east))
 
     # -- new maps from this one -----------------------------------------------------------
     def replace(self, **changes) -> BathymetryMap:
-        """A copy with some fields changed (validated again)."""
+        """A copy with some fields changed (validated again).
+
+        ``depth_std`` and ``correlation_length`` travel unchanged unless given; a new grid
+        shape needs its own ``depth_std`` (or ``depth_std=None``), and new depths where the
+        old layer is NaN are refused until one is given.
+        """
+        if self.depth_std is not None and "depth_std" not in changes and "depth" in changes:
+            shape = np.shape(changes["depth"])
+            if shape != self.shape:
+                raise TangraphError(
+                    f"replace of map {self.name!r}: depth changes shape {self.shape} -> {shape} but "
+                    "depth_std was not given; pass depth_std= (or depth_std=None)"
+                )
         return dataclasses.replace(self, **changes)
 
     def crop(
@@ -248,7 +382,9 @@ class BathymetryMap:
         """The cells whose centres lie within ``north = (lo, hi)`` and ``east = (lo, hi)``."""
         rows = self._index_range(self.north, north, "north")
         cols = self._index_range(self.east, east, "east")
-        return self.replace(north=self.north[rows], east=self.east[cols], depth=self.depth[rows, cols])
+        std = None if self.depth_std is None else self.depth_std[rows, cols]
+        return self.replace(north=self.north[rows], east=self.east[cols], depth=self.depth[rows, cols],
+                            depth_std=std)
 
     def _index_range(self, axis: np.ndarray, bounds, name: str) -> slice:
         if bounds is None:
@@ -266,7 +402,10 @@ class BathymetryMap:
         """The map on a new regular grid of cell size ``cell`` (metres) over the same extent.
 
         Finer cells interpolate (``order``); coarser cells average the cells that fall in each
-        new cell (so a coarse map is not aliased), then interpolate to the new centres.
+        new cell (so a coarse map is not aliased), then interpolate to the new centres. A
+        ``depth_std`` goes the same way, always bilinear (a std never overshoots below 0): a
+        coarser cell keeps the mean std of the cells it averages, as if their errors were
+        correlated over it (conservative); ``correlation_length`` is unchanged.
         """
         dn_new, de_new = (float(cell), float(cell)) if np.isscalar(cell) else map(float, cell)
         if not (dn_new > 0 and de_new > 0):
@@ -280,7 +419,9 @@ class BathymetryMap:
             )
         source = self._smoothed_for(dn_new, de_new)
         nn, ee = np.meshgrid(north, east, indexing="ij")
-        return self.replace(north=north, east=east, depth=source.depth_at(nn, ee, order=order))
+        std = None if source.depth_std is None else source.depth_std_at(nn, ee)
+        return self.replace(north=north, east=east, depth=source.depth_at(nn, ee, order=order),
+                            depth_std=std)
 
     def _smoothed_for(self, dn_new: float, de_new: float) -> BathymetryMap:
         """A box average over the new cell size where the new grid is coarser (anti-aliasing)."""
@@ -289,19 +430,13 @@ class BathymetryMap:
         ke = max(1, round(de_new / de))
         if kn == 1 and ke == 1:
             return self
-        from scipy.ndimage import uniform_filter
-
-        valid = np.isfinite(self.depth)
-        filled = np.where(valid, self.depth, 0.0)
-        total = uniform_filter(filled, size=(kn, ke), mode="nearest")
-        weight = uniform_filter(valid.astype(float), size=(kn, ke), mode="nearest")
-        with np.errstate(invalid="ignore", divide="ignore"):
-            mean = total / weight
-        return self.replace(depth=np.where(valid, mean, np.nan))
+        std = None if self.depth_std is None else _box_mean(self.depth_std, kn, ke)
+        return self.replace(depth=_box_mean(self.depth, kn, ke), depth_std=std)
 
     # -- xarray ---------------------------------------------------------------------------
     def to_xarray(self) -> xr.DataArray:
-        """The map as an ``xarray.DataArray`` with dims ``("north", "east")``."""
+        """The depths as an ``xarray.DataArray`` with dims ``("north", "east")``; the error layer
+        travels with :meth:`to_dataset`."""
         import xarray as xr
 
         attrs = {
@@ -326,14 +461,52 @@ class BathymetryMap:
             attrs=attrs,
         )
 
+    def to_dataset(self) -> xr.Dataset:
+        """The map with its error layer as an ``xarray.Dataset``: ``depth`` (:meth:`to_xarray`)
+        and, if the map has one, ``depth_std`` named by depth's CF ``ancillary_variables``;
+        ``correlation_length`` is depth's attribute ``error_correlation_length_m``.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> m = BathymetryMap(north=[0.0, 1], east=[0.0, 1], depth=np.ones((2, 2)),
+        ...                   depth_std=np.full((2, 2), 0.3), correlation_length=5.0)
+        >>> ds = m.to_dataset()
+        >>> ds["depth"].attrs["ancillary_variables"], ds["depth"].attrs["error_correlation_length_m"]
+        ('depth_std', 5.0)
+        >>> back = BathymetryMap.from_xarray(ds)
+        >>> float(back.depth_std[0, 0]), back.correlation_length
+        (0.3, 5.0)
+        """
+        import xarray as xr
+
+        depth = self.to_xarray()
+        variables = {"depth": depth}
+        if self.correlation_length is not None:
+            depth.attrs[CORRELATION_ATTRIBUTE] = self.correlation_length
+        if self.depth_std is not None:
+            depth.attrs["ancillary_variables"] = "depth_std"
+            variables["depth_std"] = depth.copy(data=np.array(self.depth_std)).rename("depth_std")
+            variables["depth_std"].attrs = dict(DEPTH_STD_ATTRS)
+        return xr.Dataset(variables)
+
     @classmethod
-    def from_xarray(cls, da: xr.DataArray, *, name: str | None = None) -> BathymetryMap:
-        """Inverse of :meth:`to_xarray`: a DataArray with dims ``("north", "east")`` holding depth.
+    def from_xarray(cls, da: xr.DataArray | xr.Dataset, *, name: str | None = None) -> BathymetryMap:
+        """Inverse of :meth:`to_xarray` (a DataArray with dims ``("north", "east")`` holding
+        depth) and of :meth:`to_dataset` (a Dataset whose ``depth`` names its ``depth_std``
+        in ``ancillary_variables``).
 
         Coordinates may be descending (the grid is flipped). Sign and CRS come from the attrs
         ``positive`` ("down" or "up") and ``crs``; a DataArray without ``positive`` is taken
         as depth only if it was written by :meth:`to_xarray`.
         """
+        std_da = None
+        if hasattr(da, "data_vars"):  # a Dataset
+            if "depth" not in da.data_vars:
+                raise MapFormatError(f"Dataset has no variable 'depth' (it has {list(da.data_vars)})")
+            linked = str(da["depth"].attrs.get("ancillary_variables", "")).split()
+            std_da = da[linked[0]] if linked and linked[0] in da.variables else None
+            da = da["depth"]
         if tuple(da.dims) != ("north", "east"):
             raise MapFormatError(
                 f"DataArray {da.name!r} has dims {tuple(da.dims)}, expected ('north', 'east')"
@@ -345,12 +518,18 @@ class BathymetryMap:
                 "(depth) or 'up' (elevation)"
             )
         depth = np.asarray(da.values, dtype=np.float64) * (1.0 if positive == "down" else -1.0)
+        std = None
+        if std_da is not None:
+            if tuple(std_da.dims) != ("north", "east"):
+                raise MapFormatError(f"variable {std_da.name!r} has dims {tuple(std_da.dims)}, "
+                                     "expected ('north', 'east') like depth")
+            std = np.asarray(std_da.values, dtype=np.float64)
         north = np.asarray(da["north"].values, dtype=np.float64)
         east = np.asarray(da["east"].values, dtype=np.float64)
         if north.size > 1 and north[0] > north[-1]:
-            north, depth = north[::-1], depth[::-1]
+            north, depth, std = north[::-1], depth[::-1], None if std is None else std[::-1]
         if east.size > 1 and east[0] > east[-1]:
-            east, depth = east[::-1], depth[:, ::-1]
+            east, depth, std = east[::-1], depth[:, ::-1], None if std is None else std[:, ::-1]
         return cls(
             north=north,
             east=east,
@@ -358,4 +537,17 @@ class BathymetryMap:
             crs=da.attrs.get("crs"),
             origin=(float(da.attrs.get("origin_northing", 0.0)), float(da.attrs.get("origin_easting", 0.0))),
             name=name or str(da.attrs.get("name", da.name or "map")),
+            depth_std=std,
+            correlation_length=da.attrs.get(CORRELATION_ATTRIBUTE),
         )
+
+
+def _box_mean(layer: np.ndarray, kn: int, ke: int) -> np.ndarray:
+    """Mean of the data cells in a ``kn`` x ``ke`` box around each cell (NaN stays NaN)."""
+    from scipy.ndimage import uniform_filter
+
+    valid = np.isfinite(layer)
+    total = uniform_filter(np.where(valid, layer, 0.0), size=(kn, ke), mode="nearest")
+    weight = uniform_filter(valid.astype(float), size=(kn, ke), mode="nearest")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(valid, total / weight, np.nan)

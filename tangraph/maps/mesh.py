@@ -12,6 +12,7 @@ barycentric interpolation for :func:`triangles_to_map`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 from typing import Any, Literal
 
@@ -469,7 +470,9 @@ class SoundingGrid:
     not computed), ``statistic`` which of ``"mean"`` and ``"median"`` is the map's
     :attr:`depth`, ``gap_fill (ny, nx)`` the depth a gap fill gave to empty cells (NaN
     elsewhere; None: no gap fill, see :func:`tangraph.maps.gridding.fill_gaps`), and ``meta``
-    JSON-ready provenance (sources, vertical datum), written with the grid.
+    JSON-ready provenance (sources, vertical datum), written with the grid. :attr:`error` is
+    the map's error told from the soundings (:func:`tangraph.maps.gridding.gridded_error`),
+    which :attr:`depth` carries as its ``depth_std`` and ``correlation_length``.
     """
 
     mean: BathymetryMap
@@ -513,13 +516,22 @@ class SoundingGrid:
         """Empty cells given a depth by the gap fill."""
         return 0 if self.gap_fill is None else int(np.isfinite(self.gap_fill).sum())
 
+    @functools.cached_property
+    def error(self):
+        """The map's error (:class:`tangraph.maps.gridding.GriddedError`), computed once."""
+        from tangraph.maps.gridding import gridded_error
+
+        return gridded_error(self)
+
     @property
     def depth(self) -> BathymetryMap:
-        """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any)."""
+        """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
+        with the error layer of :attr:`error` (``depth_std``, ``correlation_length``)."""
         layer = self.mean.depth if self.statistic == "mean" else self.median
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
-        return self.mean.replace(depth=layer)
+        return self.mean.replace(depth=layer, depth_std=self.error.depth_std,
+                                 correlation_length=self.error.correlation_length)
 
 
 def _as_points(points) -> np.ndarray:

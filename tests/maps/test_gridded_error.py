@@ -1,0 +1,113 @@
+"""The error of a map gridded from soundings (`gridded_error`, carried by `SoundingGrid.depth`)."""
+
+from __future__ import annotations
+
+import logging
+import math
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.maps import block_reduce, fill_gaps
+from tangraph.maps.gridding import gridded_error
+
+
+def test_a_measured_cell_gets_the_standard_error_of_its_value():
+    z = np.array([10.0, 10.3, 9.8, 10.1, 10.6])
+    pts = [[0.1, 0.0, v] for v in z] + [[1.0, 1.0, 12.0], [1.0, 1.1, 12.4]]
+    for statistic, factor in (("mean", 1.0), ("median", math.sqrt(math.pi / 2))):
+        g = block_reduce(pts, cell=1.0, statistic=statistic)
+        std = g.depth.depth_std
+        assert std[0, 0] == pytest.approx(factor * np.std(z, ddof=1) / np.sqrt(5), rel=1e-12)
+        # two soundings: the median is their mean, no efficiency factor
+        assert std[1, 1] == pytest.approx(np.std([12.0, 12.4], ddof=1) / np.sqrt(2), rel=1e-12)
+
+
+def test_a_single_sounding_borrows_the_spread_around_it():
+    rng = np.random.default_rng(2)
+    pts = []
+    for i in range(8):  # a row of cells with 4 soundings each, spread 0.2 at west, 0.6 at east
+        pts += [[0.0, float(i), 20 + s] for s in rng.normal(0, 1, 4)]
+    pts = np.array(pts)
+    spread = np.where(pts[:, 1] < 4, 0.2, 0.6)
+    pts[:, 2] = 20 + (pts[:, 2] - 20) * spread
+    pts = np.vstack([pts, [[1.0, 0.0, 20.0], [1.0, 7.0, 20.0], [9.0, 0.0, 20.0]]])  # three singles
+    g = block_reduce(pts, cell=1.0)
+    std = g.depth.depth_std
+    near_west = np.mean(g.std[0, 0:3])  # replicated cells within 2 cells of (1, 0)
+    near_east = np.mean(g.std[0, 5:8])
+    assert std[1, 0] == pytest.approx(near_west, rel=1e-12)
+    assert std[1, 7] == pytest.approx(near_east, rel=1e-12)
+    assert std[9, 0] == pytest.approx(np.median(g.std[0]), rel=1e-12)  # nothing near: the grid's median
+    assert std[1, 0] > 0 and std[9, 0] > 0
+
+
+def filled_strip(gap_cells=6, cell=2.0, noise=0.05, seed=0):
+    """Two measured lines (rows 0 and gap_cells + 1) of a sloping seafloor, the gap filled."""
+    rng = np.random.default_rng(seed)
+    pts = []
+    for row in (0, gap_cells + 1):
+        for col in range(30):
+            for _ in range(4):
+                north, east = row * cell, col * cell
+                pts.append([north, east, 30 + 0.1 * east + 0.3 * np.sin(east / 3) + rng.normal(0, noise)])
+    return fill_gaps(block_reduce(pts, cell=cell, statistic="mean"), gap_cells)
+
+
+def test_a_filled_cell_grows_with_the_distance_to_the_data_as_the_linear_variogram_says():
+    g = filled_strip()
+    e = gridded_error(g)
+    measured = g.count > 0
+    layer = np.where(measured, g.mean.depth, np.nan)
+    gamma = 0.5 * np.nanmean(np.diff(layer, axis=1) ** 2)  # along the lines: the only pairs
+    assert e.semivariance == pytest.approx(gamma, rel=1e-12)
+    column = e.depth_std[:, 10]
+    sigma_near_low = e.depth_std[0, 10]
+    for row in (1, 2, 3):  # nearer the southern line
+        expected = np.sqrt(sigma_near_low**2 + 2 * gamma * row)  # d / cell = row
+        assert column[row] == pytest.approx(expected, rel=1e-12)
+    assert np.all(np.diff(column[0:4]) > 0)  # grows towards the middle of the gap
+    assert np.all(np.diff(column[4:8]) < 0)  # and falls towards the northern line
+    assert np.all(np.isfinite(column)) and column[3] > 5 * column[0]
+
+
+def test_the_correlation_length_is_the_cell_under_dense_coverage():
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0, 200, (40000, 3))
+    pts[:, 2] = 40 + 0.05 * pts[:, 0] + np.sin(pts[:, 1] / 20) + rng.normal(0, 0.1, len(pts))
+    g = fill_gaps(block_reduce(pts, cell=5.0), 3)
+    assert g.n_filled == 0  # nothing to fill: every cell measured
+    assert gridded_error(g).correlation_length == 5.0
+    assert g.depth.correlation_length == 5.0
+
+
+@pytest.mark.parametrize("spacing", [60.0, 120.0])
+def test_the_correlation_length_follows_the_line_spacing_when_gaps_are_filled(spacing):
+    rng = np.random.default_rng(4)
+    east = rng.uniform(0, 600, 60000)
+    north = rng.choice(np.arange(0, 601, spacing), east.size) + rng.uniform(-4, 4, east.size)
+    depth = 50 + 3 * np.sin(north / 40) + 2 * np.cos(east / 55) + rng.normal(0, 0.1, east.size)
+    grid = block_reduce(np.column_stack([north, east, depth]), cell=5.0)
+    unfilled = gridded_error(grid).correlation_length
+    filled = gridded_error(fill_gaps(grid, int(spacing / 5))).correlation_length
+    assert unfilled == 5.0  # gaps left empty: the map's data are the lines, cell by cell
+    assert 0.3 * spacing < filled < spacing
+
+
+def test_the_grid_carries_its_error_and_a_grid_that_cannot_tell_says_so(caplog):
+    g = filled_strip()
+    m = g.depth
+    np.testing.assert_array_equal(m.depth_std, g.error.depth_std)
+    assert m.correlation_length == g.error.correlation_length > 2.0
+    assert g.error is g.error  # computed once
+    # every cell one sounding, no two measured cells adjacent, a gap filled between them
+    sparse = fill_gaps(block_reduce([[0.0, 0, 10], [0, 4, 11], [4, 0, 12], [4, 4, 13]], cell=1.0), 2)
+    with caplog.at_level(logging.WARNING, logger="tangraph.maps.gridding"):
+        assert sparse.depth.depth_std is None and sparse.depth.correlation_length is None
+    assert "cannot be told" in caplog.text
+
+
+def test_neighbourhood_must_be_a_count():
+    with pytest.raises(TangraphError, match="neighbourhood must be an integer >= 0"):
+        gridded_error(filled_strip(), neighbourhood=-1)
