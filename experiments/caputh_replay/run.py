@@ -151,20 +151,14 @@ def beam_check(cfg: dict, data: Path) -> list[dict]:
 
 def terrain(survey, bathymetry, window: int) -> dict:
     """How much the map can tell along a run: its slope at the GPS track (median, 90th
-    percentile, fraction above 0.05 and off the map) and a window's soundings per distinct map
-    cell (median over windows, from the DR footprints)."""
-    from tangraph.matching import soundings_per_cell
-
+    percentile, fraction above 0.05 and off the map)."""
     pose = survey.true_pose
     slope = np.hypot(*bathymetry.gradient_at(pose[:, 0], pose[:, 1]).T)
     on = np.isfinite(slope)
-    shared = [soundings_per_cell(survey, bathymetry, a, a + window - 1)
-              for a in range(0, survey.n_pings - window + 1, window // 2)]
     return {"slope_median": float(np.median(slope[on])),
             "slope_p90": float(np.percentile(slope[on], 90)),
             "fraction_steeper_0.05": float(np.mean(slope[on] > 0.05)),
-            "fraction_off_map": float(np.mean(~on)),
-            "soundings_per_cell": float(np.median(shared)) if shared else float("nan")}
+            "fraction_off_map": float(np.mean(~on))}
 
 
 def in_map(survey, bathymetry):

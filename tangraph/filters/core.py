@@ -567,18 +567,21 @@ def reweight(belief: Belief, log_factor: np.ndarray, *, where: str) -> Belief:
     return belief.replace(log_weights=logw - log_total)
 
 
-def evaluate(belief: Belief, ping: Ping, model: FilterModel) -> TerrainUpdate:
+def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> TerrainUpdate:
     """The terrain likelihood of a ping for every particle of a belief (its positions, tide
-    posteriors and heading errors)."""
+    posteriors, heading errors and weights); ``exponent``: the information exponents of an
+    earlier evaluation of the same ping (None: from this belief)."""
     return model.terrain.evaluate(
-        belief.particles, belief.tide, belief.tide_var, ping, heading_error=belief.calibration[:, 1]
+        belief.particles, belief.tide, belief.tide_var, ping, heading_error=belief.calibration[:, 1],
+        weights=belief.weights, exponent=exponent,
     )
 
 
 def innovation(belief: Belief, update: TerrainUpdate, ping: Ping, model: FilterModel) -> Innovation | None:
     """The :class:`Innovation` of a ping for the predicted ``belief`` (weights before the ping)
     and its terrain ``update``; None when no particle of positive weight can explain it."""
-    finite = np.isfinite(update.log_likelihood) & (belief.log_weights > -np.inf)
+    finite = np.isfinite(update.log_likelihood) & np.isfinite(update.predicted)
+    finite &= belief.log_weights > -np.inf
     if ping.n_soundings == 0 or not finite.any():
         return None
     w = belief.weights[finite]
@@ -587,7 +590,10 @@ def innovation(belief: Belief, update: TerrainUpdate, ping: Ping, model: FilterM
     mean = w @ predicted
     spread = w @ (predicted - mean) ** 2
     b = ping.n_soundings
-    variance = spread + model.terrain.sounding_std**2 / b + belief.tide_var
+    noise = model.terrain.sounding_std**2 / b
+    if ping.variance is not None:  # white noise averages out over the ping, its map error may not
+        noise = model.navigation.sounding_std**2 / b + float(np.mean(ping.map_variance))
+    variance = spread + noise + belief.tide_var
     nis = float((np.mean(ping.depths) - mean) ** 2 / variance)
     best = float(-2.0 * np.max(update.log_likelihood[finite]))
     return Innovation(nis, best, b)
@@ -630,9 +636,8 @@ def measure(
     rng: np.random.Generator | None = None,
     update: TerrainUpdate | None = None,
 ) -> Measurement:
-    """The terrain update of a ping (weights and tide posterior), raised to ``ping.weight`` and
-    tempered when ``config`` asks and the likelihood is too peaked for the cloud (see the module
-    docstring): stage ``j``
+    """The terrain update of a ping (weights and tide posterior), tempered when ``config`` asks
+    and the likelihood is too peaked for the cloud (see the module docstring): stage ``j``
     multiplies the weights by ``p(z | x)^phi_j``, ``phi_j`` the largest exponent that keeps the
     ESS at or above ``tempering_ess`` times that of the cloud before it; between stages the
     cloud is resampled (``config.resampler``) and moved by :func:`shrink_state`. A ping without
@@ -651,7 +656,7 @@ def measure(
     if gated(first, config):
         return Measurement(belief, None, first, gated=True)
     tempering = config is not None and config.tempering and rng is not None
-    current, remaining = belief, ping.weight
+    current, remaining = belief, 1.0
     exponents: list[float] = []
     stage_ess: list[float] = []
     while True:
@@ -669,7 +674,7 @@ def measure(
         resampled, _ = resample_belief(weighted, config.resampler, rng=rng)  # type: ignore[union-attr,arg-type]
         floor = np.concatenate([[1e-6, 1e-6], _kernel_floor(model, config)])  # type: ignore[arg-type]
         current = shrink_state(resampled, moments, config.kernel_bandwidth, floor, rng=rng)  # type: ignore[union-attr,arg-type]
-        update = evaluate(current, ping, model)
+        update = evaluate(current, ping, model, exponent=update.exponent)
     new = weighted.replace(tide=update.tide, tide_var=update.tide_var)
     return Measurement(new, update, first, tuple(exponents), tuple(stage_ess))
 
@@ -780,7 +785,7 @@ def run_particle_filter(
     seed = rng_seed(rng)
     navigation = survey_navigation_model(survey, model, where=method)
     filter_model = FilterModel.from_model(navigation, bathymetry, config)
-    pings = survey_pings(survey, bathymetry if navigation.map_error_shared else None)
+    pings = survey_pings(survey, bathymetry, navigation)
     k_total = survey.n_pings
     belief = model_belief(
         survey.dr_pose[0, :2], filter_model, config.n_particles, rng=rng, history_length=history_length

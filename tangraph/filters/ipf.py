@@ -115,7 +115,7 @@ def ipf_step(
         mean, cov = weighted_moments(moved)
         return StepResult(moved, mean, cov, effective_sample_size(moved.weights), innovation=check,
                           counts={"n_gated": 1})
-    weighted = reweight(moved, ping.weight * update.log_likelihood, where=f"ping {ping.index}").replace(
+    weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}").replace(
         tide=update.tide, tide_var=update.tide_var
     )
     if _needs_tempering(moved, weighted, update, config):
@@ -141,11 +141,11 @@ def ipf_step(
     shrunk = shrink_calibration(uniform, moments, config.kernel_bandwidth, floor, rng=rng)
     previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
     children = predict(previous, ping, model, rng=rng)
-    child_update = evaluate(children, ping, model)
+    child_update = evaluate(children, ping, model, exponent=update.exponent)
     try:
         new = reweight(
             uniform,
-            ping.weight * (child_update.log_likelihood - update.log_likelihood[ancestors]),
+            child_update.log_likelihood - update.log_likelihood[ancestors],
             where=f"ping {ping.index} (IPF children)",
         ).replace(particles=children.particles, calibration=children.calibration, tide=child_update.tide)
     except FilterDivergence:

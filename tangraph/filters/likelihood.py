@@ -1,13 +1,32 @@
-"""The one terrain likelihood every particle filter shares, in a compiled kernel.
+"""The one terrain likelihood every particle filter shares, in compiled kernels.
 
-``log p(z | x) = -1/2 sum_b (h(x + o_b) - (z_b - tide))^2 / sigma^2`` (up to a constant) over a
-ping's soundings, with ``h`` the map's bilinear depth (the rules of
-:mod:`tangraph.maps._interp`). A particle for which any sounding falls off the map or next to a
-NaN cell gets ``-inf``: zero weight. One compiled kernel serves the known tide and the
-Gaussian tide posterior of :mod:`tangraph.filters.model` (:meth:`TerrainLikelihood.tide_update`);
-each particle's grid coordinates are computed once. A particle may turn its soundings' world
-offsets about the vehicle by its own angle (``turn``: a filter's particle turns them by minus its
-heading error, :mod:`tangraph.filters.model`).
+The model is :mod:`tangraph.sensors.terrain`'s: sounding ``b`` of a ping measures
+``z_b = h(x + o_b) + tide + e_b`` with ``h`` the map's bilinear depth (the rules of
+:mod:`tangraph.maps._interp`) and ``e_b`` of variance ``v_b`` (the sounding's noise plus the map
+error it shares with the survey's other soundings: the row-sum bound). For particle ``p`` with
+residuals ``r_pb = z_b - m_p - h(x_p + R(turn_p) o_b)`` (``m_p`` its tide mean) and the
+soundings' precisions ``l_b = a_b / v_b``:
+
+- **known tide** (``tide_var = 0``): ``log p = -1/2 sum_b l_b r_pb^2``;
+- **Gaussian tide posterior** ``N(m_p, v)``: the predictive density of the ping,
+  ``log p = -1/2 (S2 - S1^2 / (1/v + L)) - 1/2 log(1 + v L)`` with ``S1 = sum l r``,
+  ``S2 = sum l r^2``, ``L = sum l`` over the particle's soundings; its posterior tide mean is
+  ``m_p + S1 / (1/v + L)``;
+- **no map, no evidence**: a sounding with no map depth under a particle (off the grid, or by a
+  NaN cell) is missing information for that particle, not evidence against it: it is given the
+  weighted mean likelihood ``log sum_q w_q exp(-l_b r_qb^2 / 2) / sum_q w_q`` of the particles
+  that do have the map under it (MBARI's sub-cloud rule). Only a ping no sounding of which has
+  the map under any particle gives ``-inf`` everywhere (:class:`OffMap`);
+- **terrain information gating**: ``a_b`` in [0, 1] is MBARI's modified weighting
+  (:func:`tangraph.sensors.information_exponent`) from how far the cloud's predicted depths for
+  sounding ``b`` spread beyond the map's error there (1 with a perfect map); computed once per
+  ping from the weighted cloud and passed back in for the same ping's later evaluations
+  (tempering stages, IPF children) so that their likelihood ratios are of one function.
+
+Constants shared by all particles are dropped: weights are normalised. One kernel computes
+every particle's residuals (each particle's grid coordinates once, its soundings turned by its
+own angle ``turn``: a filter's particle turns them by minus its heading error), a second the
+exponents, the sub-cloud means and every particle's likelihood and tide.
 """
 
 from __future__ import annotations
@@ -21,7 +40,14 @@ from tangraph.errors import TangraphError
 from tangraph.maps._interp import _FASTMATH, _bilinear
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["FilterDivergence", "OffMap", "TerrainLikelihood", "effective_sample_size", "log_normalise"]
+__all__ = [
+    "FilterDivergence",
+    "OffMap",
+    "PingLikelihood",
+    "TerrainLikelihood",
+    "effective_sample_size",
+    "log_normalise",
+]
 
 
 class FilterDivergence(TangraphError):
@@ -29,7 +55,7 @@ class FilterDivergence(TangraphError):
 
 
 class OffMap(FilterDivergence):
-    """No particle has the map under every sounding of a ping: the ping says nothing about where
+    """No sounding of a ping has the map under any particle: the ping says nothing about where
     the vehicle is (it is not evidence against any particle)."""
 
 
@@ -81,45 +107,127 @@ def _residual_sums_kernel(
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
-def _tide_update_kernel(
-    depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, tide, tide_var, noise_var,
-    log_likelihood, new_tide, predicted,
-):  # fmt: skip
-    """The ping's log-likelihood with a Gaussian tide posterior ``N(tide[p], tide_var)``, the
-    updated tide means and the mean predicted depth, per particle whose soundings' offsets are
-    turned by ``turn[p]`` (see ``filters.model``)."""
-    nb = offsets.shape[0]
-    gain = tide_var / (noise_var + nb * tide_var)
-    sum_z = 0.0
-    for b in range(nb):
-        sum_z += measured[b]
+def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, tide, out):
+    """``out[p, b] = z_b - tide_p - h(x_p + R(turn_p) o_b)``, NaN where the map has no depth."""
+    ny, nx = depth.shape
     for p in range(particles.shape[0]):
-        se, se2 = _particle_sums(
-            depth,
-            (particles[p, 0] - north0) * inv_dn,
-            (particles[p, 1] - east0) * inv_de,
-            offsets,
-            inv_dn,
-            inv_de,
-            np.cos(turn[p]),
-            np.sin(turn[p]),
-            measured,
-            tide[p],
-        )
-        m = tide[p]
-        if se != se:
-            log_likelihood[p] = -np.inf
-            new_tide[p] = m
-            predicted[p] = np.nan
+        pn = (particles[p, 0] - north0) * inv_dn
+        pe = (particles[p, 1] - east0) * inv_de
+        c = np.cos(turn[p])
+        s = np.sin(turn[p])
+        for b in range(offsets.shape[0]):
+            fy = pn + (c * offsets[b, 0] - s * offsets[b, 1]) * inv_dn
+            fx = pe + (s * offsets[b, 0] + c * offsets[b, 1]) * inv_de
+            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+                out[p, b] = np.nan
+                continue
+            i = min(int(fy), ny - 2)
+            j = min(int(fx), nx - 2)
+            out[p, b] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
+def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var,
+                   log_likelihood, tide_shift, total_precision):  # fmt: skip
+    """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift
+    and summed precision from the residuals ``(N, B)`` (NaN: no map) and the normalised
+    ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``. See the module docstring."""
+    n, nb = residual.shape
+    imputed = np.zeros(nb)
+    has = np.zeros(nb, dtype=np.bool_)
+    for b in range(nb):
+        total = 0.0
+        mean = 0.0
+        square = 0.0
+        squares = 0.0
+        for p in range(n):
+            r = residual[p, b]
+            if r == r and weights[p] > 0.0:
+                total += weights[p]
+                mean += weights[p] * r
+                square += weights[p] * r * r
+                squares += weights[p] * weights[p]
+        if total <= 0.0:
+            exponent[b] = 0.0
             continue
-        log_likelihood[p] = -0.5 * (se2 - gain * se * se) / noise_var
-        new_tide[p] = m + gain * se
-        predicted[p] = (sum_z - se) / nb  # mean of h + m: sum h = sum z - se - nb m
+        has[b] = True
+        if not given:
+            mean /= total
+            spread = square / total - mean * mean - (1.0 - squares / (total * total)) * map_variance[b]
+            if map_variance[b] <= 0.0:
+                exponent[b] = 1.0
+            elif spread <= 0.0:
+                exponent[b] = 0.0
+            else:
+                exponent[b] = spread / (spread + 2.0 * map_variance[b])
+        lam = exponent[b] * precision[b]
+        top = -np.inf
+        for p in range(n):
+            r = residual[p, b]
+            if r == r and weights[p] > 0.0:
+                top = max(top, -0.5 * lam * r * r)
+        acc = 0.0
+        for p in range(n):
+            r = residual[p, b]
+            if r == r and weights[p] > 0.0:
+                acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
+        imputed[b] = top + np.log(acc / total)
+    any_map = False
+    for b in range(nb):
+        any_map = any_map or has[b]
+    for p in range(n):
+        if not any_map:
+            log_likelihood[p] = -np.inf
+            tide_shift[p] = 0.0
+            total_precision[p] = 0.0
+            continue
+        s1 = 0.0
+        s2 = 0.0
+        big_l = 0.0
+        missing = 0.0
+        for b in range(nb):
+            if not has[b]:
+                continue
+            r = residual[p, b]
+            if r == r:
+                lam = exponent[b] * precision[b]
+                s1 += lam * r
+                s2 += lam * r * r
+                big_l += lam
+            else:
+                missing += imputed[b]
+        if tide_var > 0.0:
+            gain = 1.0 / (1.0 / tide_var + big_l)
+            log_likelihood[p] = -0.5 * (s2 - gain * s1 * s1) - 0.5 * np.log1p(tide_var * big_l) + missing
+            tide_shift[p] = gain * s1
+        else:
+            log_likelihood[p] = -0.5 * s2 + missing
+            tide_shift[p] = 0.0
+        total_precision[p] = big_l
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PingLikelihood:
+    """The terrain likelihood of one ping for every particle (from
+    :meth:`TerrainLikelihood.ping_update`): ``log_likelihood (N,)`` (up to a constant; ``-inf``
+    everywhere when no sounding has the map under any particle), the posterior tide means
+    ``tide (N,)`` and their shared variance ``tide_var``, the mean predicted depth ``predicted
+    (N,)`` (the ping's mean measured depth less the particle's mean residual; NaN for a particle
+    with the map under none of its soundings), the exponents ``exponent (B,)`` and the share of
+    soundings with the map under each particle, ``mapped (N,)``."""
+
+    log_likelihood: np.ndarray
+    tide: np.ndarray
+    tide_var: float
+    predicted: np.ndarray
+    exponent: np.ndarray
+    mapped: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TerrainLikelihood:
-    """Gaussian sounding errors of std ``sigma`` (m) around the map depth plus ``tide``."""
+    """The terrain likelihood on a map, with a default sounding std ``sigma`` (m) and known
+    ``tide`` for the calls that give no per-sounding variances (see the module docstring)."""
 
     bathymetry: BathymetryMap
     sigma: float
@@ -131,18 +239,19 @@ class TerrainLikelihood:
 
     def log_likelihood(self, particles, offsets, depths, turn=None) -> np.ndarray:
         """Log-likelihood (N,) of particles (N, 2) for soundings at ``offsets`` (B, 2) (world
-        north/east from the vehicle) with measured ``depths`` (B,); NaN depths are skipped.
+        north/east from the vehicle) with measured ``depths`` (B,), of std ``sigma`` around the
+        map depth plus ``tide``, all particles weighted equally; NaN depths are skipped.
 
-        ``-1/2 sum_b (z_b - tide - h(x + R(turn) o_b))^2 / sigma^2``; ``-inf`` where a sounding has
-        no map depth. ``turn (N,)`` (rad, clockwise from north; None: 0) turns each particle's
-        offsets about the vehicle (a filter passes ``-b``, minus its heading error). One compiled
-        pass (the known-tide case of :meth:`tide_update`).
+        ``-1/2 sum_b (z_b - tide - h(x + R(turn) o_b))^2 / sigma^2`` where every sounding has a
+        map depth; a sounding without one takes the mean likelihood of the particles that have
+        one (module docstring). ``turn (N,)`` (rad, clockwise from north; None: 0) turns each
+        particle's offsets about the vehicle.
         """
         particles = np.asarray(particles, dtype=np.float64)
         tide = np.full(particles.shape[0] if particles.ndim else 0, float(self.tide))
         return self.tide_update(particles, offsets, depths, tide, 0.0, turn=turn)[0]
 
-    def _checked(self, particles, offsets, depths, turn) -> tuple[np.ndarray, ...]:
+    def _checked(self, particles, offsets, depths, turn, keep_nan=False) -> tuple[np.ndarray, ...]:
         particles = np.ascontiguousarray(particles, dtype=np.float64)
         offsets = np.ascontiguousarray(offsets, dtype=np.float64)
         depths = np.asarray(depths, dtype=np.float64)
@@ -159,7 +268,7 @@ class TerrainLikelihood:
         if turn.shape != (n,):
             raise TangraphError(f"turn must have shape ({n},) as particles, got {turn.shape}")
         keep = np.isfinite(depths)
-        if not keep.all():
+        if not keep.all() and not keep_nan:
             offsets, depths = np.ascontiguousarray(offsets[keep]), depths[keep]
         return particles, offsets, np.ascontiguousarray(depths), turn
 
@@ -168,9 +277,6 @@ class TerrainLikelihood:
         ``r = z - h(x + R(turn) o)`` (measured minus map depth, ``tide`` not removed) of the
         finite soundings; NaN rows for particles with a sounding off the map or by a NaN cell.
         ``turn (N,)``: see :meth:`log_likelihood`.
-
-        One compiled pass over particles x soundings; the filters build their likelihood (with
-        a known or an estimated tide) from these sums.
         """
         particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn)
         out = np.empty((particles.shape[0], 2))
@@ -180,17 +286,100 @@ class TerrainLikelihood:
         )
         return out
 
+    def residuals(self, particles, offsets, depths, tide, *, turn=None) -> np.ndarray:
+        """``(N, B)`` residuals ``z_b - tide_p - h(x_p + R(turn_p) o_b)`` (NaN: no map depth, or
+        a NaN depth), one compiled pass."""
+        particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn, keep_nan=True)
+        tide = np.ascontiguousarray(tide, dtype=np.float64)
+        if tide.shape != (particles.shape[0],):
+            raise TangraphError(f"tide must have shape ({particles.shape[0]},) as particles, "
+                                f"got {tide.shape}")
+        out = np.empty((particles.shape[0], offsets.shape[0]))
+        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
+        _residual_kernel(self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, turn, offsets,
+                         depths, tide, out)
+        return out
+
+    def ping_update(self, particles, offsets, depths, tide, tide_var: float, *, turn=None, weights=None,
+                    variance=None, map_variance=None, exponent=None) -> PingLikelihood:
+        """The likelihood of a ping for every particle (module docstring).
+
+        Parameters
+        ----------
+        particles : (N, 2)
+        offsets, depths : (B, 2), (B,)
+            The ping's soundings (NaN depths are skipped with their offsets).
+        tide, tide_var : (N,), float
+            The particles' Gaussian tide posteriors ``N(tide_p, tide_var)`` (0: known tide).
+        turn : (N,), optional
+            Each particle's angle turning its offsets about it (rad).
+        weights : (N,), optional
+            The cloud's weights (normalised here; default equal): they weigh the sub-cloud means
+            and the exponents.
+        variance, map_variance : (B,), optional
+            Each sounding's variance ``v_b`` (default ``sigma^2``) and its map error variance
+            (default 0: a perfect map, exponents 1).
+        exponent : (B,), optional
+            The exponents of an earlier evaluation of the same ping (default: from this cloud).
+
+        Raises
+        ------
+        TangraphError
+            Arrays of the wrong shapes, ``tide_var`` negative or not finite, variances not
+            positive.
+        """
+        particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn, keep_nan=True)
+        n, nb = particles.shape[0], depths.size
+        tide = np.ascontiguousarray(tide, dtype=np.float64)
+        if tide.shape != (n,):
+            raise TangraphError(f"tide must have shape ({n},) as particles, got {tide.shape}")
+        try:
+            t_var = float(tide_var)
+        except (TypeError, ValueError):
+            t_var = np.nan
+        if not (np.isfinite(t_var) and t_var >= 0):
+            raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
+        v = np.full(nb, self.sigma**2) if variance is None else np.asarray(variance, dtype=np.float64)
+        mv = np.zeros(nb) if map_variance is None else np.asarray(map_variance, dtype=np.float64)
+        if v.shape != (nb,) or mv.shape != (nb,):
+            raise TangraphError(
+                f"variance and map_variance must have shape ({nb},), got {v.shape}, {mv.shape}"
+            )
+        keep = np.isfinite(depths)
+        if not keep.all():
+            offsets, depths, v, mv = offsets[keep], depths[keep], v[keep], mv[keep]
+            exponent = None if exponent is None else np.asarray(exponent)[keep]
+            nb = depths.size
+        if not np.all(v > 0):
+            raise TangraphError("the soundings' variances must be positive")
+        if nb == 0:  # nothing measured: no information
+            return PingLikelihood(np.zeros(n), tide.copy(), t_var, np.full(n, np.nan), np.ones(0),
+                                  np.zeros(n))
+        w = np.full(n, 1.0 / n) if weights is None else np.asarray(weights, dtype=np.float64)
+        if w.shape != (n,):
+            raise TangraphError(f"weights must have shape ({n},) as particles, got {w.shape}")
+        w = w / w.sum()
+        residual = self.residuals(particles, np.ascontiguousarray(offsets), np.ascontiguousarray(depths),
+                                  tide, turn=turn)
+        given = exponent is not None
+        alpha = np.array(exponent, dtype=np.float64) if given else np.empty(nb)
+        if alpha.shape != (nb,):
+            raise TangraphError(f"exponent must have shape ({nb},), got {alpha.shape}")
+        log_likelihood, shift, total = np.empty(n), np.empty(n), np.empty(n)
+        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, log_likelihood, shift, total)
+        mapped = np.isfinite(residual)
+        count = mapped.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            mean_residual = np.where(mapped, residual, 0.0).sum(axis=1) / count
+        predicted = np.where(count > 0, np.mean(depths) - mean_residual, np.nan)
+        new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0
+        return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, mapped.mean(axis=1))
+
     def tide_update(
         self, particles, offsets, depths, tide, tide_var: float, *, turn=None
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """With finite soundings only, in one compiled pass: per particle the log-likelihood
-        (up to a constant) of the soundings under a Gaussian tide posterior ``N(tide (N,),
-        tide_var)`` (``tide_var = 0``: a known tide, the plain Gaussian likelihood), the
-        posterior tide mean after them and the mean predicted depth (map plus tide); ``-inf``,
-        the old tide and NaN for particles with a sounding off the map. See
-        :mod:`tangraph.filters.model` for the algebra; ``self.tide`` is not used. NaN depths are
-        skipped (with their offsets), as in :meth:`log_likelihood`. ``turn (N,)`` turns each
-        particle's offsets about the vehicle (rad; None: 0).
+        """:meth:`ping_update` with the default variances, equal weights and a perfect map:
+        ``(log_likelihood, tide, predicted)``; see the module docstring for the algebra.
 
         Raises
         ------
@@ -198,26 +387,8 @@ class TerrainLikelihood:
             ``particles`` not ``(N, 2)``, ``offsets`` and ``depths`` not ``(B, 2)`` and ``(B,)``,
             ``tide`` or ``turn`` not ``(N,)``, ``tide_var`` negative or not finite.
         """
-        particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn)
-        n = particles.shape[0]
-        tide = np.ascontiguousarray(tide, dtype=np.float64)
-        if tide.shape != (n,):
-            raise TangraphError(f"tide must have shape ({n},) as particles, got {tide.shape}")
-        try:
-            variance = float(tide_var)
-        except (TypeError, ValueError):
-            variance = np.nan
-        if not (np.isfinite(variance) and variance >= 0):
-            raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
-        if depths.size == 0:  # nothing measured: no information
-            return np.zeros(n), tide.copy(), np.full(n, np.nan)
-        log_likelihood, new_tide, predicted = np.empty(n), np.empty(n), np.empty(n)
-        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
-        _tide_update_kernel(
-            self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, turn, offsets, depths, tide,
-            variance, self.sigma**2, log_likelihood, new_tide, predicted,
-        )  # fmt: skip
-        return log_likelihood, new_tide, predicted
+        update = self.ping_update(particles, offsets, depths, tide, tide_var, turn=turn)
+        return update.log_likelihood, update.tide, update.predicted
 
 
 def log_normalise(logw: np.ndarray, *, where: str = "") -> tuple[np.ndarray, float]:

@@ -19,22 +19,19 @@ step, and the config's optional floor) and ``w_k ~ N(0, heading_walk^2 dt)``.
 
 **Measurement**: the ``B`` soundings of ping ``k`` (offsets ``o_b`` from the vehicle,
 world-aligned by the dead-reckoned heading: ``R(-b) o_b`` are the true offsets) measure
-``z_b = h(x + R(-b) o_b) + t + e_b``, ``e_b ~ N(0, sigma^2)``, ``h`` the map's bilinear depth, ``t``
-the tide (measured = map + tide) and ``sigma^2 = sounding_std^2 + map_std^2`` (the map error
-inflates the likelihood: MBARI's "modified weighting"). With ``tide_std = 0`` the tide is known
-and the log-likelihood is ``-sum (z_b - t - h)^2 / (2 sigma^2)``. With ``tide_std > 0`` the tide
-has a Gaussian prior ``N(tide, tide_std^2)`` and each particle carries its conjugate posterior
-``N(m, v)`` (``v`` is the same for all particles: every particle sees the same number of
-soundings): the weight is the predictive density of the ping, with ``e_b = z_b - h_b - m``
-(Sherman-Morrison on ``sigma^2 I + v 1 1^T``)
-
-    ``log p = -(sum e^2 - v (sum e)^2 / (sigma^2 + B v)) / (2 sigma^2)`` (+ a constant),
-
-and the posterior becomes ``v' = v sigma^2 / (sigma^2 + B v)``, ``m' = m + v' sum e / sigma^2``.
-At the true state ``-2 log p`` is chi-square with ``B`` degrees of freedom (the filters' lost
-test uses it). The white heading error of a ping's own DR heading stays in its soundings' offsets
-(not modelled: a few centimetres across a swath for a tenth of a degree). A particle with a
-sounding off the map or by a NaN cell gets ``-inf``. Constants shared by all particles are
+``z_b = h(x + R(-b) o_b) + t + e_b``, ``h`` the map's bilinear depth, ``t`` the tide (measured =
+map + tide) and ``e_b`` of variance ``v_b``: the terrain measurement model of
+:mod:`tangraph.sensors.terrain` (the sounding noise plus the map error the sounding shares with
+the survey's other soundings), carried by the ping (:func:`survey_pings`); without a map error,
+``v_b = sounding_std^2``. The likelihood (:mod:`tangraph.filters.likelihood`) leaves out, per
+particle, the soundings with no map under it (they take the sub-cloud's mean likelihood: no
+data is no evidence) and raises each sounding's term to MBARI's exponent (little information
+where the cloud's predicted depths do not spread beyond the map's error). With ``tide_std = 0``
+the tide is known; with ``tide_std > 0`` the tide has a Gaussian prior ``N(tide, tide_std^2)``
+and each particle carries its conjugate posterior ``N(m, v)`` (Rao-Blackwellised): the weight is
+the predictive density of the ping and the posterior is updated in closed form. The white
+heading error of a ping's own DR heading stays in its soundings' offsets (not modelled: a few
+centimetres across a swath for a tenth of a degree). Constants shared by all particles are
 dropped: weights are normalised.
 """
 
@@ -52,7 +49,7 @@ from tangraph.sensors import NavigationModel
 from tangraph.sensors.dead_reckoning import _rotate as rotate  # R(psi), written once
 from tangraph.survey import Survey
 
-__all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "shared_map_weights", "survey_pings"]
+__all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -60,9 +57,10 @@ class Ping:
     """What a filter step needs of ping ``index``: the dead-reckoned ``increment (2,)`` from the
     previous ping (zero and ``first`` True at ping 0), the world-aligned ``offsets (B, 2)`` of
     its finite soundings from the dead-reckoned position, their ``depths (B,)``, the time
-    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0) and the
-    ``weight`` in (0, 1] of its likelihood (the exponent of its terrain update: below 1 where its
-    soundings share map errors with neighbouring pings', ``NavigationModel.map_error_shared``).
+    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0), and the
+    terrain measurement model's ``variance (B,)`` of each sounding and ``map_variance (B,)`` of
+    the map's error under it (:func:`tangraph.sensors.sounding_variances`; None: the filter
+    model's sounding std and a perfect map).
 
     Checked on construction: ``index`` an integer >= 0, ``dt`` finite >= 0, ``increment`` finite
     ``(2,)``, ``offsets`` finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is
@@ -81,7 +79,8 @@ class Ping:
     depths: np.ndarray
     first: bool = False
     dt: float = 1.0
-    weight: float = 1.0
+    variance: np.ndarray | None = None
+    map_variance: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -113,6 +112,18 @@ class Ping:
                 f"Ping {index}: depths must be finite or NaN, got {float(depths[bad])!r} at sounding {bad}"
             )
         keep = ~np.isnan(depths)
+        extra = {}
+        for name in ("variance", "map_variance"):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            value = np.asarray(value, dtype=np.float64)
+            if value.shape != depths.shape:
+                raise TangraphError(f"Ping {index}: {name} must have shape {depths.shape} as depths, "
+                                    f"got {value.shape}")
+            if not np.all((value[keep] >= 0) & np.isfinite(value[keep])):
+                raise TangraphError(f"Ping {index}: {name} must be finite and >= 0")
+            extra[name] = value[keep]
         if not keep.all():
             offsets, depths = offsets[keep], depths[keep]
         object.__setattr__(self, "index", int(index))
@@ -120,6 +131,8 @@ class Ping:
         object.__setattr__(self, "offsets", offsets)
         object.__setattr__(self, "depths", depths)
         object.__setattr__(self, "first", bool(self.first))
+        for name, value in extra.items():
+            object.__setattr__(self, name, value)
         try:
             dt = float(self.dt)
         except (TypeError, ValueError):
@@ -127,25 +140,29 @@ class Ping:
         if not (np.isfinite(dt) and dt >= 0):
             raise TangraphError(f"Ping {index}: dt must be a finite number >= 0, got {self.dt!r}")
         object.__setattr__(self, "dt", dt)
-        weight = float(self.weight)
-        if not 0.0 < weight <= 1.0:
-            raise TangraphError(f"Ping {index}: weight must lie in (0, 1], got {self.weight!r}")
-        object.__setattr__(self, "weight", weight)
 
     @property
     def n_soundings(self) -> int:
         return int(self.depths.size)
 
 
-def survey_pings(survey: Survey, bathymetry=None) -> list[Ping]:
-    """The pings of a survey as filter inputs (NaN soundings dropped). Given the map, each
-    ping's ``weight`` is one over the soundings per distinct map cell
-    (:func:`~tangraph.matching.soundings_per_cell`) of the pings whose DR positions lie within
-    one cell diagonal of its own: the pings that can share its cells' map errors."""
+def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None = None) -> list[Ping]:
+    """The pings of a survey as filter inputs (NaN soundings dropped). Given the map and the
+    navigation model, each sounding carries the terrain measurement model's variance and its
+    map error variance (:func:`tangraph.sensors.sounding_variances`, at the dead-reckoned
+    footprints)."""
+    from tangraph.sensors.terrain import map_error, sounding_variances
+
     north, east = survey.footprints()
     dr = survey.dr_pose
     valid = np.isfinite(survey.beam_depth)
-    weights = np.ones(survey.n_pings) if bathymetry is None else shared_map_weights(survey, bathymetry)
+    variance = map_variance = None
+    if bathymetry is not None and model is not None:
+        variance = sounding_variances(survey, bathymetry, model)
+        error = map_error(bathymetry, model)
+        map_variance = np.full(north.shape, np.nan)
+        s = error.std_at(north[valid], east[valid])
+        map_variance[valid] = np.where(np.isfinite(s), s, error.typical_std) ** 2
     pings = []
     for k in range(survey.n_pings):
         keep = valid[k]
@@ -153,20 +170,9 @@ def survey_pings(survey: Survey, bathymetry=None) -> list[Ping]:
         increment = dr[k, :2] - dr[k - 1, :2] if k > 0 else np.zeros(2)
         dt = float(survey.time[k] - survey.time[k - 1]) if k > 0 else 0.0
         pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt,
-                          weight=weights[k]))
+                          variance=None if variance is None else variance[k, keep],
+                          map_variance=None if map_variance is None else map_variance[k, keep]))
     return pings
-
-
-def shared_map_weights(survey: Survey, bathymetry) -> np.ndarray:
-    """Per ping, one over the soundings per distinct map cell of the pings around it (those
-    whose DR track distance from it is within one cell diagonal)."""
-    from tangraph.matching import soundings_per_cell
-
-    reach = float(np.hypot(*bathymetry.cell_size))
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(survey.dr_pose[:, :2], axis=0).T))])
-    lo = np.searchsorted(along, along - reach, side="left")
-    hi = np.searchsorted(along, along + reach, side="right") - 1
-    return np.array([1.0 / soundings_per_cell(survey, bathymetry, a, b) for a, b in zip(lo, hi, strict=True)])
 
 
 @dataclasses.dataclass(frozen=True)
@@ -243,20 +249,25 @@ class MotionModel:
 @dataclasses.dataclass(frozen=True, eq=False)
 class TerrainUpdate:
     """The terrain measurement of one ping for every particle: ``log_likelihood (N,)`` (up to a
-    constant), the tide posterior ``tide (N,)``, ``tide_var``, and the mean predicted depth of
-    the ping's soundings ``predicted (N,)`` (map depth plus tide; NaN off the map)."""
+    constant), the tide posterior ``tide (N,)``, ``tide_var``, the mean predicted depth of the
+    ping's soundings ``predicted (N,)`` (map depth plus tide; NaN with no map under any), the
+    soundings' information exponents ``exponent (B,)`` (reused by later evaluations of the same
+    ping) and the share of the ping's soundings with the map under each particle
+    ``mapped (N,)``."""
 
     log_likelihood: np.ndarray
     tide: np.ndarray
     tide_var: float
     predicted: np.ndarray
+    exponent: np.ndarray | None = None
+    mapped: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class TerrainModel:
     """The terrain likelihood of a ping with a known (``tide_std = 0``) or uncertain tide;
-    ``sounding_std`` is the std of one sounding's residual (a navigation model's
-    ``measurement_std``: sounding and map errors)."""
+    ``sounding_std`` is the std of one sounding's residual for pings that carry no variances
+    (a navigation model's ``measurement_std``: sounding and map errors)."""
 
     bathymetry: BathymetryMap
     sounding_std: float
@@ -267,17 +278,18 @@ class TerrainModel:
         object.__setattr__(self, "likelihood", TerrainLikelihood(self.bathymetry, self.sounding_std))
 
     def evaluate(
-        self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping, heading_error=None
-    ) -> TerrainUpdate:
+        self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping, heading_error=None,
+        *, weights=None, exponent=None,
+    ) -> TerrainUpdate:  # fmt: skip
         """Likelihood of ``ping`` at ``particles (N, 2)`` whose tide posteriors are ``N(tide (N,),
-        tide_var)`` and whose heading errors are ``heading_error (N,)`` (rad, DR minus true; None:
-        0): each particle's soundings are turned by ``-heading_error`` about it. See the module
-        docstring."""
-        b = ping.n_soundings
-        s2_noise = self.sounding_std**2
+        tide_var)``, whose heading errors are ``heading_error (N,)`` (rad, DR minus true; None:
+        0: each particle's soundings are turned by ``-heading_error`` about it) and whose weights
+        are ``weights (N,)`` (None: equal); ``exponent (B,)``: the information exponents of an
+        earlier evaluation of the same ping (None: from this cloud). See the module docstring."""
         turn = None if heading_error is None else -np.asarray(heading_error, dtype=np.float64)
-        log_likelihood, new_tide, predicted = self.likelihood.tide_update(
-            particles, ping.offsets, ping.depths, tide, tide_var, turn=turn
-        )
-        new_var = tide_var * s2_noise / (s2_noise + b * tide_var)
-        return TerrainUpdate(log_likelihood, new_tide, float(new_var), predicted)
+        update = self.likelihood.ping_update(
+            particles, ping.offsets, ping.depths, tide, tide_var, turn=turn, weights=weights,
+            variance=ping.variance, map_variance=ping.map_variance, exponent=exponent,
+        )  # fmt: skip
+        return TerrainUpdate(update.log_likelihood, update.tide, update.tide_var, update.predicted,
+                             update.exponent, update.mapped)

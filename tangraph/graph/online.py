@@ -52,7 +52,7 @@ from tangraph.graph.fixes import (
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import Relocalisation
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix, soundings_per_cell
+from tangraph.matching import MatchingError, TapFix
 from tangraph.sensors import NavigationModel, odometry, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
@@ -98,6 +98,8 @@ class GraphNavigator(Relocalisation):
             raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
         self.model = survey_navigation_model(survey, model, where="graph")
         self.white = self.model.dead_reckoning
+        # the map error each sounding shares with the survey's others: it widens every fix
+        self.shared_map_variance = _shared_map_variance(survey, bathymetry, self.model)
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
@@ -244,7 +246,7 @@ class GraphNavigator(Relocalisation):
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
                             poses=None if laid is None else to_world(laid, self.calibration, self.origin),
-                            first=self.window_first.get(k))
+                            first=self.window_first.get(k), shared=self.shared_map_variance)
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
@@ -293,8 +295,6 @@ class GraphNavigator(Relocalisation):
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
         shared = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
         overlap = self.config.fix_inflation * shared
-        if self.model.map_error_shared:
-            overlap *= soundings_per_cell(self.survey, self.bathymetry, first, end)
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 
     def _update(self, k: int) -> None:
@@ -469,3 +469,13 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         ``calibration`` (:func:`calibration_summary` at the last ping).
     """
     return GraphNavigator(survey, bathymetry, config, model=model).run(progress).track()
+
+
+def _shared_map_variance(survey: Survey, bathymetry: BathymetryMap,
+                         model: NavigationModel) -> np.ndarray | None:
+    """The survey's shared map error variances (K, B), None with a perfect map."""
+    from tangraph.sensors.terrain import map_error, shared_map_variances
+
+    if map_error(bathymetry, model).is_zero:
+        return None
+    return shared_map_variances(survey, bathymetry, model)

@@ -1,6 +1,6 @@
 """Batch terrain matching: TAP fixes with confidence regions and covariances (no gtsam here)."""
 
-from tangraph.matching.patch import MatchingError, Patch, soundings_per_cell, window_patch
+from tangraph.matching.patch import MatchingError, Patch, window_patch
 from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
 from tangraph.matching.tap import (
     Criterion,
@@ -31,7 +31,6 @@ __all__ = [
     "criterion_sums",
     "nees",
     "region_thresholds",
-    "soundings_per_cell",
     "tap_fix",
     "tap_fix_patch",
     "window_patch",

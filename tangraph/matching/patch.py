@@ -9,7 +9,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.survey import Survey, footprints
 
-__all__ = ["MatchingError", "Patch", "soundings_per_cell", "window_patch"]
+__all__ = ["MatchingError", "Patch", "window_patch"]
 
 
 class MatchingError(TangraphError):
@@ -24,7 +24,8 @@ class Patch:
     dead reckoning sees them (DR increments inside the window are trusted; the window's absolute
     position is what matching estimates); ``depths (N,)`` the measured depths; ``ping (N,)`` the
     ping of each sounding; ``beam (N,)`` its beam. ``reference_position`` is the DR position of
-    ping ``reference``.
+    ping ``reference``. ``shared (N,)``: the map error variance each sounding shares with the
+    survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none).
     """
 
     offsets: np.ndarray
@@ -35,6 +36,7 @@ class Patch:
     first: int
     reference_position: np.ndarray
     n_dropped: int
+    shared: np.ndarray | None = None
 
     @property
     def n_soundings(self) -> int:
@@ -45,10 +47,12 @@ class Patch:
         return self.reference - self.first + 1
 
 
-def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None) -> Patch:
+def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None,
+                 shared=None) -> Patch:
     """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted),
     laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
-    window's footprints are computed.
+    window's footprints are computed. ``shared (K, B)``: the survey's soundings' shared map
+    error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's.
 
     Raises
     ------
@@ -89,32 +93,5 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         first=first,
         reference_position=ref,
         n_dropped=int((~keep).sum()),
+        shared=None if shared is None else np.asarray(shared, float)[window][keep],
     )
-
-
-def soundings_per_cell(survey: Survey, bathymetry, first: int, end: int) -> float:
-    """Soundings of pings ``first..end`` per distinct map cell they fall into, at their DR
-    footprints: how many soundings share each cell's map error (at least 1). A model whose map
-    error is shared per cell (``NavigationModel.map_error_shared``) counts a window's soundings
-    that many times fewer.
-
-    >>> import numpy as np
-    >>> from tangraph.maps import BathymetryMap
-    >>> m = BathymetryMap(north=np.arange(0, 50, 5.0), east=np.arange(0, 50, 5.0), depth=np.ones((10, 10)))
-    >>> t = np.arange(4.0)
-    >>> s = Survey(time=t, dr_pose=np.column_stack([t, 0 * t + 10, 0 * t]), vehicle_depth=0 * t,
-    ...            beam_forward=np.zeros((4, 3)), beam_starboard=np.tile([-1.0, 0, 1], (4, 1)),
-    ...            beam_depth=np.ones((4, 3)))
-    >>> soundings_per_cell(s, m, 0, 3)  # 12 soundings in two cells (centred at north 0 and 5)
-    6.0
-    """
-    w = slice(int(first), int(end) + 1)
-    north, east = survey.footprints()
-    north, east, has = north[w], east[w], np.isfinite(survey.beam_depth[w])
-    if not has.any():
-        return 1.0
-    dn, de = bathymetry.cell_size
-    i = np.floor((north[has] - bathymetry.north[0]) / dn + 0.5).astype(np.int64)
-    j = np.floor((east[has] - bathymetry.east[0]) / de + 0.5).astype(np.int64)
-    cells = np.unique(i * (bathymetry.east.size + 1) + j).size
-    return max(float(has.sum()) / cells, 1.0)

@@ -10,7 +10,16 @@ tide ``t(X)`` is the mean residual and ``sigma^2(X)`` the residual variance; the
   chi2_{1-a}(2)`` with ``s^2 = Q(X_p) / (n - 3)`` (two position parameters and the tide
   estimated) and ``c >= 1`` the variance inflation of spatially correlated residuals: a
   cluster-robust (per ping) sandwich ratio of the score's variance for errors shared by a ping's
-  beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track.
+  beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track;
+  and at least the map's: where the patch carries the map error its soundings share with the
+  survey's others (:func:`tangraph.sensors.shared_map_variances`, the terrain measurement
+  model's row-sum bound), the sandwich ratio of the least-squares fix's covariance with the
+  soundings' variances ``s^2 + shared_b`` to the one with ``s^2`` (the residual scatter alone
+  cannot show an error the window's soundings share: on flat terrain, where the map's noise is
+  all the soundings see, this widens the region until the fix is flagged uninformative).
+
+A candidate is valid when every sounding of the window has a map depth there; a prior off the
+map is searched around like any other (the window may reach the map's data from there).
 
 Covariances: from the curvature of ``Q`` at the fix (``2 c s^2 H^-1``, the inverse Fisher
 information of eq. 14), from the second moments of the normalised likelihood over the search
@@ -220,8 +229,6 @@ def tap_fix(
 def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *, prior=None) -> TapFix:
     """:func:`tap_fix` of a prepared :class:`Patch`."""
     prior = patch.reference_position if prior is None else np.asarray(prior, float)
-    if not bathymetry.contains(prior[0], prior[1]):
-        raise MatchingError(f"prior position {prior.tolist()} is off the map {bathymetry.name!r}")
     step = config.step or min(bathymetry.cell_size)
     grid = CandidateGrid.around(prior, config.half_width, step, np.asarray(config.headings))
     method = (
@@ -264,11 +271,17 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = q_min / max(n - 3, 1)
+    shared = _map_sandwich(bathymetry, patch, position, s2)
+    if shared is not None:
+        inflation = max(inflation, shared[0])
     regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
     )
     covariance = covariances[config.covariance]
+    if shared is not None:
+        covariances["map"] = shared[1]
+        covariance = _larger(covariance, shared[1])
     if config.jackknife:
         jack = _jackknife(bathymetry, patch, grid, i, j, step)
         if jack is not None:
@@ -368,6 +381,28 @@ def _variance_inflation(bathymetry, patch, position, tide) -> float:
         within = (1 + rho) / (1 - rho)
     rho = float(np.clip(_lag_one(r, patch.beam, patch.ping), 0.0, 0.95))
     return max(1.0, within) * (1 + rho) / (1 - rho)
+
+
+def _map_sandwich(bathymetry, patch, position, s2) -> tuple[float, np.ndarray] | None:
+    """Where the patch carries its soundings' shared map error variances: the covariance of the
+    least-squares fix with the soundings' variances ``s^2 + shared_b`` (a sandwich on the
+    gradients at the fix, the tide's mean removed) and its ratio to the one with ``s^2`` alone
+    (the mean of their generalised eigenvalues); None without a map error or a gradient."""
+    if patch.shared is None or not np.any(patch.shared > 0):
+        return None
+    offsets = patch.offsets
+    g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
+    ok = np.all(np.isfinite(g), axis=1) & np.isfinite(patch.shared)
+    if ok.sum() < 3:
+        return None
+    g = g[ok] - g[ok].mean(axis=0)
+    information = g.T @ g
+    if np.linalg.cond(information) > 1e12:
+        return None
+    inverse = np.linalg.inv(information)
+    sandwich = inverse @ ((g * (s2 + patch.shared[ok])[:, None]).T @ g) @ inverse
+    ratio = float(np.trace(np.linalg.solve(s2 * inverse, sandwich)) / 2)
+    return max(ratio, 1.0), 0.5 * (sandwich + sandwich.T)
 
 
 def region_thresholds(

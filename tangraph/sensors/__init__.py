@@ -20,20 +20,36 @@ from tangraph.sensors.sonar import (
     beam_angles,
     simulate_pings,
 )
+from tangraph.sensors.terrain import (
+    MapError,
+    information_exponent,
+    map_error,
+    matern_correlation,
+    matern_field,
+    shared_map_variances,
+    sounding_variances,
+)
 
 __all__ = [
     "DeadReckoning",
     "DeadReckoningModel",
+    "MapError",
     "MultibeamConfig",
     "NavigationModel",
     "Pings",
     "SingleBeamConfig",
     "beam_angles",
     "increment_covariance",
+    "information_exponent",
     "load_navigation_model",
+    "map_error",
+    "matern_correlation",
+    "matern_field",
     "odometry",
     "rotation_matrix",
+    "shared_map_variances",
     "simulate_dead_reckoning",
     "simulate_pings",
+    "sounding_variances",
     "survey_navigation_model",
 ]

@@ -59,17 +59,15 @@ class NavigationModel:
     sounding_std : float
         Std (m) of a sounding's error (noise, attitude, map interpolation).
     map_std : float
-        Std (m) of the map's own depth error, added in quadrature to ``sounding_std`` where a
-        likelihood treats soundings independently.
+        Std (m) of the map's own depth error where the map carries none (a map gridded by
+        ``tangraph maps grid``, a BAG or an S-102 file carries its own, per cell); 0: the map is
+        the truth. See :mod:`tangraph.sensors.terrain` for how every estimator uses it.
+    map_correlation_length : float
+        Range (m) of the map error's spatial correlation where the map states none; 0: one
+        cell of the map. Soundings closer than this share their map error, so they count as
+        fewer independent ones (:func:`~tangraph.sensors.terrain.sounding_variances`).
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
-    map_error_shared : bool
-        The map's error is one per map cell, shared by every sounding in it (a map gridded
-        from surveys, with more soundings per cell than cells), instead of independent per
-        sounding. The estimators then count a window's soundings once per distinct cell
-        (:func:`~tangraph.matching.soundings_per_cell`): the graph multiplies each fix's
-        covariance by its window's soundings per cell; the filters raise each ping's likelihood
-        to the power of one over the soundings per cell of the pings around it.
 
     Examples
     --------
@@ -94,17 +92,13 @@ class NavigationModel:
     initial_position_std: float = 10.0
     sounding_std: float = 0.5
     map_std: float = 0.0
+    map_correlation_length: float = 0.0
     tide: float = 0.0
     tide_std: float = 3.0
-    map_error_shared: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.map_error_shared, bool):
-            raise TangraphError(
-                f"NavigationModel.map_error_shared must be true or false, got {self.map_error_shared!r}"
-            )
         for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
-                     "map_std", "tide_std"):
+                     "map_std", "map_correlation_length", "tide_std"):
             _number(self, name, low=0.0)
         for name in ("speed_scale_std", "heading_bias_std", "initial_position_std", "sounding_std"):
             _number(self, name, low=0.0, open_low=True)
@@ -208,6 +202,12 @@ class NavigationModel:
         fields = {f.name for f in dataclasses.fields(cls)}
         values: dict[str, Any] = {}
         for key, value in table.items():
+            if key == "map_error_shared":
+                raise TangraphError(
+                    f"{where}: map_error_shared is no longer a setting: every estimator counts the "
+                    "soundings that share a map error (set map_std and map_correlation_length, or use "
+                    "a map that carries its depth_std)"
+                )
             name = key[:-4] if key.endswith("_deg") else key
             if name not in fields or (key.endswith("_deg") and name not in _ANGLES):
                 allowed = sorted(fields | {f"{a}_deg" for a in _ANGLES})

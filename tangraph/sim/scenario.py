@@ -14,6 +14,9 @@
                                  # an angle field may be given in degrees as NAME_deg
     [sonar]                      # kind = "multibeam" | "singlebeam", preset, and config fields
     [study]                      # free-form settings for the studies (e.g. window lengths)
+    [seafloor]                   # optional: the true seafloor is the map plus a random field
+    [prior_map]                  # (with [seafloor]) the estimators' map, gridded from an
+                                 # earlier survey of it (tangraph.sim.seafloor)
 
 Unknown keys anywhere are refused, naming the key and the keys allowed there.
 """
@@ -38,9 +41,19 @@ from tangraph.sensors import (
     simulate_pings,
 )
 from tangraph.sim import trajectories
+from tangraph.sim.seafloor import PriorMapSettings, ScenarioWorld, SeafloorSettings, simulate_world
 from tangraph.survey import Survey
 
-__all__ = ["Scenario", "list_scenarios", "load_dr_model", "load_scenario", "scenario_path", "simulate"]
+__all__ = [
+    "Scenario",
+    "Simulation",
+    "list_scenarios",
+    "load_dr_model",
+    "load_scenario",
+    "scenario_path",
+    "simulate",
+    "simulate_run",
+]
 
 _TOP = {
     "name",
@@ -52,6 +65,8 @@ _TOP = {
     "dead_reckoning",
     "sonar",
     "study",
+    "seafloor",
+    "prior_map",
 }
 _TRAJECTORY = {
     "line": {"start", "heading_deg", "speed", "duration"},
@@ -79,10 +94,21 @@ class Scenario:
     description: str = ""
     study: dict[str, Any] = dataclasses.field(default_factory=dict)
     source: str = ""
+    seafloor: SeafloorSettings | None = None
+    prior_map: PriorMapSettings | None = None
+
+    @property
+    def map_error(self) -> bool:
+        """The soundings see a true seafloor that is not the estimators' map."""
+        return self.seafloor is not None
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-ready form, stored in a simulated survey's metadata."""
-        return {
+        world = {}
+        if self.seafloor is not None and self.prior_map is not None:
+            world = {"seafloor": dataclasses.asdict(self.seafloor),
+                     "prior_map": dataclasses.asdict(self.prior_map)}
+        return world | {
             "name": self.name,
             "map": self.map,
             "seed": self.seed,
@@ -226,7 +252,22 @@ def load_scenario(name_or_path: str | os.PathLike) -> Scenario:
         description=str(table.get("description", "")),
         study=dict(table.get("study", {})),
         source=str(path),
+        **_world(table, where),
     )
+
+
+def _world(table: dict, where: str) -> dict[str, Any]:
+    """The ``[seafloor]`` and ``[prior_map]`` tables: both or neither."""
+    if ("seafloor" in table) != ("prior_map" in table):
+        raise ScenarioError(f"{where}: [seafloor] and [prior_map] go together (a seafloor that is not the "
+                            "map needs the map the estimators use, and the other way round)")
+    if "seafloor" not in table:
+        return {}
+    try:
+        return {"seafloor": SeafloorSettings.from_table(dict(table["seafloor"]), f"{where} [seafloor]"),
+                "prior_map": PriorMapSettings.from_table(dict(table["prior_map"]), f"{where} [prior_map]")}
+    except TangraphError as exc:
+        raise ScenarioError(str(exc)) from None
 
 
 def true_trajectory(scenario: Scenario, bathymetry: BathymetryMap) -> tuple[np.ndarray, np.ndarray]:
@@ -267,6 +308,17 @@ def true_trajectory(scenario: Scenario, bathymetry: BathymetryMap) -> tuple[np.n
         ) from None
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class Simulation:
+    """A simulated run: the ``survey``, the ``bathymetry`` its estimators navigate on, and the
+    ``world`` (true seafloor and prior map) when the seafloor is not that map (None otherwise:
+    the soundings were ray cast on ``bathymetry`` itself)."""
+
+    survey: Survey
+    bathymetry: BathymetryMap
+    world: ScenarioWorld | None = None
+
+
 def simulate(
     scenario: Scenario,
     *,
@@ -276,29 +328,53 @@ def simulate(
 ) -> Survey:
     """Simulate a survey: truth, dead reckoning and ray-cast soundings on the scenario's map.
 
-    ``seed`` is only recorded (pass the generator built from it as ``rng``).
-    The trajectory leaving the map is allowed: its pings have no returns, counted in
-    ``meta["sonar_counts"]``.
+    The survey of :func:`simulate_run`; use that one for a scenario whose seafloor is not its map
+    (``[seafloor]``), whose estimators navigate on the prior map it returns.
+    """
+    return simulate_run(scenario, rng=rng, bathymetry=bathymetry, seed=seed).survey
+
+
+def simulate_run(
+    scenario: Scenario,
+    *,
+    rng: np.random.Generator,
+    bathymetry: BathymetryMap | None = None,
+    seed: int | None = None,
+) -> Simulation:
+    """Simulate a survey and the map its estimators use.
+
+    Truth, dead reckoning and soundings ray cast on the seafloor: the scenario's map
+    (``bathymetry`` overrides it), or, for a scenario with ``[seafloor]`` and ``[prior_map]``,
+    a true seafloor that is the map plus a random field, with a prior map gridded from an
+    earlier survey of it (:mod:`tangraph.sim.seafloor`), all drawn from ``rng``. ``seed`` is
+    only recorded (pass the generator built from it as ``rng``). The trajectory leaving the map
+    is allowed: its pings have no returns, counted in ``meta["sonar_counts"]``.
     """
     from tangraph.maps import load_any
     from tangraph.maps.mesh import raycasting_scene
 
-    bathymetry = bathymetry if bathymetry is not None else load_any(scenario.map)
-    time, true_pose = true_trajectory(scenario, bathymetry)
+    source = bathymetry if bathymetry is not None else load_any(scenario.map)
+    time, true_pose = true_trajectory(scenario, source)
+    world = None
+    seafloor, estimators_map = source, source
+    if scenario.seafloor is not None and scenario.prior_map is not None:
+        world = simulate_world(source, true_pose[:, :2], scenario.seafloor, scenario.prior_map,
+                               scenario.sonar, rng=rng, name=f"{scenario.name} prior map")
+        seafloor, estimators_map = world.seafloor, world.prior_map
     dr = simulate_dead_reckoning(time, true_pose, scenario.dead_reckoning, rng=rng)
     vehicle_depth = np.full(time.size, scenario.vehicle_depth)
-    pings = simulate_pings(raycasting_scene(bathymetry), true_pose, vehicle_depth, scenario.sonar, rng=rng)
+    pings = simulate_pings(raycasting_scene(seafloor), true_pose, vehicle_depth, scenario.sonar, rng=rng)
     import tangraph
     from tangraph.navigation import map_identity
 
     meta = {
-        "map": bathymetry.name,
-        "map_identity": map_identity(bathymetry),
+        "map": estimators_map.name,
+        "map_identity": map_identity(estimators_map),
         "scenario": scenario.name,
         "seed": seed,
         "software": f"tangraph {tangraph.__version__}",
-        "crs": bathymetry.crs,
-        "origin": list(bathymetry.origin),
+        "crs": estimators_map.crs,
+        "origin": list(estimators_map.origin),
         "settings": scenario.as_dict(),
         "sonar_counts": {
             "missing": int(pings.n_missing),
@@ -307,7 +383,9 @@ def simulate(
         },
         "dvl_dropouts": int(dr.n_dropouts),
     }
-    return Survey(
+    if world is not None:
+        meta["seafloor"] = {"source_map": source.name, "map_error_rms": _rms(world.map_error())}
+    survey = Survey(
         time=time,
         dr_pose=dr.pose,
         vehicle_depth=vehicle_depth,
@@ -317,3 +395,9 @@ def simulate(
         true_pose=true_pose,
         meta=meta,
     )
+    return Simulation(survey, estimators_map, world)
+
+
+def _rms(error: np.ndarray) -> float:
+    finite = error[np.isfinite(error)]
+    return float(np.sqrt(np.mean(finite**2))) if finite.size else float("nan")

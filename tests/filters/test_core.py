@@ -380,39 +380,6 @@ def test_no_seed_is_recorded_for_a_generator_without_a_seed_sequence():
     assert run_filter("pf", SURVEY, MAP, config, rng=rng).meta["seed"] is None
 
 
-def test_shared_map_error_weights_each_ping_by_its_soundings_per_cell():
-    from tangraph.filters.core import evaluate, measure, reweight
-    from tangraph.filters.model import shared_map_weights
-    from tangraph.matching import soundings_per_cell
-
-    weights = shared_map_weights(SURVEY, MAP)
-    # 30 beams over an 80 m swath on 5 m cells: ~2 soundings per cell within a ping, more
-    # where neighbouring pings' footprints fall into the same cells
-    assert np.all((weights > 0) & (weights < 1))
-    pings = survey_pings(SURVEY, MAP)
-    assert [p.weight for p in pings] == pytest.approx(weights)
-    assert pings[0].weight <= 1.0 / soundings_per_cell(SURVEY, MAP, 0, 0) + 1e-12
-    assert [p.weight for p in survey_pings(SURVEY)] == [1.0] * SURVEY.n_pings
-    # the terrain update is the likelihood raised to the ping's weight (no tempering here)
-    fm = FilterModel.from_model(MODEL, MAP)
-    belief = model_belief(SURVEY.dr_pose[0, :2], fm, 500, rng=np.random.default_rng(3))
-    ping = pings[3]
-    got = measure(belief, ping, fm).belief
-    want = reweight(belief, ping.weight * evaluate(belief, ping, fm).log_likelihood, where="test")
-    np.testing.assert_allclose(got.weights, want.weights, rtol=1e-12)
-    with pytest.raises(TangraphError, match="weight must lie in"):
-        Ping(1, np.zeros(2), np.zeros((1, 2)), np.ones(1), weight=0.0)
-
-
-def test_a_filter_on_a_shared_map_error_model_is_less_confident():
-    config = PFConfig(n_particles=500)
-    plain = run_filter("pf", SURVEY, MAP, config, model=MODEL, rng=np.random.default_rng(4))
-    shared = run_filter("pf", SURVEY, MAP, config, model=MODEL.replace(map_error_shared=True),
-                        rng=np.random.default_rng(4))
-    det = [np.linalg.det(t.covariance[-1, :2, :2]) for t in (plain, shared)]
-    assert det[1] > det[0], det
-
-
 @pytest.mark.parametrize("method", ["pf", "ipf", "sjcpf"])
 def test_pings_no_particle_explains_do_not_drag_the_cloud(method):
     """Two blocks of 10 pings with every depth 5 m off: with the ping gate they are not weighed

@@ -26,7 +26,7 @@ initial_position_std = 3.0
 sounding_std = 0.1
 map_std = 0.2
 tide_std = 0.1
-map_error_shared = true
+map_correlation_length = 10.0
 """
 GRAPH = """[graph]
 n_pings = 120

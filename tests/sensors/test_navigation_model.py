@@ -59,10 +59,14 @@ def test_toml_file_in_degrees_and_its_errors(tmp_path):
         load_navigation_model(tmp_path / "missing.toml")
 
 
-def test_shared_map_error_is_a_boolean_from_toml(tmp_path):
+def test_the_map_error_from_toml_and_the_old_switch_refused(tmp_path):
     path = tmp_path / "model.toml"
-    path.write_text("[navigation]\nmap_error_shared = true\nsounding_std = 0.1\n")
-    assert load_navigation_model(path).map_error_shared is True
-    path.write_text("[navigation]\nmap_error_shared = 1\n")
-    with pytest.raises(TangraphError, match="map_error_shared must be true or false, got 1"):
+    path.write_text("[navigation]\nmap_std = 0.2\nmap_correlation_length = 30.0\n")
+    model = load_navigation_model(path)
+    assert (model.map_std, model.map_correlation_length) == (0.2, 30.0)
+    path.write_text("[navigation]\nmap_correlation_length = -1\n")
+    with pytest.raises(TangraphError, match="map_correlation_length must be >= 0"):
+        load_navigation_model(path)
+    path.write_text("[navigation]\nmap_error_shared = true\n")
+    with pytest.raises(TangraphError, match="map_error_shared is no longer a setting.*correlation_length"):
         load_navigation_model(path)

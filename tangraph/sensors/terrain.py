@@ -1,0 +1,303 @@
+"""The terrain measurement model every estimator shares: sounding noise plus the map's error.
+
+A sounding of the seafloor at ``p`` measures ``z = h(p) + d(p) + t + e``: ``h`` the prior map's
+(bilinear) depth, ``d`` the map's error (the true seafloor minus the map), ``t`` the tide and
+``e ~ N(0, sounding_std^2)`` the sounding's own noise, independent between soundings. A map is
+gridded from earlier surveys, so ``d`` is a zero-mean Gaussian random field, **correlated in
+space**: ``cov(d(p), d(q)) = s(p) s(q) rho(|p - q|)`` with ``s`` the map's per-cell standard
+deviation (``BathymetryMap.depth_std``, else the navigation model's ``map_std`` everywhere) and
+``rho`` the Matérn (nu = 1) correlation of range ``L`` (``BathymetryMap.correlation_length``,
+else ``NavigationModel.map_correlation_length``, else one map cell):
+
+    ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / L``  (``rho(L)`` is about 0.14).
+
+It is the field a second-order SPDE on the plane gives (Lindgren, Rue & Lindström 2011), so the
+same field can be simulated (:func:`matern_field`) and carried as a sparse Gaussian-Markov
+prior by the bound.
+
+**What the estimators use: the row-sum bound.** The exact likelihood of a survey's soundings has
+the dense covariance ``C = sounding_std^2 I + S R S`` (``R_ij = rho(|p_i - p_j|)``, ``S`` the
+diagonal of ``s``). A filter or a fix that treated the soundings as independent with variance
+``sounding_std^2 + s^2`` would count the same map error once for every sounding that sees it,
+and converge on the map's noise. Every estimator here instead gives sounding ``b`` the variance
+
+    ``v_b = sounding_std^2 + s_b sum_j s_j rho(|p_b - p_j|)``
+
+(the sum over the survey's soundings, ``b`` itself included: one over the soundings that share
+its map error, weighted by how much they share it). Since ``S R S`` has non-negative entries,
+``diag(row sums) - S R S`` is a graph Laplacian and positive semi-definite, so
+``diag(v) >= C``: the independent-sounding likelihood with these variances never claims more
+information than the exact one, in any direction. It is exact for the common part of
+soundings that share one error (the information of a patch's mean residual is
+``1 / (sounding_std^2 / n + s^2)``), and it loses little where the map has no structure finer
+than its error's correlation length, which a gridded map does not. Sums are evaluated on the
+dead-reckoned footprints (:func:`sounding_variances`).
+
+**No data is no information.** A sounding that falls on no map data (off the grid, or by a NaN
+cell) says nothing about a candidate position, for or against: estimators leave it out of the
+comparison instead of giving the candidate zero weight.
+
+**Little information where the terrain does not rise above the map's noise.** Where the depths
+that a belief predicts for a sounding spread no more than the map's error, the sounding cannot
+tell the belief's positions apart, and its small differences are the map's noise: the
+likelihood is raised to the exponent :func:`information_exponent` (MBARI's modified weighting).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import special
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+
+__all__ = [
+    "MapError",
+    "information_exponent",
+    "map_error",
+    "matern_correlation",
+    "matern_field",
+    "shared_map_variances",
+    "sounding_variances",
+]
+
+# Grid of the row sums: at least this many cells per correlation length, at most this many cells.
+_CELLS_PER_LENGTH = 6
+_MAX_CELLS = 4_000_000
+
+
+def matern_correlation(distance, length: float) -> np.ndarray:
+    """The map error's correlation ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / length`` (1 at 0).
+
+    Examples
+    --------
+    >>> matern_correlation([0.0, 10.0], 10.0).round(3).tolist()
+    [1.0, 0.14]
+    """
+    r = np.sqrt(8.0) * np.abs(np.asarray(distance, dtype=np.float64)) / float(length)
+    with np.errstate(invalid="ignore"):
+        out = r * special.kv(1, r)
+    return np.where(r > 0, out, 1.0)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class MapError:
+    """The error of a map as the estimators model it: the std ``std (ny, nx)`` (m, NaN where the
+    map has no data) on the map's grid, and the correlation range ``correlation_length`` (m)."""
+
+    bathymetry: BathymetryMap
+    std: np.ndarray
+    correlation_length: float
+
+    def __post_init__(self) -> None:
+        std = np.array(self.std, dtype=np.float64)
+        if std.shape != self.bathymetry.shape:
+            raise TangraphError(f"MapError: std has shape {std.shape}, the map {self.bathymetry.shape}")
+        if np.any(std[np.isfinite(std)] < 0):
+            raise TangraphError("MapError: std must be >= 0")
+        length = float(self.correlation_length)
+        if not (np.isfinite(length) and length > 0):
+            raise TangraphError(f"MapError: correlation_length must be > 0, got {self.correlation_length!r}")
+        std.setflags(write=False)
+        object.__setattr__(self, "std", std)
+        object.__setattr__(self, "correlation_length", length)
+        object.__setattr__(self, "_field", None)
+
+    @property
+    def is_zero(self) -> bool:
+        """The map is taken as the truth (no error anywhere)."""
+        return not np.any(np.nan_to_num(self.std) > 0)
+
+    @property
+    def typical_std(self) -> float:
+        """The median std over the map's data (m)."""
+        values = self.std[np.isfinite(self.std)]
+        return float(np.median(values)) if values.size else 0.0
+
+    def std_at(self, north, east) -> np.ndarray:
+        """Bilinear std of the map's error at points (NaN where the map has no data)."""
+        if self.is_zero:
+            out = np.zeros(np.broadcast_shapes(np.shape(north), np.shape(east)))
+            return np.where(np.isfinite(self.bathymetry.depth_at(north, east)), out, np.nan)
+        field = self._field  # type: ignore[has-type]
+        if field is None:
+            m = self.bathymetry
+            field = BathymetryMap(m.north, m.east, np.where(np.isfinite(m.depth), self.std, np.nan),
+                                  name=f"{m.name} error std")
+            object.__setattr__(self, "_field", field)
+        return field.depth_at(north, east)
+
+
+def map_error(bathymetry: BathymetryMap, model) -> MapError:
+    """The map's error: its own ``depth_std`` and ``correlation_length`` where it carries them,
+    else the navigation model's ``map_std`` (everywhere the map has data) and
+    ``map_correlation_length`` (0: one map cell)."""
+    std = getattr(bathymetry, "depth_std", None)
+    if std is None:
+        std = np.where(np.isfinite(bathymetry.depth), float(model.map_std), np.nan)
+    length = getattr(bathymetry, "correlation_length", None)
+    if length is None:
+        length = float(model.map_correlation_length) or float(max(bathymetry.cell_size))
+    return MapError(bathymetry, std, length)
+
+
+def sounding_variances(survey, bathymetry: BathymetryMap, model, *, poses=None) -> np.ndarray:
+    """Per sounding ``(K, B)`` the variance every estimator gives its residual (m^2): the
+    sounding noise plus its map error times the map error it shares with the survey's soundings
+    (the row-sum bound of the module docstring), at the footprints seen from ``poses``
+    (default: the dead reckoning). NaN where a beam has no depth. It is ``sounding_std^2 + s_b^2
+    +`` :func:`shared_map_variances`.
+
+    A footprint off the map's data takes the map's median error std (its soundings are left
+    out where they have no map under a candidate, but may have one under another). With no map
+    error it is ``sounding_std^2`` everywhere.
+
+    Examples
+    --------
+    Nine soundings in one spot share one map error: each counts as a ninth of a sounding with
+    the map's error, ``0.1^2 + 9 * 0.2^2 = 0.37``:
+
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> from tangraph.sensors import NavigationModel
+    >>> from tangraph.survey import Survey
+    >>> flat = BathymetryMap(np.arange(0.0, 200, 10), np.arange(0.0, 200, 10), np.full((20, 20), 30.0))
+    >>> t = np.arange(9.0)
+    >>> pose = np.column_stack([100 + 0 * t, 100 + 0 * t, 0 * t])
+    >>> s = Survey(time=t, dr_pose=pose, vehicle_depth=0 * t, beam_forward=np.zeros((9, 1)),
+    ...            beam_starboard=np.zeros((9, 1)), beam_depth=np.full((9, 1), 30.0))
+    >>> model = NavigationModel(sounding_std=0.1, map_std=0.2, map_correlation_length=20.0)
+    >>> sounding_variances(s, flat, model)[:, 0].round(3).tolist()[:3]
+    [0.37, 0.37, 0.37]
+    """
+    own, shared = _map_variances(survey, bathymetry, model, poses)
+    return float(model.sounding_std) ** 2 + own + shared
+
+
+def shared_map_variances(survey, bathymetry: BathymetryMap, model, *, poses=None) -> np.ndarray:
+    """Per sounding ``(K, B)`` the map error variance it shares with the survey's other
+    soundings, ``s_b sum_(j != b) s_j rho(|p_b - p_j|)`` (m^2; the row-sum bound's off-diagonal
+    part, :func:`sounding_variances`); 0 with no map error, NaN where a beam has no depth.
+
+    A fix's covariance is widened by it (:func:`tangraph.matching.tap_fix`): the residual scatter
+    a window shows holds the map error its soundings do not share, not the part they share
+    with each other and with the survey's other soundings."""
+    return _map_variances(survey, bathymetry, model, poses)[1]
+
+
+def _map_variances(survey, bathymetry, model, poses) -> tuple[np.ndarray, np.ndarray]:
+    """``(s_b^2, s_b sum_(j != b) s_j rho_bj)`` per sounding (K, B), NaN where no depth."""
+    north, east = survey.footprints(poses)
+    has = np.isfinite(survey.beam_depth) & np.isfinite(north) & np.isfinite(east)
+    own = np.full(north.shape, np.nan)
+    shared = np.full(north.shape, np.nan)
+    error = map_error(bathymetry, model)
+    if error.is_zero:
+        own[has] = shared[has] = 0.0
+        return own, shared
+    s = error.std_at(north[has], east[has])
+    s = np.where(np.isfinite(s), s, error.typical_std)
+    sums = _weighted_correlation_sums(north[has], east[has], s, error.correlation_length)
+    own[has] = s * s
+    shared[has] = s * (sums - s)
+    return own, shared
+
+
+def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray:
+    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b``, on a grid: the weights splatted
+    bilinearly onto cells of a sixth of the range, convolved (FFT) with the Matérn correlation
+    sampled on the cells out to four ranges, and read back bilinearly; each point's own term is
+    then made exact (``rho(0) = 1``)."""
+    from scipy.signal import fftconvolve
+
+    reach = 4.0 * length
+    pad = reach + length
+    n0, e0 = north.min() - pad, east.min() - pad
+    span = max(north.max() - north.min(), east.max() - east.min()) + 2 * pad
+    cell = max(length / _CELLS_PER_LENGTH, span / np.sqrt(_MAX_CELLS))
+    shape = (int((north.max() + pad - n0) / cell) + 2, int((east.max() + pad - e0) / cell) + 2)
+    fy, fx = (north - n0) / cell, (east - e0) / cell
+    i, j = np.floor(fy).astype(np.int64), np.floor(fx).astype(np.int64)
+    ty, tx = fy - i, fx - j
+    corners = [(0, 0, (1 - ty) * (1 - tx)), (0, 1, (1 - ty) * tx), (1, 0, ty * (1 - tx)), (1, 1, ty * tx)]
+    density = np.zeros(shape)
+    for a, b, beta in corners:
+        np.add.at(density, (i + a, j + b), weight * beta)
+    half = int(np.ceil(reach / cell))
+    offsets = np.arange(-half, half + 1) * cell
+    kernel = matern_correlation(np.hypot(offsets[:, None], offsets[None, :]), length)
+    smooth = fftconvolve(density, kernel, mode="same")
+    sums = sum(beta * smooth[i + a, j + b] for a, b, beta in corners)
+    near = (kernel[half, half], kernel[half, half + 1], kernel[half + 1, half + 1])  # offsets 0, 1, diagonal
+    self_term = np.zeros_like(weight)
+    for a, b, beta in corners:
+        for c, d, gamma in corners:
+            self_term += beta * gamma * near[abs(a - c) + abs(b - d)]
+    return np.maximum(sums - weight * self_term + weight, weight)
+
+
+def information_exponent(predicted: np.ndarray, weights: np.ndarray, map_variance) -> np.ndarray:
+    """MBARI's modified weighting: per sounding, the exponent in [0, 1] of its likelihood from
+    how much the depths a belief predicts for it spread beyond the map's noise.
+
+    ``predicted (N, B)`` are the depths (or residuals) that the belief's ``N`` weighted
+    particles (``weights (N,)``, normalised) predict for each of ``B`` soundings (NaN: no map
+    there, left out); ``map_variance (B,)`` the map's error variance at each. With ``D^2`` the
+    weighted spread of the predictions less what the map's noise alone gives a weighted
+    spread (``(1 - sum w^2) s^2``), the exponent is ``D^2 / (D^2 + 2 s^2)``: 1 with a perfect
+    map, near 0 where the belief's predictions differ by no more than the map's noise.
+
+    Examples
+    --------
+    >>> w = np.full(4, 0.25)
+    >>> predicted = np.array([[10.0, 10.0], [10.01, 12.0], [9.99, 8.0], [10.0, 10.0]])
+    >>> information_exponent(predicted, w, np.array([0.01, 0.01])).round(3).tolist()
+    [0.0, 0.99]
+    """
+    predicted = np.asarray(predicted, dtype=np.float64)
+    w = np.asarray(weights, dtype=np.float64)[:, None] * np.isfinite(predicted)
+    total = w.sum(axis=0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = w / total
+        x = np.nan_to_num(predicted)
+        mean = np.sum(w * x, axis=0)
+        spread = np.sum(w * (x - mean) ** 2, axis=0) - (1.0 - np.sum(w * w, axis=0)) * map_variance
+        spread = np.maximum(spread, 0.0)
+        alpha = np.where(map_variance > 0, spread / (spread + 2.0 * map_variance), 1.0)
+    return np.where(total > 0, alpha, 0.0)
+
+
+def matern_field(north, east, std: float, length: float, *, rng: np.random.Generator) -> np.ndarray:
+    """A zero-mean Gaussian random field with the Matérn (nu = 1) covariance of range ``length``
+    and std ``std`` on the regular grid ``north (ny,) x east (nx,)``: white noise filtered in
+    the Fourier domain by the square root of the spectral density ``(k^2 + |w|^2)^-2``, on a grid
+    padded by two ranges so the periodic wrap does not correlate opposite edges.
+
+    Examples
+    --------
+    >>> axis = np.arange(0.0, 1000.0, 5.0)
+    >>> f = matern_field(axis, axis, 0.3, 50.0, rng=np.random.default_rng(0))
+    >>> f.shape, bool(0.2 < f.std() < 0.4)
+    ((200, 200), True)
+    """
+    north = np.asarray(north, dtype=np.float64)
+    east = np.asarray(east, dtype=np.float64)
+    if not (np.isfinite(std) and std >= 0 and np.isfinite(length) and length > 0):
+        raise TangraphError(f"matern_field: std must be >= 0 and length > 0, got {std!r}, {length!r}")
+    dn = float(north[1] - north[0]) if north.size > 1 else 1.0
+    de = float(east[1] - east[0]) if east.size > 1 else 1.0
+    pad_n, pad_e = int(np.ceil(2 * length / dn)), int(np.ceil(2 * length / de))
+    shape = (north.size + 2 * pad_n, east.size + 2 * pad_e)
+    noise = rng.standard_normal(shape)
+    kappa = np.sqrt(8.0) / length
+    wn = 2 * np.pi * np.fft.fftfreq(shape[0], dn)[:, None]
+    we = 2 * np.pi * np.fft.rfftfreq(shape[1], de)[None, :]
+    amplitude = 1.0 / (kappa**2 + wn**2 + we**2)  # sqrt of the spectral density
+    field = np.fft.irfft2(np.fft.rfft2(noise) * amplitude, s=shape)
+    # normalise to the stationary variance: the filter's variance per unit white noise
+    variance = np.sum(amplitude**2 * np.where(we == 0, 1.0, 2.0)) / (shape[0] * shape[1])
+    variance -= np.sum(amplitude[:, -1] ** 2) / (shape[0] * shape[1]) if shape[1] % 2 == 0 else 0.0
+    field = field[pad_n : pad_n + north.size, pad_e : pad_e + east.size] / np.sqrt(variance)
+    return std * field

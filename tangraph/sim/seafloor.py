@@ -1,0 +1,227 @@
+"""A world whose seafloor is not the map: a true seafloor and a prior map gridded from a survey of it.
+
+A scenario may declare its true seafloor and its prior map (``[seafloor]`` and ``[prior_map]``
+in its TOML, :mod:`tangraph.sim.scenario`). Then:
+
+- the **true seafloor** is the scenario's map resampled (bicubic) to ``seafloor.cell`` over the
+  area the survey needs, plus a seeded Gaussian random field of std ``seafloor.std`` and range
+  ``seafloor.correlation_length`` (the Matérn field of :func:`tangraph.sensors.matern_field`):
+  relief the map never had;
+- the **prior map** the estimators navigate on is gridded (:func:`tangraph.maps.grid_surveys`)
+  from a simulated earlier survey of that seafloor: a lawnmower of parallel lines
+  ``prior_map.line_spacing`` apart, ray cast with the scenario's sonar (or
+  ``[prior_map.sonar]``), placed at a GPS track with a slowly varying error of std
+  ``prior_map.position_std``, binned at ``prior_map.cell``, with gaps of up to
+  ``prior_map.fill`` cells filled. Its error is spatially correlated, larger between lines and
+  in filled gaps, and its data stop at edges, as a real map's do, while the truth stays known.
+
+The survey itself is ray cast on the true seafloor. Everything is drawn from the generator the
+caller passes, so a run's seed fixes its seafloor and prior map too.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from typing import Any
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+
+__all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "simulate_world"]
+
+log = logging.getLogger(__name__)
+
+_GPS_TIME_CONSTANT = 60.0  # s: the earlier survey's GPS error is a first-order Gauss-Markov process
+
+
+def _positive(table: dict, key: str, where: str, *, zero: bool = False) -> float:
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value) or (
+        value < 0 if zero else value <= 0
+    ):
+        bound = ">= 0" if zero else "> 0"
+        raise TangraphError(f"{where}: {key} must be a number {bound}, got {value!r}")
+    return float(value)
+
+
+@dataclasses.dataclass(frozen=True)
+class SeafloorSettings:
+    """The true seafloor: the map at ``cell`` (m) plus a Matérn field of ``std`` (m) and range
+    ``correlation_length`` (m); ``margin`` (m) of seafloor around the survey's track."""
+
+    std: float = 0.3
+    correlation_length: float = 30.0
+    cell: float | None = None
+    margin: float = 300.0
+
+    @classmethod
+    def from_table(cls, table: dict, where: str) -> SeafloorSettings:
+        allowed = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise TangraphError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+        values: dict[str, Any] = {}
+        for key in table:
+            values[key] = _positive(table, key, where, zero=key == "std")
+        return cls(**values)
+
+
+@dataclasses.dataclass(frozen=True)
+class PriorMapSettings:
+    """The earlier survey the prior map is gridded from, and the gridding."""
+
+    line_spacing: float = 70.0
+    line_heading_deg: float | None = None  # default: along the longer side of the area
+    speed: float = 2.0
+    ping_rate: float = 1.0
+    position_std: float = 1.0
+    cell: float = 10.0
+    fill: int = 3
+    statistic: str = "median"
+    vehicle_depth: float = 0.5
+    sonar: dict[str, Any] = dataclasses.field(default_factory=dict)
+
+    @classmethod
+    def from_table(cls, table: dict, where: str) -> PriorMapSettings:
+        allowed = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(table) - allowed)
+        if unknown:
+            raise TangraphError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+        values: dict[str, Any] = {}
+        for key, value in table.items():
+            if key in ("line_spacing", "speed", "ping_rate", "cell"):
+                values[key] = _positive(table, key, where)
+            elif key in ("position_std", "vehicle_depth"):
+                values[key] = _positive(table, key, where, zero=True)
+            elif key == "line_heading_deg":
+                values[key] = float(_finite(value, key, where))
+            elif key == "fill":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+                    raise TangraphError(f"{where}: fill must be an integer >= 0, got {value!r}")
+                values[key] = value
+            elif key == "statistic":
+                if value not in ("mean", "median"):
+                    raise TangraphError(f"{where}: statistic must be 'mean' or 'median', got {value!r}")
+                values[key] = value
+            elif key == "sonar":
+                if not isinstance(value, dict):
+                    raise TangraphError(f"{where}: sonar must be a table, got {value!r}")
+                values[key] = dict(value)
+        return cls(**values)
+
+
+def _finite(value, key: str, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value):
+        raise TangraphError(f"{where}: {key} must be a finite number, got {value!r}")
+    return float(value)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class ScenarioWorld:
+    """The true ``seafloor`` the soundings see and the ``prior_map`` the estimators use, with the
+    ``prior_survey`` it was gridded from (its ``true_pose`` is the GPS track it was placed at)."""
+
+    seafloor: BathymetryMap
+    prior_map: BathymetryMap
+    prior_survey: Any = None
+
+    def map_error(self) -> np.ndarray:
+        """The prior map's true error on its own grid, ``seafloor - prior map`` (m; NaN where
+        either has no data)."""
+        nn, ee = np.meshgrid(self.prior_map.north, self.prior_map.east, indexing="ij")
+        return self.seafloor.depth_at(nn, ee) - self.prior_map.depth
+
+
+def _area(track: np.ndarray, source: BathymetryMap, margin: float) -> tuple[float, float, float, float]:
+    n_lo, n_hi, e_lo, e_hi = source.extent
+    lo = np.maximum(track.min(axis=0) - margin, [n_lo, e_lo])
+    hi = np.minimum(track.max(axis=0) + margin, [n_hi, e_hi])
+    if np.any(hi - lo <= 0):
+        raise TangraphError(f"the scenario's track lies off its map {source.name!r}: no seafloor to draw")
+    return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
+
+
+def true_seafloor(source: BathymetryMap, track: np.ndarray, settings: SeafloorSettings, *,
+                  rng: np.random.Generator) -> BathymetryMap:
+    """The source map around ``track (K, 2)`` at the seafloor's cell plus its random field."""
+    from tangraph.sensors.terrain import matern_field
+
+    n_lo, n_hi, e_lo, e_hi = _area(track, source, settings.margin)
+    crop = source.crop(north=(n_lo, n_hi), east=(e_lo, e_hi))
+    cell = settings.cell or min(source.cell_size)
+    fine = crop.resample(cell, order=3) if cell != min(crop.cell_size) else crop
+    field = matern_field(fine.north, fine.east, settings.std, settings.correlation_length, rng=rng)
+    return BathymetryMap(fine.north, fine.east, fine.depth + field, crs=source.crs, origin=source.origin,
+                         name=f"{source.name} seafloor")
+
+
+def _prior_trajectory(seafloor: BathymetryMap, settings: PriorMapSettings) -> tuple[np.ndarray, np.ndarray]:
+    from tangraph.sim import trajectories
+
+    n_lo, n_hi, e_lo, e_hi = seafloor.extent
+    height, width = n_hi - n_lo, e_hi - e_lo
+    if settings.line_heading_deg is None:
+        heading = 0.0 if height >= width else np.pi / 2
+    else:
+        heading = np.radians(settings.line_heading_deg)
+    along = np.array([np.cos(heading), np.sin(heading)])
+    across = np.array([-np.sin(heading), np.cos(heading)])
+    corners = np.array([[n_lo, e_lo], [n_lo, e_hi], [n_hi, e_lo], [n_hi, e_hi]])
+    a, c = corners @ along, corners @ across
+    length = float(a.max() - a.min())
+    n_lines = int(np.floor((c.max() - c.min()) / settings.line_spacing)) + 1
+    # lines centred across the area, from its lowest along-coordinate
+    first = c.min() + 0.5 * ((c.max() - c.min()) - (n_lines - 1) * settings.line_spacing)
+    origin = along * a.min() + across * first
+    return trajectories.lawnmower(origin, heading, length, settings.line_spacing, n_lines, settings.speed,
+                                  settings.ping_rate)
+
+
+def _gps_error(time: np.ndarray, std: float, rng: np.random.Generator) -> np.ndarray:
+    """A first-order Gauss-Markov error (K, 2) of stationary std ``std`` per axis."""
+    out = np.zeros((time.size, 2))
+    if std == 0 or time.size == 0:
+        return out
+    phi = np.exp(-np.diff(time, prepend=time[0]) / _GPS_TIME_CONSTANT)
+    draws = rng.standard_normal((time.size, 2))
+    out[0] = std * draws[0]
+    for k in range(1, time.size):
+        out[k] = phi[k] * out[k - 1] + std * np.sqrt(1 - phi[k] ** 2) * draws[k]
+    return out
+
+
+def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng: np.random.Generator,
+              name: str) -> tuple[BathymetryMap, Any]:
+    """The map gridded from a simulated earlier survey of ``seafloor``, and that survey."""
+    from tangraph.maps.gridding import grid_surveys
+    from tangraph.maps.mesh import raycasting_scene
+    from tangraph.sensors import simulate_pings
+    from tangraph.survey import Survey
+
+    time, truth = _prior_trajectory(seafloor, settings)
+    # an earlier survey's soundings are reduced to the map's datum (no tide) unless stated
+    sonar = dataclasses.replace(sonar, **({"ping_rate": settings.ping_rate, "tide": 0.0} | settings.sonar))
+    depth = np.full(time.size, settings.vehicle_depth)
+    pings = simulate_pings(raycasting_scene(seafloor), truth, depth, sonar, rng=rng)
+    gps = truth.copy()
+    gps[:, :2] += _gps_error(time, settings.position_std, rng)
+    survey = Survey(time=time, dr_pose=gps, vehicle_depth=depth, beam_forward=pings.beam_forward,
+                    beam_starboard=pings.beam_starboard, beam_depth=pings.beam_depth, true_pose=gps,
+                    meta={"crs": seafloor.crs, "origin": list(seafloor.origin), "name": f"{name} survey"})
+    grid = grid_surveys([survey], cell=settings.cell, statistic=settings.statistic,  # type: ignore[arg-type]
+                        fill=settings.fill, name=name)
+    log.info("prior map %r: %d pings, %.0f %% of cells measured", name, time.size,
+             100 * float(np.mean(grid.count > 0)))
+    return grid.depth.replace(name=name), survey
+
+
+def simulate_world(source: BathymetryMap, track: np.ndarray, seafloor: SeafloorSettings,
+                   prior: PriorMapSettings, sonar, *, rng: np.random.Generator, name: str) -> ScenarioWorld:
+    """The true seafloor around ``track (K, 2)`` and the prior map gridded from an earlier survey
+    of it (module docstring)."""
+    truth = true_seafloor(source, track, seafloor, rng=rng)
+    gridded, survey = prior_map(truth, prior, sonar, rng=rng, name=name)
+    return ScenarioWorld(truth, gridded, survey)

@@ -1,0 +1,102 @@
+"""The terrain measurement model: the map error field, the row-sum bound, the information exponent."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.maps import BathymetryMap
+from tangraph.sensors import (
+    NavigationModel,
+    information_exponent,
+    map_error,
+    matern_correlation,
+    matern_field,
+    shared_map_variances,
+    sounding_variances,
+)
+from tangraph.sensors.terrain import _weighted_correlation_sums
+from tangraph.survey import Survey
+
+FLAT = BathymetryMap(np.arange(0.0, 1000, 10), np.arange(0.0, 1000, 10), np.full((100, 100), 30.0))
+
+
+def scattered_survey(points: np.ndarray) -> Survey:
+    """One sounding per ping at ``points (K, 2)`` (the vehicle over each)."""
+    k = points.shape[0]
+    pose = np.column_stack([points, np.zeros(k)])
+    t = np.arange(float(k))
+    return Survey(time=t, dr_pose=pose, vehicle_depth=0 * t, beam_forward=np.zeros((k, 1)),
+                  beam_starboard=np.zeros((k, 1)), beam_depth=np.full((k, 1), 30.0))
+
+
+def test_matern_field_has_its_std_and_correlation():
+    axis = np.arange(0.0, 2000.0, 5.0)
+    length, std = 60.0, 0.3
+    fields = [matern_field(axis, axis, std, length, rng=np.random.default_rng(s)) for s in range(4)]
+    f = np.stack(fields)
+    # thousands of correlated samples: the variance within 10 %
+    assert abs(f.var() / std**2 - 1) < 0.1, f.var()
+    lag = int(length / 5.0)
+    corr = np.mean(f[:, :, lag:] * f[:, :, :-lag]) / f.var()
+    assert abs(corr - matern_correlation(length, length)) < 0.05, corr
+    with pytest.raises(TangraphError, match="length > 0"):
+        matern_field(axis, axis, 0.3, 0.0, rng=np.random.default_rng(0))
+
+
+def test_correlation_sums_match_the_direct_sum():
+    """The gridded sums against the direct sum of the Matérn correlation."""
+    rng = np.random.default_rng(1)
+    length = 20.0
+    points = np.concatenate([rng.uniform(200, 260, (300, 2)), rng.uniform(500, 800, (200, 2))])
+    weight = rng.uniform(0.1, 0.3, points.shape[0])
+    got = _weighted_correlation_sums(points[:, 0], points[:, 1], weight, length)
+    d = np.sqrt(np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1))
+    want = matern_correlation(d, length) @ weight
+    np.testing.assert_allclose(got, want, rtol=0.05)
+
+
+def test_the_row_sum_variances_bound_the_dense_covariance():
+    """``diag(v) - (sigma^2 I + S R S)`` is positive semi-definite: the independent-sounding
+    likelihood with these variances claims no more information than the exact one."""
+    rng = np.random.default_rng(2)
+    points = rng.uniform(300, 400, (150, 2))
+    model = NavigationModel(sounding_std=0.1, map_std=0.2, map_correlation_length=15.0)
+    survey = scattered_survey(points)
+    v = sounding_variances(survey, FLAT, model)[:, 0]
+    d = np.sqrt(np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1))
+    dense = 0.1**2 * np.eye(points.shape[0]) + 0.2**2 * matern_correlation(d, 15.0)
+    exact = 0.1**2 + 0.2**2 * matern_correlation(d, 15.0).sum(axis=1)
+    np.testing.assert_allclose(v, exact, rtol=0.05)
+    assert np.linalg.eigvalsh(np.diag(exact) - dense).min() > -1e-9
+    # the shared part is the sum less the sounding's own map error
+    shared = shared_map_variances(survey, FLAT, model)[:, 0]
+    np.testing.assert_allclose(v, 0.1**2 + 0.2**2 + shared, rtol=1e-12)
+
+
+def test_a_perfect_map_leaves_the_sounding_noise():
+    survey = scattered_survey(np.array([[100.0, 100.0], [100.0, 101.0]]))
+    model = NavigationModel(sounding_std=0.3)
+    np.testing.assert_allclose(sounding_variances(survey, FLAT, model), 0.09)
+    np.testing.assert_allclose(shared_map_variances(survey, FLAT, model), 0.0)
+
+
+def test_the_map_error_comes_from_the_map_or_the_model():
+    error = map_error(FLAT, NavigationModel(map_std=0.4))
+    assert error.correlation_length == 10.0  # one cell
+    np.testing.assert_allclose(error.std_at(55.0, 55.0), 0.4)
+    assert np.isnan(error.std_at(-50.0, 55.0))
+    assert map_error(FLAT, NavigationModel()).is_zero
+    assert map_error(FLAT, NavigationModel(map_correlation_length=35.0)).correlation_length == 35.0
+
+
+def test_the_information_exponent():
+    w = np.full(5, 0.2)
+    tight = np.array([[10.0], [10.01], [9.99], [10.0], [10.02]])
+    wide = np.array([[10.0], [12.0], [8.0], [11.0], [9.0]])
+    assert information_exponent(tight, w, np.array([0.04]))[0] == 0.0
+    assert information_exponent(wide, w, np.array([0.04]))[0] > 0.9
+    assert information_exponent(tight, w, np.array([0.0]))[0] == 1.0  # a perfect map
+    missing = np.array([[np.nan], [np.nan], [np.nan], [np.nan], [np.nan]])
+    assert information_exponent(missing, w, np.array([0.04]))[0] == 0.0
