@@ -199,6 +199,13 @@ def check_overlap(survey: Survey, bathymetry: BathymetryMap) -> None:
     data (a cell that is not NaN). A survey that partly leaves the map, or starts off it,
     passes: off the map the estimators keep the dead reckoning.
 
+    Parameters
+    ----------
+    survey : Survey
+        In the map's frame or in the CRS and origin it records.
+    bathymetry : BathymetryMap
+        The map.
+
     Raises
     ------
     TangraphError
