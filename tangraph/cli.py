@@ -228,7 +228,7 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
     from tangraph.survey import write_survey
 
     csv_only = {"--columns": args.columns, "--no-header": args.no_header or None,
-                "--time-format": args.time_format, "--sign": args.sign}
+                "--time-format": args.time_format, "--sign": args.sign, "--units": args.units}
     sontek_only = {"--water-level": args.water_level,
                    "--water-level-interpolate": args.water_level_interpolate or None,
                    "--draft": args.draft, "--dr-heading": args.dr_heading, "--declination": args.declination}
@@ -259,7 +259,8 @@ def cmd_survey_import(args: argparse.Namespace) -> None:
     if args.format == "csv-xyz":
         from tangraph.formats import import_csv_xyz
 
-        options = {k: v for k, v in (("sign", args.sign), ("time_format", args.time_format)) if v is not None}
+        options = {k: v for k, v in (("sign", args.sign), ("time_format", args.time_format),
+                                     ("units", args.units)) if v is not None}
         survey = import_csv_xyz(*args.files, crs=args.crs, timezone=args.timezone,
                                 columns=columns, header=not args.no_header, **options)
     elif args.format == "xtf":
@@ -320,8 +321,10 @@ def cmd_experiment(args: argparse.Namespace) -> None:
 
 
 def _survey_and_map(args: argparse.Namespace):
+    """The survey file and its map; the survey put on the map as the library does
+    (:func:`tangraph.navigation.survey_on_map`), for the summary and the written reference."""
     from tangraph.maps import load_any
-    from tangraph.navigation import in_map_frame
+    from tangraph.navigation import survey_on_map
     from tangraph.survey import read_survey
 
     survey = read_survey(args.survey)
@@ -330,7 +333,7 @@ def _survey_and_map(args: argparse.Namespace):
         raise TangraphError(f"{args.survey} names no map: pass --map NAME|PATH")
     options = _read_options(args) if args.map else {**survey.meta.get("map_read", {}), **_read_options(args)}
     bathymetry = load_any(name, **options)
-    return in_map_frame(survey, bathymetry), bathymetry
+    return survey_on_map(survey, bathymetry, other_map=args.other_map), bathymetry
 
 
 def _model(args: argparse.Namespace):
@@ -582,7 +585,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="csv-xyz: the log (time, north, east or lat, lon, heading deg, depth) and "
                    "the soundings (time x y z)")
     p.add_argument("--crs", help="projected CRS of the survey: of north/east, or the one lat/lon "
-                   "go into (e.g. EPSG:32633); csv-xyz lat/lon default: a local transverse Mercator")
+                   "go into (e.g. EPSG:32633; one in feet is converted to metres); csv-xyz lat/lon "
+                   "default: a local transverse Mercator")
     p.add_argument("--timezone", help="zone of times written without one (e.g. UTC, Europe/Berlin)")
     p.add_argument("--columns", metavar="KEY=COL,...",
                    help="csv-xyz: log columns by name or 0-based position, keys time, north, east, "
@@ -591,6 +595,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-format", choices=["auto", "seconds", "epoch", "iso"],
                    help="csv-xyz: how times read (default auto: text ISO 8601, numbers from 1e8 epoch)")
     p.add_argument("--sign", choices=["depth", "elevation"], help="csv-xyz: what z is (default depth)")
+    p.add_argument("--units", help="csv-xyz: unit of z and the log's depth (m, ft, US survey foot; "
+                   "default m; required with north/east in a CRS in feet)")
     p.add_argument("--water-level", type=Path, metavar="LEVEL.csv",
                    help="sontek-sum: water-level table; depths below its zero")
     p.add_argument("--water-level-interpolate", action="store_true",
@@ -628,7 +634,8 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--map", metavar="NAME|PATH", help="the map (default: the one named in the survey)")
         _map_read_options(p)
         p.add_argument("--other-map", action="store_true",
-                       help="navigate a survey simulated on one map on another (refused otherwise)")
+                       help="navigate a survey on a map not its own: one simulated on another map, or "
+                       "one that does not overlap the map's data (refused otherwise)")
         _output(
             p,
             "track file by suffix: .csv (time, utc, lat, lon, north, east, heading, covariance), "
