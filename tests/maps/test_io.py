@@ -175,11 +175,16 @@ def test_non_monotonic_coordinates_and_all_nan_are_named(tmp_path):
 
 
 def test_several_grids_need_a_variable(tmp_path):
-    ds = xr.Dataset({k: (("y", "x"), np.ones((2, 2))) for k in ("depth", "error")},
+    ds = xr.Dataset({k: (("y", "x"), np.ones((2, 2))) for k in ("depth", "slope")},
                     coords={"x": [0.0, 1], "y": [0.0, 1]})
     ds.to_netcdf(tmp_path / "two.nc")
-    with pytest.raises(MapFormatError, match=r"2 2-D variables \['depth', 'error'\]"):
+    with pytest.raises(MapFormatError, match=r"2 2-D variables \['depth', 'slope'\]"):
         read_map(tmp_path / "two.nc")
     assert read_map(tmp_path / "two.nc", variable="depth").shape == (2, 2)
     with pytest.raises(MapFormatError, match="no variable 'nope'"):
         read_map(tmp_path / "two.nc", variable="nope")
+    # a second grid named like an uncertainty is the depths' std, not a rival grid
+    ds.rename({"slope": "error"}).to_netcdf(tmp_path / "with_error.nc")
+    m = read_map(tmp_path / "with_error.nc")
+    assert m.depth_std is not None and np.all(m.depth_std == 1.0)
+    assert read_map(tmp_path / "with_error.nc", uncertainty=False).depth_std is None
