@@ -97,9 +97,14 @@ def cmd_maps_list(args: argparse.Namespace) -> None:
 
 
 def cmd_maps_info(args: argparse.Namespace) -> None:
+    from tangraph.maps import load_any
     from tangraph.maps.statistics import describe
 
-    r = describe(_load(args))
+    options = _read_options(args)
+    if args.uncertainty is not None:
+        options["uncertainty"] = False if args.uncertainty.lower() == "none" else args.uncertainty
+    bathymetry = load_any(args.map, **options)
+    r = {**describe(bathymetry), **bathymetry.error_summary()}
     if args.json:
         _print_json(r)
         return
@@ -118,6 +123,10 @@ def cmd_maps_info(args: argparse.Namespace) -> None:
     print(f"slope        median {r['slope_median_deg']:.2f} deg")
     w = r["roughness_window"]
     print(f"roughness    median {r['roughness_median_m']:.3f} m (plane-fit residual std, {w} x {w} cells)")
+    error = [f"depth std median {r['depth_std_m']['median']:.3f} m, max {r['depth_std_m']['max']:.3f} m"
+             ] if "depth_std_m" in r else []
+    error += [f"correlation length {r['correlation_length_m']:g} m"] if "correlation_length_m" in r else []
+    print(f"map error    {'; '.join(error) or 'not in the map (the model states its map std)'}")
 
 
 def cmd_maps_plot(args: argparse.Namespace) -> None:
@@ -167,7 +176,7 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
     if (surveys and len(surveys) != len(inputs)) or (not surveys and len(inputs) > 1):
         raise TangraphError("maps grid: give survey files (.nc) or one x y z text file, not both")
     if surveys:
-        for option, given in (("--sign", args.sign), ("--crs", args.crs)):
+        for option, given in (("--sign", args.sign), ("--crs", args.crs), ("--units", args.units)):
             if given is not None:
                 raise TangraphError(
                     f"maps grid: {option} applies to x y z text; survey files hold depths (positive "
@@ -183,17 +192,22 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
             raise TangraphError("maps grid: x y z text input needs --sign (depth or elevation)")
         if args.use_dr:
             raise TangraphError("maps grid: --use-dr applies to survey files (.nc), not x y z text")
-        soundings = read_soundings(inputs[0], sign=args.sign, crs=args.crs)
+        soundings = read_soundings(inputs[0], sign=args.sign, crs=args.crs, units=args.units)
         grid = block_reduce(soundings.points, cell=args.cell, statistic=args.statistic,
                             name=args.output.stem, crs=soundings.crs, origin=soundings.origin)
         grid = fill_gaps(grid, args.fill) if args.fill else grid
     write_sounding_grid(grid, args.output, overwrite=args.force)
     gridded = int(grid.count.sum())
     measured = int(np.count_nonzero(grid.count))
+    error = grid.depth.error_summary()
     print(
         f"gridded {gridded} soundings into {measured} of {grid.count.size} cells "
         f"({args.cell:g} m, {grid.statistic}); {grid.n_filled} more filled by --fill {args.fill}; "
-        f"dropped {grid.n_dropped} without depth; wrote {args.output}"
+        f"dropped {grid.n_dropped} without depth; "
+        + (f"map error: std median {error['depth_std_m']['median']:.3f} m, max "
+           f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m; "
+           if error else "map error: not told by these soundings (no depth_std written); ")
+        + f"wrote {args.output}"
     )
 
 
@@ -504,8 +518,13 @@ def build_parser() -> argparse.ArgumentParser:
     maps_sub = maps.add_subparsers(dest="maps_command", required=True)
     p = maps_sub.add_parser("list", help="list the map catalogue")
     p.set_defaults(func=cmd_maps_list)
-    p = maps_sub.add_parser("info", help="describe a map")
+    p = maps_sub.add_parser("info", help="describe a map (and its error layer, if it has one)")
     _map_argument(p)
+    p.add_argument(
+        "--uncertainty", metavar="VAR|none",
+        help="map file: the variable (band) holding the std of its depths, where the file's "
+        "ancillary_variables or names do not tell; 'none' reads the depths alone",
+    )
     p.set_defaults(func=cmd_maps_info)
     p = maps_sub.add_parser("plot", help="hill-shaded figure of a map")
     _map_argument(p)
@@ -531,7 +550,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="grid surveys (.nc, at their reference tracks) or scattered soundings (x y z text) into a map",
         description="Grid the soundings of one or more survey files (.nc), each placed at its "
         "reference track (GPS or truth) and put in the frame (CRS, origin) of the first, or of one "
-        "x y z text file, into a map: median or mean, count and std per cell.",
+        "x y z text file, into a map: median or mean, count and std per cell, and the map's error "
+        "(depth_std per cell: the standard error of a measured cell, growing with the distance to "
+        "the data in a filled one; a correlation length).",
     )
     p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
                    help="survey files (.nc), or one x/east y/north z text file")
@@ -555,7 +576,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="x y z text only (required there): what z is, depth (positive down) or elevation",
     )
     p.add_argument("--crs", help="x y z text only: CRS of x, y (e.g. EPSG:4326); default local metres")
-    _output(p, "NetCDF file: depth (the statistic), mean, median, count and std per cell")
+    p.add_argument(
+        "--units",
+        help="x y z text only: unit of z (m, ft, us-ft, US survey foot, fathom; default m; required "
+        "with x, y in a CRS in feet)",
+    )
+    _output(p, "NetCDF file: depth (the statistic) with its depth_std, mean, median, count and std "
+            "per cell")
     p.set_defaults(func=cmd_maps_grid)
 
     p = sub.add_parser("simulate", help="simulate a survey from a scenario")
