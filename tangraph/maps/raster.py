@@ -72,7 +72,8 @@ def open_raster(path, *, label: str, nodata=None, driver: str | None = None,
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
             src = rasterio.open(path, driver=driver) if driver else rasterio.open(path)
         with src:
-            check_memory((src.height, src.width, src.count), str(path))
+            check_memory((src.height, src.width) if src.count == 1 else (src.count, src.height, src.width),
+                         str(path))
             bands = tuple(_mask_nodata(np.ma.filled(src.read(k, masked=True).astype(float), np.nan), nodata)
                           for k in range(1, src.count + 1))
             units = tuple((src.units[k] if src.units else None) or src.tags(k + 1).get("units")
