@@ -108,8 +108,8 @@ def read_bag(path, *, crs=None, cell=None, name=None, nodata=None, units=None,
     >>> from tangraph.maps import BathymetryMap, read_map, write_map
     >>> m = BathymetryMap(north=[0.0, 10, 20], east=[0.0, 10], depth=[[20.0, 21], [22, 23], [24, 25]],
     ...                   crs="EPSG:32633", origin=(6e6, 5e5), depth_std=np.full((3, 2), 0.3))
-    >>> path = write_map(m, pathlib.Path(tempfile.mkdtemp()) / "m.bag")
-    >>> back = read_map(path)
+    >>> with tempfile.TemporaryDirectory() as folder:
+    ...     back = read_map(write_map(m, pathlib.Path(folder) / "m.bag"))
     >>> back.depth[0].tolist(), back.crs, round(float(back.depth_std[0, 0]), 3)
     ([20.0, 21.0], 'EPSG:32633', 0.3)
     """

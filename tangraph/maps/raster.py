@@ -138,6 +138,8 @@ def _null_towgs84(bound) -> bool:
 def _std_band(raster: Raster, uncertainty) -> int | None:
     """Index of the band holding the depths' std (None: read the depths alone)."""
     path, count = raster.path, len(raster.bands)
+    if count == 1 and (uncertainty is True or isinstance(uncertainty, str)):
+        raise MapFormatError(f"{path}: one band, no uncertainty band to read (uncertainty={uncertainty!r})")
     if count == 1 or uncertainty is False:
         if count > 2:
             raise MapFormatError(f"{path}: {count} bands; one band of depths is expected")

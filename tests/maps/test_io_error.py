@@ -86,6 +86,8 @@ def test_geotiff_second_band_says_what_it_holds(tmp_path):
         assert float(src.tags()["TANGRAPH_ERROR_CORRELATION_LENGTH_M"]) == 35.5
     with rasterio.open(write_map(m.replace(depth_std=None), tmp_path / "one.tif")) as src:
         assert src.count == 1
+    with pytest.raises(MapFormatError, match=r"one\.tif: one band, no uncertainty band to read"):
+        read_map(tmp_path / "one.tif", uncertainty=True)
 
 
 def test_xyz_carries_the_std_as_a_fourth_column(tmp_path):
