@@ -45,10 +45,12 @@ import logging
 from typing import Literal
 
 import numpy as np
+from scipy import sparse
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.navigation_model import NavigationModel
+from tangraph.sensors.terrain import MapError, map_error
 from tangraph.survey import Survey
 
 __all__ = ["BoundKind", "CramerRaoBound", "bound_rmse", "metrics_with_bound", "posterior_crb"]
@@ -83,6 +85,9 @@ class CramerRaoBound:
     tide_std: float
     kind: BoundKind
     n_soundings: int = 0
+    map_error: bool = False
+    field_nodes: int = 0
+    field_spacing: float = 0.0
 
     def __post_init__(self) -> None:
         pos = np.array(self.position_cov, dtype=np.float64)
@@ -98,6 +103,9 @@ class CramerRaoBound:
             object.__setattr__(self, name, a)
         object.__setattr__(self, "tide_std", float(self.tide_std))
         object.__setattr__(self, "n_soundings", int(self.n_soundings))
+        object.__setattr__(self, "map_error", bool(self.map_error))
+        object.__setattr__(self, "field_nodes", int(self.field_nodes))
+        object.__setattr__(self, "field_spacing", float(self.field_spacing))
 
     @property
     def n_pings(self) -> int:
@@ -180,21 +188,27 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
     scale = layout.scale(model, survey.time)
     f, q = _transitions(survey, model, layout)
     features, n_soundings = _sounding_features(survey, bathymetry, order)
-    factor = _information_factor(features, model.measurement_std, layout)
     # Work in units of each state's natural spread: dp / initial std, s / its prior std, ...
     f = f / scale[:, None] * scale[None, :]
     q = q / np.outer(scale, scale)
-    factor = factor * scale[:, None]
     p0 = np.diag(layout.prior_variance(model)) / np.outer(scale, scale)
-    filtered, predicted = _forward(p0, f, q, factor)
-    p = filtered if kind == "filter" else _rts(filtered, predicted, f)
-    p = p * np.outer(scale, scale)
-    last = p[-1]
-    cal = last[np.ix_(layout.calibration, layout.calibration)]
-    tide = float(np.sqrt(max(last[layout.tide, layout.tide], 0.0))) if layout.tide is not None else 0.0
-    logger.debug("posterior_crb: %s bound over %d pings and %d soundings", kind, survey.n_pings, n_soundings)
-    return CramerRaoBound(position_cov=p[:, :2, :2], calibration_cov=cal, tide_std=tide, kind=kind,
-                          n_soundings=n_soundings)
+    error = map_error(bathymetry, model)
+    if error.is_zero or n_soundings == 0:
+        factor = _information_factor(features, model.sounding_std, layout) * scale[:, None]
+        filtered, predicted = _forward(p0, f, q, factor)
+        p = filtered if kind == "filter" else _rts(filtered, predicted, f)
+        p = p * np.outer(scale, scale)
+        position, constants, extra = p[:, :2, :2], p[-1], {}
+    else:
+        position, constants, extra = _field_bound(survey, model, error, kind, layout, scale, f, q, p0,
+                                                  features)
+    cal = constants[np.ix_(layout.calibration, layout.calibration)]
+    tide = layout.tide
+    tide_std = float(np.sqrt(max(constants[tide, tide], 0.0))) if tide is not None else 0.0
+    logger.debug("posterior_crb: %s bound over %d pings and %d soundings%s", kind, survey.n_pings,
+                 n_soundings, f", a map error field of {extra['field_nodes']} nodes" if extra else "")
+    return CramerRaoBound(position_cov=position, calibration_cov=cal, tide_std=tide_std, kind=kind,
+                          n_soundings=n_soundings, **extra)
 
 
 def bound_rmse(bound: CramerRaoBound, skip: int = 0) -> float:
@@ -332,17 +346,22 @@ def _sounding_features(survey: Survey, bathymetry: BathymetryMap, order) -> tupl
     return features, int(used.sum())
 
 
+def _sounding_jacobian(layout: _Layout) -> np.ndarray:
+    """``(n, 4)``: a sounding's Jacobian on the state is ``jacobian @ features``."""
+    jacobian = np.zeros((layout.n, 4))
+    jacobian[0, 0] = jacobian[1, 1] = -1.0
+    jacobian[layout.heading, 2] = -1.0
+    if layout.tide is not None:
+        jacobian[layout.tide, 3] = 1.0
+    return jacobian
+
+
 def _information_factor(features: np.ndarray, sigma: float, layout: _Layout) -> np.ndarray:
     """``L_k`` (K, n, 4) with ``L_k L_k^T`` the information of ping k's soundings on the state."""
     info = np.swapaxes(features, 1, 2) @ features / sigma**2
     value, vector = np.linalg.eigh(info)
     root = vector * np.sqrt(np.maximum(value, 0.0))[:, None, :]
-    jacobian = np.zeros((layout.n, 4))  # d z / d state = jacobian @ features
-    jacobian[0, 0] = jacobian[1, 1] = -1.0
-    jacobian[layout.heading, 2] = -1.0
-    if layout.tide is not None:
-        jacobian[layout.tide, 3] = 1.0
-    return jacobian @ root
+    return _sounding_jacobian(layout) @ root
 
 
 def _forward(p0: np.ndarray, f: np.ndarray, q: np.ndarray,
@@ -386,3 +405,216 @@ def _rts(filtered: np.ndarray, predicted: np.ndarray, f: np.ndarray) -> np.ndarr
         s = filtered[i] + g @ (smoothed[i + 1] - predicted[i]) @ g.T
         smoothed[i] = 0.5 * (s + s.T)
     return smoothed
+
+
+# -- the bound with the map's error field -------------------------------------------------------
+#: the variance (in units of the state's natural spread squared) given to a step of the error
+#: state whose variance is zero (a DR without speed noise): an information matrix cannot hold an
+#: exact constraint. It biases the bound by about this much times the pings (relative), and
+#: the rounding of the stiffer system grows as it shrinks.
+_ZERO_VARIANCE = 1e-8
+#: with a map error field, the filter bound is solved at this many pings at most
+_FILTER_PINGS = 250
+
+
+def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: BoundKind,
+                 layout: _Layout, scale: np.ndarray, f: np.ndarray, q: np.ndarray, p0: np.ndarray,
+                 features: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The bound with the map's error as a field of nodes (``f, q, p0`` in the scaled units of
+    ``scale``): position covariances (K, 2, 2) in m^2, the constants' covariance (n, n; only the
+    calibration and tide entries are set) and the bound's fields that describe the field."""
+    from tangraph.eval import selected_inverse as si  # numba loads here, not with tangraph.eval
+    from tangraph.eval.map_field import map_error_field
+
+    truth = survey.true_pose
+    assert truth is not None
+    north, east = survey.footprints(truth)
+    used = features[..., 3] > 0
+    field = map_error_field(north[used], east[used], error)
+    node, weight = field.weights(north[used], east[used])
+    std = np.ones(used.shape)  # each sounding's noise: its own and the field's nugget
+    std[used] = np.sqrt(model.sounding_std**2 + field.nugget(node, weight))
+    var = _Variables.of(layout, survey.n_pings, field.n_nodes)
+    relations, relation_ping = _relation_rows(var, f, q, np.diag(p0))
+    soundings = _sounding_rows(var, layout, scale, features, field, node, weight, std[used])
+    rows = sparse.vstack([relations, soundings], format="csr")
+    row_ping = np.concatenate([relation_ping, np.nonzero(used)[0]])
+    sort = np.argsort(row_ping, kind="stable")
+    # A state whose prior variance is zero (the walk at the first ping) is zero: it leaves every
+    # row and keeps a unit diagonal of its own.
+    pinned = var.column(np.flatnonzero(np.diag(p0) == 0), 0)
+    keep = np.ones(var.n)
+    keep[pinned] = 0.0
+    rows, row_ping = sparse.csr_array(rows[sort] @ sparse.diags_array(keep)), row_ping[sort]
+    base = _sum(_field_prior(var, field), sparse.coo_array((1.0 - keep[pinned], (pinned, pinned)),
+                                                           shape=(var.n, var.n)))
+    information = _sum(base, rows.T @ rows)
+    order = si.fill_reducing_order(information)
+    factor = si.factor(information, order)
+    z = si.selected_inverse(factor)
+    dp = var.positions(np.arange(survey.n_pings))  # (K, 2)
+    position = si.inverse_entries(factor, z, dp[:, :, None], dp[:, None, :])
+    constants = np.zeros((layout.n, layout.n))
+    held = np.flatnonzero(var.step == 0)
+    at = var.column(held, 0)
+    constants[np.ix_(held, held)] = si.inverse_entries(factor, z, at[:, None], at[None, :])
+    if kind == "filter":
+        known = _information_factor(features / std[..., None], 1.0, layout) * scale[:, None]
+        known_field = _forward(p0, f, q, known)[0][:, :2, :2]  # the filter were the field known
+        position = _filter_positions(var, rows, row_ping, base, order, position, known_field)
+    extra = {"map_error": True, "field_nodes": field.n_nodes, "field_spacing": field.spacing}
+    return position * np.outer(scale[:2], scale[:2]), constants * np.outer(scale, scale), extra
+
+
+@dataclasses.dataclass(frozen=True)
+class _Variables:
+    """Columns of the joint unknowns: the error states held per ping (``dp``, walk, white),
+    ping by ping; then the constants (scale, bias, tide) once; then the field's nodes."""
+
+    where: np.ndarray  # (n,) column of each state at ping 0
+    step: np.ndarray  # (n,) columns per ping (0 for a constant)
+    n_pings: int
+    n_field: int
+
+    @classmethod
+    def of(cls, layout: _Layout, n_pings: int, n_field: int) -> _Variables:
+        constant = np.zeros(layout.n, dtype=bool)
+        constant[layout.calibration] = True
+        if layout.tide is not None:
+            constant[layout.tide] = True
+        per_ping = int(np.sum(~constant))
+        where = np.empty(layout.n, dtype=np.int64)
+        where[~constant] = np.arange(per_ping)
+        where[constant] = n_pings * per_ping + np.arange(int(constant.sum()))
+        return cls(where, np.where(constant, 0, per_ping), n_pings, n_field)
+
+    @property
+    def per_ping(self) -> int:
+        return int(self.step.max())
+
+    @property
+    def n_states(self) -> int:
+        return self.n_pings * self.per_ping + int(np.sum(self.step == 0))
+
+    @property
+    def n(self) -> int:
+        return self.n_states + self.n_field
+
+    def column(self, state, ping) -> np.ndarray:
+        return self.where[state] + self.step[state] * np.asarray(ping)
+
+    def positions(self, ping: np.ndarray) -> np.ndarray:
+        """Columns ``(dp_north, dp_east)`` (len(ping), 2) of the pings."""
+        return self.where[:2] + self.per_ping * np.asarray(ping)[:, None]
+
+    def active(self, last: int) -> np.ndarray:
+        """Columns of the survey cut after ping ``last``: its pings' states, constants, field."""
+        return np.r_[0:(last + 1) * self.per_ping, self.n_pings * self.per_ping:self.n]
+
+
+def _relation_rows(var: _Variables, f: np.ndarray, q: np.ndarray,
+                   p0: np.ndarray) -> tuple[sparse.csr_array, np.ndarray]:
+    """The prior ``x_0 ~ N(0, p0)`` and the transitions ``x_{k+1} - F_k x_k ~ N(0, Q_k)`` of the
+    states held per ping as rows divided by their std (information ``rows^T rows``), with the
+    ping each belongs to (the constants' rows of ``F`` say they stay constant: they are one
+    variable)."""
+    n = p0.size
+    rows, cols, vals, variance = [np.arange(n)], [var.column(np.arange(n), 0)], [np.ones(n)], [p0]
+    ping = [np.zeros(n, dtype=np.int64)]
+    held = np.flatnonzero(var.step > 0)
+    if var.n_pings > 1:
+        k, i = np.meshgrid(np.arange(var.n_pings - 1), held, indexing="ij")
+        row = n + np.arange(k.size).reshape(k.shape)
+        rows.append(row.ravel())
+        cols.append(var.column(i, k + 1).ravel())
+        vals.append(np.ones(k.size))
+        variance.append(q[k, i, i].ravel())
+        ping.append((k + 1).ravel())
+        a, b, c = np.nonzero(f[:, held, :])
+        rows.append(row[a, b])
+        cols.append(var.column(c, a))
+        vals.append(-f[a, held[b], c])
+    variance[0] = np.where(p0 > 0, p0, 1.0)  # a zero prior variance: see the caller
+    std = np.sqrt(np.maximum(np.concatenate(variance), _ZERO_VARIANCE))
+    row_index = np.concatenate(rows)
+    out = sparse.csr_array((np.concatenate(vals) / std[row_index], (row_index, np.concatenate(cols))),
+                           shape=(std.size, var.n))
+    return out, np.concatenate(ping)
+
+
+def _sounding_rows(var: _Variables, layout: _Layout, scale: np.ndarray, features: np.ndarray, field,
+                   node: np.ndarray, weight: np.ndarray, std: np.ndarray) -> sparse.csr_array:
+    """Every sounding's row divided by its ``std``: ``jacobian @ features`` on its ping's states
+    and the constants (scaled), ``s_a w_a`` on the field's nodes ``node`` (M, 4) around its true
+    footprint (``weight`` their bilinear weights)."""
+    used = features[..., 3] > 0
+    ping = np.nonzero(used)[0]
+    coef = features[used] @ _sounding_jacobian(layout).T * scale  # (M, n)
+    m = coef.shape[0]
+    row, state = np.nonzero(coef)
+    rows = np.concatenate([row, np.repeat(np.arange(m), 4)])
+    cols = np.concatenate([var.column(state, ping[row]), var.n_states + node.ravel()])
+    vals = np.concatenate([coef[row, state], (weight * field.std[node]).ravel()]) / std[rows]
+    return sparse.csr_array((vals, (rows, cols)), shape=(m, var.n))
+
+
+def _field_prior(var: _Variables, field) -> sparse.csc_array:
+    """The field's precision on its nodes' columns, and explicit zeros where the bound reads the
+    inverse (each ping's ``dp_north, dp_east`` and the constants among themselves), so that
+    those entries are on the factor's pattern."""
+    prior = sparse.coo_array(field.precision)
+    dp = var.positions(np.arange(var.n_pings))
+    constants = var.column(np.flatnonzero(var.step == 0), 0)
+    a, b = np.meshgrid(constants, constants)
+    rows = np.concatenate([prior.row + var.n_states, dp[:, 0], dp[:, 1], a.ravel()])
+    cols = np.concatenate([prior.col + var.n_states, dp[:, 1], dp[:, 0], b.ravel()])
+    vals = np.concatenate([prior.data, np.zeros(2 * var.n_pings + a.size)])
+    return sparse.csc_array(sparse.coo_array((vals, (rows, cols)), shape=(var.n, var.n)))
+
+
+def _sum(*terms) -> sparse.csc_array:
+    """The sum of sparse matrices keeping every stored entry, explicit zeros too (``+`` drops
+    them, and with them the entries the bound reads)."""
+    parts = [sparse.coo_array(t) for t in terms]
+    data = np.concatenate([p.data for p in parts])
+    index = (np.concatenate([p.row for p in parts]), np.concatenate([p.col for p in parts]))
+    return sparse.csc_array(sparse.coo_array((data, index), shape=parts[0].shape))
+
+
+def _filter_positions(var: _Variables, rows: sparse.csr_array, row_ping: np.ndarray,
+                      base: sparse.csc_array, order: np.ndarray, smoother: np.ndarray,
+                      known_field: np.ndarray) -> np.ndarray:
+    """The filter bound (scaled units). At the pings of an evenly spaced subset (all of a survey
+    of at most ``_FILTER_PINGS`` pings; the first and last always), the bound of the survey cut
+    after the ping, read at it (its position ordered last: the inverse of the factor's trailing
+    2 x 2 block). In between, the filter bound were the field known (``known_field``, a Kalman
+    filter at every ping) plus what the field adds to it, interpolated linearly between the
+    subset's pings; then never below the smoother bound (the excess over it made positive
+    semi-definite)."""
+    from tangraph.eval import selected_inverse as si
+
+    k = var.n_pings
+    pings = np.unique(np.round(np.linspace(0, k - 1, min(k, _FILTER_PINGS))).astype(np.int64))
+    ends = np.searchsorted(row_ping, pings, side="right")
+    rank = np.empty(var.n, dtype=np.int64)
+    rank[order] = np.arange(var.n)
+    information = base
+    added = np.empty((pings.size, 2, 2))
+    start = 0
+    for t, (ping, end) in enumerate(zip(pings, ends, strict=True)):
+        new = rows[start:end]
+        information = _sum(information, new.T @ new)
+        start = end
+        active = var.active(int(ping))
+        local = np.argsort(rank[active], kind="stable")
+        last = ping * var.per_ping + np.arange(2)  # dp of the ping: local = global index here
+        local = np.concatenate([local[~np.isin(local, last)], last])
+        factor = si.factor(information[active][:, active], local)
+        z = si.selected_inverse(factor, first=active.size - 2)
+        added[t] = si.inverse_entries(factor, z, last[:, None], last[None, :]) - known_field[ping]
+    out = known_field.copy()
+    for a in range(2):
+        for b in range(2):
+            out[:, a, b] += np.interp(np.arange(k), pings, added[:, a, b])
+    value, vector = np.linalg.eigh(out - smoother)
+    return smoother + (vector * np.maximum(value, 0.0)[:, None, :]) @ np.swapaxes(vector, 1, 2)
