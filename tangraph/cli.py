@@ -498,6 +498,7 @@ def cmd_demo(args: argparse.Namespace) -> None:
         quick=args.quick,
         force=args.force,
         progress=_progress(args),
+        map_error=args.map_error,
     )
     print(format_table(result.rows))
     print(f"wrote {result.report} and {len(result.figures)} figures in {result.seconds:.0f} s")
@@ -710,6 +711,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=SEED, default=7, help="seed of the simulation and the filters")
     p.add_argument("--quick", action="store_true", help="half the survey, fewer particles")
     p.add_argument("--force", action="store_true", help="replace the report folder if it exists")
+    p.add_argument("--map-error", action="store_true",
+                   help="a seafloor that is not the map: navigate on a prior map gridded from a simulated "
+                   "earlier survey of it")
     p.set_defaults(func=cmd_demo)
     for name in ("maps info", "survey info", "navigate", "smooth"):
         _json_option(_subparser(parser, name.split()))

@@ -55,11 +55,20 @@ class DemoResult:
     seconds: float
 
 
-def _scenario_for(map_name: str) -> str:
+def _scenario_for(map_name: str, map_error: bool = False) -> str:
     from tangraph.maps import catalogue
+    from tangraph.sim.scenario import list_scenarios
 
     if map_name in DEMO_SCENARIOS:
-        return DEMO_SCENARIOS[map_name]
+        name = DEMO_SCENARIOS[map_name]
+        if not map_error:
+            return name
+        if f"{name}-map-error" not in list_scenarios():
+            known = list_scenarios()
+            with_error = ", ".join(m for m, s in DEMO_SCENARIOS.items() if f"{s}-map-error" in known)
+            raise TangraphError(f"the demo on map {map_name!r} has no variant whose seafloor is not the map; "
+                                f"--map-error runs on: {with_error}")
+        return f"{name}-map-error"
     known = ", ".join(DEMO_SCENARIOS)
     if map_name in catalogue():
         raise TangraphError(
@@ -177,6 +186,13 @@ def _report(folder: Path, survey, bathymetry, rows, settings: dict, seconds: flo
     dr, best_filter = by["dead reckoning"], min((by[f] for f in FILTERS), key=lambda r: r["rmse"])
     smoother, online = by["smoother"], by["isam2"]
     quick = " --quick" if settings["quick"] else ""
+    error_option = " --map-error" if settings.get("map_error") else ""
+    world = ""
+    if settings.get("map_error"):
+        world = (f"\nThe seafloor is not the map: the soundings see the map plus relief it never had, and "
+                 f"every estimator navigates on `prior_map.nc`, gridded from a simulated earlier survey of "
+                 f"that seafloor (its true error: RMS {survey.meta['seafloor']['map_error_rms']:.2f} m), "
+                 "with the map's own error std and correlation length in its terrain model.\n")
     dr_settings = survey.meta["settings"]["dead_reckoning"]
     truth_heading = float(np.degrees(survey.dr_pose[-1, 2] - survey.true_pose[-1, 2]))
     bias_deg = float(np.degrees(dr_settings["heading_bias"]))
@@ -186,7 +202,7 @@ A simulated survey ({survey.meta.get("scenario")}: {survey.n_pings} pings of {su
 over {survey.time[-1] - survey.time[0]:.0f} s) with drifting dead reckoning, navigated by the
 online factor graph (iSAM2 with terrain-aided position fixes as priors), the batch smoother and
 three particle filters on the same soundings.
-
+{world}
 - Dead reckoning drifts up to {dr["max_error"]:.1f} m from the truth (final {dr["final_error"]:.1f} m,
   RMSE {dr["rmse"]:.1f} m).
 - The batch smoother: RMSE {smoother["rmse"]:.2f} m ({smoother["rmse"] / best_filter["rmse"]:.2f} x the best
@@ -219,9 +235,10 @@ three particle filters on the same soundings.
 smoothed track: the calibrated dead reckoning): the criterion surface, the Xie, Wang and
 calibrated 95 % regions, the fix's covariance ellipse and the truth.*
 
-Made by `tangraph demo --map {bathymetry.name} --seed {settings["seed"]}{quick}` in {seconds:.0f} s
-({datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")}); settings in `settings.json`,
-the survey in `survey.nc`, every track in `tracks/` (CSV with latitude/longitude where the map has a CRS).
+Made by `tangraph demo --map {settings["map"]} --seed {settings["seed"]}{quick}{error_option}` in
+{seconds:.0f} s ({datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC")}); settings in
+`settings.json`, the survey in `survey.nc`, every track in `tracks/` (CSV with latitude/longitude
+where the map has a CRS).
 """
     path = folder / "report.md"
     path.write_text(text)
@@ -243,6 +260,7 @@ def run_demo(
     quick: bool = False,
     force: bool = False,
     progress: bool = True,
+    map_error: bool = False,
 ) -> DemoResult:
     """Run the demo and write ``out/report.md`` with its figures, tracks and settings.
 
@@ -256,6 +274,10 @@ def run_demo(
         Seeds the simulation and every filter (children of one ``SeedSequence``).
     quick : bool
         Half the survey and fewer particles: a check that everything runs, in about a minute.
+    map_error : bool
+        Simulate a seafloor that is not the map (the map plus a random field) and navigate on a
+        prior map gridded from a simulated earlier survey of it (the scenario's ``-map-error``
+        variant, :mod:`tangraph.sim.seafloor`); the prior map is written as ``prior_map.nc``.
 
     Raises
     ------
@@ -265,13 +287,13 @@ def run_demo(
     """
     from tangraph.maps import load
     from tangraph.navigation import dead_reckoning_track, navigate
-    from tangraph.sim.scenario import load_scenario, simulate
+    from tangraph.sim.scenario import load_scenario, simulate_run
     from tangraph.survey import write_survey
     from tangraph.track import write_track_csv
 
     started = time.perf_counter()
     out = Path(out)
-    scenario = load_scenario(_scenario_for(map_name))
+    scenario = load_scenario(_scenario_for(map_name, map_error))
     if out.exists() and not force:
         raise FileExistsError(f"{out} exists; pass force=True (CLI: --force) to replace it")
     bathymetry = load(map_name)
@@ -284,9 +306,14 @@ def run_demo(
             shutil.rmtree(partial, ignore_errors=True)  # this process's name: ours to replace
             (partial / "tracks").mkdir(parents=True)
             bar.set_postfix_str(names[0])
-            survey = simulate(
-                scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry, seed=seed
-            )
+            run = simulate_run(scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry,
+                               seed=seed)
+            survey = run.survey
+            if run.world is not None:  # the estimators navigate on the prior map
+                from tangraph.maps import write_map
+
+                bathymetry = run.bathymetry
+                write_map(bathymetry, partial / "prior_map.nc")
             if quick:
                 survey = survey.pings(0, survey.n_pings // 2)
             write_survey(survey, partial / "survey.nc")
@@ -323,6 +350,7 @@ def run_demo(
             rows = [_row(label, track, survey, bounds) for label, track in tracks.items()]
             settings = {
                 "map": map_name,
+                "map_error": map_error,
                 "scenario": scenario.as_dict(),
                 "seed": seed,
                 "quick": quick,

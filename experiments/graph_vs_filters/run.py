@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-SCENARIOS = ("demo", "wang2019", "han2020", "chen2022", "demo-flat")
+SCENARIOS = ("demo", "wang2019", "han2020", "chen2022", "demo-flat", "demo-map-error", "wang2019-map-error",
+             "han2020-map-error")
 FILTERS = ("pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle")
 GRAPH = ("isam2", "smoother")
 
@@ -38,7 +39,7 @@ def _survey(config: dict, rng):
     import dataclasses
 
     from tangraph.maps import load_any
-    from tangraph.sim.scenario import load_scenario, simulate
+    from tangraph.sim.scenario import load_scenario, simulate_run
 
     name = config["scenario"]  # NAME-flat: the scenario over a flat seabed (no fix can be made)
     flat = name.endswith("-flat")
@@ -53,7 +54,9 @@ def _survey(config: dict, rng):
         depth = float(np.nanmedian(bathymetry.depth_at(truth[:, 0], truth[:, 1])))
         bathymetry = dataclasses.replace(bathymetry, depth=np.full(bathymetry.depth.shape, depth),
                                          name=f"{bathymetry.name}-flat")
-    return simulate(scenario, rng=rng, bathymetry=bathymetry), bathymetry
+    # a NAME-map-error scenario's estimators navigate on the prior map gridded from its seafloor
+    run = simulate_run(scenario, rng=rng, bathymetry=bathymetry)
+    return run.survey, run.bathymetry
 
 
 def _fix_coverage(track, truth) -> tuple[int, int]:
@@ -130,7 +133,7 @@ def summarise(table) -> list[dict]:
     rows = []
     for scenario, group in table.groupby("scenario", sort=False):
         columns = ["rmse", "final_error", "rmse_over_pcrb", "anees", "final_nees", "ms_per_step",
-                   "fixes_used", "fixes_covered"]
+                   "fixes_used", "fixes_covered", "confident_wrong"]
         means = group.groupby("method")[columns].mean()
         # the bound is on the mean squared error: RMSE / PCRB pooled over the runs
         pooled = group.assign(mse=group["rmse"] ** 2, bound=group["pcrb"] ** 2).groupby("method")[
@@ -166,6 +169,7 @@ def summarise(table) -> list[dict]:
                     f"final NEES in [{lo:.2f}, {hi:.2f}]": ""
                     if not np.isfinite(m.final_nees)
                     else ("yes" if lo <= m.final_nees <= hi else "no"),
+                    "poses NEES > 20 not flagged lost": m.confident_wrong if method != "dr" else np.nan,
                     "calibration within 2 sigma": within.get(method, np.nan) if method != "dr" else np.nan,
                     "fixes used": fixes if fixes else np.nan,
                     "fix coverage at 0.95": coverage,
