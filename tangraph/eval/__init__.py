@@ -3,7 +3,9 @@
 :mod:`tangraph.eval.metrics` compares a :class:`~tangraph.track.Track` with the true poses (RMSE,
 NEES and its chi-square band); :mod:`tangraph.eval.crb` computes the physical limit of a survey,
 the posterior Cramér-Rao bound (PCRB) of its linearised error-state model, to report next to an
-estimator's RMSE. Nothing here touches files.
+estimator's RMSE; where the map has an error, the bound carries it as a Gaussian-Markov random
+field (:mod:`tangraph.eval.map_field`) solved sparsely (:mod:`tangraph.eval.selected_inverse`).
+Nothing here touches files.
 """
 
 from tangraph.eval.crb import CramerRaoBound, bound_rmse, metrics_with_bound, posterior_crb

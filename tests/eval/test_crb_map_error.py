@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import tangraph.eval.crb as crb
+import tangraph.eval.map_field as map_field
 from tangraph.eval import bound_rmse, posterior_crb
 from tangraph.eval.map_field import map_error_field
 from tangraph.maps import BathymetryMap
@@ -105,7 +105,7 @@ def test_a_vanishing_field_tends_to_the_bound_without_it(kind):
 
 def test_a_dead_reckoning_without_speed_noise_is_bounded_through_a_tiny_step_variance():
     # An exact constraint cannot enter the information matrix: the step gets the variance
-    # crb._ZERO_VARIANCE in natural units, about that much times the pings off, relatively.
+    # map_field.ZERO_VARIANCE in natural units, about that much times the pings off, relatively.
     model = MODEL.replace(heading_noise=0.0, heading_walk=0.0, speed_noise=0.0)
     survey, seabed = _survey(), _seabed()
     old = posterior_crb(survey, seabed, model)
@@ -223,7 +223,7 @@ def test_a_long_range_map_error_is_shared_by_a_second_pass_of_the_same_line():
 def test_the_filter_bound_is_never_below_the_smoother_bound(monkeypatch, exact_pings):
     # 300 pings on circles (the track turns all the time) over the plane: the survey revisits its
     # own footprints. With 12 exact pings the rest are interpolated.
-    monkeypatch.setattr(crb, "_FILTER_PINGS", exact_pings)
+    monkeypatch.setattr(map_field, "FILTER_PINGS", exact_pings)
     survey, seabed = _survey(300, 7), _seabed(east_end=1000.0)
     model = FIELD.replace(map_correlation_length=40.0)
     smooth = posterior_crb(survey, seabed, model)
@@ -233,7 +233,7 @@ def test_the_filter_bound_is_never_below_the_smoother_bound(monkeypatch, exact_p
     assert np.max(gap[:-5]) > 1e-2
     np.testing.assert_allclose(filt.position_cov[-1], smooth.position_cov[-1], rtol=1e-8)
     if exact_pings == 12:  # where solved, the same as solving at every ping
-        monkeypatch.setattr(crb, "_FILTER_PINGS", survey.n_pings)
+        monkeypatch.setattr(map_field, "FILTER_PINGS", survey.n_pings)
         every = posterior_crb(survey, seabed, model, kind="filter").position_cov
         pings = np.unique(np.round(np.linspace(0, survey.n_pings - 1, 12)).astype(int))
         np.testing.assert_allclose(filt.position_cov[pings], every[pings], rtol=1e-8,
