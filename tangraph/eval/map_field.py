@@ -370,12 +370,12 @@ def _sum(*terms) -> sparse.csc_array:
 def _filter_positions(var: _Variables, rows: sparse.csr_array, row_ping: np.ndarray,
                       base: sparse.csc_array, order: np.ndarray, smoother: np.ndarray,
                       known_field: np.ndarray) -> np.ndarray:
-    """The filter bound. At the pings of an evenly spaced subset (all of a survey
-    of at most ``FILTER_PINGS`` pings; the first and last always), the bound of the survey cut
-    after the ping, read at it (its position ordered last: the inverse of the factor's trailing
-    2 x 2 block). In between, the filter bound were the field known (``known_field``, a Kalman
-    filter at every ping) plus what the field adds to it, interpolated linearly between the
-    subset's pings; then never below the smoother bound (the excess over it made positive
+    """The filter bound. At the pings of an evenly spaced subset (all of a survey of at most
+    ``FILTER_PINGS`` pings; the first and last always), the bound of the survey cut after the
+    ping, read at it (its position ordered last: the inverse of the factor's trailing 2 x 2
+    block). In between, the filter bound were the field known (``known_field``, a Kalman filter
+    at every ping) plus what the field adds to it, interpolated linearly between the subset's
+    pings; then never below the smoother bound (the excess over it made positive
     semi-definite)."""
     k = var.n_pings
     pings = np.unique(np.round(np.linspace(0, k - 1, min(k, FILTER_PINGS))).astype(np.int64))
