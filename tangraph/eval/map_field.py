@@ -42,8 +42,19 @@ from scipy import sparse
 from tangraph.eval import selected_inverse as si
 from tangraph.sensors.terrain import MapError
 
-__all__ = ["FILTER_PINGS", "MARGIN_LENGTHS", "MAX_NODES", "ZERO_VARIANCE", "ErrorState", "MapErrorField",
-           "field_bound", "lattice_correlation", "map_error_field", "spde_precision"]
+__all__ = [
+    "FILTER_PINGS",
+    "MARGIN_LENGTHS",
+    "MAX_NODES",
+    "ZERO_VARIANCE",
+    "CombinedField",
+    "ErrorState",
+    "MapErrorField",
+    "field_bound",
+    "lattice_correlation",
+    "map_error_field",
+    "spde_precision",
+]
 
 #: nodes per correlation length (at most: never finer than the map's cell)
 NODES_PER_LENGTH = 3
@@ -52,7 +63,7 @@ MARGIN_LENGTHS = 2.0
 #: most nodes of a grid (the spacing grows beyond it)
 MAX_NODES = 40_000
 #: the filter bound is solved at this many pings at most (interpolated in between)
-FILTER_PINGS = 250
+FILTER_PINGS = 60
 #: the variance (in units of the state's natural spread squared) given to a step of the error
 #: state whose variance is zero (a DR without speed noise): an information matrix cannot hold
 #: an exact constraint. It moves the bound by about this much times the pings (relative); the
@@ -166,9 +177,12 @@ def spde_precision(shape: tuple[int, int], c: float) -> sparse.csc_array:
 
 
 def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *,
-                    max_nodes: int = MAX_NODES) -> MapErrorField:
+                    max_nodes: int = MAX_NODES) -> MapErrorField | CombinedField:
     """The map error's field on a grid of nodes over the points ``north, east`` (the soundings'
-    true footprints) with a margin of :data:`MARGIN_LENGTHS` ranges.
+    true footprints), one grid per independent field of the error
+    (:meth:`~tangraph.sensors.MapError.components`: the cell-scale error and the excess of the
+    interpolated parts, each with its own range), each with a margin of
+    :data:`MARGIN_LENGTHS` ranges and at most ``max_nodes`` nodes.
 
     Examples
     --------
@@ -181,6 +195,11 @@ def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *,
     >>> field.spacing, field.shape, float(field.std[0])
     (20.0, (18, 13), 0.3)
     """
+    fields = [_one_field(north, east, part, max_nodes) for part in error.components()]
+    return fields[0] if len(fields) == 1 else CombinedField(tuple(fields))
+
+
+def _one_field(north: np.ndarray, east: np.ndarray, error: MapError, max_nodes: int) -> MapErrorField:
     length = error.correlation_length
     cell = float(max(error.bathymetry.cell_size))
     spacing = max(length / NODES_PER_LENGTH, cell)
@@ -201,6 +220,47 @@ def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *,
                          correlation=lattice_correlation(c)[1], correlation_length=length)
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class CombinedField:
+    """Independent fields summed (:meth:`~tangraph.sensors.MapError.components`), with the
+    interface of one :class:`MapErrorField`: their nodes one after the other, a block-diagonal
+    precision, a point's interpolation weights on every field's nodes, their nuggets summed."""
+
+    fields: tuple[MapErrorField, ...]
+
+    @property
+    def n_nodes(self) -> int:
+        return int(sum(f.n_nodes for f in self.fields))
+
+    @property
+    def spacing(self) -> float:
+        """The finest field's node spacing, m."""
+        return float(min(f.spacing for f in self.fields))
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.concatenate([f.std for f in self.fields])
+
+    @property
+    def precision(self) -> sparse.csc_array:
+        return sparse.csc_array(sparse.block_diag([f.precision for f in self.fields]))
+
+    def weights(self, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Node indices and weights (M, 4 per field), indices offset by the fields before."""
+        offsets = np.cumsum([0, *(f.n_nodes for f in self.fields)])
+        parts = [f.weights(north, east) for f in self.fields]
+        return (np.concatenate([index + start for (index, _), start in zip(parts, offsets, strict=False)],
+                               axis=-1),
+                np.concatenate([weight for _, weight in parts], axis=-1))
+
+    def nugget(self, index: np.ndarray, weight: np.ndarray) -> np.ndarray:
+        offsets = np.cumsum([0, *(f.n_nodes for f in self.fields)])
+        out = np.zeros(index.shape[0])
+        for n, (f, start) in enumerate(zip(self.fields, offsets, strict=False)):
+            out += f.nugget(index[:, 4 * n:4 * n + 4] - start, weight[:, 4 * n:4 * n + 4])
+        return out
+
+
 # -- the joint solve: the error state and the field ---------------------------------------------
 @dataclasses.dataclass(frozen=True, eq=False)
 class ErrorState:
@@ -218,7 +278,7 @@ class ErrorState:
     jacobian: np.ndarray
 
 
-def field_bound(state: ErrorState, field: MapErrorField, node: np.ndarray, weight: np.ndarray,
+def field_bound(state: ErrorState, field: MapErrorField | CombinedField, node: np.ndarray, weight: np.ndarray,
                 noise: np.ndarray, *,
                 known_filter: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Every ping's position covariance (K, 2, 2) and the constants' covariance (n, n; zero but
@@ -332,19 +392,19 @@ def _relation_rows(var: _Variables, f: np.ndarray, q: np.ndarray,
     return out, np.concatenate(ping)
 
 
-def _sounding_rows(var: _Variables, state: ErrorState, field: MapErrorField, node: np.ndarray,
+def _sounding_rows(var: _Variables, state: ErrorState, field, node: np.ndarray,
                    weight: np.ndarray, noise: np.ndarray) -> sparse.csr_array:
     """Every sounding's row divided by its noise std: its Jacobian on its ping's states and the
     constants, ``s_a w_a`` on the field's nodes ``node`` (M, 4) around its true footprint."""
     m = state.jacobian.shape[0]
     row, i = np.nonzero(state.jacobian)
-    rows = np.concatenate([row, np.repeat(np.arange(m), 4)])
+    rows = np.concatenate([row, np.repeat(np.arange(m), node.shape[1])])
     cols = np.concatenate([var.column(i, state.ping[row]), var.n_states + node.ravel()])
     vals = np.concatenate([state.jacobian[row, i], (weight * field.std[node]).ravel()]) / noise[rows]
     return sparse.csr_array((vals, (rows, cols)), shape=(m, var.n))
 
 
-def _field_prior(var: _Variables, field: MapErrorField) -> sparse.csc_array:
+def _field_prior(var: _Variables, field) -> sparse.csc_array:
     """The field's precision on its nodes' columns, and explicit zeros where the bound reads the
     inverse (each ping's ``dp_north, dp_east`` and the constants among themselves), so that
     those entries are on the factor's pattern."""

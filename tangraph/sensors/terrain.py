@@ -4,16 +4,26 @@ A sounding of the seafloor at ``p`` measures ``z = h(p) + d(p) + t + e``: ``h`` 
 (bilinear) depth, ``d`` the map's error (the true seafloor minus the map), ``t`` the tide and
 ``e ~ N(0, sounding_std^2)`` the sounding's own noise, independent between soundings. A map is
 gridded from earlier surveys, so ``d`` is a zero-mean Gaussian random field, **correlated in
-space**: ``cov(d(p), d(q)) = s(p) s(q) rho(|p - q|)`` with ``s`` the map's per-cell standard
-deviation (``BathymetryMap.depth_std``, else the navigation model's ``map_std`` everywhere) and
-``rho`` the Matérn (nu = 1) correlation of range ``L`` (``BathymetryMap.correlation_length``,
-else ``NavigationModel.map_correlation_length``, else one map cell):
+space**, at two scales. With ``s`` the map's per-cell standard deviation
+(``BathymetryMap.depth_std``, else the navigation model's ``map_std`` everywhere) and ``L`` its
+correlation length (``BathymetryMap.correlation_length``, else
+``NavigationModel.map_correlation_length``, else one map cell), ``d`` is the sum of two
+independent Matérn (nu = 1) fields (:meth:`MapError.components`):
 
-    ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / L``  (``rho(L)`` is about 0.14).
+- the **cell-scale** error, every cell's own (how well a surveyed cell's depth is known: the
+  noise averaged in it, the relief within it), at the level of the map's well-surveyed cells
+  (``s_c = min(s, s_25)``, ``s_25`` the lower quartile of ``s`` over the map), of range one cell;
+- the **excess** over that level, ``sqrt(s^2 - s_c^2)``, where the map was interpolated (gaps
+  between lines, filled cells), of range ``L``.
 
-It is the field a second-order SPDE on the plane gives (Lindgren, Rue & Lindström 2011), so the
-same field can be simulated (:func:`matern_field`) and carried as a sparse Gaussian-Markov
-prior by the bound.
+A field of std ``a(p)`` and range ``L`` has ``cov(d(p), d(q)) = a(p) a(q) rho(|p - q|)`` with
+
+    ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / L``  (``rho(L)`` is about 0.14),
+
+the field a second-order SPDE on the plane gives (Lindgren, Rue & Lindström 2011), so the same
+field can be simulated (:func:`matern_field`) and carried as a sparse Gaussian-Markov prior by
+the bound. A map with ``L`` of one cell or less, or a uniform std (a navigation model's
+``map_std``), has one field of range ``L``.
 
 **What the estimators use: the row-sum bound.** The exact likelihood of a survey's soundings has
 the dense covariance ``C = sounding_std^2 I + S R S`` (``R_ij = rho(|p_i - p_j|)``, ``S`` the
@@ -21,7 +31,7 @@ diagonal of ``s``). A filter or a fix that treated the soundings as independent 
 ``sounding_std^2 + s^2`` would count the same map error once for every sounding that sees it,
 and converge on the map's noise. Every estimator here instead gives sounding ``b`` the variance
 
-    ``v_b = sounding_std^2 + s_b sum_j s_j rho(|p_b - p_j|)``
+    ``v_b = sounding_std^2 + sum_fields a_b sum_j a_j rho(|p_b - p_j|)``
 
 (the sum over the survey's soundings, ``b`` itself included: one over the soundings that share
 its map error, weighted by how much they share it). Since ``S R S`` has non-negative entries,
@@ -116,6 +126,29 @@ class MapError:
         values = self.std[np.isfinite(self.std)]
         return float(np.median(values)) if values.size else 0.0
 
+    @property
+    def cell_length(self) -> float:
+        """The range of the cell-scale error: one cell of the map (m)."""
+        return float(max(self.bathymetry.cell_size))
+
+    def components(self) -> list[MapError]:
+        """The independent fields whose sum is the map error, each a :class:`MapError` of one
+        field: the cell-scale error at the level of the map's well-surveyed cells (the lower
+        quartile of its std), of range one cell, and the excess over it, of range
+        ``correlation_length`` (module docstring); one field of range ``correlation_length``
+        when that is at most a cell or the std is uniform; none for a perfect map."""
+        if self.is_zero:
+            return []
+        if self.correlation_length <= self.cell_length:
+            return [self]
+        floor = float(np.percentile(self.std[np.isfinite(self.std)], 25))
+        cell = np.minimum(self.std, floor)
+        excess = np.sqrt(np.maximum(self.std**2 - cell**2, 0.0))
+        if not np.any(np.nan_to_num(excess) > 0.01 * floor):  # a uniform std: one field of range L
+            return [self]
+        return [MapError(self.bathymetry, cell, self.cell_length),
+                MapError(self.bathymetry, excess, self.correlation_length)]
+
     def std_at(self, north, east) -> np.ndarray:
         """Bilinear std of the map's error at points (NaN where the map has no data)."""
         if self.is_zero:
@@ -193,15 +226,13 @@ def _map_variances(survey, bathymetry, model, poses) -> tuple[np.ndarray, np.nda
     has = np.isfinite(survey.beam_depth) & np.isfinite(north) & np.isfinite(east)
     own = np.full(north.shape, np.nan)
     shared = np.full(north.shape, np.nan)
-    error = map_error(bathymetry, model)
-    if error.is_zero:
-        own[has] = shared[has] = 0.0
-        return own, shared
-    s = error.std_at(north[has], east[has])
-    s = np.where(np.isfinite(s), s, error.typical_std)
-    sums = _weighted_correlation_sums(north[has], east[has], s, error.correlation_length)
-    own[has] = s * s
-    shared[has] = s * (sums - s)
+    own[has] = shared[has] = 0.0
+    for part in map_error(bathymetry, model).components():
+        a = part.std_at(north[has], east[has])
+        a = np.where(np.isfinite(a), a, part.typical_std)
+        sums = _weighted_correlation_sums(north[has], east[has], a, part.correlation_length)
+        own[has] += a * a
+        shared[has] += a * (sums - a)
     return own, shared
 
 

@@ -79,19 +79,26 @@ def test_the_grid_covers_the_footprints_with_a_margin_of_two_ranges():
 
 
 def test_node_stds_come_from_the_maps_error_and_its_median_off_the_data():
+    """One grid per independent field of the error (a varying std with a range over a cell:
+    the cell-scale error and the excess), each node's std its field's, the median off the data."""
     std = np.where(np.arange(100)[None, :] < 50, 0.1, 0.5) * np.ones((100, 1))
     error = map_error(_flat(std, 30.0), NavigationModel())
     field = map_error_field(np.array([500.0]), np.array([480.0]), error)
-    node_n, node_e = field.nodes()
-    want = error.std_at(node_n, node_e)
-    assert np.all(np.isfinite(want[(node_e < 480) | (node_e > 520)]))
-    np.testing.assert_allclose(field.std, np.where(np.isfinite(want), want, error.typical_std))
-    assert field.correlation_length == 30.0
+    parts = error.components()
+    assert len(field.fields) == len(parts) == 2
+    assert field.n_nodes == sum(f.n_nodes for f in field.fields)
+    for grid, part in zip(field.fields, parts, strict=True):
+        node_n, node_e = grid.nodes()
+        want = part.std_at(node_n, node_e)
+        assert np.all(np.isfinite(want[(node_e < 480) | (node_e > 520)]))
+        np.testing.assert_allclose(grid.std, np.where(np.isfinite(want), want, part.typical_std))
+    assert [f.correlation_length for f in field.fields] == [10.0, 30.0]
     corner = map_error_field(np.array([60.0]), np.array([60.0]), error)
-    cn, ce = corner.nodes()
-    off_data = ~np.isfinite(error.std_at(cn, ce))
-    assert off_data.any()
-    np.testing.assert_allclose(corner.std[off_data], error.typical_std)
+    for grid, part in zip(corner.fields, parts, strict=True):
+        cn, ce = grid.nodes()
+        off_data = ~np.isfinite(part.std_at(cn, ce))
+        assert off_data.any()
+        np.testing.assert_allclose(grid.std[off_data], part.typical_std)
 
 
 def test_the_nugget_gives_every_footprint_the_models_variance():

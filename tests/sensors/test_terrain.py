@@ -100,3 +100,19 @@ def test_the_information_exponent():
     assert information_exponent(tight, w, np.array([0.0]))[0] == 1.0  # a perfect map
     missing = np.array([[np.nan], [np.nan], [np.nan], [np.nan], [np.nan]])
     assert information_exponent(missing, w, np.array([0.04]))[0] == 0.0
+
+
+def test_a_map_with_gaps_splits_its_error_by_scale():
+    """Well-surveyed cells' error at the cell scale everywhere, the excess of the interpolated
+    ones over it correlated over the map's correlation length; the variance is kept."""
+    std = np.where(np.arange(100)[None, :] < 50, 0.1, 0.4) * np.ones((100, 1))
+    gappy = FLAT.replace(depth_std=std, correlation_length=40.0)
+    cell, excess = map_error(gappy, NavigationModel()).components()
+    assert (cell.correlation_length, excess.correlation_length) == (10.0, 40.0)
+    np.testing.assert_allclose(cell.std, 0.1)
+    np.testing.assert_allclose(cell.std**2 + excess.std**2, std**2)
+    assert np.all(excess.std[:, :50] == 0.0)
+    # a uniform std, or a range of a cell: one field
+    uniform = map_error(FLAT, NavigationModel(map_std=0.2, map_correlation_length=30.0)).components()
+    assert len(uniform) == 1 and uniform[0].correlation_length == 30.0
+    assert len(map_error(gappy.replace(correlation_length=10.0), NavigationModel()).components()) == 1
