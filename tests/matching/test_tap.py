@@ -136,7 +136,8 @@ def test_bad_input_is_refused_with_a_reason():
         tap_fix(s, m, 3, 10)
     with pytest.raises(MatchingError, match="fewer than min_soundings"):
         tap_fix(s.replace(beam_depth=np.where(np.arange(41) < 1, s.beam_depth, np.nan)), m, 9, 5)
-    with pytest.raises(MatchingError, match=r"no candidate within 50.0 m of \[-500.0, 0.0\] has every sounding"):
+    nowhere = r"no candidate within 50.0 m of \[-500.0, 0.0\] has every sounding"
+    with pytest.raises(MatchingError, match=nowhere):
         tap_fix(s, m, 9, 10, prior=(-500.0, 0.0))
 
 
