@@ -214,7 +214,9 @@ def main(argv=None) -> int:
     parser = study_parser(HERE, __doc__.splitlines()[0], runs=20, seed=6,
                           quick="4 runs of PF, IPF and SJCPF: minutes")
     parser.add_argument("--particles", type=int, default=1000, help="particles of every filter")
-    parser.add_argument("--scenarios", nargs="+", default=["demo", "wang2019", "han2020"], choices=SCENARIOS)
+    parser.add_argument("--scenarios", nargs="+", default=["demo", "wang2019", "han2020"], choices=SCENARIOS,
+                        help="NAME-flat: over a flat seabed; NAME-map-error: a seafloor that is not the map, "
+                        "navigated on a prior map gridded from a simulated earlier survey")
     parser.add_argument("--methods", nargs="+", choices=[*GRAPH, *FILTERS],
                         help="methods to run (default: the graph and every filter)")
     parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
@@ -240,7 +242,9 @@ def main(argv=None) -> int:
     if failed.all():
         return 1
     rows = summarise(table[~failed])
+    default_scenarios = ["demo", "wang2019", "han2020"]
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
+        ("" if args.scenarios == default_scenarios else "_" + "-".join(args.scenarios)) + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \
         "".join(f"_{item}" for item in args.graph)
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
