@@ -108,7 +108,8 @@ def _residual_sums_kernel(
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
 def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, tide, out):
-    """``out[p, b] = z_b - tide_p - h(x_p + R(turn_p) o_b)``, NaN where the map has no depth."""
+    """``out[b, p] = z_b - tide_p - h(x_p + R(turn_p) o_b)``, NaN where the map has no depth
+    (sounding-major, so the per-sounding passes run along memory)."""
     ny, nx = depth.shape
     for p in range(particles.shape[0]):
         pn = (particles[p, 0] - north0) * inv_dn
@@ -119,38 +120,45 @@ def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offs
             fy = pn + (c * offsets[b, 0] - s * offsets[b, 1]) * inv_dn
             fx = pe + (s * offsets[b, 0] + c * offsets[b, 1]) * inv_de
             if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
-                out[p, b] = np.nan
+                out[b, p] = np.nan
                 continue
             i = min(int(fy), ny - 2)
             j = min(int(fx), nx - 2)
-            out[p, b] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
+            out[b, p] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
 def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var,
-                   log_likelihood, tide_shift, total_precision):  # fmt: skip
-    """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift
-    and summed precision from the residuals ``(N, B)`` (NaN: no map) and the normalised
-    ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``. See the module docstring."""
-    n, nb = residual.shape
-    imputed = np.zeros(nb)
-    has = np.zeros(nb, dtype=np.bool_)
+                   log_likelihood, tide_shift, total_precision, residual_sum, mapped):  # fmt: skip
+    """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift,
+    summed precision, sum of residuals and count of soundings with the map under it, from the
+    residuals ``(B, N)`` (NaN: no map) and the normalised ``weights (N,)``; ``precision (B,)``
+    is ``1 / v_b``. See the module docstring."""
+    nb, n = residual.shape
+    s1 = np.zeros(n)
+    s2 = np.zeros(n)
+    big_l = np.zeros(n)
+    missing = np.zeros(n)
+    any_map = False
     for b in range(nb):
         total = 0.0
         mean = 0.0
         square = 0.0
         squares = 0.0
+        count = 0
         for p in range(n):
-            r = residual[p, b]
-            if r == r and weights[p] > 0.0:
-                total += weights[p]
-                mean += weights[p] * r
-                square += weights[p] * r * r
-                squares += weights[p] * weights[p]
+            r = residual[b, p]
+            w = weights[p]
+            if r == r and w > 0.0:
+                total += w
+                mean += w * r
+                square += w * r * r
+                squares += w * w
+                count += 1
         if total <= 0.0:
             exponent[b] = 0.0
             continue
-        has[b] = True
+        any_map = True
         if not given:
             mean /= total
             spread = square / total - mean * mean - (1.0 - squares / (total * total)) * map_variance[b]
@@ -161,49 +169,44 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
             else:
                 exponent[b] = spread / (spread + 2.0 * map_variance[b])
         lam = exponent[b] * precision[b]
-        top = -np.inf
+        imputed = 0.0
+        if count < n:  # some particles have no map under this sounding: the sub-cloud's mean
+            top = -np.inf
+            for p in range(n):
+                r = residual[b, p]
+                if r == r and weights[p] > 0.0:
+                    top = max(top, -0.5 * lam * r * r)
+            acc = 0.0
+            for p in range(n):
+                r = residual[b, p]
+                if r == r and weights[p] > 0.0:
+                    acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
+            imputed = top + np.log(acc / total)
         for p in range(n):
-            r = residual[p, b]
-            if r == r and weights[p] > 0.0:
-                top = max(top, -0.5 * lam * r * r)
-        acc = 0.0
-        for p in range(n):
-            r = residual[p, b]
-            if r == r and weights[p] > 0.0:
-                acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
-        imputed[b] = top + np.log(acc / total)
-    any_map = False
-    for b in range(nb):
-        any_map = any_map or has[b]
+            r = residual[b, p]
+            if r == r:
+                s1[p] += lam * r
+                s2[p] += lam * r * r
+                big_l[p] += lam
+                residual_sum[p] += r
+                mapped[p] += 1.0
+            else:
+                missing[p] += imputed
     for p in range(n):
         if not any_map:
             log_likelihood[p] = -np.inf
             tide_shift[p] = 0.0
             total_precision[p] = 0.0
-            continue
-        s1 = 0.0
-        s2 = 0.0
-        big_l = 0.0
-        missing = 0.0
-        for b in range(nb):
-            if not has[b]:
-                continue
-            r = residual[p, b]
-            if r == r:
-                lam = exponent[b] * precision[b]
-                s1 += lam * r
-                s2 += lam * r * r
-                big_l += lam
-            else:
-                missing += imputed[b]
-        if tide_var > 0.0:
-            gain = 1.0 / (1.0 / tide_var + big_l)
-            log_likelihood[p] = -0.5 * (s2 - gain * s1 * s1) - 0.5 * np.log1p(tide_var * big_l) + missing
-            tide_shift[p] = gain * s1
+        elif tide_var > 0.0:
+            gain = 1.0 / (1.0 / tide_var + big_l[p])
+            log_likelihood[p] = -0.5 * (s2[p] - gain * s1[p] * s1[p]) - 0.5 * np.log1p(tide_var * big_l[p]) \
+                + missing[p]
+            tide_shift[p] = gain * s1[p]
+            total_precision[p] = big_l[p]
         else:
-            log_likelihood[p] = -0.5 * s2 + missing
+            log_likelihood[p] = -0.5 * s2[p] + missing[p]
             tide_shift[p] = 0.0
-        total_precision[p] = big_l
+            total_precision[p] = big_l[p]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -287,14 +290,14 @@ class TerrainLikelihood:
         return out
 
     def residuals(self, particles, offsets, depths, tide, *, turn=None) -> np.ndarray:
-        """``(N, B)`` residuals ``z_b - tide_p - h(x_p + R(turn_p) o_b)`` (NaN: no map depth, or
-        a NaN depth), one compiled pass."""
+        """``(B, N)`` residuals ``z_b - tide_p - h(x_p + R(turn_p) o_b)`` (NaN: no map depth, or
+        a NaN depth), one compiled pass; sounding-major."""
         particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn, keep_nan=True)
         tide = np.ascontiguousarray(tide, dtype=np.float64)
         if tide.shape != (particles.shape[0],):
             raise TangraphError(f"tide must have shape ({particles.shape[0]},) as particles, "
                                 f"got {tide.shape}")
-        out = np.empty((particles.shape[0], offsets.shape[0]))
+        out = np.empty((offsets.shape[0], particles.shape[0]))
         n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
         _residual_kernel(self.bathymetry.depth, n0, e0, 1.0 / dn, 1.0 / de, particles, turn, offsets,
                          depths, tide, out)
@@ -366,14 +369,13 @@ class TerrainLikelihood:
         if alpha.shape != (nb,):
             raise TangraphError(f"exponent must have shape ({nb},), got {alpha.shape}")
         log_likelihood, shift, total = np.empty(n), np.empty(n), np.empty(n)
-        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, log_likelihood, shift, total)
-        mapped = np.isfinite(residual)
-        count = mapped.sum(axis=1)
+        residual_sum, count = np.zeros(n), np.zeros(n)
+        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, log_likelihood, shift, total,
+                       residual_sum, count)
         with np.errstate(invalid="ignore", divide="ignore"):
-            mean_residual = np.where(mapped, residual, 0.0).sum(axis=1) / count
-        predicted = np.where(count > 0, np.mean(depths) - mean_residual, np.nan)
+            predicted = np.where(count > 0, np.mean(depths) - residual_sum / count, np.nan)
         new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0
-        return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, mapped.mean(axis=1))
+        return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, count / nb)
 
     def tide_update(
         self, particles, offsets, depths, tide, tide_var: float, *, turn=None

@@ -1,0 +1,112 @@
+"""Speed of the map-aware terrain measurement (the map's error in the likelihood and in TAP).
+
+    ./run bench   (or: python benchmarks/bench_map_error.py [--repeat R]);
+    one thread: NUMBA_NUM_THREADS and OMP_NUM_THREADS default to 1.
+
+The issue's goal: the map-aware likelihood and TAP at most 1.5 x the time per ping of the
+likelihood and TAP that took the map as the truth. Measured in one run, as CPU time of this
+process (best of R after a warm-up), as ratios:
+
+1. One ping's likelihood for 1000 particles x 101 soundings on the merimbula map (a filter's
+   step): the one compiled pass of residual sums the filters' update used to be (the reference),
+   the update now with a perfect map (per particle residuals, the sub-cloud means, the exponents
+   all one), and with the map's error (per-sounding variances, map variances, exponents from the
+   weighted cloud).
+2. One TAP fix of a 10-ping window (the demo's multibeam) on the demo-map-error scenario's prior
+   map: without and with the map error its soundings share (the sandwich of the map's
+   variances), both with the ping jackknife as the graph calls it.
+3. The per-sounding variances of a whole survey (:func:`tangraph.sensors.sounding_variances`,
+   computed once per run), against one PF run of the same survey.
+
+Nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+
+
+def best_cpu(fn, repeat: int) -> float:
+    """CPU seconds of this process for the fastest of ``repeat`` calls (after a warm-up)."""
+    fn()
+    times = []
+    for _ in range(repeat):
+        t0 = time.process_time()
+        fn()
+        times.append(time.process_time() - t0)
+    return min(times)
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=20)
+    args = parser.parse_args(argv)
+
+    from tangraph.filters import FilterModel, survey_pings
+    from tangraph.filters.core import model_belief
+    from tangraph.filters.likelihood import TerrainLikelihood
+    from tangraph.matching import TapConfig, tap_fix_patch, window_patch
+    from tangraph.sensors import NavigationModel, shared_map_variances, sounding_variances
+    from tangraph.sim.scenario import load_scenario, simulate_run
+
+    run = simulate_run(load_scenario("demo-map-error"), rng=np.random.default_rng(1))
+    survey, prior = run.survey, run.bathymetry
+    model = NavigationModel.from_survey(survey)
+    perfect_model = model  # the prior map carries its own error; a map without it is the truth
+    perfect = prior.replace(depth_std=None, correlation_length=None)
+
+    k = survey.n_pings // 2
+    fm = FilterModel.from_model(model, prior)
+    belief = model_belief(survey.dr_pose[k, :2], fm, 1000, rng=np.random.default_rng(2))
+    ping_error = survey_pings(survey, prior, model)[k]
+    ping_plain = survey_pings(survey, perfect, perfect_model)[k]
+    like = TerrainLikelihood(prior, model.measurement_std)
+    turn = -belief.calibration[:, 1]
+    reference = best_cpu(lambda: like.residual_sums(belief.particles, ping_plain.offsets, ping_plain.depths,
+                                                    turn=turn), args.repeat)
+    plain = best_cpu(lambda: like.ping_update(belief.particles, ping_plain.offsets, ping_plain.depths,
+                                              belief.tide, belief.tide_var, turn=turn,
+                                              weights=belief.weights, variance=ping_plain.variance,
+                                              map_variance=ping_plain.map_variance), args.repeat)
+    aware = best_cpu(lambda: like.ping_update(belief.particles, ping_error.offsets, ping_error.depths,
+                                              belief.tide, belief.tide_var, turn=turn,
+                                              weights=belief.weights, variance=ping_error.variance,
+                                              map_variance=ping_error.map_variance), args.repeat)
+    b = ping_error.n_soundings
+    print(f"1. one ping, 1000 particles x {b} soundings (CPU ms, ratio to the one-pass residual sums)")
+    print(f"   residual sums (the old update's pass) {1e3 * reference:8.3f} ms  1.00")
+    print(f"   update, perfect map                  {1e3 * plain:8.3f} ms  {plain / reference:.2f}")
+    print(f"   update, the map's error              {1e3 * aware:8.3f} ms  {aware / reference:.2f}")
+
+    shared = shared_map_variances(survey, prior, model)
+    config = TapConfig(half_width=30.0)
+    end = k
+    centre = survey.true_pose[end, :2]
+    patch_plain = window_patch(survey, end, 10)
+    patch_error = window_patch(survey, end, 10, shared=shared)
+    few = max(3, args.repeat // 4)
+    tap_plain = best_cpu(lambda: tap_fix_patch(patch_plain, perfect, config, prior=centre), few)
+    tap_error = best_cpu(lambda: tap_fix_patch(patch_error, prior, config, prior=centre), few)
+    print(f"2. one TAP fix, 10 pings ({patch_plain.n_soundings} soundings), +-30 m")
+    print(f"   the map as the truth  {1e3 * tap_plain:8.2f} ms  1.00")
+    print(f"   the map's error       {1e3 * tap_error:8.2f} ms  {tap_error / tap_plain:.2f}")
+
+    variances = best_cpu(lambda: sounding_variances(survey, prior, model), 3)
+    from tangraph.filters import default_config, run_filter
+
+    t0 = time.process_time()
+    run_filter("pf", survey, prior, default_config("pf"), model=model, rng=np.random.default_rng(3))
+    pf = time.process_time() - t0
+    print(f"3. the survey's per-sounding variances ({survey.n_pings} pings): {variances:.2f} s, "
+          f"{variances / pf:.2f} of one PF run ({pf:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()
