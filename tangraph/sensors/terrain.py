@@ -39,9 +39,11 @@ its map error, weighted by how much they share it). Since ``S R S`` has non-nega
 ``diag(v) >= C``: the independent-sounding likelihood with these variances never claims more
 information than the exact one, in any direction. It is exact for the common part of
 soundings that share one error (the information of a patch's mean residual is
-``1 / (sounding_std^2 / n + s^2)``), and it loses little where the map has no structure finer
-than its error's correlation length, which a gridded map does not. Sums are evaluated on the
-dead-reckoned footprints (:func:`sounding_variances`).
+``1 / (sounding_std^2 / n + s^2)``); what it gives up is the information in the pattern of
+soundings within one correlation length beyond their common part, which is small where the map
+holds no structure finer than its error's range (a gridded map holds none finer than its cell)
+and large for a long-range error over fine terrain. Sums are evaluated on the dead-reckoned
+footprints (:func:`sounding_variances`).
 
 **No data is no information.** A sounding that falls on no map data (off the grid, or by a NaN
 cell) says nothing about a candidate position, for or against: estimators leave it out of the

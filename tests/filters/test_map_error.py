@@ -79,3 +79,26 @@ def test_a_filter_started_at_the_edge_of_the_maps_data_does_not_collapse(method)
     # the old rule: 37-45 m off with a spread of 0.2-0.6 m; now within its spread at every ping
     assert np.all(error < 3 * spread + 0.5), (error.round(2), spread.round(2))
     assert track.meta["n_divergences"] == 0
+
+
+def test_the_compiled_exponents_match_the_reference():
+    """The likelihood kernel's exponents against :func:`tangraph.sensors.information_exponent` on
+    the cloud's predicted depths (a weighted cloud, some particles off the map's data)."""
+    from tangraph.sensors import information_exponent
+
+    model = MODEL.replace(map_std=0.3, map_correlation_length=20.0)
+    depth = np.array(MAP.depth)
+    depth[MAP.north > 240.0, :] = np.nan  # the map's data stop by the survey
+    cut = MAP.replace(depth=depth)
+    fm = FilterModel.from_model(model, cut)
+    ping = survey_pings(SURVEY, cut, model)[5]
+    rng = np.random.default_rng(7)
+    belief = model_belief(SURVEY.dr_pose[5, :2], fm, 300, rng=rng, std=40.0)
+    belief = reweight(belief, rng.normal(0, 1, 300), where="test")
+    got = evaluate(belief, ping, fm).exponent
+    residual = fm.terrain.likelihood.residuals(belief.particles, ping.offsets, ping.depths, belief.tide,
+                                               turn=-belief.calibration[:, 1])
+    predicted = ping.depths[None, :] - residual.T  # (N, B), NaN off the map
+    assert np.isnan(predicted).any()
+    want = information_exponent(predicted, belief.weights, ping.map_variance)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
