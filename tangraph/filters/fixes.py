@@ -74,6 +74,20 @@ def fix_window(config, survey: Survey) -> int:
 
 # The default window of each live survey (surveys are immutable and hashed by identity).
 _DEFAULT_WINDOWS: weakref.WeakKeyDictionary[Survey, int] = weakref.WeakKeyDictionary()
+# The shared map error variances of each live survey, per (map, model).
+_SHARED: weakref.WeakKeyDictionary[Survey, dict] = weakref.WeakKeyDictionary()
+
+
+def _shared(survey: Survey, bathymetry: BathymetryMap, model) -> np.ndarray | None:
+    """The survey's shared map error variances on a map for a model (None: a perfect map)."""
+    from tangraph.sensors.terrain import map_error, shared_map_variances
+
+    per_survey = _SHARED.setdefault(survey, {})
+    key = (id(bathymetry), model)
+    if key not in per_survey:
+        per_survey[key] = None if map_error(bathymetry, model).is_zero else \
+            shared_map_variances(survey, bathymetry, model)
+    return per_survey[key]
 
 
 def fix_due(config, index: int, window: int) -> bool:
@@ -93,11 +107,14 @@ def attempt_fix(
     window: int,
     *,
     initial_std: float = 0.0,
+    model=None,
 ) -> tuple[TapFix | None, dict[str, Any]]:
     """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
     ``None`` (and a ``"failed: ..."`` reason) when no match can be made. ``initial_std`` (the
     model's start std) is the smallest half-width when ``search.min_half_width`` is None (with
-    3 map cells)."""
+    3 map cells). ``model``: the run's navigation model, whose map error widens the fix by what
+    its soundings share with the survey's others (:func:`tangraph.sensors.shared_map_variances`,
+    computed once per survey, map and model)."""
     cell = min(bathymetry.cell_size)
     spread = np.sqrt(np.max(np.linalg.eigvalsh(covariance))) if np.all(np.isfinite(covariance)) else np.inf
     low = search.min_half_width
@@ -112,7 +129,8 @@ def attempt_fix(
     }
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
-        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior)
+        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior,
+                      shared=None if model is None else _shared(survey, bathymetry, model))
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
         record.update(accepted=False, reason=f"failed: {exc}")

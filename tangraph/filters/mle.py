@@ -124,7 +124,7 @@ def mle_filter(
         if fix_due(config, k, window):
             fix, record = attempt_fix(
                 survey, bathymetry, k, position, p[:2, :2], config, window,
-                initial_std=navigation.initial_position_std,
+                initial_std=navigation.initial_position_std, model=navigation,
             )  # fmt: skip
             used = fix is not None and (fix.accepted or not config.require_accepted)
             record["used"] = bool(used)

@@ -120,7 +120,7 @@ def tercom_pf_step(
     prior_mean, prior_cov = weighted_moments(moved)
     fix, record = attempt_fix(
         survey, bathymetry, ping.index, prior_mean, prior_cov, config, window,
-        initial_std=model.navigation.initial_position_std,
+        initial_std=model.navigation.initial_position_std, model=model.navigation,
     )  # fmt: skip
     counts = {"n_fixes_accepted": 0, "n_fixes_rejected": 0, "n_recentred": 0}
     if fix is None or not fix.accepted:

@@ -211,9 +211,12 @@ def tap_fix(
     config: TapConfig | None = None,
     *,
     prior=None,
+    shared=None,
 ) -> TapFix:
     """A fix of the window of ``n_pings`` pings ending at ``end``, searched around ``prior``
-    (default: the dead-reckoned position of ping ``end``).
+    (default: the dead-reckoned position of ping ``end``); ``shared (K, B)``: the survey's
+    shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
+    map), which widen the fix.
 
     Raises
     ------
@@ -222,7 +225,7 @@ def tap_fix(
         sounding on the map.
     """
     config = config or TapConfig()
-    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings)
+    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared)
     return tap_fix_patch(patch, bathymetry, config, prior=prior)
 
 
