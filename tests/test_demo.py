@@ -9,6 +9,7 @@ import pytest
 import tangraph.navigation
 from tangraph.cli import main
 from tangraph.demo import run_demo
+from tangraph.errors import TangraphError
 
 
 def test_unknown_map_lists_the_demo_maps(tmp_path, capsys):
@@ -53,3 +54,13 @@ def test_quick_demo_writes_the_report_and_the_graph_beats_dead_reckoning(tmp_pat
     assert settings["seed"] == 7 and settings["quick"] is True
     assert (result.out / "tracks" / "smoother.csv").read_text().startswith("time,lat,lon")
     assert not any(p.name.startswith(".") for p in tmp_path.iterdir())
+
+
+def test_the_demo_on_a_seafloor_that_is_not_the_map_runs_where_a_variant_exists():
+    from tangraph.demo import _scenario_for
+
+    assert _scenario_for("merimbula", map_error=True) == "demo-map-error"
+    assert _scenario_for("han2020", map_error=True) == "han2020-map-error"
+    assert _scenario_for("merimbula") == "demo"
+    with pytest.raises(TangraphError, match="--map-error runs on: merimbula, han2020"):
+        _scenario_for("lidar-dem", map_error=True)
