@@ -78,15 +78,17 @@ _DEFAULT_WINDOWS: weakref.WeakKeyDictionary[Survey, int] = weakref.WeakKeyDictio
 _SHARED: weakref.WeakKeyDictionary[Survey, dict] = weakref.WeakKeyDictionary()
 
 
-def _shared(survey: Survey, bathymetry: BathymetryMap, model) -> np.ndarray | None:
-    """The survey's shared map error variances on a map for a model (None: a perfect map)."""
+def _shared(survey: Survey, bathymetry: BathymetryMap, model) -> tuple[np.ndarray | None, object]:
+    """The survey's shared map error variances on a map for a model and the map's error (None,
+    None: a perfect map)."""
     from tangraph.sensors.terrain import map_error, shared_map_variances
 
     per_survey = _SHARED.setdefault(survey, {})
     key = (id(bathymetry), model)
     if key not in per_survey:
-        per_survey[key] = None if map_error(bathymetry, model).is_zero else \
-            shared_map_variances(survey, bathymetry, model)
+        error = map_error(bathymetry, model)
+        per_survey[key] = (None, None) if error.is_zero else \
+            (shared_map_variances(survey, bathymetry, model), error)
     return per_survey[key]
 
 
@@ -129,8 +131,8 @@ def attempt_fix(
     }
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
-        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior,
-                      shared=None if model is None else _shared(survey, bathymetry, model))
+        shared, error = (None, None) if model is None else _shared(survey, bathymetry, model)
+        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
         record.update(accepted=False, reason=f"failed: {exc}")

@@ -99,7 +99,7 @@ class GraphNavigator(Relocalisation):
         self.model = survey_navigation_model(survey, model, where="graph")
         self.white = self.model.dead_reckoning
         # the map error each sounding shares with the survey's others: it widens every fix
-        self.shared_map_variance = _shared_map_variance(survey, bathymetry, self.model)
+        self.shared_map_variance, self.map_error = _shared_map_variance(survey, bathymetry, self.model)
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
@@ -246,7 +246,8 @@ class GraphNavigator(Relocalisation):
         try:
             made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
                             poses=None if laid is None else to_world(laid, self.calibration, self.origin),
-                            first=self.window_first.get(k), shared=self.shared_map_variance)
+                            first=self.window_first.get(k), shared=self.shared_map_variance,
+                            error=self.map_error)
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
@@ -471,11 +472,12 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
     return GraphNavigator(survey, bathymetry, config, model=model).run(progress).track()
 
 
-def _shared_map_variance(survey: Survey, bathymetry: BathymetryMap,
-                         model: NavigationModel) -> np.ndarray | None:
-    """The survey's shared map error variances (K, B), None with a perfect map."""
+def _shared_map_variance(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
+    """The survey's shared map error variances (K, B) and the map's error; None, None with a
+    perfect map."""
     from tangraph.sensors.terrain import map_error, shared_map_variances
 
-    if map_error(bathymetry, model).is_zero:
-        return None
-    return shared_map_variances(survey, bathymetry, model)
+    error = map_error(bathymetry, model)
+    if error.is_zero:
+        return None, None
+    return shared_map_variances(survey, bathymetry, model), error

@@ -25,7 +25,8 @@ class Patch:
     position is what matching estimates); ``depths (N,)`` the measured depths; ``ping (N,)`` the
     ping of each sounding; ``beam (N,)`` its beam. ``reference_position`` is the DR position of
     ping ``reference``. ``shared (N,)``: the map error variance each sounding shares with the
-    survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none).
+    survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none), and
+    ``within (N,)`` the part it shares with the window's own (:func:`tangraph.sensors.shared_among`).
     """
 
     offsets: np.ndarray
@@ -37,6 +38,7 @@ class Patch:
     reference_position: np.ndarray
     n_dropped: int
     shared: np.ndarray | None = None
+    within: np.ndarray | None = None
 
     @property
     def n_soundings(self) -> int:
@@ -48,11 +50,13 @@ class Patch:
 
 
 def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None,
-                 shared=None) -> Patch:
+                 shared=None, error=None) -> Patch:
     """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted),
     laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
     window's footprints are computed. ``shared (K, B)``: the survey's soundings' shared map
-    error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's.
+    error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's;
+    ``error``: the map's error (:func:`tangraph.sensors.map_error`), whose part shared among the
+    window's own soundings is computed (:attr:`Patch.within`).
 
     Raises
     ------
@@ -94,4 +98,11 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         reference_position=ref,
         n_dropped=int((~keep).sum()),
         shared=None if shared is None else np.asarray(shared, float)[window][keep],
+        within=None if error is None or error.is_zero else _within(north[keep], east[keep], error),
     )
+
+
+def _within(north, east, error) -> np.ndarray:
+    from tangraph.sensors.terrain import shared_among
+
+    return shared_among(north, east, error)

@@ -10,13 +10,19 @@ tide ``t(X)`` is the mean residual and ``sigma^2(X)`` the residual variance; the
   chi2_{1-a}(2)`` with ``s^2 = Q(X_p) / (n - 3)`` (two position parameters and the tide
   estimated) and ``c >= 1`` the variance inflation of spatially correlated residuals: a
   cluster-robust (per ping) sandwich ratio of the score's variance for errors shared by a ping's
-  beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track;
-  and at least the map's: where the patch carries the map error its soundings share with the
-  survey's others (:func:`tangraph.sensors.shared_map_variances`, the terrain measurement
-  model's row-sum bound), the sandwich ratio of the least-squares fix's covariance with the
-  soundings' variances ``s^2 + shared_b`` to the one with ``s^2`` (the residual scatter alone
-  cannot show an error the window's soundings share: on flat terrain, where the map's noise is
-  all the soundings see, this widens the region until the fix is flagged uninformative).
+  beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track.
+
+The map's error. Where the patch carries the map error its soundings share with the survey's
+other soundings (:func:`tangraph.sensors.shared_map_variances`, the terrain measurement model's
+row-sum bound), the fix's covariance is at least the least-squares fix's covariance with the
+soundings' variances ``s^2 + shared_b`` (a sandwich on the map gradients at the fix): the
+residual scatter cannot show an error the window's soundings share with each other or with the
+survey's other passes over the same cells, and a graph that adds every window's fix must not
+count that error once per window. The regions and the quality flags are those of the window's
+own likelihood (its shape: one basin or several, compact or flat): the variance inflation ``c``
+is at least the same sandwich ratio with the map error its soundings share among themselves
+(``Patch.within``, :func:`tangraph.sensors.shared_among`), which the sharing of its map error
+with other windows and passes does not change.
 
 A candidate is valid when every sounding of the window has a map depth there; a prior off the
 map is searched around like any other (the window may reach the map's data from there).
@@ -212,11 +218,14 @@ def tap_fix(
     *,
     prior=None,
     shared=None,
+    error=None,
 ) -> TapFix:
     """A fix of the window of ``n_pings`` pings ending at ``end``, searched around ``prior``
     (default: the dead-reckoned position of ping ``end``); ``shared (K, B)``: the survey's
     shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
-    map), which widen the fix.
+    map), which widen the fix, and ``error`` the map's error
+    (:func:`tangraph.sensors.map_error`), whose part shared among the window's own soundings
+    widens its regions.
 
     Raises
     ------
@@ -225,7 +234,7 @@ def tap_fix(
         sounding on the map.
     """
     config = config or TapConfig()
-    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared)
+    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared, error=error)
     return tap_fix_patch(patch, bathymetry, config, prior=prior)
 
 
@@ -274,9 +283,10 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = q_min / max(n - 3, 1)
-    shared = _map_sandwich(bathymetry, patch, position, s2)
-    if shared is not None:
-        inflation = max(inflation, shared[0])
+    within = _map_sandwich(bathymetry, patch, position, s2, patch.within)
+    if within is not None:  # the map error the window's own soundings share shapes its likelihood
+        inflation = max(inflation, within[0])
+    shared = _map_sandwich(bathymetry, patch, position, s2, patch.shared)
     regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
@@ -386,16 +396,16 @@ def _variance_inflation(bathymetry, patch, position, tide) -> float:
     return max(1.0, within) * (1 + rho) / (1 - rho)
 
 
-def _map_sandwich(bathymetry, patch, position, s2) -> tuple[float, np.ndarray] | None:
-    """Where the patch carries its soundings' shared map error variances: the covariance of the
+def _map_sandwich(bathymetry, patch, position, s2, shared) -> tuple[float, np.ndarray] | None:
+    """Given the soundings' shared map error variances ``shared (N,)``: the covariance of the
     least-squares fix with the soundings' variances ``s^2 + shared_b`` (a sandwich on the
     gradients at the fix, the tide's mean removed) and its ratio to the one with ``s^2`` alone
     (the mean of their generalised eigenvalues); None without a map error or a gradient."""
-    if patch.shared is None or not np.any(patch.shared > 0):
+    if shared is None or not np.any(shared > 0):
         return None
     offsets = patch.offsets
     g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
-    ok = np.all(np.isfinite(g), axis=1) & np.isfinite(patch.shared)
+    ok = np.all(np.isfinite(g), axis=1) & np.isfinite(shared)
     if ok.sum() < 3:
         return None
     g = g[ok] - g[ok].mean(axis=0)
@@ -403,7 +413,7 @@ def _map_sandwich(bathymetry, patch, position, s2) -> tuple[float, np.ndarray] |
     if np.linalg.cond(information) > 1e12:
         return None
     inverse = np.linalg.inv(information)
-    sandwich = inverse @ ((g * (s2 + patch.shared[ok])[:, None]).T @ g) @ inverse
+    sandwich = inverse @ ((g * (s2 + shared[ok])[:, None]).T @ g) @ inverse
     ratio = float(np.trace(np.linalg.solve(s2 * inverse, sandwich)) / 2)
     return max(ratio, 1.0), 0.5 * (sandwich + sandwich.T)
 

@@ -26,6 +26,7 @@ from tangraph.sensors.terrain import (
     map_error,
     matern_correlation,
     matern_field,
+    shared_among,
     shared_map_variances,
     sounding_variances,
 )
@@ -47,6 +48,7 @@ __all__ = [
     "matern_field",
     "odometry",
     "rotation_matrix",
+    "shared_among",
     "shared_map_variances",
     "simulate_dead_reckoning",
     "simulate_pings",

@@ -71,6 +71,7 @@ __all__ = [
     "map_error",
     "matern_correlation",
     "matern_field",
+    "shared_among",
     "shared_map_variances",
     "sounding_variances",
 ]
@@ -220,6 +221,23 @@ def shared_map_variances(survey, bathymetry: BathymetryMap, model, *, poses=None
     a window shows holds the map error its soundings do not share, not the part they share
     with each other and with the survey's other soundings."""
     return _map_variances(survey, bathymetry, model, poses)[1]
+
+
+def shared_among(north, east, error: MapError) -> np.ndarray:
+    """For points ``(N,)`` (the soundings of one window) the map error each shares with the
+    others of them alone, ``sum_fields a_b sum_(j != b) a_j rho(|p_b - p_j|)`` (m^2): the part of
+    :func:`shared_map_variances` that shapes one window's own likelihood. A point off the map's
+    data takes the field's median std."""
+    north = np.asarray(north, dtype=np.float64)
+    east = np.asarray(east, dtype=np.float64)
+    out = np.zeros(north.shape)
+    if north.size == 0:
+        return out
+    for part in error.components():
+        a = part.std_at(north, east)
+        a = np.where(np.isfinite(a), a, part.typical_std)
+        out += a * (_weighted_correlation_sums(north, east, a, part.correlation_length) - a)
+    return out
 
 
 def _map_variances(survey, bathymetry, model, poses) -> tuple[np.ndarray, np.ndarray]:

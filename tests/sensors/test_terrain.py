@@ -116,3 +116,19 @@ def test_a_map_with_gaps_splits_its_error_by_scale():
     uniform = map_error(FLAT, NavigationModel(map_std=0.2, map_correlation_length=30.0)).components()
     assert len(uniform) == 1 and uniform[0].correlation_length == 30.0
     assert len(map_error(gappy.replace(correlation_length=10.0), NavigationModel()).components()) == 1
+
+
+def test_the_error_a_windows_soundings_share_among_themselves():
+    """``shared_among`` of some points is the shared variance of a survey made of them alone."""
+    from tangraph.sensors import shared_among
+
+    rng = np.random.default_rng(5)
+    points = rng.uniform(300, 360, (80, 2))
+    model = NavigationModel(sounding_std=0.1, map_std=0.2, map_correlation_length=25.0)
+    error = map_error(FLAT, model)
+    np.testing.assert_allclose(shared_among(points[:, 0], points[:, 1], error),
+                               shared_map_variances(scattered_survey(points), FLAT, model)[:, 0], rtol=1e-12)
+    # fewer soundings share less: the survey's other soundings add to a window's own
+    survey = scattered_survey(np.concatenate([points, rng.uniform(300, 360, (200, 2))]))
+    own = shared_among(points[:, 0], points[:, 1], error)
+    assert np.all(shared_map_variances(survey, FLAT, model)[:80, 0] > own)
