@@ -32,7 +32,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
-from _timing import best_time
+from _timing import best_cpu, best_time
 
 from tangraph.filters import (
     FilterMethod,
@@ -49,17 +49,6 @@ from tangraph.sim import trajectories
 from tangraph.survey import Survey, footprints
 
 PAPER_MS = {"pearson": 140.59, "spearman": 301.19, "kendall": 235.37}
-
-
-def best_cpu(fn, repeat: int) -> float:
-    """CPU seconds of this process for the fastest of ``repeat`` calls (after a warm-up)."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        fn()
-        times.append(time.process_time() - t0)
-    return min(times)
 
 
 def numpy_log_likelihood(bathymetry: BathymetryMap, particles, offsets, depths, sigma: float) -> np.ndarray:

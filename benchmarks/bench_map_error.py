@@ -13,8 +13,8 @@ process (best of R after a warm-up), as ratios:
    all one), and with the map's error (per-sounding variances, map variances, exponents from the
    weighted cloud).
 2. One TAP fix of a 10-ping window (the demo's multibeam) on the demo-map-error scenario's prior
-   map: without and with the map error its soundings share (the sandwich of the map's
-   variances), both with the ping jackknife as the graph calls it.
+   map: without and with the map error its soundings share (among themselves for its regions,
+   with the survey for its covariance), both with the ping jackknife as the graph calls it.
 3. The per-sounding variances of a whole survey (:func:`tangraph.sensors.sounding_variances`,
    computed once per run), against one PF run of the same survey.
 
@@ -31,17 +31,7 @@ os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
-
-
-def best_cpu(fn, repeat: int) -> float:
-    """CPU seconds of this process for the fastest of ``repeat`` calls (after a warm-up)."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        fn()
-        times.append(time.process_time() - t0)
-    return min(times)
+from _timing import best_cpu
 
 
 def main(argv=None) -> None:
@@ -52,8 +42,8 @@ def main(argv=None) -> None:
     from tangraph.filters import FilterModel, survey_pings
     from tangraph.filters.core import model_belief
     from tangraph.filters.likelihood import TerrainLikelihood
-    from tangraph.matching import TapConfig, tap_fix_patch, window_patch
-    from tangraph.sensors import NavigationModel, shared_map_variances, sounding_variances
+    from tangraph.matching import TapConfig, tap_fix, window_patch
+    from tangraph.sensors import NavigationModel, map_error, shared_map_variances, sounding_variances
     from tangraph.sim.scenario import load_scenario, simulate_run
 
     run = simulate_run(load_scenario("demo-map-error"), rng=np.random.default_rng(1))
@@ -85,16 +75,16 @@ def main(argv=None) -> None:
     print(f"   update, perfect map                  {1e3 * plain:8.3f} ms  {plain / reference:.2f}")
     print(f"   update, the map's error              {1e3 * aware:8.3f} ms  {aware / reference:.2f}")
 
-    shared = shared_map_variances(survey, prior, model)
+    shared, error = shared_map_variances(survey, prior, model), map_error(prior, model)
     config = TapConfig(half_width=30.0)
     end = k
     centre = survey.true_pose[end, :2]
-    patch_plain = window_patch(survey, end, 10)
-    patch_error = window_patch(survey, end, 10, shared=shared)
     few = max(3, args.repeat // 4)
-    tap_plain = best_cpu(lambda: tap_fix_patch(patch_plain, perfect, config, prior=centre), few)
-    tap_error = best_cpu(lambda: tap_fix_patch(patch_error, prior, config, prior=centre), few)
-    print(f"2. one TAP fix, 10 pings ({patch_plain.n_soundings} soundings), +-30 m")
+    tap_plain = best_cpu(lambda: tap_fix(survey, perfect, end, 10, config, prior=centre), few)
+    tap_error = best_cpu(lambda: tap_fix(survey, prior, end, 10, config, prior=centre, shared=shared,
+                                         error=error), few)
+    n = window_patch(survey, end, 10).n_soundings
+    print(f"2. one TAP fix, 10 pings ({n} soundings), +-30 m (the patch laid, searched, judged)")
     print(f"   the map as the truth  {1e3 * tap_plain:8.2f} ms  1.00")
     print(f"   the map's error       {1e3 * tap_error:8.2f} ms  {tap_error / tap_plain:.2f}")
 

@@ -37,6 +37,13 @@ log = logging.getLogger(__name__)
 _GPS_TIME_CONSTANT = 60.0  # s: the earlier survey's GPS error is a first-order Gauss-Markov process
 
 
+def _known_keys(cls, table: dict, where: str) -> None:
+    allowed = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise TangraphError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+
+
 def _positive(table: dict, key: str, where: str, *, zero: bool = False) -> float:
     value = table[key]
     if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value) or (
@@ -59,10 +66,7 @@ class SeafloorSettings:
 
     @classmethod
     def from_table(cls, table: dict, where: str) -> SeafloorSettings:
-        allowed = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise TangraphError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+        _known_keys(cls, table, where)
         values: dict[str, Any] = {}
         for key in table:
             values[key] = _positive(table, key, where, zero=key == "std")
@@ -86,10 +90,7 @@ class PriorMapSettings:
 
     @classmethod
     def from_table(cls, table: dict, where: str) -> PriorMapSettings:
-        allowed = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(table) - allowed)
-        if unknown:
-            raise TangraphError(f"{where}: unknown keys {unknown}; allowed: {sorted(allowed)}")
+        _known_keys(cls, table, where)
         values: dict[str, Any] = {}
         for key, value in table.items():
             if key in ("line_spacing", "speed", "ping_rate", "cell"):
