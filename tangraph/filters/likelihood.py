@@ -15,8 +15,9 @@ soundings' precisions ``l_b = a_b / v_b``:
 - **no map, no evidence**: a sounding with no map depth under a particle (off the grid, or by a
   NaN cell) is missing information for that particle, not evidence against it: it is given the
   weighted mean likelihood ``log sum_q w_q exp(-l_b r_qb^2 / 2) / sum_q w_q`` of the particles
-  that do have the map under it (MBARI's sub-cloud rule). Only a ping no sounding of which has
-  the map under any particle gives ``-inf`` everywhere (:class:`OffMap`);
+  that do have the map under it (MBARI's sub-cloud rule); a sounding whose sub-cloud holds less
+  than 0.1 % of the cloud's weight is left out for all (as MBARI's filter does). Only a ping no
+  sounding of which has the map under the cloud gives ``-inf`` everywhere (:class:`OffMap`);
 - **terrain information gating**: ``a_b`` in [0, 1] is MBARI's modified weighting
   (:func:`tangraph.sensors.information_exponent`) from how far the cloud's predicted depths for
   sounding ``b`` spread beyond the map's error there (1 with a perfect map); computed once per
@@ -106,6 +107,11 @@ def _residual_sums_kernel(
         out[p, 1] = s2 if s1 == s1 else np.nan
 
 
+# A sounding weighs the cloud only where particles holding at least this share of its weight have
+# the map under it (MBARI's sub-cloud rule); below it, its weighted spread is numerical noise.
+_MIN_SUBCLOUD = 1e-3
+
+
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
 def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, tide, out):
     """``out[b, p] = z_b - tide_p - h(x_p + R(turn_p) o_b)``, NaN where the map has no depth
@@ -127,7 +133,7 @@ def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offs
             out[b, p] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
 def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var,
                    log_likelihood, tide_shift, total_precision, residual_sum, mapped):  # fmt: skip
     """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift,
@@ -155,13 +161,14 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 square += w * r * r
                 squares += w * w
                 count += 1
-        if total <= 0.0:
+        if total < _MIN_SUBCLOUD:  # (almost) none of the cloud's weight has the map here
             exponent[b] = 0.0
             continue
         any_map = True
         if not given:
             mean /= total
-            spread = square / total - mean * mean - (1.0 - squares / (total * total)) * map_variance[b]
+            # (squares / total) / total: total may be tiny (few particles of tiny weight have the map)
+            spread = square / total - mean * mean - (1.0 - squares / total / total) * map_variance[b]
             if map_variance[b] <= 0.0:
                 exponent[b] = 1.0
             elif spread <= 0.0:

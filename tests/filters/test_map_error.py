@@ -102,3 +102,27 @@ def test_the_compiled_exponents_match_the_reference():
     assert np.isnan(predicted).any()
     want = information_exponent(predicted, belief.weights, ping.map_variance)
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_a_sounding_whose_map_lies_under_negligible_weight_is_left_out():
+    """Only particles of tiny weight (1e-200) have the map under some soundings: those soundings
+    are left out for all (no NaN from their weighted spread), the others weigh as usual."""
+    from tangraph.filters.likelihood import TerrainLikelihood
+
+    depth = np.array(MAP.depth)
+    depth[MAP.north > 300.0, :] = np.nan
+    cut = MAP.replace(depth=depth)
+    like = TerrainLikelihood(cut, 0.5)
+    rng = np.random.default_rng(3)
+    north = np.concatenate([np.full(3, 350.0), np.full(57, 210.0), np.full(40, 260.0)])
+    particles = np.column_stack([north + rng.uniform(-2, 2, 100), rng.uniform(200, 300, 100)])
+    # three far north, off the map; 57 whose second sounding (80 m north) has the map; 40 without
+    offsets = np.array([[0.0, 0.0], [80.0, 0.0], [-5.0, 10.0]])  # the second: north of most
+    depths = np.array([80.0, 80.0, 80.0])
+    weights = np.full(100, 1.0)
+    weights[3:60] = 1e-200  # the particles whose second sounding has the map: negligible weight
+    update = like.ping_update(particles, offsets, depths, np.zeros(100), 0.1, weights=weights,
+                              variance=np.full(3, 0.5), map_variance=np.full(3, 0.04))
+    assert np.all(np.isfinite(update.log_likelihood))
+    assert update.exponent[1] == 0.0
+    assert update.exponent[0] > 0.0 and update.exponent[2] > 0.0
