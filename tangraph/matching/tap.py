@@ -283,10 +283,11 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = q_min / max(n - 3, 1)
-    within = _map_sandwich(bathymetry, patch, position, s2, patch.within)
+    gradient = _gradient(bathymetry, patch, position) if patch.shared is not None else None
+    within = _map_sandwich(gradient, s2, patch.within)
     if within is not None:  # the map error the window's own soundings share shapes its likelihood
         inflation = max(inflation, within[0])
-    shared = _map_sandwich(bathymetry, patch, position, s2, patch.shared)
+    shared = _map_sandwich(gradient, s2, patch.shared)
     regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
@@ -396,15 +397,19 @@ def _variance_inflation(bathymetry, patch, position, tide) -> float:
     return max(1.0, within) * (1 + rho) / (1 - rho)
 
 
-def _map_sandwich(bathymetry, patch, position, s2, shared) -> tuple[float, np.ndarray] | None:
-    """Given the soundings' shared map error variances ``shared (N,)``: the covariance of the
-    least-squares fix with the soundings' variances ``s^2 + shared_b`` (a sandwich on the
-    gradients at the fix, the tide's mean removed) and its ratio to the one with ``s^2`` alone
-    (the mean of their generalised eigenvalues); None without a map error or a gradient."""
-    if shared is None or not np.any(shared > 0):
+def _gradient(bathymetry, patch, position) -> np.ndarray:
+    """The map gradient ``(N, 2)`` at the patch's soundings placed at ``position``."""
+    return bathymetry.gradient_at(position[0] + patch.offsets[:, 0], position[1] + patch.offsets[:, 1])
+
+
+def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
+    """Given the map gradients ``g (N, 2)`` at the soundings and their shared map error variances
+    ``shared (N,)``: the covariance of the least-squares fix with the soundings' variances
+    ``s^2 + shared_b`` (a sandwich on the gradients, the tide's mean removed) and its ratio to
+    the one with ``s^2`` alone (the mean of their generalised eigenvalues); None without a map
+    error or a gradient."""
+    if g is None or shared is None or not np.any(shared > 0):
         return None
-    offsets = patch.offsets
-    g = bathymetry.gradient_at(position[0] + offsets[:, 0], position[1] + offsets[:, 1])
     ok = np.all(np.isfinite(g), axis=1) & np.isfinite(shared)
     if ok.sum() < 3:
         return None

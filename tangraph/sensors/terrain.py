@@ -58,6 +58,7 @@ likelihood is raised to the exponent :func:`information_exponent` (MBARI's modif
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 from scipy import special
@@ -117,6 +118,7 @@ class MapError:
         object.__setattr__(self, "std", std)
         object.__setattr__(self, "correlation_length", length)
         object.__setattr__(self, "_field", None)
+        object.__setattr__(self, "_parts", None)
 
     @property
     def is_zero(self) -> bool:
@@ -140,17 +142,24 @@ class MapError:
         quartile of its std), of range one cell, and the excess over it, of range
         ``correlation_length`` (module docstring); one field of range ``correlation_length``
         when that is at most a cell or the std is uniform; none for a perfect map."""
+        parts = self._parts  # type: ignore[has-type]
+        if parts is None:
+            parts = self._split()
+            object.__setattr__(self, "_parts", parts)
+        return list(parts)
+
+    def _split(self) -> tuple[MapError, ...]:
         if self.is_zero:
-            return []
+            return ()
         if self.correlation_length <= self.cell_length:
-            return [self]
+            return (self,)
         floor = float(np.percentile(self.std[np.isfinite(self.std)], 25))
         cell = np.minimum(self.std, floor)
         excess = np.sqrt(np.maximum(self.std**2 - cell**2, 0.0))
         if not np.any(np.nan_to_num(excess) > 0.01 * floor):  # a uniform std: one field of range L
-            return [self]
-        return [MapError(self.bathymetry, cell, self.cell_length),
-                MapError(self.bathymetry, excess, self.correlation_length)]
+            return (self,)
+        return (MapError(self.bathymetry, cell, self.cell_length),
+                MapError(self.bathymetry, excess, self.correlation_length))
 
     def std_at(self, north, east) -> np.ndarray:
         """Bilinear std of the map's error at points (NaN where the map has no data)."""
@@ -277,8 +286,7 @@ def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray
     for a, b, beta in corners:
         np.add.at(density, (i + a, j + b), weight * beta)
     half = int(np.ceil(reach / cell))
-    offsets = np.arange(-half, half + 1) * cell
-    kernel = matern_correlation(np.hypot(offsets[:, None], offsets[None, :]), length)
+    kernel = _matern_kernel(float(length), float(cell), half)
     smooth = fftconvolve(density, kernel, mode="same")
     sums = sum(beta * smooth[i + a, j + b] for a, b, beta in corners)
     near = (kernel[half, half], kernel[half, half + 1], kernel[half + 1, half + 1])  # offsets 0, 1, diagonal
@@ -287,6 +295,15 @@ def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray
         for c, d, gamma in corners:
             self_term += beta * gamma * near[abs(a - c) + abs(b - d)]
     return np.maximum(sums - weight * self_term + weight, weight)
+
+
+@functools.lru_cache(maxsize=32)
+def _matern_kernel(length: float, cell: float, half: int) -> np.ndarray:
+    """The Matérn correlation sampled on ``(2 half + 1)^2`` cells of side ``cell`` (read-only)."""
+    offsets = np.arange(-half, half + 1) * cell
+    kernel = matern_correlation(np.hypot(offsets[:, None], offsets[None, :]), length)
+    kernel.setflags(write=False)
+    return kernel
 
 
 def information_exponent(predicted: np.ndarray, weights: np.ndarray, map_variance) -> np.ndarray:
