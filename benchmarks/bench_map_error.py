@@ -3,7 +3,7 @@
     ./run bench   (or: python benchmarks/bench_map_error.py [--repeat R]);
     one thread: NUMBA_NUM_THREADS and OMP_NUM_THREADS default to 1.
 
-The issue's goal: the map-aware likelihood and TAP at most 1.5 x the time per ping of the
+The goal: the map-aware likelihood and TAP at most 1.5 x the time per ping of the
 likelihood and TAP that took the map as the truth. Measured in one run, as CPU time of this
 process (best of R after a warm-up), as ratios:
 

@@ -5,7 +5,7 @@
 
 A 1000 x 1000 map (5 m cells, fractal relief); patches of pings x 60 beams (10 m between pings,
 120 m swath, heading 30 deg); whole-cell candidate grids (step 5 m) of 201 x 201 x 600 soundings
-(the issue's target: at most 50 ms on one core) and 401 x 401 x 3000, plus a sub-cell step (3.7 m,
+(the target: at most 50 ms on one core) and 401 x 401 x 3000, plus a sub-cell step (3.7 m,
 the general direct kernel) and a 3-heading whole-cell search. Each case times the direct and FFT
 paths, what "auto" picks, and a plain-numpy search (vectorised over the candidates for each
 sounding) in the same run, best of R, and prints ms and ratios. Nothing here is asserted.

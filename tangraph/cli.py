@@ -52,11 +52,14 @@ CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
 FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
 
 
-_READ = ("variable", "sign", "crs", "units", "nodata", "cell")
+_READ = ("variable", "sign", "crs", "units", "nodata", "cell", "uncertainty")
 
 
 def _read_options(args: argparse.Namespace) -> dict:
-    return {k: getattr(args, k) for k in _READ if getattr(args, k, None) is not None}
+    options = {k: getattr(args, k) for k in _READ if getattr(args, k, None) is not None}
+    if isinstance(options.get("uncertainty"), str) and options["uncertainty"].lower() == "none":
+        options["uncertainty"] = False  # the depths alone
+    return options
 
 
 def _map_argument(parser: argparse.ArgumentParser) -> None:
@@ -74,6 +77,11 @@ def _map_read_options(parser: argparse.ArgumentParser, *, crs: bool = True) -> N
     parser.add_argument("--units", help="map file: the unit of its values where it does not say (m, ft)")
     parser.add_argument("--nodata", type=float, help="map file: the value that marks no data")
     parser.add_argument("--cell", type=CELL, help="resample the map to this cell size (m)")
+    parser.add_argument(
+        "--uncertainty", metavar="VAR|none",
+        help="map file: the variable (band) holding the std of its depths, where the file's "
+        "ancillary_variables or names do not tell; 'none' reads the depths alone",
+    )
 
 
 def _output(parser: argparse.ArgumentParser, help_text: str) -> None:
@@ -100,10 +108,7 @@ def cmd_maps_info(args: argparse.Namespace) -> None:
     from tangraph.maps import load_any
     from tangraph.maps.statistics import describe
 
-    options = _read_options(args)
-    if args.uncertainty is not None:
-        options["uncertainty"] = False if args.uncertainty.lower() == "none" else args.uncertainty
-    bathymetry = load_any(args.map, **options)
+    bathymetry = load_any(args.map, **_read_options(args))
     r = {**describe(bathymetry), **bathymetry.error_summary()}
     if args.json:
         _print_json(r)
@@ -212,19 +217,29 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
-    from tangraph.maps import load_any
-    from tangraph.sim.scenario import load_scenario, simulate
+    from tangraph.maps import load_any, write_map
+    from tangraph.sim.scenario import load_scenario, simulate_run
     from tangraph.survey import write_survey
 
     scenario = load_scenario(args.scenario)
     bathymetry = load_any(args.map or scenario.map, **_read_options(args))
     seed = scenario.seed if args.seed is None else args.seed
-    survey = simulate(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry, seed=seed)
-    if args.map is not None and Path(args.map).exists():  # a file: smooth must find it again
+    output = Path(args.output)
+    prior = output.with_name(f"{output.stem}_prior_map.nc")  # a seafloor that is not the map: its map
+    if scenario.seafloor is not None and prior.exists() and not args.force:
+        raise TangraphError(f"{prior} exists (the prior map of {output.name}): pass --force to replace it")
+    run = simulate_run(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry, seed=seed)
+    survey = run.survey
+    if run.world is not None:  # the estimators' map is the prior map: written beside the survey
+        write_map(run.bathymetry, prior, overwrite=args.force)
+        survey = survey.replace(meta={**survey.meta, "map": str(prior.resolve()), "map_read": {}})
+    elif args.map is not None and Path(args.map).exists():  # a file: smooth must find it again
         survey = survey.replace(meta={**survey.meta, "map": str(Path(args.map).resolve()),
                                       "map_read": _read_options(args)})
     write_survey(survey, args.output, overwrite=args.force)
     print(survey.summary())
+    if run.world is not None:
+        print(f"wrote {prior} (the map its estimators navigate on: the seafloor is not the scenario's map)")
     print(f"wrote {args.output}")
 
 
@@ -444,7 +459,7 @@ def cmd_navigate(args: argparse.Namespace) -> None:
     if config is not None and not method.is_graph:
         raise TangraphError(f"--graph-config does not apply to method {method.value!r}")
     if args.particles is not None:
-        if method.is_graph or method is Method.MLE:
+        if not method.is_random:
             raise TangraphError(f"--particles does not apply to method {method.value!r}")
         from tangraph.filters import default_config
 
@@ -521,11 +536,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_maps_list)
     p = maps_sub.add_parser("info", help="describe a map (and its error layer, if it has one)")
     _map_argument(p)
-    p.add_argument(
-        "--uncertainty", metavar="VAR|none",
-        help="map file: the variable (band) holding the std of its depths, where the file's "
-        "ancillary_variables or names do not tell; 'none' reads the depths alone",
-    )
     p.set_defaults(func=cmd_maps_info)
     p = maps_sub.add_parser("plot", help="hill-shaded figure of a map")
     _map_argument(p)

@@ -314,6 +314,8 @@ def run_demo(
 
                 bathymetry = run.bathymetry
                 write_map(bathymetry, partial / "prior_map.nc")
+                survey = survey.replace(meta={**survey.meta, "map": str((out / "prior_map.nc").resolve()),
+                                              "map_read": {}})  # where it will be: smooth finds it
             if quick:
                 survey = survey.pings(0, survey.n_pings // 2)
             write_survey(survey, partial / "survey.nc")

@@ -51,12 +51,18 @@ class Method(enum.StrEnum):
     JBPF = "jbpf"
     TERCOM_PF = "tercom-pf"
     MLE = "mle"
+    PMF = "pmf"
     ISAM2 = "isam2"
     SMOOTHER = "smoother"
 
     @property
     def is_graph(self) -> bool:
         return self in (Method.ISAM2, Method.SMOOTHER)
+
+    @property
+    def is_random(self) -> bool:
+        """Whether the method draws random numbers (needs ``rng``)."""
+        return self not in (Method.ISAM2, Method.SMOOTHER, Method.MLE, Method.PMF)
 
 
 def _method(method: Method | str) -> Method:
@@ -90,14 +96,15 @@ def navigate(
     survey, bathymetry
         The run and the prior map.
     method : Method or str
-        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"``, ``"mle"`` (the particle
+        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"``, ``"mle"``, ``"pmf"`` (the filter
         family, :mod:`tangraph.filters`) or ``"isam2"``, ``"smoother"`` (the factor graph,
         :mod:`tangraph.graph`).
     config
         The method's own configuration (``tangraph.filters.*Config`` or
         ``tangraph.graph.GraphConfig``); ``None`` for its defaults.
     rng : numpy.random.Generator
-        Required by the particle filters; unused by the graph, which is deterministic.
+        Required by the particle filters; unused by the graph, the MLE and the point-mass
+        filter, which are deterministic.
     model : NavigationModel, optional
         What every estimator believes about the DR and the sonar (the constant DR errors it
         estimates, the start uncertainty, the terrain measurement); by default the one of a
@@ -140,7 +147,7 @@ def navigate(
 
         run = graph.navigate_online if method is Method.ISAM2 else graph.smooth_survey
         return run(survey, bathymetry, config, model=model, progress=progress)
-    if rng is None:
+    if rng is None and method.is_random:
         raise TangraphError(
             f"navigation method {method.value!r} is random: pass rng=np.random.default_rng(seed)"
         )

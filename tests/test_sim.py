@@ -132,3 +132,20 @@ def test_simulate_cli_same_seed_same_survey(tmp_path, capsys):
     assert "lidar-dem" in capsys.readouterr().out
     assert main(["survey", "plot", str(a), "-o", str(tmp_path / "a.png")]) == 0
     assert (tmp_path / "a.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_simulate_cli_writes_the_prior_map_of_a_seafloor_that_is_not_the_map(tmp_path, capsys):
+    from tangraph.maps import load_any
+    from tangraph.navigation import survey_on_map
+
+    out = tmp_path / "s.nc"
+    assert main(["simulate", "demo-map-error", "-o", str(out)]) == 0
+    prior = tmp_path / "s_prior_map.nc"
+    assert "s_prior_map.nc" in capsys.readouterr().out
+    survey = read_survey(out)
+    assert survey.meta["map"] == str(prior.resolve())
+    bathymetry = load_any(survey.meta["map"])
+    assert bathymetry.depth_std is not None  # the gridded map's error travels with it
+    survey_on_map(survey, bathymetry)  # the map its estimators navigate on: accepted
+    assert main(["simulate", "demo-map-error", "-o", str(out)]) == 2
+    assert "--force" in capsys.readouterr().err

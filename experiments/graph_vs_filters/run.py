@@ -31,7 +31,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 SCENARIOS = ("demo", "wang2019", "han2020", "chen2022", "demo-flat", "demo-map-error", "wang2019-map-error",
              "han2020-map-error")
-FILTERS = ("pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle")
+FILTERS = ("pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle", "pmf")
 GRAPH = ("isam2", "smoother")
 
 
@@ -96,7 +96,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
             from tangraph.graph import GraphConfig
 
             settings = GraphConfig(**config["graph"])
-        if method in FILTERS and method != "mle":
+        if method in FILTERS and method not in ("mle", "pmf"):  # deterministic: no particles
             from tangraph.filters import default_config
 
             settings = dataclasses.replace(default_config(method), n_particles=config["n_particles"])

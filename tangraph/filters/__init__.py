@@ -1,10 +1,11 @@
 """Particle-filter front ends on one shared motion model and terrain likelihood (no gtsam here).
 
 :func:`run_filter` runs any of them by :class:`FilterMethod`: the bootstrap PF, Han et al.'s IPF,
-Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF and grid-search MLE fixes, on the survey's
-:class:`~tangraph.sensors.NavigationModel` (``model=``; None: from the survey). The particles
-carry the DR's constant errors (speed scale, heading error) and every track reports their
-estimate (``meta["calibration"]``); configs hold algorithm settings only.
+Chen & Che's SJCPF, the jittered JBPF, TERCOM-PF, grid-search MLE fixes and the point-mass
+filter (a grid, no particles), on the survey's :class:`~tangraph.sensors.NavigationModel`
+(``model=``; None: from the survey). The filters carry the DR's constant errors (speed scale,
+heading error) and every track reports their estimate (``meta["calibration"]``); configs hold
+algorithm settings only.
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
@@ -49,6 +50,7 @@ from tangraph.filters.likelihood import (
 from tangraph.filters.mle import MLEConfig, mle_filter
 from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
 from tangraph.filters.pf import PFConfig, bootstrap_pf, pf_step
+from tangraph.filters.pmf import PMFConfig, point_mass_filter
 from tangraph.filters.resampling import Resampler, resample
 from tangraph.filters.sjcpf import SJCPFConfig, correlation_log_weight, sjcpf, sjcpf_step
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf, tercom_pf_step
@@ -67,6 +69,7 @@ __all__ = [
     "MotionModel",
     "OffMap",
     "PFConfig",
+    "PMFConfig",
     "ParticleConfig",
     "Ping",
     "Resampler",
@@ -96,6 +99,7 @@ __all__ = [
     "model_belief",
     "pearson_rows",
     "pf_step",
+    "point_mass_filter",
     "predict",
     "resample",
     "resample_belief",

@@ -13,6 +13,7 @@ from tangraph.filters.ipf import IPFConfig, ipf
 from tangraph.filters.jbpf import JBPFConfig, jbpf
 from tangraph.filters.mle import MLEConfig, mle_filter
 from tangraph.filters.pf import PFConfig, bootstrap_pf
+from tangraph.filters.pmf import PMFConfig, point_mass_filter
 from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
 from tangraph.maps.grid import BathymetryMap
@@ -32,6 +33,7 @@ class FilterMethod(enum.StrEnum):
     JBPF = "jbpf"
     TERCOM_PF = "tercom-pf"
     MLE = "mle"
+    PMF = "pmf"
 
 
 _RUNNERS: dict[FilterMethod, tuple[type, Any]] = {
@@ -41,6 +43,7 @@ _RUNNERS: dict[FilterMethod, tuple[type, Any]] = {
     FilterMethod.JBPF: (JBPFConfig, jbpf),
     FilterMethod.TERCOM_PF: (TercomPFConfig, tercom_pf),
     FilterMethod.MLE: (MLEConfig, mle_filter),
+    FilterMethod.PMF: (PMFConfig, point_mass_filter),
 }
 
 
@@ -75,7 +78,7 @@ def run_filter(
     config=None,
     *,
     model: NavigationModel | None = None,
-    rng: np.random.Generator,
+    rng: np.random.Generator | None,
     progress: bool = False,
 ) -> Track:
     """Run one filter of the particle family over a survey.
@@ -83,19 +86,20 @@ def run_filter(
     Parameters
     ----------
     method : FilterMethod or str
-        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"`` or ``"mle"``.
+        ``"pf"``, ``"ipf"``, ``"sjcpf"``, ``"jbpf"``, ``"tercom-pf"``, ``"mle"`` or ``"pmf"``.
     survey, bathymetry
         The run and the prior map.
     config
         The method's own config (``PFConfig``, ``IPFConfig``, ``SJCPFConfig``, ``JBPFConfig``,
-        ``TercomPFConfig``, ``MLEConfig``); None for its defaults. Configs hold algorithm
+        ``TercomPFConfig``, ``MLEConfig``, ``PMFConfig``); None for its defaults. Configs hold algorithm
         settings only.
     model : NavigationModel or None
         What the filter believes about the DR errors (white noise, the speed scale and heading
         bias it estimates), the start uncertainty, the soundings, the map and the tide; None:
         ``NavigationModel.from_survey(survey)`` (a simulated survey's settings).
     rng : numpy.random.Generator
-        The source of randomness (the MLE filter does not use it: None is accepted there).
+        The source of randomness (the MLE and point-mass filters do not use it: None is accepted
+        there).
     progress : bool
         Show a progress bar over the pings.
 
@@ -126,7 +130,7 @@ def run_filter(
         bathymetry,
         rng,
         where=f"run_filter({method.value!r})",
-        rng_optional=method is FilterMethod.MLE,
+        rng_optional=method in (FilterMethod.MLE, FilterMethod.PMF),
     )
     cls, runner = _RUNNERS[method]
     if config is None:

@@ -22,6 +22,7 @@ from tangraph.errors import TangraphError
 from tangraph.filters.config import check_count, check_number
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
+from tangraph.sensors import survey_map_error
 from tangraph.survey import Survey
 
 __all__ = ["attempt_fix", "check_fix_search", "fix_due", "fix_window"]
@@ -74,22 +75,6 @@ def fix_window(config, survey: Survey) -> int:
 
 # The default window of each live survey (surveys are immutable and hashed by identity).
 _DEFAULT_WINDOWS: weakref.WeakKeyDictionary[Survey, int] = weakref.WeakKeyDictionary()
-# The shared map error variances of each live survey, per (map, model).
-_SHARED: weakref.WeakKeyDictionary[Survey, dict] = weakref.WeakKeyDictionary()
-
-
-def _shared(survey: Survey, bathymetry: BathymetryMap, model) -> tuple[np.ndarray | None, object]:
-    """The survey's shared map error variances on a map for a model and the map's error (None,
-    None: a perfect map)."""
-    from tangraph.sensors.terrain import map_error, shared_map_variances
-
-    per_survey = _SHARED.setdefault(survey, {})
-    key = (id(bathymetry), model)
-    if key not in per_survey:
-        error = map_error(bathymetry, model)
-        per_survey[key] = (None, None) if error.is_zero else \
-            (shared_map_variances(survey, bathymetry, model), error)
-    return per_survey[key]
 
 
 def fix_due(config, index: int, window: int) -> bool:
@@ -131,7 +116,7 @@ def attempt_fix(
     }
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
-        shared, error = (None, None) if model is None else _shared(survey, bathymetry, model)
+        shared, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
         fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)

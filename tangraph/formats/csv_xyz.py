@@ -302,7 +302,9 @@ def import_csv_xyz(
         A missing column, text in a number column or an unreadable time (each naming the file,
         line and column), a time without zone and no ``timezone``, the two files on different
         clocks, a CRS that is not projected, north/east in a CRS not in metres without
-        ``units``, an unknown unit, repeated log times, no sounding within the log.
+        ``units``, repeated log times, no sounding within the log.
+    MapFormatError
+        An unknown unit.
 
     Examples
     --------

@@ -53,7 +53,7 @@ from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indi
 from tangraph.graph.lost import Relocalisation
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix
-from tangraph.sensors import NavigationModel, odometry, survey_navigation_model
+from tangraph.sensors import NavigationModel, odometry, survey_map_error, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -99,7 +99,7 @@ class GraphNavigator(Relocalisation):
         self.model = survey_navigation_model(survey, model, where="graph")
         self.white = self.model.dead_reckoning
         # the map error each sounding shares with the survey's others: it widens every fix
-        self.shared_map_variance, self.map_error = _shared_map_variance(survey, bathymetry, self.model)
+        self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
@@ -470,14 +470,3 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         ``calibration`` (:func:`calibration_summary` at the last ping).
     """
     return GraphNavigator(survey, bathymetry, config, model=model).run(progress).track()
-
-
-def _shared_map_variance(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
-    """The survey's shared map error variances (K, B) and the map's error; None, None with a
-    perfect map."""
-    from tangraph.sensors.terrain import map_error, shared_map_variances
-
-    error = map_error(bathymetry, model)
-    if error.is_zero:
-        return None, None
-    return shared_map_variances(survey, bathymetry, model), error

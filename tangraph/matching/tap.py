@@ -241,6 +241,9 @@ def tap_fix(
 def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *, prior=None) -> TapFix:
     """:func:`tap_fix` of a prepared :class:`Patch`."""
     prior = patch.reference_position if prior is None else np.asarray(prior, float)
+    if prior.shape != (2,) or not np.all(np.isfinite(prior)):  # an estimator that lost its way
+        raise MatchingError(f"window {patch.first}..{patch.reference}: the search centre must be a "
+                            f"finite (north, east), got {prior.tolist()!r}")
     step = config.step or min(bathymetry.cell_size)
     grid = CandidateGrid.around(prior, config.half_width, step, np.asarray(config.headings))
     method = (
@@ -282,7 +285,7 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
             position = node
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
-    s2 = q_min / max(n - 3, 1)
+    s2 = _residual_variance(q_min, n)
     gradient = _gradient(bathymetry, patch, position) if patch.shared is not None else None
     within = _map_sandwich(gradient, s2, patch.within)
     if within is not None:  # the map error the window's own soundings share shapes its likelihood
@@ -419,8 +422,19 @@ def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
         return None
     inverse = np.linalg.inv(information)
     sandwich = inverse @ ((g * (s2 + shared[ok])[:, None]).T @ g) @ inverse
-    ratio = float(np.trace(np.linalg.solve(s2 * inverse, sandwich)) / 2)
+    ratio = float(np.trace(information @ sandwich) / (2.0 * s2))
     return max(ratio, 1.0), 0.5 * (sandwich + sandwich.T)
+
+
+# The smallest residual variance a window is credited with (m^2): soundings that fit the map
+# exactly (noise-free, or the map made from them) leave no scatter to scale regions by.
+_MIN_RESIDUAL_VARIANCE = 1e-12
+
+
+def _residual_variance(q_min: float, n: int) -> float:
+    """The soundings' residual variance at the best fit, ``Q_min / (n - 3)`` (at least
+    ``_MIN_RESIDUAL_VARIANCE``)."""
+    return max(q_min / max(n - 3, 1), _MIN_RESIDUAL_VARIANCE)
 
 
 def region_thresholds(
@@ -429,7 +443,7 @@ def region_thresholds(
     """Thresholds of the three regions at level ``1 - alpha``: on ``Q`` for Xie and calibrated,
     on ``S`` (tide fixed at the fix's) for Wang; see the module docstring."""
     ratio = stats.chi2.ppf(1 - alpha, n - 1) / (n - 1)
-    s2 = q_min / max(n - 3, 1)
+    s2 = _residual_variance(q_min, n)
     return {
         RegionMethod.XIE: q_min * ratio,
         RegionMethod.WANG: q_min * (1 + ratio),

@@ -29,6 +29,7 @@ from tangraph.sensors.terrain import (
     shared_among,
     shared_map_variances,
     sounding_variances,
+    survey_map_error,
 )
 
 __all__ = [
@@ -53,5 +54,6 @@ __all__ = [
     "simulate_dead_reckoning",
     "simulate_pings",
     "sounding_variances",
+    "survey_map_error",
     "survey_navigation_model",
 ]

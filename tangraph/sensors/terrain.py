@@ -59,6 +59,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import weakref
 
 import numpy as np
 from scipy import special
@@ -75,6 +76,7 @@ __all__ = [
     "shared_among",
     "shared_map_variances",
     "sounding_variances",
+    "survey_map_error",
 ]
 
 # Grid of the row sums: at least this many cells per correlation length, at most this many cells.
@@ -230,6 +232,24 @@ def shared_map_variances(survey, bathymetry: BathymetryMap, model, *, poses=None
     a window shows holds the map error its soundings do not share, not the part they share
     with each other and with the survey's other soundings."""
     return _map_variances(survey, bathymetry, model, poses)[1]
+
+
+# survey -> map -> {model: (shared variances, error)}: weak keys, so nothing outlives its survey or
+# map and a new map never meets an old one's entry (surveys and maps hash by identity)
+_SURVEY_MAP_ERRORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def survey_map_error(survey, bathymetry: BathymetryMap, model) -> tuple[np.ndarray | None, MapError | None]:
+    """The survey's :func:`shared_map_variances` at its dead-reckoned footprints and the map's
+    error (:func:`map_error`), computed once per survey, map and model; ``(None, None)`` with a
+    perfect map. What every fix of a run is widened by (TAP in the graph, MLE, TERCOM-PF)."""
+    per_map = _SURVEY_MAP_ERRORS.setdefault(survey, weakref.WeakKeyDictionary())
+    per_model = per_map.setdefault(bathymetry, {})
+    if model not in per_model:
+        error = map_error(bathymetry, model)
+        per_model[model] = (None, None) if error.is_zero else \
+            (shared_map_variances(survey, bathymetry, model), error)
+    return per_model[model]
 
 
 def shared_among(north, east, error: MapError) -> np.ndarray:

@@ -34,6 +34,7 @@ MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is 
     "jbpf": dict(n_particles=1000),
     "tercom-pf": dict(n_particles=1000),
     "mle": dict(),
+    "pmf": dict(),
 }
 
 
@@ -143,7 +144,7 @@ def test_run_filter_refuses_another_methods_config_and_unknown_methods():
 
 
 def test_default_configs():
-    assert [m.value for m in FilterMethod] == ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle"]
+    assert [m.value for m in FilterMethod] == ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle", "pmf"]
     for method in FilterMethod:
         assert type(default_config(method)) is config_type(method)
     sjcpf = default_config("sjcpf")  # Chen & Che's 15 m (variance 225 m^2) at 100 m per sounding

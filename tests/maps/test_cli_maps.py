@@ -83,6 +83,11 @@ def test_info_chooses_the_uncertainty_variable(tmp_path, capsys):
     assert "several uncertainty variables ['stdev', 'error']" in capsys.readouterr().err
     assert main(["maps", "info", str(tmp_path / "two.nc"), "--uncertainty", "error"]) == 0
     assert "depth std median 0.900 m" in capsys.readouterr().out
+    # every command that reads a map takes the option the message names
+    assert main(["maps", "plot", str(tmp_path / "two.nc"), "-o", str(tmp_path / "two.png")]) == 2
+    assert "--uncertainty" in capsys.readouterr().err
+    assert main(["maps", "plot", str(tmp_path / "two.nc"), "--uncertainty", "none",
+                 "-o", str(tmp_path / "two.png")]) == 0
 
 
 def test_grid_refuses_units_for_surveys(tmp_path, capsys):

@@ -76,6 +76,29 @@ def test_noise_free_fix_lands_on_the_truth_with_the_tide():
     assert fix.n_soundings == 410
 
 
+def test_a_noise_free_window_on_a_map_with_an_error_is_a_fix_not_a_crash():
+    """Soundings that fit the map exactly leave no scatter: with a map error in the model the
+    fix is still made (at the truth), its shared map error dominating its covariance."""
+    from tangraph.sensors import NavigationModel
+    from tangraph.sensors.terrain import survey_map_error
+
+    m = rough_map()
+    s = survey_on(m)
+    model = NavigationModel(map_std=0.3, map_correlation_length=50.0)
+    shared, error = survey_map_error(s, m, model)
+    fix = tap_fix(s, m, end=9, n_pings=10, config=TapConfig(half_width=40.0), shared=shared, error=error)
+    np.testing.assert_allclose(fix.position, s.true_pose[9, :2], atol=1e-6)
+    assert np.all(np.isfinite(fix.covariance))
+    assert np.linalg.eigvalsh(fix.covariance).min() > 1e-6  # the shared map error, not the zero scatter
+
+
+def test_a_search_centre_that_is_not_a_position_is_a_matching_error():
+    m = rough_map()
+    s = survey_on(m)
+    with pytest.raises(MatchingError, match=r"centre must be a finite \(north, east\), got \[nan, 400.0\]"):
+        tap_fix(s, m, end=9, n_pings=10, prior=[np.nan, 400.0])
+
+
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_noisy_fix_recovers_the_truth_and_regions_nest(seed):
     m = rough_map(seed)

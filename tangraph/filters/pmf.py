@@ -1,0 +1,671 @@
+"""The point-mass filter: the position density on a grid that moves with the estimate.
+
+No particles: the density of the vehicle's position is held as its values on a regular
+``n x n`` grid (Bergman's point-mass filter), every grid point weighed by the same terrain
+likelihood as the particle filters (:mod:`tangraph.filters.likelihood`: the map's error, no map
+is no evidence, MBARI's exponents, the tide marginalised exactly: each point carries its
+Gaussian tide posterior). It is deterministic and keeps a multimodal density as it is.
+
+**The DR's constant errors** ``(k, b)`` (speed scale, heading error) are handled by a bank: the
+joint density of ``(position, k, b)`` is held at the nodes of a product Gauss-Hermite rule of the
+calibration's Gaussian (``calibration_points`` per principal axis), each node a member with its
+own position grid and a mass. Between pings a member's grid moves by its own calibrated increment
+``R(-b) u / (1 + k)`` (the Lagrangian form: moving the points is exact); the white DR noise
+accumulates and is convolved in (FFT, in the grid's coordinates) once its std reaches half a grid
+spacing. A ping weighs every point of every member; the members' masses are the calibration's
+posterior at the nodes. The calibration's estimate is the Gaussian whose log fits the nodes'
+posterior density (exact for a Gaussian posterior however narrow against the nodes), else the
+nodes' weighted moments.
+
+**Re-gridding**: when a member's density reaches its grid's edge, or the density has grown or
+shrunk well away from its grid, every member is re-sampled (bilinear) onto a grid centred on its
+own mean, aligned with the principal axes of the members' mean covariance and spanning
+``grid_sigmas`` standard deviations. The calibration's nodes are re-placed then, and whenever its
+posterior has moved from their placement: the Gauss-Hermite rule of the fitted Gaussian (its
+heading error grown by the heading walk since the last placement), each new node given the
+position density of the nearest old member shifted by the regression of the members' mean
+positions on their nodes (the posterior's position sensitivity to the calibration). The nodes
+thus shrink with the calibration's uncertainty as the terrain informs it; the Gaussian at
+re-placement is the one approximation of the calibration's posterior. The tide posteriors of
+points mixed by the convolution are moment-matched (the spread of the mixed means joins the
+variance); re-sampling interpolates them.
+
+**Resolution**: a grid point stands for its cell, so each sounding's variance is raised by the
+variance of the map's depth across a cell, ``sum_i a_i^T G a_i / 12`` for the grid's steps
+``a_i`` and the map's mean outer product of depth gradients ``G``: a coarse grid does not claim a
+sharp likelihood it cannot resolve (negligible once the grid is finer than the likelihood).
+
+The track is the density's mean and covariance (with the white noise not yet convolved in), the
+heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
+A ping whose innovation is inconsistent (:class:`~tangraph.filters.core.Innovation`) for
+``lost_pings`` pings in a row is flagged lost (``meta["lost_steps"]``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time as _time
+from typing import Any
+
+import numpy as np
+import scipy.fft
+from scipy import ndimage
+
+from tangraph.filters.config import check_count, check_number
+from tangraph.filters.core import Belief, FilterModel, check_run_inputs, innovation, step_timings
+from tangraph.filters.likelihood import FilterDivergence, log_normalise
+from tangraph.filters.model import Ping, rotate, survey_pings
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import NavigationModel, survey_navigation_model
+from tangraph.survey import Survey
+from tangraph.track import Track
+
+__all__ = ["PMFConfig", "PointMass", "point_mass_filter"]
+
+# a member's density reaching this share of its mass in its grid's outer ring triggers a re-grid
+_EDGE_MASS = 1e-3
+# the density's std in grid spacings may drift this factor from the target before a re-grid
+_SPREAD_RATIO = 1.6
+# the calibration's nodes are re-placed when its posterior std leaves [r, 1 / r] times the
+# placement's, or its mean moves by this many placement stds
+_NODE_RATIO = 0.7
+_NODE_SHIFT = 0.5
+
+
+@dataclasses.dataclass(frozen=True)
+class PMFConfig:
+    """Settings of the point-mass filter.
+
+    Parameters
+    ----------
+    grid_points : int
+        Points per axis of a member's position grid (odd, >= 5).
+    grid_sigmas : float
+        Half-width of the grid in standard deviations of the density along each principal axis.
+    min_spacing : float
+        Smallest grid spacing (m): the floor a grid shrinks to around a density narrower than
+        its points (a coarser floor gives up precision: each sounding's variance grows with the
+        spacing, see the module docstring).
+    calibration_points : tuple of int
+        Gauss-Hermite nodes of the calibration bank along the principal axes of the
+        calibration's covariance (first: the speed scale's, second: the heading error's; 1 on an
+        axis whose std is 0, whatever is asked).
+    lost_alpha, lost_pings : float, int
+        A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
+        quantile; ``lost_pings`` in a row flag the filter lost.
+
+    Examples
+    --------
+    >>> PMFConfig().grid_points
+    31
+    >>> PMFConfig(grid_points=4)
+    Traceback (most recent call last):
+    ...
+    tangraph.errors.TangraphError: PMFConfig: grid_points must be an odd integer >= 5, got 4
+    """
+
+    grid_points: int = 31
+    grid_sigmas: float = 5.0
+    min_spacing: float = 0.01
+    calibration_points: tuple[int, int] = (3, 3)
+    lost_alpha: float = 1e-3
+    lost_pings: int = 5
+
+    def __post_init__(self) -> None:
+        from tangraph.errors import TangraphError
+
+        n = self.grid_points
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
+            raise TangraphError(f"PMFConfig: grid_points must be an odd integer >= 5, got {n!r}")
+        object.__setattr__(self, "grid_points", int(n))
+        check_number(self, "grid_sigmas", low=1.0)
+        check_number(self, "min_spacing", low=0.0, open_low=True)
+        points = self.calibration_points
+        if (not isinstance(points, (tuple, list)) or len(points) != 2
+                or any(isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1 for p in points)):
+            raise TangraphError(f"PMFConfig: calibration_points must be two integers >= 1, got {points!r}")
+        object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
+        check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
+        check_count(self, "lost_pings", low=1)
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+@dataclasses.dataclass(eq=False)
+class PointMass:
+    """The filter's state: ``M`` members (calibration ``nodes (M, 2)``: ``k``, ``b``), each a
+    position grid of ``n x n`` points ``centres[m] + axes @ (i - h, j - h)`` (``h = (n - 1) / 2``;
+    ``axes (2, 2)``'s columns the grid's steps in metres, shared by the members), the log density
+    ``log_density (M, n, n)`` (per square metre, normalised over all members), each point's tide
+    posterior mean ``tide (M, n, n)`` and variance ``tide_var``; ``pending (2, 2)`` the white DR
+    noise not yet convolved in; ``walk`` the heading error's variance grown since the nodes were
+    placed; ``placed`` the calibration mean and std at the last placement; ``node_offset (M,)``
+    the log of the placement Gaussian over the quadrature weight at each node (a member's mass
+    plus it is the log posterior density of its node, up to a constant)."""
+
+    nodes: np.ndarray
+    node_offset: np.ndarray
+    centres: np.ndarray
+    axes: np.ndarray
+    log_density: np.ndarray
+    tide: np.ndarray
+    tide_var: float
+    pending: np.ndarray
+    walk: float = 0.0
+    placed: tuple[np.ndarray, np.ndarray] | None = None
+
+    @property
+    def n(self) -> int:
+        return int(self.log_density.shape[1])
+
+    def offsets(self) -> np.ndarray:
+        """The grid's points relative to a member's centre, ``(n * n, 2)`` (row-major)."""
+        h = (self.n - 1) / 2.0
+        i, j = np.meshgrid(np.arange(self.n) - h, np.arange(self.n) - h, indexing="ij")
+        return np.column_stack([i.ravel(), j.ravel()]) @ self.axes.T
+
+    def points(self) -> np.ndarray:
+        """Every member's points, ``(M * n * n, 2)``."""
+        return (self.centres[:, None, :] + self.offsets()[None]).reshape(-1, 2)
+
+    @property
+    def cell_area(self) -> float:
+        return float(abs(np.linalg.det(self.axes)))
+
+    def masses(self) -> np.ndarray:
+        """Each point's probability, ``(M, n, n)`` (sums to 1)."""
+        w = np.exp(self.log_density - np.max(self.log_density))
+        return w / w.sum()
+
+    def member_moments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Each member's mass ``(M,)``, mean ``(M, 2)`` and covariance ``(M, 2, 2)`` (of its
+        points; zero-mass members: their centre and a zero covariance)."""
+        mass = self.masses().reshape(len(self.nodes), -1)
+        weight = mass.sum(axis=1)
+        offsets = self.offsets()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(weight[:, None] > 0, mass / weight[:, None], 0.0)
+        local = w @ offsets
+        d = offsets[None] - local[:, None]
+        cov = np.einsum("mp,mpi,mpj->mij", w, d, d)
+        return weight, self.centres + local, cov
+
+    def within(self) -> np.ndarray:
+        """The members' mass-weighted mean covariance ``(2, 2)`` (the spread a grid must hold)."""
+        weight, _, cov = self.member_moments()
+        return np.einsum("m,mij->ij", weight, cov) / weight.sum()
+
+    def moments(self) -> tuple[np.ndarray, np.ndarray]:
+        """The position's mean ``(2,)`` and covariance ``(2, 2)`` (with the white noise not yet
+        convolved in)."""
+        weight, mean, cov = self.member_moments()
+        total = weight @ mean
+        d = mean - total
+        pooled = np.einsum("m,mij->ij", weight, cov) + (d * weight[:, None]).T @ d
+        return total, pooled + self.pending
+
+    def member_log_mass(self) -> np.ndarray:
+        """Each member's log mass ``(M,)`` (computed in logs: no underflow however unlikely)."""
+        flat = self.log_density.reshape(len(self.nodes), -1)
+        top = np.max(flat, axis=1)
+        safe = np.where(np.isfinite(top), top, 0.0)
+        with np.errstate(divide="ignore"):
+            return safe + np.log(np.sum(np.exp(flat - safe[:, None]), axis=1)) + np.log(self.cell_area)
+
+    def calibration(self) -> tuple[np.ndarray, np.ndarray]:
+        """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the Gaussian
+        whose log fits the posterior density at the nodes (least squares; exact for a Gaussian
+        posterior, however narrow against the nodes' spacing), else the nodes' moments."""
+        log_mass = self.member_log_mass()
+        weight = np.exp(log_mass - np.max(log_mass))
+        weight /= weight.sum()
+        mean = weight @ self.nodes
+        d = self.nodes - mean
+        moments = (mean, (d * weight[:, None]).T @ d)
+        fitted = self.calibration_fit(log_mass)
+        return moments if fitted is None else fitted
+
+    def calibration_fit(self, log_mass: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+        """:func:`_gaussian_fit` of the posterior density at the nodes (None: no fit)."""
+        log_mass = self.member_log_mass() if log_mass is None else log_mass
+        return _gaussian_fit(self.nodes, log_mass + self.node_offset)
+
+
+def _gaussian_fit(nodes: np.ndarray, log_density: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """Mean and covariance of the Gaussian whose log is the least-squares quadratic through
+    ``log_density`` at ``nodes (M, 2)`` (axes with one node value: variance 0); None when the
+    nodes cannot determine a quadratic (fewer than three values on an axis) or the fit is not
+    concave. The mean is kept within half the nodes' span beyond them (the fit does not
+    extrapolate far)."""
+    live = [a for a in range(2) if np.unique(nodes[:, a]).size > 1]
+    mean = nodes[0].astype(np.float64).copy()
+    cov = np.zeros((2, 2))
+    if not live:
+        return mean, cov
+    if any(np.unique(nodes[:, a]).size < 3 for a in live):
+        return None
+    centre = nodes[:, live].mean(axis=0)
+    scale = nodes[:, live].std(axis=0)
+    pairs = [(i, j) for i in range(len(live)) for j in range(i, len(live))]
+    keep = np.isfinite(log_density)
+    if keep.sum() < 1 + len(live) + len(pairs):
+        return None
+    x = (nodes[keep][:, live] - centre) / scale
+    y = log_density[keep]
+    columns = [np.ones(len(x)), *x.T, *(x[:, i] * x[:, j] for i, j in pairs)]
+    coef = np.linalg.lstsq(np.column_stack(columns), y, rcond=None)[0]
+    g = coef[1:1 + len(live)]
+    h = np.zeros((len(live), len(live)))
+    for c, (i, j) in zip(coef[1 + len(live):], pairs, strict=True):
+        h[i, j] -= c if i != j else 2.0 * c
+        h[j, i] = h[i, j]
+    if np.any(np.linalg.eigvalsh(h) <= 0):
+        return None
+    inv = np.linalg.inv(h)
+    low, high = nodes[:, live].min(axis=0), nodes[:, live].max(axis=0)
+    reach = 0.5 * (high - low)  # at most half the nodes' span beyond them
+    mean[live] = np.clip(centre + scale * (inv @ g), low - reach, high + reach)
+    cov[np.ix_(live, live)] = inv * np.outer(scale, scale)
+    return mean, cov
+
+
+def _gaussian_convolve(values: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``values (M, n, n)`` convolved with the Gaussian of covariance ``cov (2, 2)`` in grid
+    coordinates (zero padded, so nothing wraps around)."""
+    n = values.shape[1]
+    pad = int(np.ceil(5.0 * np.sqrt(max(np.max(np.linalg.eigvalsh(cov)), 0.0)))) + 1
+    size = scipy.fft.next_fast_len(n + 2 * pad)
+    f = scipy.fft.rfft2(values, s=(size, size), axes=(1, 2))
+    wi = 2.0 * np.pi * scipy.fft.fftfreq(size)[:, None]
+    wj = 2.0 * np.pi * scipy.fft.rfftfreq(size)[None, :]
+    kernel = np.exp(-0.5 * (cov[0, 0] * wi**2 + 2.0 * cov[0, 1] * wi * wj + cov[1, 1] * wj**2))
+    return scipy.fft.irfft2(f * kernel, s=(size, size), axes=(1, 2))[:, :n, :n]
+
+
+def _mixed_tide(mass: np.ndarray, first: np.ndarray, second: np.ndarray, tide_var: float):
+    """The tide posterior of points whose density ``mass`` mixes points of tide means whose
+    mass-weighted first and second moments are ``first``, ``second`` (same shape): each point's
+    mean and the one variance of the filter (the variance within plus the mass-weighted spread
+    between the mixed means)."""
+    live = mass > 1e-300
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tide = np.where(live, first / mass, 0.0)
+        spread = np.where(live, np.maximum(second / mass - tide**2, 0.0), 0.0)
+    total = mass.sum()
+    return tide, tide_var + (float(np.sum(mass * spread) / total) if total > 0 else 0.0)
+
+
+def _diffuse(state: PointMass) -> None:
+    """Convolve the pending white DR noise into every member's density (and tide posteriors)."""
+    inv = np.linalg.inv(state.axes)
+    cov = inv @ state.pending @ inv.T
+    top = np.max(state.log_density)
+    p = np.exp(state.log_density - top)
+    smoothed = np.maximum(_gaussian_convolve(p, cov), 0.0)  # less round-off below zero
+    if state.tide_var > 0:
+        state.tide, state.tide_var = _mixed_tide(
+            smoothed, _gaussian_convolve(p * state.tide, cov), _gaussian_convolve(p * state.tide**2, cov),
+            state.tide_var,
+        )  # fmt: skip
+    with np.errstate(divide="ignore"):
+        state.log_density = np.where(smoothed > 1e-300, np.log(smoothed), -np.inf) + top
+    state.pending = np.zeros((2, 2))
+
+
+def _edge_mass(state: PointMass) -> float:
+    """The largest share of a member's mass in its grid's outer ring."""
+    mass = state.masses()
+    total = mass.sum(axis=(1, 2))
+    inner = mass[:, 1:-1, 1:-1].sum(axis=(1, 2))
+    live = total > 1e-9 * total.max()
+    return float(np.max((total[live] - inner[live]) / total[live]))
+
+
+class _Grid:
+    """The grid rule of a run: points, half-width in standard deviations, smallest spacing."""
+
+    def __init__(self, config: PMFConfig, min_spacing: float):
+        self.n = config.grid_points
+        self.sigmas = config.grid_sigmas
+        self.min_spacing = min_spacing
+
+    def axes(self, cov: np.ndarray) -> np.ndarray:
+        """Grid steps ``(2, 2)`` (columns) for a density of covariance ``cov``: along its principal
+        axes, spanning ``sigmas`` standard deviations each side."""
+        values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+        half = self.sigmas * np.sqrt(np.maximum(values, 0.0))
+        spacing = np.maximum(half / ((self.n - 1) / 2.0), self.min_spacing)
+        return vectors * spacing
+
+    def needs_regrid(self, state: PointMass, cov: np.ndarray) -> bool:
+        """Whether the density has reached the edge, or its spread (in grid coordinates) has
+        left ``[1 / ratio, ratio]`` times the target."""
+        if _edge_mass(state) > _EDGE_MASS:
+            return True
+        inv = np.linalg.inv(state.axes)
+        spread = np.sqrt(np.maximum(np.linalg.eigvalsh(inv @ cov @ inv.T), 0.0))
+        target = (self.n - 1) / 2.0 / self.sigmas
+        if np.max(spread) > _SPREAD_RATIO * target:
+            return True
+        spacing = np.linalg.norm(state.axes, axis=0)
+        return bool(np.min(spread) < target / _SPREAD_RATIO and np.min(spacing) > 1.01 * self.min_spacing)
+
+
+def _sample(state: PointMass, member: int, points: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Member ``member``'s density (relative to the state's largest value) at world ``points
+    (P, 2)`` and its mass-weighted tide mean there (bilinear; zero outside its grid)."""
+    inv = np.linalg.inv(state.axes)
+    h = (state.n - 1) / 2.0
+    q = ((points - state.centres[member]) @ inv.T + h).T
+    p = np.exp(state.log_density[member] - np.max(state.log_density))
+    t = state.tide[member]
+    return tuple(ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0) for v in (p, p * t))
+
+
+def _place_nodes(mean: np.ndarray, cov: np.ndarray, counts: tuple[int, int]) -> tuple[np.ndarray, ...]:
+    """Calibration nodes ``(M, 2)`` of the product Gauss-Hermite rule of ``counts`` points along
+    the principal axes of ``N(mean, cov)`` (one node on an axis of variance 0), their log
+    weights ``(M,)`` (summing to 1) and the log of the Gaussian over the weight at each node."""
+    values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+    order = np.argsort(np.argmax(np.abs(vectors), axis=0))  # principal axis nearest k first, then b
+    values, vectors = values[order], vectors[:, order]
+    rules = []
+    for c, v in zip(counts, values, strict=True):
+        if c == 1 or v <= 0:
+            rules.append((np.zeros(1), np.ones(1)))
+        else:
+            x, w = np.polynomial.hermite_e.hermegauss(c)
+            rules.append((x, w / w.sum()))
+    (x0, w0), (x1, w1) = rules
+    xi = np.stack(np.meshgrid(x0, x1, indexing="ij"), axis=-1).reshape(-1, 2)
+    log_w = np.log(np.outer(w0, w1).ravel())
+    nodes = mean + xi * np.sqrt(np.maximum(values, 0.0)) @ vectors.T
+    log_gauss = -0.5 * np.sum(xi**2, axis=1)
+    return nodes, log_w, log_gauss - log_w
+
+
+def _log_gaussian(nodes: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """``log N(nodes; mean, cov)`` up to a constant (axes of variance 0 left out)."""
+    live = np.diag(cov) > 0
+    if not live.any():
+        return np.zeros(len(nodes))
+    d = (nodes - mean)[:, live]
+    return -0.5 * np.einsum("mi,ij,mj->m", d, np.linalg.inv(cov[np.ix_(live, live)]), d)
+
+
+def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, target=None) -> PointMass:
+    """The state re-sampled onto new grids (and, with the calibration estimated, new nodes: the
+    Gauss-Hermite rule of the state's calibration posterior, or of ``target`` ``(mean, cov)``,
+    the members' masses then carrying the state's posterior over the target)."""
+    if np.any(state.pending):
+        _diffuse(state)
+    weight, means, _ = state.member_moments()
+    live = weight > 0
+    axes = grid.axes(state.within())
+    nodes, node_offset, cal_mean, cal_cov = state.nodes, state.node_offset, None, None
+    source = np.arange(len(nodes))
+    shift = np.zeros((len(nodes), 2))
+    log_weight = np.log(np.maximum(weight, 1e-300))
+    if estimate:
+        own_mean, own_cov = state.calibration()
+        own_cov = own_cov.copy()
+        own_cov[1, 1] += state.walk
+        cal_mean, cal_cov = (own_mean, own_cov) if target is None else target
+        nodes, log_weight, node_offset = _place_nodes(cal_mean, cal_cov, config.calibration_points)
+        if target is not None:  # mass = weight x own posterior / target at each node
+            log_weight = _log_gaussian(nodes, own_mean, own_cov) - node_offset
+        # the members' mean positions regressed on their nodes: the position's sensitivity
+        d_theta = state.nodes - own_mean
+        d_x = means - weight @ means
+        c_xt = (d_x * weight[:, None]).T @ d_theta
+        gain = c_xt @ np.linalg.pinv(own_cov - np.diag([0.0, state.walk]), rcond=1e-9)
+        live_var = np.maximum(np.diag(cal_cov), 1e-30)
+        distance = ((nodes[:, None, :] - state.nodes[None]) ** 2 / live_var).sum(axis=2)
+        distance[:, ~live] = np.inf
+        source = np.argmin(distance, axis=1)
+        shift = (nodes - state.nodes[source]) @ gain.T
+    new_centres = means[source] + shift
+    h = (grid.n - 1) / 2.0
+    i, j = np.meshgrid(np.arange(grid.n) - h, np.arange(grid.n) - h, indexing="ij")
+    offsets = np.column_stack([i.ravel(), j.ravel()]) @ axes.T
+    shape = (len(nodes), grid.n, grid.n)
+    mass, first = np.empty(shape), np.empty(shape)
+    for m, src in enumerate(source):
+        value, t1 = _sample(state, src, new_centres[m] - shift[m] + offsets)
+        total = value.sum()
+        if total <= 0:  # a member whose density missed its new grid: its mean point
+            value, t1 = np.zeros_like(value), np.zeros_like(value)
+            value[value.size // 2], t1[value.size // 2] = 1.0, state.tide[src].mean()
+            total = 1.0
+        scale = np.exp(log_weight[m] - np.max(log_weight)) / total
+        mass[m], first[m] = value.reshape(shape[1:]) * scale, t1.reshape(shape[1:]) * scale
+    # re-sampling only reads the density between points: the tide means are interpolated (their
+    # spread between neighbours is not a mixture: it would widen the tide at every re-grid)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tide = np.where(mass > 1e-300, first / mass, 0.0)
+        density = np.log(mass)
+    area = float(abs(np.linalg.det(axes)))
+    _, log_total = log_normalise(density.ravel(), where="pmf")
+    placed = state.placed if not estimate else (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0)))
+    return PointMass(nodes, node_offset, new_centres, axes, density - log_total - np.log(area), tide,
+                     state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, placed)
+
+
+def _calibration_moved(state: PointMass) -> bool:
+    """Whether the calibration's posterior has left the nodes' placement: its std out of
+    ``[_NODE_RATIO, 1 / _NODE_RATIO]`` times the placement's on an axis, or its mean moved by
+    more than ``_NODE_SHIFT`` placement stds."""
+    if state.placed is None:
+        return False
+    mean, cov = state.calibration()
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    placed_mean, placed_std = state.placed
+    live = (placed_std > 0) & (np.ptp(state.nodes, axis=0) > 0)
+    if not live.any():
+        return False
+    grown = np.sqrt(placed_std[live] ** 2 + np.array([0.0, state.walk])[live])
+    ratio = std[live] / grown
+    return bool(np.any(ratio < _NODE_RATIO) or np.any(ratio > 1.0 / _NODE_RATIO)
+                or np.any(np.abs(mean - placed_mean)[live] > _NODE_SHIFT * placed_std[live]))
+
+
+def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig) -> PointMass:
+    cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
+    cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
+    nodes, log_weight, node_offset = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
+    s = navigation.initial_position_std
+    axes = grid.axes(np.eye(2) * s**2)
+    h = (grid.n - 1) / 2.0
+    i, j = np.meshgrid(np.arange(grid.n) - h, np.arange(grid.n) - h, indexing="ij")
+    offsets = np.column_stack([i.ravel(), j.ravel()]) @ axes.T
+    log_p = -0.5 * np.sum(offsets**2, axis=1) / max(s, 1e-9) ** 2
+    density = (log_weight[:, None] + log_p[None]).reshape(len(nodes), grid.n, grid.n)
+    _, log_total = log_normalise(density.ravel(), where="pmf")
+    area = float(abs(np.linalg.det(axes)))
+    return PointMass(nodes, node_offset, np.tile(centre, (len(nodes), 1)), axes,
+                     density - log_total - np.log(area), np.full(density.shape, navigation.tide),
+                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, cal_std))
+
+
+def _slope_moment(bathymetry: BathymetryMap) -> np.ndarray:
+    """The map's mean outer product of its depth gradients over its data, ``(2, 2)`` (north,
+    east; dimensionless)."""
+    _, _, dn, de = bathymetry._grid  # type: ignore[attr-defined]
+    gn, ge = np.gradient(bathymetry.depth, dn, de)
+    ok = np.isfinite(gn) & np.isfinite(ge)
+    if not ok.any():
+        return np.zeros((2, 2))
+    g = np.column_stack([gn[ok], ge[ok]])
+    return g.T @ g / g.shape[0]
+
+
+def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
+    if ping.first:
+        return
+    step = rotate(-state.nodes[:, 1], np.broadcast_to(ping.increment, state.centres.shape))
+    state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
+    state.pending = state.pending + model.motion.noise_covariance(ping)
+    state.walk += model.motion.heading_walk**2 * ping.dt
+    inv = np.linalg.inv(state.axes)
+    if np.max(np.linalg.eigvalsh(inv @ state.pending @ inv.T)) >= 0.25:
+        _diffuse(state)
+
+
+def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray):
+    """Weigh every point by the ping; returns the predicted state's belief view, the update and
+    whether any point had the map under it."""
+    if ping.n_soundings == 0:
+        return None, None
+    points = state.points()
+    n_points = state.n * state.n
+    turn = np.repeat(-state.nodes[:, 1], n_points)
+    log_mass = (state.log_density - np.max(state.log_density)).ravel()
+    weights = np.exp(log_mass)
+    resolution = float(np.trace(state.axes.T @ slope @ state.axes)) / 12.0
+    variance = ping.variance if ping.variance is not None else np.full(ping.n_soundings,
+                                                                      model.terrain.sounding_std**2)
+    update = model.terrain.likelihood.ping_update(
+        points, ping.offsets, ping.depths, state.tide.ravel(), state.tide_var, turn=turn, weights=weights,
+        variance=variance + resolution, map_variance=ping.map_variance,
+    )  # fmt: skip
+    if np.all(np.isneginf(update.log_likelihood)):
+        return None, None  # no point has the map under any sounding: no information
+    view = Belief(points, log_mass - np.log(weights.sum()), state.tide.ravel(), state.tide_var,
+                  np.empty((points.shape[0], 0)), np.empty(0))
+    check = innovation(view, update, ping, model)
+    posterior = state.log_density + update.log_likelihood.reshape(state.log_density.shape)
+    _, log_total = log_normalise(posterior.ravel(), where=f"pmf ping {ping.index}")
+    state.log_density = posterior - log_total - np.log(state.cell_area)
+    state.tide = update.tide.reshape(state.tide.shape)
+    state.tide_var = update.tide_var
+    return check, update
+
+
+# A ping whose evidence differs by more than this (nats) between calibration nodes tells the
+# calibration more sharply than the nodes can hold: they are re-placed at its posterior first.
+_SHARP = 8.0
+_MAX_REFINE = 2
+
+
+def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray, grid: _Grid,
+             config: PMFConfig, estimate: bool):
+    """The ping's update (:func:`_update`) as a new state. With the calibration estimated, when
+    the ping's evidence is too sharp across the nodes, the predicted state's nodes are re-placed
+    at the posterior the ping gives (adaptive Gauss-Hermite quadrature) and the ping weighed
+    again, at most ``_MAX_REFINE`` times."""
+    for attempt in range(_MAX_REFINE + 1):
+        trial = dataclasses.replace(state)  # fields are replaced, never changed in place
+        check, update = _update(trial, ping, model, slope)
+        if update is None or not estimate or attempt == _MAX_REFINE:
+            return trial, check, update
+        prior = state.member_log_mass()
+        evidence = trial.member_log_mass() - prior
+        live = np.isfinite(evidence) & (prior > np.max(prior) - 20.0)
+        if not live.any() or np.ptp(evidence[live]) <= _SHARP:
+            return trial, check, update
+        target = trial.calibration_fit()
+        if target is None:
+            return trial, check, update
+        cov = target[1].copy()
+        cov[1, 1] += state.walk
+        state = _regrid(state, grid, config, True, target=(target[0], cov))
+    return trial, check, update  # not reached
+
+
+def point_mass_filter(
+    survey: Survey,
+    bathymetry: BathymetryMap,
+    config: PMFConfig | None = None,
+    *,
+    model: NavigationModel | None = None,
+    rng: np.random.Generator | None = None,
+    progress: bool = False,
+) -> Track:
+    """Run the point-mass filter over a survey (deterministic: ``rng`` is not used); ``model``
+    is the navigation model (None: ``NavigationModel.from_survey(survey)``). See the module
+    docstring.
+
+    Returns
+    -------
+    Track
+        The density's mean track and covariance (heading: dead reckoning, its variance NaN);
+        ``meta``: ``calibration`` (the bank's mean and std), ``n_lost``, ``lost_steps``,
+        ``n_off_map``, ``off_map_steps`` (pings no point had the map under), ``n_regrids``,
+        ``n_points`` (grid points per ping: members times ``grid_points^2``),
+        ``navigation_model``, ``config``; ``timings``.
+    """
+    from tqdm.auto import tqdm
+
+    check_run_inputs(survey, bathymetry, rng, where="pmf", rng_optional=True)
+    config = config or PMFConfig()
+    navigation = survey_navigation_model(survey, model, where="pmf")
+    filter_model = FilterModel.from_model(navigation, bathymetry)
+    grid = _Grid(config, config.min_spacing)
+    slope = _slope_moment(bathymetry)
+    estimate = any(c > 1 and s > 0
+                   for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
+    state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
+    k_total = survey.n_pings
+    mean = np.empty((k_total, 2))
+    cov = np.full((k_total, 3, 3), np.nan)
+    seconds = np.empty(k_total)
+    lost_steps: list[int] = []
+    off_map_steps: list[int] = []
+    divergence_steps: list[int] = []
+    streak = n_regrids = 0
+    started = _time.perf_counter()
+    pings = survey_pings(survey, bathymetry, navigation)
+    for ping in tqdm(pings, disable=not progress, desc="pmf", unit="ping", leave=False):
+        t0 = _time.perf_counter()
+        _predict(state, ping, filter_model)
+        try:
+            state, check, update = _measure(state, ping, filter_model, slope, grid, config, estimate)
+        except FilterDivergence:  # no point of positive density explains the ping: keep the prior
+            divergence_steps.append(ping.index)
+            check, update = None, False
+        if update is None and ping.n_soundings:
+            off_map_steps.append(ping.index)
+        if check is not None:
+            streak = streak + 1 if check.inconsistent(config.lost_alpha) else 0
+            if streak >= config.lost_pings:
+                lost_steps.append(ping.index)
+        if grid.needs_regrid(state, state.within()) or (estimate and _calibration_moved(state)):
+            state = _regrid(state, grid, config, estimate)
+            n_regrids += 1
+        m, c = state.moments()
+        mean[ping.index], cov[ping.index, :2, :2] = m, c
+        seconds[ping.index] = _time.perf_counter() - t0
+    elapsed = _time.perf_counter() - started
+    cal_mean, cal_cov = state.calibration()
+    cal_std = np.sqrt(np.maximum(np.diag(cal_cov), 0.0))
+    meta: dict[str, Any] = {
+        "calibration": {
+            "speed_scale": float(cal_mean[0]),
+            "speed_scale_std": float(cal_std[0]),
+            "heading_error": float(cal_mean[1]),
+            "heading_error_std": float(np.sqrt(cal_std[1] ** 2 + state.walk)),
+        },
+        "ess": [float("nan")] * k_total,
+        "n_resampled": 0,
+        "n_divergences": len(divergence_steps),
+        "divergence_steps": divergence_steps,
+        "n_lost": len(lost_steps),
+        "lost_steps": lost_steps,
+        "n_off_map": len(off_map_steps),
+        "off_map_steps": off_map_steps,
+        "n_regrids": n_regrids,
+        "n_points": int(len(state.nodes) * grid.n**2),
+        "sounding_std": filter_model.terrain.sounding_std,
+        "navigation_model": navigation.as_dict(),
+        "config": config.as_dict(),
+        "seed": None,
+    }
+    return Track(
+        time=survey.time,
+        pose=np.column_stack([mean, survey.dr_pose[:, 2]]),
+        covariance=cov,
+        method="pmf",
+        timings=step_timings(elapsed, seconds),
+        meta=meta,
+    )

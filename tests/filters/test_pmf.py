@@ -1,0 +1,143 @@
+"""The point-mass filter against exact answers: the Kalman filter on a linear-Gaussian sloped
+seabed (known and unknown tide), the exact mixture posterior with an unknown DVL speed scale, the
+dead reckoning's own spread on a flat seabed; and its edges (no map, bad settings)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.filters import PMFConfig, point_mass_filter, run_filter
+from tangraph.sensors import DeadReckoningModel
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
+from tests.filters.test_pf import kalman, kalman_mixture, linear_gaussian_run, linear_model, sloped_seabed
+
+
+@pytest.mark.parametrize(("seed", "tide_sd"), [(0, 0.0), (2, 3.0)])
+def test_the_pmf_matches_the_kalman_filter(seed, tide_sd):
+    """Deterministic, so the tolerance is the grid's (31 points over +-5 std: about 0.08 std on
+    the mean and 1 % on the variance in seeds 0-2, at 61 points 0.02 std): a tenth of a
+    posterior std on the mean, 3 % on the variance."""
+    q, sigma, p0 = 2.0, 1.0, 30.0
+    survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
+    x_kf, p_kf, _ = kalman(survey, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
+    model = linear_model(q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
+    track = point_mass_filter(survey, sloped_seabed(), model=model)
+    x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
+    assert np.all(np.abs(x - x_kf) < 0.1 * np.sqrt(np.diag(p_kf))), (x, x_kf)
+    np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.03)
+
+
+def test_the_pmf_with_a_speed_scale_matches_the_exact_posterior():
+    """A DVL reading 4 % fast (prior std of k 3 %): the bank's position and k against the exact
+    mixture of Kalman filters over quadrature nodes of k. The bank's error is its quadrature and
+    its Gaussian re-placements: in seeds 5-6 at pings 10, 30, 59 at most 0.04 std on the
+    position, 4 % on its variance, 0.22 std on k and 1 % on its std (the 3 x 3 default)."""
+    q, sigma, p0, scale_sd = 0.5, 1.0, 30.0, 0.03
+    survey = linear_gaussian_run(5, k=60, q=q, sigma=sigma, p0=p0, scale=0.04)
+    x_kf, p_kf, k_kf, k_sd = kalman_mixture(survey, q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
+    model = linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
+    track = point_mass_filter(survey, sloped_seabed(), model=model)
+    x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
+    assert np.all(np.abs(x - x_kf) < 0.1 * np.sqrt(np.diag(p_kf))), (x, x_kf)
+    np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.06)
+    calibration = track.meta["calibration"]
+    assert abs(calibration["speed_scale"] - k_kf) < 0.3 * k_sd, (calibration, k_kf)
+    np.testing.assert_allclose(calibration["speed_scale_std"], k_sd, rtol=0.05)
+    assert k_sd < 0.5 * scale_sd  # the soundings did teach the filter the scale
+
+
+def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
+    """No terrain information: the density is the DR's, a mixture over the unknown speed scale
+    of the white-noise Gaussians around ``x_0 + S / (1 + k)`` (exact moments from 80
+    Gauss-Hermite nodes; the bank's 3 x 3 nodes and grids within 2 % on the variance)."""
+    q, sigma, p0, scale_sd = 0.5, 1.0, 10.0, 0.03
+    survey = linear_gaussian_run(3, k=40, q=q, sigma=sigma, p0=p0)
+    flat = sloped_seabed()
+    flat = dataclasses.replace(flat, depth=np.full(flat.depth.shape, 500.0))
+    track = point_mass_filter(survey, flat, model=linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd))
+    z, w = np.polynomial.hermite_e.hermegauss(80)
+    w = w / w.sum()
+    run = survey.dr_pose[-1, :2] - survey.dr_pose[0, :2]
+    means = survey.dr_pose[0, :2] + run / (1.0 + scale_sd * z)[:, None]
+    mean = w @ means
+    d = means - mean
+    cov = (p0**2 + (survey.n_pings - 1) * q**2) * np.eye(2) + (d * w[:, None]).T @ d
+    np.testing.assert_allclose(track.pose[-1, :2], mean, atol=0.02 * np.sqrt(cov[0, 0]))
+    np.testing.assert_allclose(track.covariance[-1, :2, :2], cov, rtol=0.02, atol=0.02 * cov[0, 0])
+    assert track.meta["calibration"]["speed_scale_std"] == pytest.approx(scale_sd, rel=0.02)
+
+
+def test_the_pmf_finds_the_vehicle_and_its_calibration_on_rough_terrain():
+    """A multibeam run over rough terrain with a DR 3 deg off and 2 % fast: the density ends near
+    the truth, with the truth inside its covariance and the heading error found."""
+    bathymetry = rough_map(1)
+    dr = DeadReckoningModel(heading_bias=np.radians(3.0), speed_scale=0.02, speed_noise=0.05)
+    survey = multibeam_survey(bathymetry, seed=4, pings=120, dr_model=dr)
+    model = navigation(survey)
+    track = point_mass_filter(survey, bathymetry, model=model)
+    error = track.pose[-1, :2] - survey.true_pose[-1, :2]
+    dr_error = survey.dr_pose[-1, :2] - survey.true_pose[-1, :2]
+    assert np.hypot(*error) < 0.1 * np.hypot(*dr_error), (error, dr_error)
+    assert error @ np.linalg.solve(track.covariance[-1, :2, :2], error) < 13.8  # chi2(2) at 0.999
+    calibration = track.meta["calibration"]
+    truth = survey.dr_pose[-1, 2] - survey.true_pose[-1, 2]
+    assert abs(calibration["heading_error"] - truth) < 3 * calibration["heading_error_std"]
+    assert calibration["heading_error_std"] < 0.5 * model.calibration_std[1]
+
+
+def test_a_survey_off_the_map_keeps_the_dead_reckoning_and_says_so():
+    bathymetry = sloped_seabed()
+    survey = linear_gaussian_run(0, k=10)
+    away = survey.replace(dr_pose=survey.dr_pose + np.array([1e5, 0.0, 0.0]),
+                          true_pose=survey.true_pose + np.array([1e5, 0.0, 0.0]))
+    track = point_mass_filter(away, bathymetry, model=linear_model(q=2.0, sigma=1.0, p0=30.0))
+    assert track.meta["n_off_map"] == away.n_pings
+    np.testing.assert_allclose(track.pose[:, :2], away.dr_pose[:, :2], atol=1e-6)
+    assert np.all(np.isfinite(track.covariance[:, :2, :2]))
+
+
+def test_the_pmf_runs_by_name_without_a_random_generator():
+    survey = linear_gaussian_run(1, k=8)
+    model = linear_model(q=2.0, sigma=1.0, p0=30.0)
+    direct = point_mass_filter(survey, sloped_seabed(), model=model)
+    by_name = run_filter("pmf", survey, sloped_seabed(), model=model, rng=None)
+    np.testing.assert_array_equal(direct.pose, by_name.pose)
+    assert by_name.method == "pmf" and by_name.meta["n_points"] == 9 * 31**2
+
+
+@pytest.mark.parametrize(
+    ("settings", "message"),
+    [
+        ({"grid_points": 4}, "grid_points must be an odd integer >= 5, got 4"),
+        ({"grid_points": True}, "grid_points must be an odd integer >= 5, got True"),
+        ({"grid_points": 30}, "grid_points must be an odd integer >= 5, got 30"),
+        ({"grid_sigmas": 0.5}, "grid_sigmas must be >= 1"),
+        ({"min_spacing": 0.0}, "min_spacing must be > 0"),
+        ({"calibration_points": (3,)}, "calibration_points must be two integers >= 1"),
+        ({"calibration_points": (0, 3)}, "calibration_points must be two integers >= 1"),
+        ({"lost_pings": 0}, "lost_pings must be an integer >= 1"),
+    ],
+)
+def test_bad_settings_are_named(settings, message):
+    with pytest.raises(TangraphError, match=message.replace("(", r"\(")) as caught:
+        PMFConfig(**settings)
+    assert "\n" not in str(caught.value)
+
+
+def test_the_spacing_floor_is_honoured():
+    """``min_spacing`` floors the grid: with one 5 cm sounding per ping on the slope the
+    posterior across the depth contours narrows to 0.3 m; the default grid follows it (as the
+    Kalman filter), a 2 m floor cannot and stays wider (its cells' depth spread counted)."""
+    q, sigma, p0 = 0.1, 0.05, 5.0
+    survey = linear_gaussian_run(2, k=30, q=q, sigma=sigma, p0=p0)
+    model = linear_model(q=q, sigma=sigma, p0=p0)
+    _, p_kf, _ = kalman(survey, q=q, sigma=sigma, p0=p0)
+    g = np.array([0.05, -0.02]) / np.hypot(0.05, -0.02)
+    across = {s: g @ point_mass_filter(survey, sloped_seabed(), PMFConfig(min_spacing=s),
+                                       model=model).covariance[-1, :2, :2] @ g for s in (0.01, 2.0)}
+    assert across[0.01] == pytest.approx(g @ p_kf @ g, rel=0.05)
+    assert across[2.0] > 2.0 * across[0.01]
