@@ -7,28 +7,31 @@ is no evidence, MBARI's exponents, the tide marginalised exactly: each point car
 Gaussian tide posterior). It is deterministic and keeps a multimodal density as it is.
 
 **The DR's constant errors** ``(k, b)`` (speed scale, heading error) are handled by a bank: the
-joint density of ``(position, k, b)`` is held at the nodes of a product Gauss-Hermite rule of the
-calibration's Gaussian (``calibration_points`` per principal axis), each node a member with its
-own position grid and a mass. Between pings a member's grid moves by its own calibrated increment
-``R(-b) u / (1 + k)`` (the Lagrangian form: moving the points is exact); the white DR noise
-accumulates and is convolved in (FFT, in the grid's coordinates) once its std reaches half a grid
-spacing. A ping weighs every point of every member; the members' masses are the calibration's
-posterior at the nodes. The calibration's estimate is the Gaussian whose log fits the nodes'
-posterior density (exact for a Gaussian posterior however narrow against the nodes), else the
-nodes' weighted moments.
+joint density of ``(position, k, b)`` is held at the nodes of a product Gauss-Hermite rule of a
+Gaussian in the calibration (``calibration_points`` per principal axis), each node a member with
+its own position grid and a mass. Between pings a member's grid moves by its own calibrated
+increment ``R(-b) u / (1 + k)`` (the Lagrangian form: moving the points is exact); the white DR
+noise accumulates and is convolved in (FFT, in the grid's coordinates) once its std reaches half
+a grid spacing. A ping weighs every point of every member. The calibration's posterior is the
+Gaussian the nodes were placed with times the evidence since (each member's mass over its mass
+at placement), fitted as a quadratic at the nodes whose curvature is made a likelihood's
+(positive semi-definite): exact for a Gaussian evidence however narrow against the nodes, never
+wider than the prior, its mean kept among the nodes.
 
 **Re-gridding**: when a member's density reaches its grid's edge, or the density has grown or
 shrunk well away from its grid, every member is re-sampled (bilinear) onto a grid centred on its
-own mean, aligned with the principal axes of the members' mean covariance and spanning
-``grid_sigmas`` standard deviations. The calibration's nodes are re-placed then, and whenever its
-posterior has moved from their placement: the Gauss-Hermite rule of the fitted Gaussian (its
+own mean, aligned with the principal axes of the members' mean covariance, spanning
+``grid_sigmas`` standard deviations and at least the points that hold all but ``1e-4`` of the
+mass (so a second mode is not cut off). The calibration's nodes are re-placed then, and whenever
+its posterior has moved from their placement: the Gauss-Hermite rule of the posterior (its
 heading error grown by the heading walk since the last placement), each new node given the
 position density of the nearest old member shifted by the regression of the members' mean
-positions on their nodes (the posterior's position sensitivity to the calibration). The nodes
-thus shrink with the calibration's uncertainty as the terrain informs it; the Gaussian at
-re-placement is the one approximation of the calibration's posterior. The tide posteriors of
-points mixed by the convolution are moment-matched (the spread of the mixed means joins the
-variance); re-sampling interpolates them.
+positions on their nodes (the posterior's position sensitivity to the calibration). When one
+ping's evidence differs by more than ``_SHARP`` nats between the nodes and is Gaussian in the
+calibration, the predicted state's nodes are first re-placed at the posterior it gives and the
+ping weighed again (adaptive Gauss-Hermite quadrature). The tide posteriors of points mixed by
+the convolution are moment-matched (the spread of the mixed means joins the variance);
+re-sampling interpolates them.
 
 **Resolution**: a grid point stands for its cell, so each sounding's variance is raised by the
 variance of the map's depth across a cell, ``sum_i a_i^T G a_i / 12`` for the grid's steps
@@ -140,20 +143,21 @@ class PointMass:
     ``log_density (M, n, n)`` (per square metre, normalised over all members), each point's tide
     posterior mean ``tide (M, n, n)`` and variance ``tide_var``; ``pending (2, 2)`` the white DR
     noise not yet convolved in; ``walk`` the heading error's variance grown since the nodes were
-    placed; ``placed`` the calibration mean and std at the last placement; ``node_offset (M,)``
-    the log of the placement Gaussian over the quadrature weight at each node (a member's mass
-    plus it is the log posterior density of its node, up to a constant)."""
+    placed. The calibration's posterior is ``prior (mean, cov)`` (the Gaussian it had when the
+    nodes were placed) times the evidence since: each member's log mass less ``node_base (M,)``,
+    its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on."""
 
     nodes: np.ndarray
-    node_offset: np.ndarray
+    node_base: np.ndarray
     centres: np.ndarray
     axes: np.ndarray
     log_density: np.ndarray
     tide: np.ndarray
     tide_var: float
     pending: np.ndarray
-    walk: float = 0.0
-    placed: tuple[np.ndarray, np.ndarray] | None = None
+    walk: float
+    prior: tuple[np.ndarray, np.ndarray]
+    placed: tuple[np.ndarray, np.ndarray]
 
     @property
     def n(self) -> int:
@@ -214,60 +218,42 @@ class PointMass:
             return safe + np.log(np.sum(np.exp(flat - safe[:, None]), axis=1)) + np.log(self.cell_area)
 
     def calibration(self) -> tuple[np.ndarray, np.ndarray]:
-        """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the Gaussian
-        whose log fits the posterior density at the nodes (least squares; exact for a Gaussian
-        posterior, however narrow against the nodes' spacing), else the nodes' moments."""
-        log_mass = self.member_log_mass()
-        weight = np.exp(log_mass - np.max(log_mass))
-        weight /= weight.sum()
-        mean = weight @ self.nodes
-        d = self.nodes - mean
-        moments = (mean, (d * weight[:, None]).T @ d)
-        fitted = self.calibration_fit(log_mass)
-        return moments if fitted is None else fitted
-
-    def calibration_fit(self, log_mass: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray] | None:
-        """:func:`_gaussian_fit` of the posterior density at the nodes (None: no fit)."""
-        log_mass = self.member_log_mass() if log_mass is None else log_mass
-        return _gaussian_fit(self.nodes, log_mass + self.node_offset)
+        """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the prior at
+        placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`)."""
+        return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior)[:2]
 
 
-def _gaussian_fit(nodes: np.ndarray, log_density: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """Mean and covariance of the Gaussian whose log is the least-squares quadratic through
-    ``log_density`` at ``nodes (M, 2)`` (axes with one node value: variance 0); None when the
-    nodes cannot determine a quadratic (fewer than three values on an axis) or the fit is not
-    concave. The mean is kept within half the nodes' span beyond them (the fit does not
-    extrapolate far)."""
-    live = [a for a in range(2) if np.unique(nodes[:, a]).size > 1]
-    mean = nodes[0].astype(np.float64).copy()
-    cov = np.zeros((2, 2))
-    if not live:
-        return mean, cov
-    if any(np.unique(nodes[:, a]).size < 3 for a in live):
-        return None
-    centre = nodes[:, live].mean(axis=0)
-    scale = nodes[:, live].std(axis=0)
-    pairs = [(i, j) for i in range(len(live)) for j in range(i, len(live))]
-    keep = np.isfinite(log_density)
-    if keep.sum() < 1 + len(live) + len(pairs):
-        return None
-    x = (nodes[keep][:, live] - centre) / scale
-    y = log_density[keep]
+def _evidence_fit(nodes: np.ndarray, evidence: np.ndarray, mean: np.ndarray, cov: np.ndarray):
+    """The Gaussian ``N(mean, cov)`` times the exponential of the least-squares quadratic through
+    the log ``evidence (M,)`` at ``nodes (M, 2)``, its curvature made positive semi-definite (a
+    likelihood's): the posterior is never wider than the prior, exact when the evidence is
+    Gaussian in the calibration however narrow it is against the nodes' spacing. The mean is
+    kept inside the nodes' bounding box (the fit does not extrapolate). Axes of prior variance
+    0, or on which the nodes do not vary, keep the prior; without enough finite evidence for a
+    quadratic, the prior is returned. Returns the mean, the covariance and whether the fitted
+    evidence was concave (a Gaussian likelihood)."""
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    live = np.flatnonzero((std > 0) & (np.ptp(nodes, axis=0) > 0))
+    pairs = [(i, j) for i in range(live.size) for j in range(i, live.size)]
+    keep = np.isfinite(evidence)
+    if live.size == 0 or keep.sum() < 1 + live.size + len(pairs):
+        return mean.copy(), cov.copy(), False
+    x = (nodes[keep][:, live] - mean[live]) / std[live]
     columns = [np.ones(len(x)), *x.T, *(x[:, i] * x[:, j] for i, j in pairs)]
-    coef = np.linalg.lstsq(np.column_stack(columns), y, rcond=None)[0]
-    g = coef[1:1 + len(live)]
-    h = np.zeros((len(live), len(live)))
-    for c, (i, j) in zip(coef[1 + len(live):], pairs, strict=True):
-        h[i, j] -= c if i != j else 2.0 * c
-        h[j, i] = h[i, j]
-    if np.any(np.linalg.eigvalsh(h) <= 0):
-        return None
-    inv = np.linalg.inv(h)
-    low, high = nodes[:, live].min(axis=0), nodes[:, live].max(axis=0)
-    reach = 0.5 * (high - low)  # at most half the nodes' span beyond them
-    mean[live] = np.clip(centre + scale * (inv @ g), low - reach, high + reach)
-    cov[np.ix_(live, live)] = inv * np.outer(scale, scale)
-    return mean, cov
+    coef = np.linalg.lstsq(np.column_stack(columns), evidence[keep], rcond=None)[0]
+    g = coef[1:1 + live.size]
+    h = np.zeros((live.size, live.size))
+    for c, (i, j) in zip(coef[1 + live.size:], pairs, strict=True):
+        h[i, j] = h[j, i] = -c if i != j else -2.0 * c
+    values, vectors = np.linalg.eigh(h)
+    h = (vectors * np.maximum(values, 0.0)) @ vectors.T  # a likelihood's curvature
+    correlation = cov[np.ix_(live, live)] / np.outer(std[live], std[live])
+    posterior = np.linalg.inv(np.linalg.inv(correlation) + h)
+    out_mean, out_cov = mean.copy(), cov.copy()
+    box = nodes[:, live]
+    out_mean[live] = np.clip(mean[live] + std[live] * (posterior @ g), box.min(axis=0), box.max(axis=0))
+    out_cov[np.ix_(live, live)] = posterior * np.outer(std[live], std[live])
+    return out_mean, out_cov, bool(np.all(values > 0))
 
 
 def _gaussian_convolve(values: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -330,26 +316,68 @@ class _Grid:
         self.sigmas = config.grid_sigmas
         self.min_spacing = min_spacing
 
-    def axes(self, cov: np.ndarray) -> np.ndarray:
+    def axes(self, cov: np.ndarray, support: np.ndarray | None = None) -> np.ndarray:
         """Grid steps ``(2, 2)`` (columns) for a density of covariance ``cov``: along its principal
-        axes, spanning ``sigmas`` standard deviations each side."""
+        axes, spanning ``sigmas`` standard deviations each side, and at least its ``support``
+        (a function of the axes ``(2, 2) -> (2,)``: the half-widths holding every point of
+        the density above ``_SUPPORT`` nats below its peak, so no mode is cut off)."""
         values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
         half = self.sigmas * np.sqrt(np.maximum(values, 0.0))
+        if support is not None:
+            half = np.maximum(half, support(vectors))
         spacing = np.maximum(half / ((self.n - 1) / 2.0), self.min_spacing)
         return vectors * spacing
 
     def needs_regrid(self, state: PointMass, cov: np.ndarray) -> bool:
-        """Whether the density has reached the edge, or its spread (in grid coordinates) has
-        left ``[1 / ratio, ratio]`` times the target."""
+        """Whether the density has reached the edge, its spread (in grid coordinates) has grown
+        beyond ``_SPREAD_RATIO`` times the target, or its support has shrunk within ``1 /
+        _SPREAD_RATIO`` of the grid on an axis that can be made finer."""
         if _edge_mass(state) > _EDGE_MASS:
             return True
         inv = np.linalg.inv(state.axes)
         spread = np.sqrt(np.maximum(np.linalg.eigvalsh(inv @ cov @ inv.T), 0.0))
-        target = (self.n - 1) / 2.0 / self.sigmas
-        if np.max(spread) > _SPREAD_RATIO * target:
+        h = (self.n - 1) / 2.0
+        if np.max(spread) > _SPREAD_RATIO * h / self.sigmas:
             return True
+        extent = _significant(state)
         spacing = np.linalg.norm(state.axes, axis=0)
-        return bool(np.min(spread) < target / _SPREAD_RATIO and np.min(spacing) > 1.01 * self.min_spacing)
+        return bool(np.any((extent < h / _SPREAD_RATIO) & (spacing > 1.01 * self.min_spacing)))
+
+
+# the density's support: the points that hold all but this share of its mass, whatever their
+# shape (a second mode included; what bilinear re-sampling adds to the tails is not)
+_SUPPORT_MASS = 1e-4
+
+
+def _extent(offsets: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Per column of ``offsets (P, A)`` the smallest half-width holding all but
+    ``_SUPPORT_MASS`` of ``mass (P,)``."""
+    out = np.empty(offsets.shape[1])
+    total = mass.sum()
+    for a in range(offsets.shape[1]):
+        size = np.abs(offsets[:, a])
+        order = np.argsort(size)
+        held = np.cumsum(mass[order])
+        out[a] = size[order][min(np.searchsorted(held, (1.0 - _SUPPORT_MASS) * total), size.size - 1)]
+    return out
+
+
+def _significant(state: PointMass) -> np.ndarray:
+    """The half-widths in grid steps, per grid axis, that hold the density's support."""
+    h = (state.n - 1) / 2.0
+    i, j = np.meshgrid(np.arange(state.n) - h, np.arange(state.n) - h, indexing="ij")
+    index = np.tile(np.column_stack([i.ravel(), j.ravel()]), (len(state.nodes), 1))
+    return _extent(index, state.masses().ravel())
+
+
+def _support(state: PointMass, centres: np.ndarray):
+    """The half-widths along unit ``vectors (2, 2)`` (columns) from each member's ``centres``
+    that hold the density's support (plus one old grid step), as :meth:`_Grid.axes` takes
+    them."""
+    points = state.points() - np.repeat(centres, state.n * state.n, axis=0)
+    mass = state.masses().ravel()
+    return lambda vectors: _extent(points @ vectors, mass) \
+        + np.max(np.abs(state.axes.T @ vectors), axis=0)  # one old step along each
 
 
 def _sample(state: PointMass, member: int, points: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -363,10 +391,10 @@ def _sample(state: PointMass, member: int, points: np.ndarray) -> tuple[np.ndarr
     return tuple(ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0) for v in (p, p * t))
 
 
-def _place_nodes(mean: np.ndarray, cov: np.ndarray, counts: tuple[int, int]) -> tuple[np.ndarray, ...]:
+def _place_nodes(mean: np.ndarray, cov: np.ndarray, counts: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
     """Calibration nodes ``(M, 2)`` of the product Gauss-Hermite rule of ``counts`` points along
-    the principal axes of ``N(mean, cov)`` (one node on an axis of variance 0), their log
-    weights ``(M,)`` (summing to 1) and the log of the Gaussian over the weight at each node."""
+    the principal axes of ``N(mean, cov)`` (one node on an axis of variance 0) and their log
+    weights ``(M,)`` (summing to 1)."""
     values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
     order = np.argsort(np.argmax(np.abs(vectors), axis=0))  # principal axis nearest k first, then b
     values, vectors = values[order], vectors[:, order]
@@ -379,10 +407,8 @@ def _place_nodes(mean: np.ndarray, cov: np.ndarray, counts: tuple[int, int]) -> 
             rules.append((x, w / w.sum()))
     (x0, w0), (x1, w1) = rules
     xi = np.stack(np.meshgrid(x0, x1, indexing="ij"), axis=-1).reshape(-1, 2)
-    log_w = np.log(np.outer(w0, w1).ravel())
     nodes = mean + xi * np.sqrt(np.maximum(values, 0.0)) @ vectors.T
-    log_gauss = -0.5 * np.sum(xi**2, axis=1)
-    return nodes, log_w, log_gauss - log_w
+    return nodes, np.log(np.outer(w0, w1).ravel())
 
 
 def _log_gaussian(nodes: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -402,19 +428,24 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
         _diffuse(state)
     weight, means, _ = state.member_moments()
     live = weight > 0
-    axes = grid.axes(state.within())
-    nodes, node_offset, cal_mean, cal_cov = state.nodes, state.node_offset, None, None
+    axes = grid.axes(state.within(), _support(state, means))
+    nodes, prior, placed = state.nodes, state.prior, state.placed
     source = np.arange(len(nodes))
     shift = np.zeros((len(nodes), 2))
     log_weight = np.log(np.maximum(weight, 1e-300))
+    node_base = state.node_base  # the nodes stay: so does the evidence since their placement
     if estimate:
         own_mean, own_cov = state.calibration()
         own_cov = own_cov.copy()
         own_cov[1, 1] += state.walk
         cal_mean, cal_cov = (own_mean, own_cov) if target is None else target
-        nodes, log_weight, node_offset = _place_nodes(cal_mean, cal_cov, config.calibration_points)
-        if target is not None:  # mass = weight x own posterior / target at each node
-            log_weight = _log_gaussian(nodes, own_mean, own_cov) - node_offset
+        nodes, log_weight = _place_nodes(cal_mean, cal_cov, config.calibration_points)
+        if target is not None:  # mass = weight x own posterior / target's at each node
+            log_weight = log_weight + _log_gaussian(nodes, own_mean, own_cov) \
+                - _log_gaussian(nodes, cal_mean, cal_cov)
+        node_base = log_weight
+        prior = (own_mean, own_cov)
+        placed = (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0)))
         # the members' mean positions regressed on their nodes: the position's sensitivity
         d_theta = state.nodes - own_mean
         d_x = means - weight @ means
@@ -447,17 +478,14 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
         density = np.log(mass)
     area = float(abs(np.linalg.det(axes)))
     _, log_total = log_normalise(density.ravel(), where="pmf")
-    placed = state.placed if not estimate else (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0)))
-    return PointMass(nodes, node_offset, new_centres, axes, density - log_total - np.log(area), tide,
-                     state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, placed)
+    return PointMass(nodes, node_base, new_centres, axes, density - log_total - np.log(area), tide,
+                     state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, prior, placed)
 
 
 def _calibration_moved(state: PointMass) -> bool:
     """Whether the calibration's posterior has left the nodes' placement: its std out of
     ``[_NODE_RATIO, 1 / _NODE_RATIO]`` times the placement's on an axis, or its mean moved by
     more than ``_NODE_SHIFT`` placement stds."""
-    if state.placed is None:
-        return False
     mean, cov = state.calibration()
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     placed_mean, placed_std = state.placed
@@ -473,7 +501,7 @@ def _calibration_moved(state: PointMass) -> bool:
 def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig) -> PointMass:
     cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
     cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
-    nodes, log_weight, node_offset = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
+    nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
     s = navigation.initial_position_std
     axes = grid.axes(np.eye(2) * s**2)
     h = (grid.n - 1) / 2.0
@@ -483,9 +511,10 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     density = (log_weight[:, None] + log_p[None]).reshape(len(nodes), grid.n, grid.n)
     _, log_total = log_normalise(density.ravel(), where="pmf")
     area = float(abs(np.linalg.det(axes)))
-    return PointMass(nodes, node_offset, np.tile(centre, (len(nodes), 1)), axes,
+    return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
                      density - log_total - np.log(area), np.full(density.shape, navigation.tide),
-                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, cal_std))
+                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
+                     (cal_mean, cal_std))
 
 
 def _slope_moment(bathymetry: BathymetryMap) -> np.ndarray:
@@ -564,12 +593,12 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
         live = np.isfinite(evidence) & (prior > np.max(prior) - 20.0)
         if not live.any() or np.ptp(evidence[live]) <= _SHARP:
             return trial, check, update
-        target = trial.calibration_fit()
-        if target is None:
+        mean, cov, concave = _evidence_fit(trial.nodes, trial.member_log_mass() - trial.node_base,
+                                           *trial.prior)
+        if not concave:  # not a Gaussian in the calibration: the nodes cannot be aimed by it
             return trial, check, update
-        cov = target[1].copy()
         cov[1, 1] += state.walk
-        state = _regrid(state, grid, config, True, target=(target[0], cov))
+        state = _regrid(state, grid, config, True, target=(mean, cov))
     return trial, check, update  # not reached
 
 

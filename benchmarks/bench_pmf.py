@@ -1,0 +1,70 @@
+"""Speed of the point-mass filter against the 1000-particle bootstrap PF, at their accuracy.
+
+    ./run bench   (or: python benchmarks/bench_pmf.py [--repeat R] [--scenario NAME] [--seed S]);
+    one thread: NUMBA_NUM_THREADS and OMP_NUM_THREADS default to 1.
+
+One survey of a scenario (default ``demo``: 1256 pings of 101 soundings) navigated by the PF with
+1000 particles (the reference, seeded) and by the PMF at its default grid (31 x 31 points per
+calibration node, 3 x 3 nodes) and at coarser settings. Printed: CPU ms per ping (best of R
+after a warm-up, this process), its ratio to the PF's measured in the same run, and each run's
+RMSE and final NEES (the goal: the PMF's time per ping at most the PF's at equal or better
+RMSE). Nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy as np
+from _timing import best_cpu
+
+from tangraph.eval import track_metrics
+from tangraph.filters import PFConfig, PMFConfig, run_filter
+from tangraph.sensors import NavigationModel
+
+CONFIGS = {
+    "pmf 31 x 31, 3 x 3 nodes": PMFConfig(),
+    "pmf 21 x 21, 3 x 3 nodes": PMFConfig(grid_points=21),
+    "pmf 15 x 15, 3 x 3 nodes": PMFConfig(grid_points=15),
+}
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--scenario", default="demo")
+    parser.add_argument("--seed", type=int, default=7)
+    args = parser.parse_args(argv)
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments" / "graph_vs_filters"))
+    from run import _survey  # the study's scenario with the demo's drifting DR
+
+    survey, bathymetry = _survey({"scenario": args.scenario, "dr": "demo"}, np.random.default_rng(args.seed))
+    model = NavigationModel.from_survey(survey)
+    b = survey.beam_depth.shape[1]
+    print(f"PMF vs PF on {args.scenario} (seed {args.seed}): {survey.n_pings} pings of {b} soundings; "
+          f"CPU ms per ping, best of {args.repeat}")
+    tracks = {}
+
+    def run(name, method, config):
+        def go():
+            tracks[name] = run_filter(method, survey, bathymetry, config, model=model,
+                                      rng=np.random.default_rng(1))
+        return 1e3 * best_cpu(go, args.repeat) / survey.n_pings
+
+    reference = run("pf 1000 particles", "pf", PFConfig(n_particles=1000))
+    rows = [("pf 1000 particles", reference)]
+    rows += [(name, run(name, "pmf", config)) for name, config in CONFIGS.items()]
+    print(f"   {'':28s} {'ms/ping':>8s} {'ratio':>6s} {'RMSE m':>7s} {'final NEES':>10s}")
+    for name, ms in rows:
+        m = track_metrics(tracks[name], survey.true_pose)
+        print(f"   {name:28s} {ms:8.2f} {ms / reference:6.2f} {m['rmse']:7.2f} {m['final_nees']:10.2f}")
+
+
+if __name__ == "__main__":
+    main()
