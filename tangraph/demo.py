@@ -1,10 +1,10 @@
 """``tangraph demo``: the whole idea on one real map, in a few minutes.
 
 Simulate a multibeam survey whose dead reckoning drifts, navigate it with the online iSAM2
-graph, the batch smoother and the particle filters (PF, IPF, SJCPF), and write a report with
-figures: the tracks over the hill-shaded map, the position error against time with the graph's
-2-sigma bound, one terrain fix close up with its Xie, Wang and calibrated regions, and a table
-of RMSE, final error, NEES, time per step and fixes used.
+graph, the batch smoother, three particle filters (PF, IPF, SJCPF) and the point-mass filter,
+and write a report with figures: the tracks over the hill-shaded map, the position error against
+time with the graph's 2-sigma bound, one terrain fix close up with its Xie, Wang and calibrated
+regions, and a table of RMSE, final error, NEES, time per step and fixes used.
 
 The report folder is built beside the destination and renamed into place only when complete,
 so an interrupted demo (Ctrl-C or SIGTERM) leaves no half-written report, and an existing folder
@@ -39,7 +39,8 @@ DEMO_SCENARIOS = {
     "han2020": "han2020",
     "polar500": "chen2022",
 }
-FILTERS = ("pf", "ipf", "sjcpf")
+FILTERS = ("pf", "ipf", "sjcpf", "pmf")
+PARTICLE_FILTERS = ("pf", "ipf", "sjcpf")
 
 log = logging.getLogger(__name__)
 
@@ -201,12 +202,12 @@ def _report(folder: Path, survey, bathymetry, rows, settings: dict, seconds: flo
 A simulated survey ({survey.meta.get("scenario")}: {survey.n_pings} pings of {survey.n_beams} beams
 over {survey.time[-1] - survey.time[0]:.0f} s) with drifting dead reckoning, navigated by the
 online factor graph (iSAM2 with terrain-aided position fixes as priors), the batch smoother and
-three particle filters on the same soundings.
+three particle filters and the point-mass filter on the same soundings.
 {world}
 - Dead reckoning drifts up to {dr["max_error"]:.1f} m from the truth (final {dr["final_error"]:.1f} m,
   RMSE {dr["rmse"]:.1f} m).
 - The batch smoother: RMSE {smoother["rmse"]:.2f} m ({smoother["rmse"] / best_filter["rmse"]:.2f} x the best
-  particle filter, {best_filter["method"]}, at {best_filter["rmse"]:.2f} m); the online graph:
+  filter, {best_filter["method"]}, at {best_filter["rmse"]:.2f} m); the online graph:
   RMSE {online["rmse"]:.2f} m ({online["rmse"] / best_filter["rmse"]:.2f} x).
 - The graph and the filters estimate the dead reckoning's constant errors (the simulated DVL reads
   {100 * dr_settings["speed_scale"]:+.1f} % fast, the compass is {bias_deg:+.1f} deg off; the true
@@ -326,7 +327,7 @@ def run_demo(
             for name, child in zip(methods, [None, None, *seeds[1:]], strict=True):
                 bar.set_postfix_str(name)
                 config = None
-                if child is not None:
+                if name in PARTICLE_FILTERS:
                     from tangraph.filters import default_config
 
                     config = dataclasses.replace(default_config(name), n_particles=n_particles)

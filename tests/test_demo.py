@@ -47,7 +47,7 @@ def test_quick_demo_writes_the_report_and_the_graph_beats_dead_reckoning(tmp_pat
     for name in ("tracks.png", "errors.png", "fix.png"):
         assert f"]({name})" in text and (result.out / name).read_bytes()[:4] == b"\x89PNG"
     rows = {r["method"]: r for r in json.loads((result.out / "results.json").read_text())}
-    assert set(rows) == {"dead reckoning", "isam2", "smoother", "pf", "ipf", "sjcpf"}
+    assert set(rows) == {"dead reckoning", "isam2", "smoother", "pf", "ipf", "sjcpf", "pmf"}
     assert rows["smoother"]["rmse"] < 0.5 * rows["dead reckoning"]["rmse"]
     assert rows["isam2"]["rmse"] < rows["dead reckoning"]["rmse"]
     settings = json.loads((result.out / "settings.json").read_text())

@@ -41,12 +41,18 @@ sharp likelihood it cannot resolve (negligible once the grid is finer than the l
 The track is the density's mean and covariance (with the white noise not yet convolved in), the
 heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
 A ping whose innovation is inconsistent (:class:`~tangraph.filters.core.Innovation`) for
-``lost_pings`` pings in a row is flagged lost (``meta["lost_steps"]``).
+``lost_pings`` pings in a row is flagged lost with them (``meta["lost_steps"]``) and, with
+``relocalise``, the filter starts afresh from a uniform density on a global grid over the map's data (or
+``relocalise_radius`` around its estimate; ``relocalise_points`` per axis, one calibration node
+at the calibration's posterior, which the bank grows back from at its next re-grid, the tide at
+its prior): the density then holds every place the soundings could have come from, and its
+covariance says so until the terrain has chosen (``meta["relocalisation_steps"]``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import logging
 import time as _time
 from typing import Any
 
@@ -64,6 +70,8 @@ from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = ["PMFConfig", "PointMass", "point_mass_filter"]
+
+_log = logging.getLogger(__name__)
 
 # a member's density reaching this share of its mass in its grid's outer ring triggers a re-grid
 _EDGE_MASS = 1e-3
@@ -96,6 +104,12 @@ class PMFConfig:
     lost_alpha, lost_pings : float, int
         A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
         quantile; ``lost_pings`` in a row flag the filter lost.
+    relocalise : bool
+        When lost, start afresh from a uniform density on the global grid.
+    relocalise_points : int
+        Points per axis of the global grid (odd, >= 5).
+    relocalise_radius : float or None
+        Half-width (m) of the global grid around the estimate; None: the map's data extent.
 
     Examples
     --------
@@ -113,6 +127,9 @@ class PMFConfig:
     calibration_points: tuple[int, int] = (3, 3)
     lost_alpha: float = 1e-3
     lost_pings: int = 5
+    relocalise: bool = True
+    relocalise_points: int = 201
+    relocalise_radius: float | None = None
 
     def __post_init__(self) -> None:
         from tangraph.errors import TangraphError
@@ -130,6 +147,13 @@ class PMFConfig:
         object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
         check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
         check_count(self, "lost_pings", low=1)
+        object.__setattr__(self, "relocalise", bool(self.relocalise))
+        n = self.relocalise_points
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
+            raise TangraphError(f"PMFConfig: relocalise_points must be an odd integer >= 5, got {n!r}")
+        object.__setattr__(self, "relocalise_points", int(n))
+        if self.relocalise_radius is not None:
+            check_number(self, "relocalise_radius", low=0.0, open_low=True)
 
     def as_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -331,12 +355,15 @@ class _Grid:
     def needs_regrid(self, state: PointMass, cov: np.ndarray) -> bool:
         """Whether the density has reached the edge, its spread (in grid coordinates) has grown
         beyond ``_SPREAD_RATIO`` times the target, or its support has shrunk within ``1 /
-        _SPREAD_RATIO`` of the grid on an axis that can be made finer."""
+        _SPREAD_RATIO`` of the grid on an axis that can be made finer. A global grid (more points
+        than the rule's) is kept until its support fits the rule's grid at no coarser spacing."""
+        h = (self.n - 1) / 2.0
+        if state.n > self.n:
+            return bool(np.all(_significant(state) < h))
         if _edge_mass(state) > _EDGE_MASS:
             return True
         inv = np.linalg.inv(state.axes)
         spread = np.sqrt(np.maximum(np.linalg.eigvalsh(inv @ cov @ inv.T), 0.0))
-        h = (self.n - 1) / 2.0
         if np.max(spread) > _SPREAD_RATIO * h / self.sigmas:
             return True
         extent = _significant(state)
@@ -363,11 +390,15 @@ def _extent(offsets: np.ndarray, mass: np.ndarray) -> np.ndarray:
 
 
 def _significant(state: PointMass) -> np.ndarray:
-    """The half-widths in grid steps, per grid axis, that hold the density's support."""
-    h = (state.n - 1) / 2.0
-    i, j = np.meshgrid(np.arange(state.n) - h, np.arange(state.n) - h, indexing="ij")
-    index = np.tile(np.column_stack([i.ravel(), j.ravel()]), (len(state.nodes), 1))
-    return _extent(index, state.masses().ravel())
+    """The half-widths in grid steps, per grid axis, that hold the density's support about
+    each member's mean."""
+    i, j = np.meshgrid(np.arange(state.n), np.arange(state.n), indexing="ij")
+    index = np.column_stack([i.ravel(), j.ravel()]).astype(np.float64)
+    mass = state.masses().reshape(len(state.nodes), -1)
+    weight = mass.sum(axis=1, keepdims=True)
+    centre = (mass @ index) / np.where(weight > 0, weight, 1.0)
+    offsets = (index[None, :, :] - centre[:, None, :]).reshape(-1, 2)
+    return _extent(offsets, mass.ravel())
 
 
 def _support(state: PointMass, centres: np.ndarray):
@@ -602,6 +633,29 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
     return trial, check, update  # not reached
 
 
+def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: NavigationModel,
+                  config: PMFConfig, centre: np.ndarray) -> PointMass:
+    """A uniform density on the global grid (see the module docstring)."""
+    rows, cols = np.nonzero(np.isfinite(bathymetry.depth))
+    low = np.array([bathymetry.north[rows.min()], bathymetry.east[cols.min()]])
+    high = np.array([bathymetry.north[rows.max()], bathymetry.east[cols.max()]])
+    if config.relocalise_radius is not None:
+        low = np.maximum(low, centre - config.relocalise_radius)
+        high = np.minimum(high, centre + config.relocalise_radius)
+        if np.any(high <= low):  # the estimate is far off the map's data: around it then
+            low, high = centre - config.relocalise_radius, centre + config.relocalise_radius
+    n = config.relocalise_points
+    axes = np.diag(np.maximum((high - low) / (n - 1), config.min_spacing))
+    cal_mean, cal_cov = state.calibration()
+    cal_cov = cal_cov.copy()
+    cal_cov[1, 1] += state.walk
+    area = float(abs(np.linalg.det(axes))) * n * n
+    return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
+                     np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
+                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
+                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))))
+
+
 def point_mass_filter(
     survey: Survey,
     bathymetry: BathymetryMap,
@@ -620,7 +674,9 @@ def point_mass_filter(
     Track
         The density's mean track and covariance (heading: dead reckoning, its variance NaN);
         ``meta``: ``calibration`` (the bank's mean and std), ``n_lost``, ``lost_steps``,
-        ``n_off_map``, ``off_map_steps`` (pings no point had the map under), ``n_regrids``,
+        ``n_off_map``, ``off_map_steps`` (pings no point had the map under),
+        ``relocalisation_steps`` (pings after which it started afresh on the global grid),
+        ``n_regrids``,
         ``n_points`` (grid points per ping: members times ``grid_points^2``),
         ``navigation_model``, ``config``; ``timings``.
     """
@@ -642,6 +698,7 @@ def point_mass_filter(
     lost_steps: list[int] = []
     off_map_steps: list[int] = []
     divergence_steps: list[int] = []
+    relocalisation_steps: list[int] = []
     streak = n_regrids = 0
     started = _time.perf_counter()
     pings = survey_pings(survey, bathymetry, navigation)
@@ -655,10 +712,17 @@ def point_mass_filter(
             check, update = None, False
         if update is None and ping.n_soundings:
             off_map_steps.append(ping.index)
-        if check is not None:
-            streak = streak + 1 if check.inconsistent(config.lost_alpha) else 0
+        if check is not None or update is False:
+            streak = streak + 1 if update is False or check.inconsistent(config.lost_alpha) else 0
+            if streak == config.lost_pings:  # the streak's pings all said so
+                lost_steps.extend(range(ping.index - streak + 1, ping.index))
             if streak >= config.lost_pings:
                 lost_steps.append(ping.index)
+                if config.relocalise:
+                    _log.warning("pmf: lost at ping %d; relocalising on the global grid", ping.index)
+                    state = _relocalised(state, bathymetry, navigation, config, state.moments()[0])
+                    relocalisation_steps.append(ping.index)
+                    streak = 0
         if grid.needs_regrid(state, state.within()) or (estimate and _calibration_moved(state)):
             state = _regrid(state, grid, config, estimate)
             n_regrids += 1
@@ -683,6 +747,7 @@ def point_mass_filter(
         "lost_steps": lost_steps,
         "n_off_map": len(off_map_steps),
         "off_map_steps": off_map_steps,
+        "relocalisation_steps": relocalisation_steps,
         "n_regrids": n_regrids,
         "n_points": int(len(state.nodes) * grid.n**2),
         "sounding_std": filter_model.terrain.sounding_std,

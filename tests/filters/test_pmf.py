@@ -56,6 +56,8 @@ def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
     Gauss-Hermite nodes; the bank's 3 x 3 nodes and grids within 2 % on the variance)."""
     q, sigma, p0, scale_sd = 0.5, 1.0, 10.0, 0.03
     survey = linear_gaussian_run(3, k=40, q=q, sigma=sigma, p0=p0)
+    noise = sigma * np.random.default_rng(3).standard_normal(survey.beam_depth.shape)
+    survey = survey.replace(beam_depth=500.0 + noise)  # soundings of the flat seabed
     flat = sloped_seabed()
     flat = dataclasses.replace(flat, depth=np.full(flat.depth.shape, 500.0))
     track = point_mass_filter(survey, flat, model=linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd))
@@ -141,3 +143,22 @@ def test_the_spacing_floor_is_honoured():
                                        model=model).covariance[-1, :2, :2] @ g for s in (0.01, 2.0)}
     assert across[0.01] == pytest.approx(g @ p_kf @ g, rel=0.05)
     assert across[2.0] > 2.0 * across[0.01]
+
+
+def test_a_start_far_off_is_found_again_on_the_global_grid():
+    """The DR starts 200 m from the truth while the model says 10 m: the filter finds itself
+    lost, starts afresh on the global grid over the map and ends at the truth, with no pose
+    confidently wrong unflagged (NEES over 20 only where it said it was lost)."""
+    bathymetry = rough_map(1)
+    survey = multibeam_survey(bathymetry, seed=4, pings=80)
+    shifted = survey.replace(dr_pose=survey.dr_pose + np.array([150.0, -130.0, 0.0]))
+    model = navigation(shifted)
+    track = point_mass_filter(shifted, bathymetry, model=model)
+    assert track.meta["relocalisation_steps"], track.meta
+    error = track.pose[-1, :2] - shifted.true_pose[-1, :2]
+    assert np.hypot(*error) < 3.0, error
+    d = track.pose[:, :2] - shifted.true_pose[:, :2]
+    nees = np.einsum("ki,kij,kj->k", d, np.linalg.inv(track.covariance[:, :2, :2]), d)
+    flagged = np.zeros(shifted.n_pings, bool)
+    flagged[track.meta["lost_steps"]] = True
+    assert not np.any((nees > 20) & ~flagged), np.flatnonzero((nees > 20) & ~flagged)
