@@ -40,13 +40,14 @@ sharp likelihood it cannot resolve (negligible once the grid is finer than the l
 
 The track is the density's mean and covariance (with the white noise not yet convolved in), the
 heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
-A ping whose innovation is inconsistent (:class:`~tangraph.filters.core.Innovation`) for
-``lost_pings`` pings in a row is flagged lost with them (``meta["lost_steps"]``) and, with
-``relocalise``, the filter starts afresh from a uniform density on a global grid over the map's data (or
-``relocalise_radius`` around its estimate; ``relocalise_points`` per axis, one calibration node
-at the calibration's posterior, which the bank grows back from at its next re-grid, the tide at
-its prior): the density then holds every place the soundings could have come from, and its
-covariance says so until the terrain has chosen (``meta["relocalisation_steps"]``).
+A ping whose mean sounding's innovation is inconsistent with the density's predictive spread
+(:class:`~tangraph.filters.core.Innovation`'s ``nis``) for ``lost_pings`` pings in a row is
+flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise``, the filter starts
+afresh from a uniform density on a global grid over the map's data (or ``relocalise_radius``
+around its estimate; ``relocalise_points`` per axis), with one calibration node at the
+calibration's prior, which the bank grows back from at its next re-grid, and the tide at its
+prior (what a lost filter believes of them is suspect too). The density then holds every place the soundings could have come from, and its covariance says so until the
+terrain has chosen (``meta["relocalisation_steps"]``).
 """
 
 from __future__ import annotations
@@ -61,7 +62,14 @@ import scipy.fft
 from scipy import ndimage
 
 from tangraph.filters.config import check_count, check_number
-from tangraph.filters.core import Belief, FilterModel, check_run_inputs, innovation, step_timings
+from tangraph.filters.core import (
+    Belief,
+    FilterModel,
+    _chi2_quantile,
+    check_run_inputs,
+    innovation,
+    step_timings,
+)
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import Ping, rotate, survey_pings
 from tangraph.maps.grid import BathymetryMap
@@ -617,7 +625,9 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
     for attempt in range(_MAX_REFINE + 1):
         trial = dataclasses.replace(state)  # fields are replaced, never changed in place
         check, update = _update(trial, ping, model, slope)
-        if update is None or not estimate or attempt == _MAX_REFINE:
+        if update is None or attempt == _MAX_REFINE:
+            return trial, check, update
+        if not estimate:
             return trial, check, update
         prior = state.member_log_mass()
         evidence = trial.member_log_mass() - prior
@@ -633,6 +643,14 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
     return trial, check, update  # not reached
 
 
+def _inconsistent(check, alpha: float) -> bool:
+    """The lost test of one ping: its mean sounding's innovation against the density's own
+    predictive spread (:class:`~tangraph.filters.core.Innovation`'s ``nis``, chi-square(1)).
+    The best point's chi-square is not used: the calibration's few nodes need not hold a point
+    that fits every sounding of a wide swath while the heading error is still uncertain."""
+    return bool(check.nis > _chi2_quantile(alpha, 1))
+
+
 def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: NavigationModel,
                   config: PMFConfig, centre: np.ndarray) -> PointMass:
     """A uniform density on the global grid (see the module docstring)."""
@@ -646,9 +664,8 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
             low, high = centre - config.relocalise_radius, centre + config.relocalise_radius
     n = config.relocalise_points
     axes = np.diag(np.maximum((high - low) / (n - 1), config.min_spacing))
-    cal_mean, cal_cov = state.calibration()
-    cal_cov = cal_cov.copy()
-    cal_cov[1, 1] += state.walk
+    cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)  # a lost filter's: suspect
+    cal_cov = np.diag(np.asarray(navigation.calibration_std, dtype=np.float64) ** 2)
     area = float(abs(np.linalg.det(axes))) * n * n
     return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
                      np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
@@ -713,12 +730,12 @@ def point_mass_filter(
         if update is None and ping.n_soundings:
             off_map_steps.append(ping.index)
         if check is not None or update is False:
-            streak = streak + 1 if update is False or check.inconsistent(config.lost_alpha) else 0
+            streak = streak + 1 if update is False or _inconsistent(check, config.lost_alpha) else 0
             if streak == config.lost_pings:  # the streak's pings all said so
                 lost_steps.extend(range(ping.index - streak + 1, ping.index))
             if streak >= config.lost_pings:
                 lost_steps.append(ping.index)
-                if config.relocalise:
+                if config.relocalise and state.n <= grid.n:  # not while searching the global grid
                     _log.warning("pmf: lost at ping %d; relocalising on the global grid", ping.index)
                     state = _relocalised(state, bathymetry, navigation, config, state.moments()[0])
                     relocalisation_steps.append(ping.index)

