@@ -46,8 +46,9 @@ flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise``, the fi
 afresh from a uniform density on a global grid over the map's data (or ``relocalise_radius``
 around its estimate; ``relocalise_points`` per axis), with one calibration node at the
 calibration's prior, which the bank grows back from at its next re-grid, and the tide at its
-prior (what a lost filter believes of them is suspect too). The density then holds every place the soundings could have come from, and its covariance says so until the
-terrain has chosen (``meta["relocalisation_steps"]``).
+prior (what a lost filter believes of them is suspect too). The density then holds every place
+the soundings could have come from, and its covariance says so until the terrain has chosen
+(``meta["relocalisation_steps"]``).
 """
 
 from __future__ import annotations
