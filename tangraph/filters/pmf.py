@@ -42,7 +42,7 @@ The track is the density's mean and covariance (with the white noise not yet con
 heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
 A ping whose mean sounding's innovation is inconsistent with the density's predictive spread
 (:class:`~tangraph.filters.core.Innovation`'s ``nis``) for ``lost_pings`` pings in a row is
-flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise``, the filter starts
+flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise`` set, the filter starts
 afresh from a uniform density on a global grid over the map's data (or ``relocalise_radius``
 around its estimate; ``relocalise_points`` per axis), with one calibration node at the
 calibration's prior, which the bank grows back from at its next re-grid, and the tide at its
@@ -114,7 +114,10 @@ class PMFConfig:
         A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
         quantile; ``lost_pings`` in a row flag the filter lost.
     relocalise : bool
-        When lost, start afresh from a uniform density on the global grid.
+        When lost, start afresh from a uniform density on the global grid (off by default: on
+        a map whose error the model under-states, as on a flat lake gridded from an earlier
+        survey, the lost test fires where the filter is not lost, and a global restart there
+        chose a wrong place in most runs; use it where the terrain is distinctive).
     relocalise_points : int
         Points per axis of the global grid (odd, >= 5).
     relocalise_radius : float or None
@@ -136,7 +139,7 @@ class PMFConfig:
     calibration_points: tuple[int, int] = (3, 3)
     lost_alpha: float = 1e-3
     lost_pings: int = 5
-    relocalise: bool = True
+    relocalise: bool = False
     relocalise_points: int = 201
     relocalise_radius: float | None = None
 

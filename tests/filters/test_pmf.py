@@ -154,7 +154,7 @@ def test_a_start_far_off_is_found_again_on_the_global_grid():
     survey = multibeam_survey(bathymetry, seed=4, pings=80)
     shifted = survey.replace(dr_pose=survey.dr_pose + np.array([150.0, -130.0, 0.0]))
     model = navigation(shifted)
-    track = point_mass_filter(shifted, bathymetry, model=model)
+    track = point_mass_filter(shifted, bathymetry, PMFConfig(relocalise=True), model=model)
     assert track.meta["relocalisation_steps"], track.meta
     error = track.pose[-1, :2] - shifted.true_pose[-1, :2]
     assert np.hypot(*error) < 3.0, error
