@@ -31,7 +31,7 @@ from _timing import best_cpu
 
 from tangraph.eval import track_metrics
 from tangraph.filters import PFConfig, PMFConfig, run_filter
-from tangraph.sensors import NavigationModel
+from tangraph.sensors import NavigationModel, slope_moment
 
 CONFIGS = {
     "pmf 31 x 31, 3 x 3 nodes": PMFConfig(),
@@ -86,7 +86,7 @@ def relocalisation(repeat: int) -> None:
     across = np.linspace(-40.0, 40.0, 101)
     ping = Ping(1, np.array([2.0, 0.0]), np.column_stack([np.zeros(101), across]),
                 chart.depth_at(np.full(101, 2500.0), 2500.0 + across), dt=1.0)
-    slope = pmf._slope_moment(chart)
+    slope = slope_moment(chart)
     start = pmf._start(model, np.array([2500.0, 2500.0]), grid, config)
 
     def weigh(state):

@@ -151,7 +151,7 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
     navigation model, each sounding carries the terrain measurement model's variance and its
     map error variance (:func:`tangraph.sensors.sounding_variances`, at the dead-reckoned
     footprints)."""
-    from tangraph.sensors.terrain import map_error, sounding_variances
+    from tangraph.sensors.terrain import sounding_map_variances, sounding_variances
 
     north, east = survey.footprints()
     dr = survey.dr_pose
@@ -159,10 +159,9 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
     variance = map_variance = None
     if bathymetry is not None and model is not None:
         variance = sounding_variances(survey, bathymetry, model)
-        error = map_error(bathymetry, model)
-        map_variance = np.full(north.shape, np.nan)
-        s = error.std_at(north[valid], east[valid])
-        map_variance[valid] = np.where(np.isfinite(s), s, error.typical_std) ** 2
+        map_variance = sounding_map_variances(survey, bathymetry, model)
+        if map_variance is None:
+            map_variance = np.zeros(north.shape)
     pings = []
     for k in range(survey.n_pings):
         keep = valid[k]

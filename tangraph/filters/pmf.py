@@ -74,7 +74,7 @@ from tangraph.filters.core import (
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import Ping, rotate, survey_pings
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors import NavigationModel, survey_navigation_model
+from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -560,18 +560,6 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
                      (cal_mean, cal_std))
 
 
-def _slope_moment(bathymetry: BathymetryMap) -> np.ndarray:
-    """The map's mean outer product of its depth gradients over its data, ``(2, 2)`` (north,
-    east; dimensionless)."""
-    _, _, dn, de = bathymetry._grid  # type: ignore[attr-defined]
-    gn, ge = np.gradient(bathymetry.depth, dn, de)
-    ok = np.isfinite(gn) & np.isfinite(ge)
-    if not ok.any():
-        return np.zeros((2, 2))
-    g = np.column_stack([gn[ok], ge[ok]])
-    return g.T @ g / g.shape[0]
-
-
 def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     if ping.first:
         return
@@ -708,7 +696,7 @@ def point_mass_filter(
     navigation = survey_navigation_model(survey, model, where="pmf")
     filter_model = FilterModel.from_model(navigation, bathymetry)
     grid = _Grid(config, config.min_spacing)
-    slope = _slope_moment(bathymetry)
+    slope = slope_moment(bathymetry)
     estimate = any(c > 1 and s > 0
                    for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
     state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)

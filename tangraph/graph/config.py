@@ -35,6 +35,14 @@ class GraphConfig:
     key_interval : float
         Seconds: a key pose at least this often; there is also one at every TAP window end, at the
         first and at the last ping.
+    front_end : {"tap", "pmf"}
+        What turns a window's soundings into the online graph's terrain factor. ``"tap"``
+        (default): a TAP fix (:mod:`tangraph.graph.fixes`) searched around the prediction.
+        ``"pmf"``: the window's posterior on a point-mass grid laid on the prediction, with the
+        prediction's information removed (:mod:`tangraph.graph.posterior_fix`); its windows
+        share no ping (each holds the pings since the previous window end, so ``n_pings`` is
+        not used and ``fix_inflation`` is the only discount), and a multimodal window is always
+        refused. The batch smoother's re-matching stays TAP.
     n_pings : int
         Pings per TAP window (default 20).
     fix_spacing : int or None
@@ -165,6 +173,7 @@ class GraphConfig:
     """
 
     key_interval: float = 60.0
+    front_end: Literal["tap", "pmf"] = "tap"
     n_pings: int = 20
     fix_spacing: int | None = 10
     ramp_pings: int | None = 5
@@ -280,7 +289,8 @@ class GraphConfig:
             )
         if not isinstance(self.tap, TapConfig):
             raise TangraphError(f"GraphConfig.tap must be a TapConfig, got {type(self.tap).__name__}")
-        for name, allowed in (("robust_kernel", ("huber", "cauchy", "none")),
+        for name, allowed in (("front_end", ("tap", "pmf")),
+                              ("robust_kernel", ("huber", "cauchy", "none")),
                               ("half_width_rule", ("marginal", "fixed")),
                               ("optimizer", ("lm", "gn", "dogleg")),
                               ("smoother_covariance", ("all", "none")),

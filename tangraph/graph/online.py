@@ -25,6 +25,7 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.graph.calibration import (
     CALIBRATION,
     joint_in_frame,
@@ -51,9 +52,18 @@ from tangraph.graph.fixes import (
 )
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import Relocalisation
+from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix
-from tangraph.sensors import NavigationModel, odometry, survey_map_error, survey_navigation_model
+from tangraph.matching import MatchingError, TapFix, window_patch
+from tangraph.sensors import (
+    NavigationModel,
+    odometry,
+    slope_moment,
+    sounding_map_variances,
+    sounding_variances,
+    survey_map_error,
+    survey_navigation_model,
+)
 from tangraph.survey import Survey
 from tangraph.track import Track
 
@@ -106,6 +116,11 @@ class GraphNavigator(Relocalisation):
         firsts, self.fix_ends, overlaps = fix_windows(n, c.n_pings, c.spacing, c.ramp_pings)
         self.window_first = dict(zip(self.fix_ends.tolist(), firsts.tolist(), strict=True))
         self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
+        if c.front_end == "pmf":  # windows that share no ping: each from the previous end on
+            starts = np.concatenate([[0], self.fix_ends[:-1] + 1])
+            self.window_first = dict(zip(self.fix_ends.tolist(), starts.tolist(), strict=True))
+            self.window_overlap = dict.fromkeys(self.fix_ends.tolist(), 1.0)
+            self._terrain = _window_terrain(survey, bathymetry, self.model)
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
         self._is_end[self.fix_ends] = True
@@ -237,27 +252,46 @@ class GraphNavigator(Relocalisation):
 
     def _judge(self, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
         world, cov = self._world(pose, joint)
-        half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
+        pmf = self.config.front_end == "pmf"
+        if pmf:  # the grid's half-width
+            half_width = GRID_SIGMAS * float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()))
+        else:
+            half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
         laid = self._laid(k, pose)
         if fix is not None:
             return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width,
                              strict=strict, noise=self._misfit_noise(k, fix.sigma))
         started = _time.perf_counter()
+        poses = None if laid is None else to_world(laid, self.calibration, self.origin)
         try:
-            made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
-                            poses=None if laid is None else to_world(laid, self.calibration, self.origin),
-                            first=self.window_first.get(k), shared=self.shared_map_variance,
-                            error=self.map_error)
+            if pmf:
+                made = self._posterior_fix(k, poses, world, cov)
+            else:
+                made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
+                                poses=poses, first=self.window_first.get(k), shared=self.shared_map_variance,
+                                error=self.map_error)
         except MatchingError as exc:
             return failed(k, exc, half_width)
         finally:
             self.tap_times.append(_time.perf_counter() - started)
         try:
             return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width,
-                             strict=strict, noise=self._misfit_noise(k, made.sigma))
+                             strict=strict or pmf, noise=self._misfit_noise(k, made.sigma))
         except TangraphError as exc:
             log.warning("%s", exc)
             return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
+
+    def _posterior_fix(self, k: int, poses, world, cov) -> WindowFix:
+        """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
+        ``poses`` of its pings, on the prediction ``N(world, cov)``."""
+        first = self.window_first[k]
+        patch = window_patch(self.survey, k, k - first + 1, min_soundings=self.config.tap.min_soundings,
+                             poses=poses)
+        likelihood, variance, map_variance, slope = self._terrain
+        return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
+                             None if map_variance is None else map_variance[patch.ping, patch.beam],
+                             slope, world[:2], cov[:2, :2], tide=self.model.tide,
+                             tide_std=self.model.tide_std)
 
     def _misfit_noise(self, k: int, sigma: float) -> float:
         """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
@@ -418,6 +452,15 @@ def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
         "heading_error": error,
         "heading_error_std": float(np.sqrt(max(grad @ joint @ grad, 0.0))),
     }
+
+
+def _window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
+    """What the point-mass front end weighs soundings with: the terrain likelihood, every
+    sounding's variance and map error variance ``(K, B)`` (None: a perfect map) at the DR's
+    footprints (as the filters'), and the map's slope moment."""
+    return (TerrainLikelihood(bathymetry, model.measurement_std),
+            sounding_variances(survey, bathymetry, model),
+            sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
 
 
 def _wrap(angle):

@@ -28,6 +28,8 @@ from tangraph.sensors.terrain import (
     matern_field,
     shared_among,
     shared_map_variances,
+    slope_moment,
+    sounding_map_variances,
     sounding_variances,
     survey_map_error,
 )
@@ -53,6 +55,8 @@ __all__ = [
     "shared_map_variances",
     "simulate_dead_reckoning",
     "simulate_pings",
+    "slope_moment",
+    "sounding_map_variances",
     "sounding_variances",
     "survey_map_error",
     "survey_navigation_model",

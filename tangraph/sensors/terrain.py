@@ -75,6 +75,8 @@ __all__ = [
     "matern_field",
     "shared_among",
     "shared_map_variances",
+    "slope_moment",
+    "sounding_map_variances",
     "sounding_variances",
     "survey_map_error",
 ]
@@ -389,3 +391,32 @@ def matern_field(north, east, std: float, length: float, *, rng: np.random.Gener
     variance -= np.sum(amplitude[:, -1] ** 2) / (shape[0] * shape[1]) if shape[1] % 2 == 0 else 0.0
     field = field[pad_n : pad_n + north.size, pad_e : pad_e + east.size] / np.sqrt(variance)
     return std * field
+
+
+def slope_moment(bathymetry: BathymetryMap) -> np.ndarray:
+    """The map's mean outer product of its depth gradients over its data, ``(2, 2)`` (north,
+    east; dimensionless): a grid estimator whose point stands for a cell ``a`` raises each
+    sounding's variance by the map's depth variance across the cell, ``a^T G a / 12``."""
+    _, _, dn, de = bathymetry._grid  # type: ignore[attr-defined]
+    gn, ge = np.gradient(bathymetry.depth, dn, de)
+    ok = np.isfinite(gn) & np.isfinite(ge)
+    if not ok.any():
+        return np.zeros((2, 2))
+    g = np.column_stack([gn[ok], ge[ok]])
+    return g.T @ g / g.shape[0]
+
+
+def sounding_map_variances(survey, bathymetry: BathymetryMap, model) -> np.ndarray | None:
+    """Per sounding ``(K, B)`` the variance of the map's own error under it (m^2) at the
+    dead-reckoned footprints, the map's median error where a footprint is off its data, NaN
+    where a beam has no depth; None for a perfect map. What the likelihood's information
+    exponents are made of (:meth:`tangraph.filters.likelihood.TerrainLikelihood.ping_update`)."""
+    error = map_error(bathymetry, model)
+    if error.is_zero:
+        return None
+    north, east = survey.footprints()
+    valid = np.isfinite(survey.beam_depth)
+    out = np.full(north.shape, np.nan)
+    s = error.std_at(north[valid], east[valid])
+    out[valid] = np.where(np.isfinite(s), s, error.typical_std) ** 2
+    return out

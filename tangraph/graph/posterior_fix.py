@@ -1,0 +1,257 @@
+"""The point-mass front end of the online graph: a window's terrain information from its posterior.
+
+TAP summarises a window's likelihood by a confidence region found without the graph's belief,
+so its covariance must be conservative, and windows that share pings are discounted by how many
+do. This front end instead weighs the window's soundings where the graph believes the vehicle is
+and hands the graph exactly what they add to that belief:
+
+1. **Prior**: the graph's prediction of the window end's world position, ``N(m, P)`` (its
+   marginal, the calibration's uncertainty included).
+2. **Posterior on a grid**: the window's soundings are laid with the calibrated DR from the end
+   ping, as TAP lays them (:func:`~tangraph.matching.window_patch`), and weighed at every point
+   of a ``GRID_POINTS x GRID_POINTS`` grid aligned with ``P``'s principal axes and spanning
+   ``GRID_SIGMAS`` of its stds, with the filters' terrain likelihood
+   (:meth:`~tangraph.filters.likelihood.TerrainLikelihood.ping_update`: each sounding's variance
+   and map error from the terrain measurement model, no map is no evidence, the tide
+   marginalised exactly from the model's prior). A grid point stands for its cell, so each
+   sounding's variance is raised by the map's depth variance across a cell (from the depth
+   gradient under it, at least the map's mean, as in the point-mass filter): a likelihood
+   sharper than the grid is not missed between its points. The posterior is the prior times
+   the likelihood.
+3. **Refinement**: when the posterior is unimodal and its std along some axis is below
+   ``REFINE_SPACINGS`` grid spacings, a new grid is laid on it (aligned with its covariance
+   grown by a third of a cell, so that a posterior sitting between two points is covered,
+   ``GRID_SIGMAS`` stds each side) and the posterior weighed again there; a refined grid whose
+   outer ring holds more than ``EDGE_MASS`` is laid twice as wide; at most ``MAX_REFINE`` times.
+   Its mean and covariance are ``mu`` and ``S``.
+4. **Prior removed**: the likelihood's information is the posterior's less the prior's,
+   ``L = S^-1 - P^-1``, and its mean ``L^-1 (S^-1 mu - P^-1 m)``; the graph receives the fix
+   ``N(L^-1 (S^-1 mu - P^-1 m), L^-1)``, so nothing it already knew is counted again. On a
+   linear-Gaussian model this is the window's likelihood factor exactly. Along a principal axis
+   (of ``L`` in the prior's whitened coordinates) where the window adds less than ``MIN_GAIN``
+   of the prior's information, the fix keeps the prior's mean and ``MIN_AXIS_GAIN`` of its
+   information: its mean there would be the posterior's small shift divided by a small gain.
+
+The window is refused, never given as one Gaussian, when the posterior on the prior-wide grid
+has a second part (``multimodal``: a connected region above ``exp(-MODE_LEVEL)`` of the peak
+holding at least ``MODE_MASS`` of the mass away from the main one), when ``L`` has an axis
+along which the posterior is wider than the prior by more than ``MAX_LOSS`` of its information
+(the likelihood is not a Gaussian's there: the terrain's curvature spreads the posterior) or
+adds less than ``MIN_GAIN`` of the prior's information along its best axis (``uninformative``),
+and when more than ``EDGE_MASS`` of the posterior lies in the grid's outer ring
+(``best_on_edge``: the truth may lie beyond, which is evidence that the prediction is wrong).
+The windows of this front end share no ping (:class:`~tangraph.graph.GraphNavigator`).
+
+A likelihood much sharper than the prior-wide grid (a few centimetres of sounding noise on
+steep relief under a prior of tens of metres) can hide a second mode between the grid's
+points: the cell's depth variance blurs it, but one shift common to every sounding is not
+noise independent per sounding.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy import ndimage, stats
+
+from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.matching import FixQuality, MatchingError, Patch
+
+__all__ = ["WindowFix", "posterior_fix"]
+
+GRID_POINTS = 31  #: points per axis of the window's grid
+GRID_SIGMAS = 5.0  #: the grid spans this many stds of the density it is laid on, each side
+REFINE_SPACINGS = 1.5  #: a posterior std below this many grid spacings is re-gridded
+MAX_REFINE = 3  #: re-griddings at most
+MIN_SPACING = 0.01  #: m, the finest grid spacing
+MODE_LEVEL = 0.5 * stats.chi2.ppf(0.999, 2)  #: nats below the peak that bound a part of the posterior
+MODE_MASS = 0.01  #: share of the mass a second part must hold to make the window multimodal
+EDGE_MASS = 1e-3  #: share of the posterior in the grid's outer ring that says the truth may lie beyond
+#: least information the window must add along its best axis, as a share of the prior's
+MIN_GAIN = 1e-3
+#: an axis along which the posterior is wider than the prior by more than this share refuses it
+MAX_LOSS = 0.1
+#: information given along an axis the window adds less than MIN_GAIN to, as a share of the prior's
+MIN_AXIS_GAIN = 1e-4
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class WindowFix:
+    """The terrain information of the window of pings ``first`` to ``index``: the likelihood's
+    ``position (2,)`` and ``covariance (2, 2)`` (world, north/east; a refused window's are its
+    posterior's), the posterior tide mean ``tide`` and the soundings' residual std ``sigma`` at
+    the posterior mean, their number, the ``quality`` flags the graph judges (as a TAP fix's),
+    the posterior's mean and covariance, the prior's, and the grid (``points (n*n, 2)`` and the
+    normalised ``log_density``) it was last weighed on, the ``n_grids``-th."""
+
+    index: int
+    first: int
+    position: np.ndarray
+    covariance: np.ndarray
+    tide: float
+    sigma: float
+    n_soundings: int
+    quality: FixQuality
+    posterior_mean: np.ndarray
+    posterior_covariance: np.ndarray
+    prior_mean: np.ndarray
+    prior_covariance: np.ndarray
+    points: np.ndarray
+    log_density: np.ndarray
+    n_grids: int
+
+    @property
+    def accepted(self) -> bool:
+        """Informative, unimodal and inside its grid."""
+        q = self.quality
+        return q.informative and not q.multimodal and not q.outside
+
+
+def _axes(cov: np.ndarray) -> np.ndarray:
+    """Grid axes ``(2, 2)`` (columns: one grid step along each principal axis of ``cov``)."""
+    values, vectors = np.linalg.eigh(0.5 * (cov + cov.T))
+    std = np.sqrt(np.maximum(values, 0.0))
+    spacing = np.maximum(2.0 * GRID_SIGMAS * std / (GRID_POINTS - 1), MIN_SPACING)
+    return vectors * spacing
+
+
+def _grid(centre: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    half = (GRID_POINTS - 1) / 2
+    u = np.arange(GRID_POINTS) - half
+    a, b = np.meshgrid(u, u, indexing="ij")
+    return centre + np.column_stack([a.ravel(), b.ravel()]) @ axes.T
+
+
+def _log_gaussian(points: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    d = points - mean
+    return -0.5 * np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+
+
+def _moments(points: np.ndarray, log_density: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Normalised masses, mean and covariance of a density at ``points``."""
+    mass = np.exp(log_density - np.max(log_density))
+    mass /= mass.sum()
+    mean = mass @ points
+    d = points - mean
+    return mass, mean, (d * mass[:, None]).T @ d
+
+
+def _parts(log_density: np.ndarray, mass: np.ndarray) -> tuple[int, float]:
+    """Connected parts of the posterior above ``exp(-MODE_LEVEL)`` of its peak, and the share of
+    the mass in the parts other than the heaviest."""
+    image = log_density.reshape(GRID_POINTS, GRID_POINTS)
+    labels, n = ndimage.label(image > np.max(image) - MODE_LEVEL)
+    if n < 2:
+        return n, 0.0
+    # the mass of each part: the points closer (by label propagation) to it than to another
+    _, (rows, cols) = ndimage.distance_transform_edt(labels == 0, return_indices=True)
+    nearest = labels[rows, cols].ravel()
+    held = np.bincount(nearest, weights=mass, minlength=n + 1)[1:]
+    return n, float(held.sum() - held.max())
+
+
+def _edge(mass: np.ndarray) -> float:
+    image = mass.reshape(GRID_POINTS, GRID_POINTS)
+    inner = image[1:-1, 1:-1].sum()
+    return float(image.sum() - inner)
+
+
+def _resolution(bathymetry, footprints: np.ndarray, axes: np.ndarray, slope: np.ndarray) -> np.ndarray:
+    """Each sounding's variance from the map's depth across a grid cell of ``axes``: ``sum_i
+    (g . a_i)^2 / 12`` with its footprint's depth gradient ``g`` at the grid's centre, and at
+    least the map-wide mean ``sum_i a_i^T G a_i / 12`` (``slope``: G), which stands in for a
+    footprint off the map."""
+    mean = float(np.trace(axes.T @ slope @ axes)) / 12.0
+    gradient = bathymetry.gradient_at(footprints[:, 0], footprints[:, 1])
+    local = np.sum((gradient @ axes) ** 2, axis=1) / 12.0
+    return np.fmax(np.where(np.isfinite(local), local, mean), mean)
+
+
+def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
+                  map_variance: np.ndarray | None, slope: np.ndarray, prior_mean, prior_cov, *,
+                  tide: float, tide_std: float) -> WindowFix:
+    """The window's terrain information (module docstring) from ``patch`` (laid from the end
+    ping's position, the prior's mean standing for it), each sounding's ``variance (N,)`` and map
+    error ``map_variance (N,)`` (None: a perfect map), the map's mean outer product of depth
+    gradients ``slope (2, 2)``, the prior ``N(prior_mean (2,), prior_cov (2, 2))`` and the tide
+    prior ``N(tide, tide_std^2)``.
+
+    Raises
+    ------
+    MatchingError
+        The prior covariance is not finite and positive definite, or no sounding of the window
+        has the map under it anywhere on the grid.
+    """
+    m = np.asarray(prior_mean, float)[:2]
+    p = np.asarray(prior_cov, float)[:2, :2]
+    where = f"window {patch.first}..{patch.reference}"
+    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(m)) and np.linalg.eigvalsh(p).min() > 0):
+        raise MatchingError(f"{where}: the prior covariance is not finite and positive definite")
+    tide_var = float(tide_std) ** 2
+
+    def weigh(centre, cov):
+        axes = _axes(cov)
+        points = _grid(centre, axes)
+        prior = _log_gaussian(points, m, p)
+        resolution = _resolution(likelihood.bathymetry, patch.offsets + centre, axes, slope)
+        update = likelihood.ping_update(points, patch.offsets, patch.depths, np.full(points.shape[0], tide),
+                                        tide_var, weights=np.exp(prior - prior.max()),
+                                        variance=variance + resolution, map_variance=map_variance)
+        if np.all(np.isneginf(update.log_likelihood)):
+            raise MatchingError(f"{where}: no sounding has the map under it anywhere near the prediction")
+        return points, prior + update.log_likelihood, update
+
+    points, log_post, update = weigh(m, p)
+    mass, mean, cov = _moments(points, log_post)
+    n_parts, other = _parts(log_post, mass)
+    edge = _edge(mass)
+    reasons = []
+    if other >= MODE_MASS:
+        reasons.append(f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one")
+    grids, lay = 1, p
+    while not reasons and grids <= MAX_REFINE:
+        axes = _axes(lay)
+        inv = np.linalg.inv(axes)
+        narrow = np.linalg.eigvalsh(inv @ cov @ inv.T).min() < REFINE_SPACINGS**2
+        spilled = grids > 1 and _edge(mass) > EDGE_MASS
+        if not (narrow or spilled):
+            break
+        # a narrow posterior may sit between the points: lay the next grid over the cells around it
+        lay = 4.0 * lay if spilled else cov + axes @ axes.T / 3.0
+        points, log_post, update = weigh(mean, lay)
+        mass, mean, cov = _moments(points, log_post)
+        grids += 1
+    # in the prior's whitened coordinates y = R^-1 (x - m), R R^T = P: the prior is N(0, I), the
+    # posterior N(a, B), the likelihood's information G = B^-1 - I = V diag(g) V^T
+    root = np.linalg.cholesky(p)
+    inv_root = np.linalg.inv(root)
+    a = inv_root @ (mean - m)
+    b = inv_root @ cov @ inv_root.T
+    gain, vectors = np.linalg.eigh(np.linalg.inv(0.5 * (b + b.T)) - np.eye(2))
+    if gain.min() < -MAX_LOSS:
+        reasons.append(f"uninformative: the posterior is wider than the prior (gain {gain.min():.2f})")
+    elif gain.max() < MIN_GAIN:
+        reasons.append(f"uninformative: the window adds {gain.max():.1%} of the prior's information")
+    position, covariance = mean, cov  # a refused window's record shows its posterior
+    if not reasons:
+        # the likelihood's mean along each axis, (1 + g) / g times the posterior's shift; an axis
+        # the window hardly sees keeps the prior's mean and almost no information
+        seen = gain >= MIN_GAIN
+        z = np.where(seen, (1.0 + gain) * (vectors.T @ a) / np.where(seen, gain, 1.0), 0.0)
+        g = np.where(seen, gain, MIN_AXIS_GAIN)
+        position = m + root @ vectors @ z
+        covariance = root @ (vectors / g) @ vectors.T @ root.T
+        covariance = 0.5 * (covariance + covariance.T)
+    best = int(np.argmax(log_post))
+    tide_mean = float(update.tide[best])
+    residual = likelihood.residuals(mean[None, :], patch.offsets, patch.depths, np.array([tide_mean]))[:, 0]
+    ok = np.isfinite(residual)
+    sigma = float(np.sqrt(np.mean(residual[ok] ** 2))) if ok.any() else float("nan")
+    quality = FixQuality(peak_ratio=float("inf") if n_parts < 2 else other, n_basins=max(n_parts, 1),
+                         area_fraction=float(np.sqrt(np.linalg.det(cov) / np.linalg.det(p))),
+                         touches_edge=edge > EDGE_MASS, reasons=tuple(reasons),
+                         best_on_edge=edge > EDGE_MASS)
+    log_density = log_post - np.max(log_post) - np.log(np.exp(log_post - np.max(log_post)).sum())
+    return WindowFix(int(patch.reference), int(patch.first), position, covariance, tide_mean, sigma,
+                     patch.n_soundings, quality, mean, cov, m, p, points, log_density, grids)
