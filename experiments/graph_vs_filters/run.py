@@ -23,6 +23,7 @@ chi-square band of the runs
 from __future__ import annotations
 
 import json
+import shlex
 import time
 from pathlib import Path
 
@@ -246,7 +247,7 @@ def main(argv=None) -> int:
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
         ("" if args.scenarios == default_scenarios else "_" + "-".join(args.scenarios)) + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \
-        "".join(f"_{item}" for item in args.graph)
+        "".join(f"_{item}".replace('"', "").replace("'", "") for item in args.graph)  # no quotes in names
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table[~failed], args.out / f"rmse_{tag}.png")
     command = (
@@ -254,7 +255,7 @@ def main(argv=None) -> int:
         + (" --quick" if args.quick else "")
         + f" --scenarios {' '.join(args.scenarios)} --dr {args.dr}"
         + ("" if args.methods is None else f" --methods {' '.join(args.methods)}")
-        + ("" if not args.graph else f" --graph {' '.join(args.graph)}")
+        + ("" if not args.graph else f" --graph {' '.join(shlex.quote(item) for item in args.graph)}")
     )
     text = markdown(rows)
     (args.out / f"summary_{tag}.md").write_text(f"Command: `{command}`\n\n{text}\n")
