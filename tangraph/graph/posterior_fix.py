@@ -14,16 +14,18 @@ and hands the graph exactly what they add to that belief:
    (:meth:`~tangraph.filters.likelihood.TerrainLikelihood.ping_update`: each sounding's variance
    and map error from the terrain measurement model, no map is no evidence, the tide
    marginalised exactly from the model's prior). A grid point stands for its cell, so each
-   sounding's variance is raised by the map's depth variance across a cell (from the depth
-   gradient under it, at least the map's mean, as in the point-mass filter): a likelihood
-   sharper than the grid is not missed between its points. The posterior is the prior times
-   the likelihood.
-3. **Refinement**: when the posterior is unimodal and its std along some axis is below
-   ``REFINE_SPACINGS`` grid spacings, a new grid is laid on it (aligned with its covariance
+   sounding's variance is raised by the depth variance a shift within the cell gives it,
+   shared by every sounding of the window (the row-sum bound of the map error's model): a
+   likelihood sharper than the grid is not lost between its points. The posterior is the prior
+   times the likelihood. The multimodality and edge tests below are made on this grid.
+3. **Refinement**: the posterior is weighed again without the resolution term, on the same
+   grid when its std along every axis is at least ``REFINE_SPACINGS`` grid spacings (the grid
+   resolves it), else on a new grid laid on it (aligned with its covariance
    grown by a third of a cell, so that a posterior sitting between two points is covered,
    ``GRID_SIGMAS`` stds each side) and the posterior weighed again there; a refined grid whose
    outer ring holds more than ``EDGE_MASS`` is laid twice as wide; at most ``MAX_REFINE`` times.
-   Its mean and covariance are ``mu`` and ``S``.
+   Its mean and covariance are ``mu`` and ``S`` (at least a twelfth of a cell's variance along
+   each grid axis: a posterior on one point stands for its cell).
 4. **Prior removed**: the likelihood's information is the posterior's less the prior's,
    ``L = S^-1 - P^-1``, and its mean ``L^-1 (S^-1 mu - P^-1 m)``; the graph receives the fix
    ``N(L^-1 (S^-1 mu - P^-1 m), L^-1)``, so nothing it already knew is counted again. On a
@@ -41,11 +43,6 @@ adds less than ``MIN_GAIN`` of the prior's information along its best axis (``un
 and when more than ``EDGE_MASS`` of the posterior lies in the grid's outer ring
 (``best_on_edge``: the truth may lie beyond, which is evidence that the prediction is wrong).
 The windows of this front end share no ping (:class:`~tangraph.graph.GraphNavigator`).
-
-A likelihood much sharper than the prior-wide grid (a few centimetres of sounding noise on
-steep relief under a prior of tens of metres) can hide a second mode between the grid's
-points: the cell's depth variance blurs it, but one shift common to every sounding is not
-noise independent per sounding.
 """
 
 from __future__ import annotations
@@ -62,8 +59,8 @@ __all__ = ["WindowFix", "posterior_fix"]
 
 GRID_POINTS = 31  #: points per axis of the window's grid
 GRID_SIGMAS = 5.0  #: the grid spans this many stds of the density it is laid on, each side
-REFINE_SPACINGS = 1.5  #: a posterior std below this many grid spacings is re-gridded
-MAX_REFINE = 3  #: re-griddings at most
+REFINE_SPACINGS = 2.5  #: a posterior std below this many grid spacings is re-gridded
+MAX_REFINE = 4  #: re-griddings at most
 MIN_SPACING = 0.01  #: m, the finest grid spacing
 MODE_LEVEL = 0.5 * stats.chi2.ppf(0.999, 2)  #: nats below the peak that bound a part of the posterior
 MODE_MASS = 0.01  #: share of the mass a second part must hold to make the window multimodal
@@ -137,6 +134,15 @@ def _moments(points: np.ndarray, log_density: np.ndarray) -> tuple[np.ndarray, n
     return mass, mean, (d * mass[:, None]).T @ d
 
 
+def _floored(cov: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """``cov`` with its variance along every axis of the grid's coordinates at least a twelfth
+    of a cell's (a point stands for its cell): a density on one point is not a singular one."""
+    inv = np.linalg.inv(axes)
+    values, vectors = np.linalg.eigh(inv @ cov @ inv.T)
+    grid = (vectors * np.maximum(values, 1.0 / 12.0)) @ vectors.T
+    return axes @ grid @ axes.T
+
+
 def _parts(log_density: np.ndarray, mass: np.ndarray) -> tuple[int, float]:
     """Connected parts of the posterior above ``exp(-MODE_LEVEL)`` of its peak, and the share of
     the mass in the parts other than the heaviest."""
@@ -158,14 +164,20 @@ def _edge(mass: np.ndarray) -> float:
 
 
 def _resolution(bathymetry, footprints: np.ndarray, axes: np.ndarray, slope: np.ndarray) -> np.ndarray:
-    """Each sounding's variance from the map's depth across a grid cell of ``axes``: ``sum_i
-    (g . a_i)^2 / 12`` with its footprint's depth gradient ``g`` at the grid's centre, and at
-    least the map-wide mean ``sum_i a_i^T G a_i / 12`` (``slope``: G), which stands in for a
-    footprint off the map."""
+    """Each sounding's variance from the grid's resolution. A grid point stands for its cell:
+    the vehicle may be anywhere in it, a shift ``u`` uniform over the cell of ``axes`` (``A``)
+    that every sounding of the window shares, so sounding ``b`` errs by ``g_b . u`` with its
+    footprint's depth gradient ``g_b``, and ``cov(b, c) = sum_i (g_b . a_i)(g_c . a_i) / 12``.
+    As for the map's error (:mod:`tangraph.sensors.terrain`), each sounding's variance grows by
+    the row sum of these: ``sum_i |g_b . a_i| sum_c |g_c . a_i| / 12``, at least the map-wide
+    mean of one sounding's own, ``sum_i a_i^T G a_i / 12`` (``slope``: G), which also stands for
+    a footprint off the map. On a grid much coarser than the likelihood the window is then
+    weighed as a whole, not as many independent soundings that each miss by the same shift."""
     mean = float(np.trace(axes.T @ slope @ axes)) / 12.0
     gradient = bathymetry.gradient_at(footprints[:, 0], footprints[:, 1])
-    local = np.sum((gradient @ axes) ** 2, axis=1) / 12.0
-    return np.fmax(np.where(np.isfinite(local), local, mean), mean)
+    reach = np.abs(np.nan_to_num(gradient @ axes))  # (N, 2): |g_b . a_i|
+    shared = reach @ reach.sum(axis=0) / 12.0
+    return np.maximum(shared, mean)
 
 
 def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
@@ -190,37 +202,43 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         raise MatchingError(f"{where}: the prior covariance is not finite and positive definite")
     tide_var = float(tide_std) ** 2
 
-    def weigh(centre, cov):
+    def weigh(centre, cov, blur):
         axes = _axes(cov)
         points = _grid(centre, axes)
         prior = _log_gaussian(points, m, p)
-        resolution = _resolution(likelihood.bathymetry, patch.offsets + centre, axes, slope)
+        extra = _resolution(likelihood.bathymetry, patch.offsets + centre, axes, slope) if blur else 0.0
         update = likelihood.ping_update(points, patch.offsets, patch.depths, np.full(points.shape[0], tide),
                                         tide_var, weights=np.exp(prior - prior.max()),
-                                        variance=variance + resolution, map_variance=map_variance)
+                                        variance=variance + extra, map_variance=map_variance)
         if np.all(np.isneginf(update.log_likelihood)):
             raise MatchingError(f"{where}: no sounding has the map under it anywhere near the prediction")
-        return points, prior + update.log_likelihood, update
+        log_post = prior + update.log_likelihood
+        mass, mean, cov = _moments(points, log_post)
+        return points, log_post, update, mass, mean, _floored(cov, axes)
 
-    points, log_post, update = weigh(m, p)
-    mass, mean, cov = _moments(points, log_post)
+    points, log_post, update, mass, mean, cov = weigh(m, p, True)
     n_parts, other = _parts(log_post, mass)
     edge = _edge(mass)
     reasons = []
     if other >= MODE_MASS:
         reasons.append(f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one")
-    grids, lay = 1, p
-    while not reasons and grids <= MAX_REFINE:
+    grids, centre, lay, blurred = 1, m, p, True
+    while not reasons:
         axes = _axes(lay)
         inv = np.linalg.inv(axes)
         narrow = np.linalg.eigvalsh(inv @ cov @ inv.T).min() < REFINE_SPACINGS**2
         spilled = grids > 1 and _edge(mass) > EDGE_MASS
-        if not (narrow or spilled):
+        if not (narrow or spilled) or grids > MAX_REFINE:
+            if blurred:  # resolved on this grid: weigh it again as it is
+                points, log_post, update, mass, mean, cov = weigh(centre, lay, False)
+                blurred = False
+                continue
             break
         # a narrow posterior may sit between the points: lay the next grid over the cells around it
         lay = 4.0 * lay if spilled else cov + axes @ axes.T / 3.0
-        points, log_post, update = weigh(mean, lay)
-        mass, mean, cov = _moments(points, log_post)
+        centre = mean
+        points, log_post, update, mass, mean, cov = weigh(centre, lay, False)
+        blurred = False
         grids += 1
     # in the prior's whitened coordinates y = R^-1 (x - m), R R^T = P: the prior is N(0, I), the
     # posterior N(a, B), the likelihood's information G = B^-1 - I = V diag(g) V^T
