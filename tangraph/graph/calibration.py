@@ -35,8 +35,10 @@ from tangraph.sensors import rotation_matrix
 
 __all__ = [
     "CALIBRATION",
+    "TIDE",
     "calibration_prior_factor",
     "joint_in_frame",
+    "position_tide_factor",
     "to_world",
     "world_covariance",
     "world_jacobian",
@@ -45,16 +47,18 @@ __all__ = [
 ]
 
 CALIBRATION = int(gtsam.symbol("c", 0))  #: GTSAM key of the calibration ``(k, b)``
+TIDE = int(gtsam.symbol("t", 0))  #: GTSAM key of the tide (a 1-vector), when the online graph holds it
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 
 
 def joint_in_frame(psi, joint) -> np.ndarray:
-    """Joint covariances ``(..., 5, 5)`` of (pose in GTSAM's tangent coordinates, c) turned into
-    DR-frame world coordinates (the ``y`` of this module), ``psi`` the poses' headings."""
+    """Joint covariances ``(..., n, n)`` of (pose in GTSAM's tangent coordinates, c, ...) turned
+    into DR-frame world coordinates (the ``y`` of this module), ``psi`` the poses' headings."""
     psi = np.asarray(psi, float)
-    a = np.zeros((*psi.shape, 5, 5))
-    a[..., :, :] = np.eye(5)
+    n = np.shape(joint)[-1]
+    a = np.zeros((*psi.shape, n, n))
+    a[..., :, :] = np.eye(n)
     c, s = np.cos(psi), np.sin(psi)
     a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1] = c, -s, s, c
     return a @ joint @ np.swapaxes(a, -1, -2)
@@ -124,6 +128,35 @@ def world_position_factor(pose_key: int, position, cov, origin, kernel: str = "n
     noise = robust_noise(np.asarray(cov, float), kernel, parameter)
     return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION],
                               partial(_position_error, np.asarray(origin, float).copy(), measured))
+
+
+def _position_tide_error(origin, measured, factor, values, jacobians):
+    """Error ``(world position, tide) - measured`` of a pose (key 0) under the calibration
+    (key 1), with the tide (key 2)."""
+    inner = [None, None] if jacobians is not None else None
+    error = _position_error(origin, measured[:2], factor, values, inner)
+    tide = float(values.atVector(factor.keys()[2])[0])
+    if jacobians is not None:
+        jacobians[0] = np.vstack([inner[0], np.zeros((1, 3))])
+        jacobians[1] = np.vstack([inner[1], np.zeros((1, 2))])
+        jacobians[2] = np.array([[0.0], [0.0], [1.0]])
+    return np.append(error, tide - measured[2])
+
+
+def position_tide_factor(pose_key: int, measured, cov, origin, kernel: str = "none",
+                         parameter: float = 1.0) -> gtsam.CustomFactor:
+    """A factor on a DR-frame pose, the calibration and the tide (:data:`TIDE`): the pose's world
+    position and the tide are ``measured (3,)`` with covariance ``cov (3, 3)``, optionally under
+    a robust kernel whose ``parameter`` is given for a 2-D error (it is moved to the same
+    probability of a 3-D one)."""
+    from scipy import stats
+
+    measured = np.asarray(measured, float).copy()
+    if kernel != "none":
+        parameter = float(np.sqrt(stats.chi2.ppf(stats.chi2.cdf(parameter**2, 2), 3)))
+    noise = robust_noise(np.asarray(cov, float), kernel, parameter)
+    return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION, TIDE],
+                              partial(_position_tide_error, np.asarray(origin, float).copy(), measured))
 
 
 def calibration_prior_factor(mean, std) -> gtsam.NonlinearFactor:

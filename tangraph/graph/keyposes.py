@@ -230,10 +230,12 @@ class PoseGraph:
         return gtsam.BetweenFactorPose2(int(i), int(j), gtsam.Pose2(*increment),
                                         gtsam.noiseModel.Gaussian.Covariance(cov))
 
-    def add_position_fix(self, key: int, position, cov) -> gtsam.NonlinearFactor:
-        """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model."""
+    def add_position_fix(self, key: int, position, cov, factor=None) -> gtsam.NonlinearFactor:
+        """A position fix (a checked 2 x 2 world covariance) on pose ``key``, robust noise model;
+        ``factor``: the one to add for it instead (the online graph's factor on the position
+        and the tide, whose position part the fix is; a batch solve rebuilds from the fixes)."""
         self.fixes.append((int(key), np.asarray(position, float), np.asarray(cov, float)))
-        factor = self.fix_factor(key, position, cov)
+        factor = self.fix_factor(key, position, cov) if factor is None else factor
         self._factors["fix"].append(factor)
         return factor
 

@@ -215,7 +215,8 @@ class Relocalisation:
             self.fixes[candidate.record] = dataclasses.replace(  # left to the batch smoother
                 record, status=FixStatus.UNCONFIRMED, detail="its key has left iSAM2's window")
             return
-        self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance))
+        self._new_factors.add(self.graph.add_position_fix(candidate.key, fix.position, fix.covariance,
+                                                          self._fix_factor(candidate.key, fix)))
         self.fixes[candidate.record] = dataclasses.replace(record, status=FixStatus.ACCEPTED,
                                                            detail=detail or record.detail)
         if fix.quality.multimodal:

@@ -28,7 +28,9 @@ from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.graph.calibration import (
     CALIBRATION,
+    TIDE,
     joint_in_frame,
+    position_tide_factor,
     to_world,
     world_covariance,
     world_jacobian,
@@ -121,6 +123,11 @@ class GraphNavigator(Relocalisation):
             self.window_first = dict(zip(self.fix_ends.tolist(), starts.tolist(), strict=True))
             self.window_overlap = dict.fromkeys(self.fix_ends.tolist(), 1.0)
             self._terrain = _window_terrain(survey, bathymetry, self.model)
+        # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
+        # never marginalised), so what one window learnt of it sharpens the next
+        self.tide = c.front_end == "pmf" and c.estimate_calibration and self.model.tide_std > 0
+        self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
+        self._tide_mean = float(self.model.tide)
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
         self._is_end[self.fix_ends] = True
@@ -139,6 +146,7 @@ class GraphNavigator(Relocalisation):
         threshold.insert(("\x00", np.array([c.relinearize_position, c.relinearize_position,
                                               c.relinearize_threshold])))
         threshold.insert(("c", np.array([1e-4, c.relinearize_threshold])))
+        threshold.insert(("t", np.array([1e-3])))  # the tide (m), when held: a linear variable
         params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = c.relinearize_skip
         params.enablePartialRelinearizationCheck = True
@@ -216,6 +224,10 @@ class GraphNavigator(Relocalisation):
         if self.graph.calibrated:
             self._new_factors.add(self.graph._factors["prior"][0])
             self._new_values.insert(CALIBRATION, self.model.calibration_prior)
+        if self.tide:  # in iSAM2 only: the batch smoother weighs the fixes' positions
+            self._new_factors.add(gtsam.PriorFactorVector(
+                TIDE, np.array([m.tide]), gtsam.noiseModel.Isotropic.Sigma(1, m.tide_std)))
+            self._new_values.insert(TIDE, np.array([m.tide]))
         joint = np.zeros((5, 5))
         joint[:2, :2] = np.eye(2) * m.initial_position_std**2
         joint[2, 2] = heading_std**2
@@ -288,10 +300,29 @@ class GraphNavigator(Relocalisation):
         patch = window_patch(self.survey, k, k - first + 1, min_soundings=self.config.tap.min_soundings,
                              poses=poses)
         likelihood, variance, map_variance, slope = self._terrain
+        mean, prior = np.append(world[:2], self.model.tide), np.zeros((3, 3))
+        prior[:2, :2], prior[2, 2] = cov[:2, :2], self.model.tide_std**2
+        if self.tide:  # the graph's belief in the tide, and how it goes with the position
+            pose = compose(self._key_pose, self._delta[k])
+            joint = propagate_joint(self._key_pose, self._tide_joint, self._delta[k], self._delta_cov[k])
+            jac = np.zeros((3, 6))
+            jac[:2, :5] = world_jacobian(pose, self.calibration, self.origin)[:2]
+            jac[2, 5] = 1.0
+            tide = jac @ joint @ jac.T
+            mean[2] = self._tide_mean
+            prior[:2, 2] = prior[2, :2] = tide[:2, 2]
+            prior[2, 2] = tide[2, 2]
         return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
                              None if map_variance is None else map_variance[patch.ping, patch.beam],
-                             slope, world[:2], cov[:2, :2], tide=self.model.tide,
-                             tide_std=self.model.tide_std)
+                             slope, mean, prior, tide_factor=self.tide)
+
+    def _fix_factor(self, key: int, fix) -> gtsam.NonlinearFactor | None:
+        """The factor of an accepted fix when it is not a position fix: the point-mass front
+        end's on the position and the tide (None otherwise)."""
+        if not (self.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
+            return None
+        return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, self.origin,
+                                    self.config.robust_kernel, self.config.robust_parameter)
 
     def _misfit_noise(self, k: int, sigma: float) -> float:
         """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
@@ -339,6 +370,8 @@ class GraphNavigator(Relocalisation):
             stamps.insert((key, float(self.survey.time[k])))
         if self.graph.calibrated:  # the calibration is never old: it is never marginalised
             stamps.insert((CALIBRATION, float(self.survey.time[k])))
+        if self.tide:  # nor is the tide
+            stamps.insert((TIDE, float(self.survey.time[k])))
         self.smoother.setSmootherLag(self._lag())
         try:
             self.smoother.update(self._new_factors, self._new_values, stamps, self._remove)
@@ -364,6 +397,12 @@ class GraphNavigator(Relocalisation):
             joint = np.zeros((5, 5))
             joint[:3, :3] = self.isam.marginalCovariance(k)
         self._key_pose, self._key_joint = pose, joint_in_frame(pose[2], joint)
+        if self.tide:
+            self._tide_mean = float(self.isam.calculateEstimateVector(TIDE)[0])
+            marginal = self.isam.jointMarginalCovariance(gtsam.KeyVector([k, CALIBRATION, TIDE]))
+            keys = (k, CALIBRATION, TIDE)
+            full = np.block([[marginal.at(a, b) for b in keys] for a in keys])
+            self._tide_joint = joint_in_frame(pose[2], full)
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 
@@ -401,7 +440,8 @@ class GraphNavigator(Relocalisation):
 
     def meta(self) -> dict:
         """``fixes``, their counts, the pings flagged lost (``n_lost``, ``lost_steps``) and the
-        ``lost_episodes``, ``key_indices``, ``calibration``, the configuration and model."""
+        ``lost_episodes``, ``key_indices``, ``calibration``, the configuration and model, and
+        with the point-mass front end's tide variable ``tide`` (its estimate and std, m)."""
         accepted = sum(f.accepted for f in self.fixes)
         lost = sorted({p for e in self.episodes for p in e.pings(self.index + 1)})
         return {
@@ -413,6 +453,8 @@ class GraphNavigator(Relocalisation):
             "lost_episodes": [e.as_dict() for e in self.episodes],
             "key_indices": [int(k) for k in self.graph.keys],
             "calibration": self.calibration_report(),
+            **({"tide": {"tide": self._tide_mean, "tide_std": float(np.sqrt(self._tide_joint[5, 5]))}}
+               if self.tide else {}),
             "config": self.config.as_dict(),
             "model": self.model.as_dict(),
         }

@@ -79,8 +79,10 @@ class WindowFix:
     ``position (2,)`` and ``covariance (2, 2)`` (world, north/east; a refused window's are its
     posterior's), the posterior tide mean ``tide`` and the soundings' residual std ``sigma`` at
     the posterior mean, their number, the ``quality`` flags the graph judges (as a TAP fix's),
-    the posterior's mean and covariance, the prior's, and the grid (``points (n*n, 2)`` and the
-    normalised ``log_density``) it was last weighed on, the ``n_grids``-th."""
+    the posterior's mean and covariance, the prior's (north, east, tide), and the grid
+    (``points (n*n, 2)`` and the normalised ``log_density``) it was last weighed on, the
+    ``n_grids``-th; ``joint_mean (3,)`` and ``joint_covariance (3, 3)``: the likelihood factor
+    on (north, east, tide) when the tide was uncertain (NaN otherwise, or when refused)."""
 
     index: int
     first: int
@@ -97,6 +99,8 @@ class WindowFix:
     points: np.ndarray
     log_density: np.ndarray
     n_grids: int
+    joint_mean: np.ndarray
+    joint_covariance: np.ndarray
 
     @property
     def accepted(self) -> bool:
@@ -180,34 +184,74 @@ def _resolution(bathymetry, footprints: np.ndarray, axes: np.ndarray, slope: np.
     return np.maximum(shared, mean)
 
 
+def _remove_prior(mean, cov, m, p, reasons: list[str]) -> tuple[np.ndarray, np.ndarray] | None:
+    """The Gaussian likelihood factor ``N(L^-1 (S^-1 mu - P^-1 m), L^-1)``, ``L = S^-1 - P^-1``,
+    of a posterior ``N(mean, cov)`` under the prior ``N(m, p)`` (any dimension), computed in the
+    prior's whitened coordinates; None (and a reason appended) when it is refused (module
+    docstring)."""
+    # y = R^-1 (x - m), R R^T = P: the prior is N(0, I), the posterior N(a, B), and the
+    # likelihood's information G = B^-1 - I = V diag(g) V^T
+    root = np.linalg.cholesky(p)
+    inv_root = np.linalg.inv(root)
+    a = inv_root @ (mean - m)
+    b = inv_root @ cov @ inv_root.T
+    gain, vectors = np.linalg.eigh(np.linalg.inv(0.5 * (b + b.T)) - np.eye(len(m)))
+    if gain.min() < -MAX_LOSS:
+        reasons.append(f"uninformative: the posterior is wider than the prior (gain {gain.min():.2f})")
+        return None
+    if gain.max() < MIN_GAIN:
+        reasons.append(f"uninformative: the window adds {gain.max():.1%} of the prior's information")
+        return None
+    # the likelihood's mean along each axis, (1 + g) / g times the posterior's shift; an axis the
+    # window hardly sees keeps the prior's mean and almost no information
+    seen = gain >= MIN_GAIN
+    z = np.where(seen, (1.0 + gain) * (vectors.T @ a) / np.where(seen, gain, 1.0), 0.0)
+    g = np.where(seen, gain, MIN_AXIS_GAIN)
+    covariance = root @ (vectors / g) @ vectors.T @ root.T
+    return m + root @ vectors @ z, 0.5 * (covariance + covariance.T)
+
+
 def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
                   map_variance: np.ndarray | None, slope: np.ndarray, prior_mean, prior_cov, *,
-                  tide: float, tide_std: float) -> WindowFix:
+                  tide_factor: bool = False) -> WindowFix:
     """The window's terrain information (module docstring) from ``patch`` (laid from the end
     ping's position, the prior's mean standing for it), each sounding's ``variance (N,)`` and map
     error ``map_variance (N,)`` (None: a perfect map), the map's mean outer product of depth
-    gradients ``slope (2, 2)``, the prior ``N(prior_mean (2,), prior_cov (2, 2))`` and the tide
-    prior ``N(tide, tide_std^2)``.
+    gradients ``slope (2, 2)``, and the prior ``N(prior_mean (3,), prior_cov (3, 3))`` of the
+    end ping's (north, east) and the tide (``measured = map + tide``).
+
+    Each grid point's tide prior is the prior's conditional on the point. With ``tide_factor``
+    (a graph that holds the tide as a variable, whose belief the prior's tide is) and a tide of
+    positive prior variance, the posterior's mean and covariance are those of (north, east,
+    tide) (each point's tide posterior joins the grid's moments), the prior removed from them in
+    three dimensions gives ``joint_mean`` and ``joint_covariance``, and ``position`` and
+    ``covariance`` are their (north, east) part. Without it the tide's prior is part of the
+    window's evidence (nothing else holds the tide) and only the position's prior is removed.
 
     Raises
     ------
     MatchingError
-        The prior covariance is not finite and positive definite, or no sounding of the window
-        has the map under it anywhere on the grid.
+        The prior covariance is not finite, symmetric and positive semi-definite with a positive
+        definite position part, or no sounding of the window has the map under it anywhere on
+        the grid.
     """
-    m = np.asarray(prior_mean, float)[:2]
-    p = np.asarray(prior_cov, float)[:2, :2]
+    m3 = np.asarray(prior_mean, float)
+    p3 = np.asarray(prior_cov, float)
     where = f"window {patch.first}..{patch.reference}"
-    if not (np.all(np.isfinite(p)) and np.all(np.isfinite(m)) and np.linalg.eigvalsh(p).min() > 0):
+    if m3.shape != (3,) or p3.shape != (3, 3) or not (np.all(np.isfinite(p3)) and np.all(np.isfinite(m3))) \
+            or np.linalg.eigvalsh(p3[:2, :2]).min() <= 0 or p3[2, 2] < 0:
         raise MatchingError(f"{where}: the prior covariance is not finite and positive definite")
-    tide_var = float(tide_std) ** 2
+    m, p = m3[:2], p3[:2, :2]
+    gain_t = np.linalg.solve(p, p3[:2, 2])  # the tide's prior regression on the position
+    tide_var = max(float(p3[2, 2] - p3[:2, 2] @ gain_t), 0.0)  # given the position
+    joint = tide_factor and tide_var > 1e-12
 
     def weigh(centre, cov, blur):
         axes = _axes(cov)
         points = _grid(centre, axes)
         prior = _log_gaussian(points, m, p)
         extra = _resolution(likelihood.bathymetry, patch.offsets + centre, axes, slope) if blur else 0.0
-        update = likelihood.ping_update(points, patch.offsets, patch.depths, np.full(points.shape[0], tide),
+        update = likelihood.ping_update(points, patch.offsets, patch.depths, m3[2] + (points - m) @ gain_t,
                                         tide_var, weights=np.exp(prior - prior.max()),
                                         variance=variance + extra, map_variance=map_variance)
         if np.all(np.isneginf(update.log_likelihood)):
@@ -240,30 +284,29 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         points, log_post, update, mass, mean, cov = weigh(centre, lay, False)
         blurred = False
         grids += 1
-    # in the prior's whitened coordinates y = R^-1 (x - m), R R^T = P: the prior is N(0, I), the
-    # posterior N(a, B), the likelihood's information G = B^-1 - I = V diag(g) V^T
-    root = np.linalg.cholesky(p)
-    inv_root = np.linalg.inv(root)
-    a = inv_root @ (mean - m)
-    b = inv_root @ cov @ inv_root.T
-    gain, vectors = np.linalg.eigh(np.linalg.inv(0.5 * (b + b.T)) - np.eye(2))
-    if gain.min() < -MAX_LOSS:
-        reasons.append(f"uninformative: the posterior is wider than the prior (gain {gain.min():.2f})")
-    elif gain.max() < MIN_GAIN:
-        reasons.append(f"uninformative: the window adds {gain.max():.1%} of the prior's information")
     position, covariance = mean, cov  # a refused window's record shows its posterior
+    joint_mean, joint_cov = np.full(3, np.nan), np.full((3, 3), np.nan)
     if not reasons:
-        # the likelihood's mean along each axis, (1 + g) / g times the posterior's shift; an axis
-        # the window hardly sees keeps the prior's mean and almost no information
-        seen = gain >= MIN_GAIN
-        z = np.where(seen, (1.0 + gain) * (vectors.T @ a) / np.where(seen, gain, 1.0), 0.0)
-        g = np.where(seen, gain, MIN_AXIS_GAIN)
-        position = m + root @ vectors @ z
-        covariance = root @ (vectors / g) @ vectors.T @ root.T
-        covariance = 0.5 * (covariance + covariance.T)
+        if joint:  # the tide's posterior joins the grid's moments
+            weights = np.exp(log_post - np.max(log_post))
+            weights /= weights.sum()
+            tide_mean = float(weights @ update.tide)
+            spread = update.tide - tide_mean
+            post3 = np.zeros((3, 3))
+            post3[:2, :2] = cov
+            post3[:2, 2] = post3[2, :2] = (weights * spread) @ (points - mean)
+            post3[2, 2] = update.tide_var + weights @ spread**2
+            factor = _remove_prior(np.append(mean, tide_mean), post3, m3, p3, reasons)
+            if factor is not None:
+                joint_mean, joint_cov = factor
+                position, covariance = joint_mean[:2], joint_cov[:2, :2]
+        else:
+            factor = _remove_prior(mean, cov, m, p, reasons)
+            if factor is not None:
+                position, covariance = factor
     best = int(np.argmax(log_post))
-    tide_mean = float(update.tide[best])
-    residual = likelihood.residuals(mean[None, :], patch.offsets, patch.depths, np.array([tide_mean]))[:, 0]
+    tide_best = float(update.tide[best])
+    residual = likelihood.residuals(mean[None, :], patch.offsets, patch.depths, np.array([tide_best]))[:, 0]
     ok = np.isfinite(residual)
     sigma = float(np.sqrt(np.mean(residual[ok] ** 2))) if ok.any() else float("nan")
     quality = FixQuality(peak_ratio=float("inf") if n_parts < 2 else other, n_basins=max(n_parts, 1),
@@ -271,5 +314,6 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
                          touches_edge=edge > EDGE_MASS, reasons=tuple(reasons),
                          best_on_edge=edge > EDGE_MASS)
     log_density = log_post - np.max(log_post) - np.log(np.exp(log_post - np.max(log_post)).sum())
-    return WindowFix(int(patch.reference), int(patch.first), position, covariance, tide_mean, sigma,
-                     patch.n_soundings, quality, mean, cov, m, p, points, log_density, grids)
+    return WindowFix(int(patch.reference), int(patch.first), position, covariance, tide_best, sigma,
+                     patch.n_soundings, quality, mean, cov, m3, p3, points, log_density, grids,
+                     joint_mean, joint_cov)

@@ -17,6 +17,14 @@ SLOPE_NORTH = np.array([0.10, 0.05])  # depth gradient (north, east) north of th
 SLOPE_SOUTH = np.array([-0.08, 0.05])  # and south of it: the same east slope, so it is continuous
 
 
+def _prior(mean, cov, tide: float = 0.0, tide_std: float = 0.0):
+    """A (north, east, tide) prior with the tide independent of the position."""
+    p3 = np.zeros((3, 3))
+    p3[:2, :2] = cov
+    p3[2, 2] = tide_std**2
+    return np.append(np.asarray(mean, float), tide), p3
+
+
 def _kinked_plane() -> BathymetryMap:
     """Two planes meeting along the east axis: every sounding sees one plane (a linear model),
     the two together see both axes."""
@@ -64,7 +72,7 @@ def test_the_prior_removed_is_the_exact_likelihood_factor_on_a_linear_seabed(tid
     patch = _patch(chart, truth, rng, noise, tide=1.2 if tide_std else 0.0)
     prior_mean, prior_cov = np.array([1.0, 1.0]), np.array([[25.0, 5.0], [5.0, 16.0]])
     fix = posterior_fix(patch, TerrainLikelihood(chart, noise), np.full(80, noise**2), None,
-                        slope_moment(chart), prior_mean, prior_cov, tide=0.0, tide_std=tide_std)
+                        slope_moment(chart), *_prior(prior_mean, prior_cov, 0.0, tide_std))
     mean, cov = _exact_factor(patch, chart, noise**2, tide_std)
     assert fix.accepted and fix.quality.reasons == ()
     std = np.sqrt(np.diag(cov))
@@ -78,6 +86,42 @@ def test_the_prior_removed_is_the_exact_likelihood_factor_on_a_linear_seabed(tid
     np.testing.assert_allclose(fix.posterior_mean, post_mean, atol=0.02 * std.min())
 
 
+def test_with_the_tide_in_the_graph_the_factor_is_the_exact_one_on_position_and_tide():
+    """A seabed kinked along both axes (four planes): soundings in the four quadrants see four
+    gradients, so position and tide are both determined; the prior over (north, east, tide) is
+    correlated, as a graph's belief is, and is removed in three dimensions."""
+    north = np.arange(-400.0, 401.0, 10.0)
+    n, e = np.meshgrid(north, north, indexing="ij")
+    slope_n = lambda x: np.where(x >= 0, 0.10, -0.08)  # noqa: E731
+    slope_e = lambda x: np.where(x >= 0, 0.05, -0.06)  # noqa: E731
+    chart = BathymetryMap(north, north, 50.0 + slope_n(n) * n + slope_e(e) * e)
+    rng = np.random.default_rng(8)
+    signs = np.repeat([[1, 1], [1, -1], [-1, 1], [-1, -1]], 30, axis=0)
+    offsets = signs * rng.uniform(100, 250, (120, 2))
+    truth, tide, noise = np.array([2.0, -3.0]), 1.5, 0.3
+    depths = chart.depth_at(*(truth + offsets).T) + tide + noise * rng.standard_normal(120)
+    patch = Patch(offsets, depths, np.zeros(120, np.int64), np.arange(120), 9, 0, np.zeros(2), 0)
+    prior_mean = np.array([1.0, 1.0, 0.5])
+    prior_cov = np.array([[25.0, 5.0, 1.0], [5.0, 16.0, -0.5], [1.0, -0.5, 4.0]])
+    fix = posterior_fix(patch, TerrainLikelihood(chart, noise), np.full(120, noise**2), None,
+                        slope_moment(chart), prior_mean, prior_cov, tide_factor=True)
+    design = np.column_stack([slope_n(offsets[:, 0]), slope_e(offsets[:, 1]), np.ones(120)])
+    base = chart.depth_at(*offsets.T)
+    info = design.T @ design / noise**2
+    exact_cov = np.linalg.inv(info)
+    exact_mean = exact_cov @ design.T @ (depths - base) / noise**2
+    std = np.sqrt(np.diag(exact_cov))
+    assert fix.accepted
+    # measured: within 1 % of a std and 2 % of the covariance
+    assert np.all(np.abs(fix.joint_mean - exact_mean) < 0.03 * std)
+    np.testing.assert_allclose(fix.joint_covariance, exact_cov, rtol=0.05, atol=0.05 * std.min() ** 2)
+    np.testing.assert_array_equal(fix.position, fix.joint_mean[:2])
+    # without the tide in the graph only the position's prior is removed: no joint factor
+    plain = posterior_fix(patch, TerrainLikelihood(chart, noise), np.full(120, noise**2), None,
+                          slope_moment(chart), prior_mean, prior_cov)
+    assert np.all(np.isnan(plain.joint_mean)) and plain.accepted
+
+
 def test_a_window_that_sees_one_axis_keeps_the_prior_along_the_other():
     north = np.arange(-300.0, 301.0, 10.0)
     n, _ = np.meshgrid(north, north, indexing="ij")
@@ -89,7 +133,7 @@ def test_a_window_that_sees_one_axis_keeps_the_prior_along_the_other():
     patch = Patch(offsets, depths, np.zeros(60, np.int64), np.arange(60), 5, 0, np.zeros(2), 0)
     prior_cov = np.diag([16.0, 16.0])
     fix = posterior_fix(patch, TerrainLikelihood(chart, 0.2), np.full(60, 0.04), None, slope_moment(chart),
-                        np.zeros(2), prior_cov, tide=0.0, tide_std=0.0)
+                        *_prior(np.zeros(2), prior_cov))
     assert fix.accepted
     # north: the soundings' information 60 * 0.1^2 / 0.04 = 15 per m^2
     assert fix.covariance[0, 0] == pytest.approx(1 / 15.0, rel=0.03)
@@ -111,11 +155,11 @@ def test_a_bimodal_window_is_refused_not_given_as_one_gaussian():
     depths = chart.depth_at(*(truth + offsets).T) + 0.5 * rng.standard_normal(20)
     patch = Patch(offsets, depths, np.zeros(20, np.int64), np.arange(20), 5, 0, np.zeros(2), 0)
     args = (patch, TerrainLikelihood(chart, 0.5), np.full(20, 0.25), None, slope_moment(chart))
-    fix = posterior_fix(*args, np.zeros(2), np.diag([100.0, 900.0]), tide=0.0, tide_std=0.0)
+    fix = posterior_fix(*args, *_prior(np.zeros(2), np.diag([100.0, 900.0])))
     assert fix.quality.multimodal and not fix.accepted
     assert fix.quality.n_basins == 2
     # a prior that holds one hill only makes it unimodal
-    near = posterior_fix(*args, np.array([0.0, -27.0]), np.diag([16.0, 16.0]), tide=0.0, tide_std=0.0)
+    near = posterior_fix(*args, *_prior([0.0, -27.0], np.diag([16.0, 16.0])))
     assert near.accepted and np.hypot(*(near.position - truth)) < 2.0
 
 
@@ -133,7 +177,7 @@ def test_a_likelihood_sharper_than_the_grid_does_not_hide_the_second_hill(seed):
     depths = chart.depth_at(*(np.array([0.0, -15.0]) + offsets).T) + 0.1 * rng.standard_normal(80)
     patch = Patch(offsets, depths, np.zeros(80, np.int64), np.arange(80), 5, 0, np.zeros(2), 0)
     fix = posterior_fix(patch, TerrainLikelihood(chart, 0.1), np.full(80, 0.01), None, slope_moment(chart),
-                        np.zeros(2), np.diag([100.0, 400.0]), tide=0.0, tide_std=0.0)
+                        *_prior(np.zeros(2), np.diag([100.0, 400.0])))
     assert fix.quality.multimodal and fix.quality.n_basins == 2
 
 
@@ -142,7 +186,7 @@ def test_a_prior_without_a_covariance_is_refused():
     patch = _patch(chart, np.zeros(2), np.random.default_rng(1), 0.3)
     with pytest.raises(MatchingError, match="prior covariance is not finite and positive definite"):
         posterior_fix(patch, TerrainLikelihood(chart, 0.3), np.full(80, 0.09), None, slope_moment(chart),
-                      np.zeros(2), np.zeros((2, 2)), tide=0.0, tide_std=0.0)
+                      *_prior(np.zeros(2), np.zeros((2, 2))))
 
 
 def test_the_online_graph_on_the_point_mass_front_end(small_survey, rough_map):
@@ -158,6 +202,28 @@ def test_the_online_graph_on_the_point_mass_front_end(small_survey, rough_map):
     assert track.meta["n_fixes_accepted"] > 0.7 * len(track.meta["fixes"])
     again = navigate_online(small_survey, rough_map, config)  # deterministic
     np.testing.assert_array_equal(again.pose, track.pose)
+
+
+def test_the_online_graph_learns_the_tide_from_its_windows(rough_map):
+    import dataclasses
+
+    from conftest import small_scenario
+
+    from tangraph.sim.scenario import simulate
+
+    scenario = small_scenario()
+    scenario = dataclasses.replace(scenario, sonar=dataclasses.replace(scenario.sonar, tide=1.5))
+    survey = simulate(scenario, rng=np.random.default_rng(62), bathymetry=rough_map, seed=62)
+    track = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"))
+    tide = track.meta["tide"]
+    assert tide["tide_std"] < 0.05  # from the prior's 3 m
+    assert abs(tide["tide"] - 1.5) < 3 * tide["tide_std"] + 0.01
+    # told the tide exactly, the graph holds no tide variable
+    from tangraph.sensors import NavigationModel
+
+    model = dataclasses.replace(NavigationModel.from_survey(survey), tide=1.5, tide_std=0.0)
+    known = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"), model=model)
+    assert "tide" not in known.meta
 
 
 def test_front_end_is_validated():
