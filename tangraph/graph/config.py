@@ -40,9 +40,17 @@ class GraphConfig:
         (default): a TAP fix (:mod:`tangraph.graph.fixes`) searched around the prediction.
         ``"pmf"``: the window's posterior on a point-mass grid laid on the prediction, with the
         prediction's information removed (:mod:`tangraph.graph.posterior_fix`); its windows
-        share no ping (each holds the pings since the previous window end, so ``n_pings`` is
-        not used and ``fix_inflation`` is the only discount), and a multimodal window is always
-        refused. The batch smoother's re-matching stays TAP.
+        are ``front_end_pings`` pings long and share no ping (``n_pings``, ``fix_spacing`` and
+        ``ramp_pings`` are TAP's), and a multimodal window is always refused. With the
+        calibration estimated and an uncertain tide (``NavigationModel.tide_std > 0``) the
+        online graph holds the tide as a variable, and each window's factor is on its end
+        position and the tide (``Track.meta["tide"]``). The batch smoother starts from the
+        windows' position factors and re-matches with TAP on the same windows (not
+        yet measured: keep ``"tap"`` for it).
+    front_end_pings : int
+        Pings per window of the point-mass front end (default 3: on three seeds each of
+        ``demo``, ``wang2019`` and ``han2020`` windows of 2 and 3 pings gave the lowest online
+        RMSE, 5, 10 and 20 pings more, a single ping much more; see the graph_vs_filters study).
     n_pings : int
         Pings per TAP window (default 20).
     fix_spacing : int or None
@@ -174,6 +182,7 @@ class GraphConfig:
 
     key_interval: float = 60.0
     front_end: Literal["tap", "pmf"] = "tap"
+    front_end_pings: int = 3
     n_pings: int = 20
     fix_spacing: int | None = 10
     ramp_pings: int | None = 5
@@ -245,8 +254,8 @@ class GraphConfig:
                 f"GraphConfig: max_half_width_cells ({self.max_half_width_cells}) is below "
                 f"min_half_width_cells ({self.min_half_width_cells})"
             )
-        for name, low in (("n_pings", 1), ("relinearize_skip", 1), ("max_iterations", 1),
-                          ("rematch_iterations", 0), ("relocalise_fixes", 1)):
+        for name, low in (("n_pings", 1), ("front_end_pings", 1), ("relinearize_skip", 1),
+                          ("max_iterations", 1), ("rematch_iterations", 0), ("relocalise_fixes", 1)):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
                 raise TangraphError(f"GraphConfig.{name} must be an integer >= {low}, got {value!r}")
@@ -302,8 +311,15 @@ class GraphConfig:
 
     @property
     def spacing(self) -> int:
-        """Pings between consecutive TAP window ends."""
+        """Pings between consecutive window ends (the front end's)."""
+        if self.front_end == "pmf":
+            return self.front_end_pings
         return self.n_pings if self.fix_spacing is None else self.fix_spacing
+
+    @property
+    def window(self) -> int:
+        """Pings per window (the front end's)."""
+        return self.front_end_pings if self.front_end == "pmf" else self.n_pings
 
     def as_dict(self) -> dict:
         """JSON-ready form, kept in a track's metadata."""

@@ -115,13 +115,12 @@ class GraphNavigator(Relocalisation):
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
-        firsts, self.fix_ends, overlaps = fix_windows(n, c.n_pings, c.spacing, c.ramp_pings)
+        # the point-mass front end's windows share no ping (window = spacing, no ramp)
+        firsts, self.fix_ends, overlaps = fix_windows(n, c.window, c.spacing,
+                                                      c.ramp_pings if c.front_end == "tap" else None)
         self.window_first = dict(zip(self.fix_ends.tolist(), firsts.tolist(), strict=True))
         self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
-        if c.front_end == "pmf":  # windows that share no ping: each from the previous end on
-            starts = np.concatenate([[0], self.fix_ends[:-1] + 1])
-            self.window_first = dict(zip(self.fix_ends.tolist(), starts.tolist(), strict=True))
-            self.window_overlap = dict.fromkeys(self.fix_ends.tolist(), 1.0)
+        if c.front_end == "pmf":
             self._terrain = _window_terrain(survey, bathymetry, self.model)
         # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
         # never marginalised), so what one window learnt of it sharpens the next
@@ -345,7 +344,7 @@ class GraphNavigator(Relocalisation):
         """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
         DR increments (no tear at the keys inside the window); mapped to the world with the
         current calibration they are the calibrated DR's patch."""
-        first = self.window_first.get(k, k - self.config.n_pings + 1)
+        first = self.window_first.get(k, k - self.config.window + 1)
         if first < 0:
             return None
         return compose(pose, odometry(self.survey.dr_pose, k, np.arange(first, k + 1)))
@@ -359,7 +358,7 @@ class GraphNavigator(Relocalisation):
         if laid is not None and self.graph.calibrated and laid.shape[0] == end - first + 1:
             jac = world_jacobian(laid[[mid - first, -1]], self.calibration, self.origin)
             shape = jac[0, :2, 3:] - jac[1, :2, 3:]
-        shared = self.window_overlap.get(end, self.config.n_pings / self.config.spacing)
+        shared = self.window_overlap.get(end, self.config.window / self.config.spacing)
         overlap = self.config.fix_inflation * shared
         return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
 

@@ -5,25 +5,27 @@ so its covariance must be conservative, and windows that share pings are discoun
 do. This front end instead weighs the window's soundings where the graph believes the vehicle is
 and hands the graph exactly what they add to that belief:
 
-1. **Prior**: the graph's prediction of the window end's world position, ``N(m, P)`` (its
-   marginal, the calibration's uncertainty included).
+1. **Prior**: the graph's prediction of the window end's world position and of the tide,
+   ``N(m, P)`` over (north, east, tide) (its marginal, the calibration's uncertainty included;
+   a graph that does not hold the tide gives the model's tide prior, apart from the position).
 2. **Posterior on a grid**: the window's soundings are laid with the calibrated DR from the end
    ping, as TAP lays them (:func:`~tangraph.matching.window_patch`), and weighed at every point
    of a ``GRID_POINTS x GRID_POINTS`` grid aligned with ``P``'s principal axes and spanning
    ``GRID_SIGMAS`` of its stds, with the filters' terrain likelihood
    (:meth:`~tangraph.filters.likelihood.TerrainLikelihood.ping_update`: each sounding's variance
    and map error from the terrain measurement model, no map is no evidence, the tide
-   marginalised exactly from the model's prior). A grid point stands for its cell, so each
-   sounding's variance is raised by the depth variance a shift within the cell gives it,
-   shared by every sounding of the window (the row-sum bound of the map error's model): a
-   likelihood sharper than the grid is not lost between its points. The posterior is the prior
-   times the likelihood. The multimodality and edge tests below are made on this grid.
+   marginalised exactly from the prior's conditional on the point). A grid point stands for
+   its cell, so each sounding's variance is raised by the depth variance a shift within the
+   cell gives it, shared by every sounding of the window (the row-sum bound of the map error's
+   model): a likelihood sharper than the grid is not lost between its points. The posterior
+   is the prior times the likelihood. The multimodality and edge tests below are made on this
+   grid.
 3. **Refinement**: the posterior is weighed again without the resolution term, on the same
    grid when its std along every axis is at least ``REFINE_SPACINGS`` grid spacings (the grid
-   resolves it), else on a new grid laid on it (aligned with its covariance
-   grown by a third of a cell, so that a posterior sitting between two points is covered,
-   ``GRID_SIGMAS`` stds each side) and the posterior weighed again there; a refined grid whose
-   outer ring holds more than ``EDGE_MASS`` is laid twice as wide; at most ``MAX_REFINE`` times.
+   resolves it), else on a new grid laid on it (aligned with its covariance grown by a third
+   of a cell, so that a posterior sitting between two points is covered, ``GRID_SIGMAS`` stds
+   each side); a refined grid whose outer ring holds more than ``EDGE_MASS`` is laid twice as
+   wide; at most ``MAX_REFINE`` times.
    Its mean and covariance are ``mu`` and ``S`` (at least a twelfth of a cell's variance along
    each grid axis: a posterior on one point stands for its cell).
 4. **Prior removed**: the likelihood's information is the posterior's less the prior's,
@@ -33,6 +35,10 @@ and hands the graph exactly what they add to that belief:
    (of ``L`` in the prior's whitened coordinates) where the window adds less than ``MIN_GAIN``
    of the prior's information, the fix keeps the prior's mean and ``MIN_AXIS_GAIN`` of its
    information: its mean there would be the posterior's small shift divided by a small gain.
+   When the graph holds the tide (``tide_factor``), the tide's posterior joins the grid's
+   moments, the prior is removed over (north, east, tide) and the factor is on both: what one
+   window learnt of the tide sharpens the absolute depths of the next, which a window that
+   marginalises the tide afresh from its prior cannot use.
 
 The window is refused, never given as one Gaussian, when the posterior on the prior-wide grid
 has a second part (``multimodal``: a connected region above ``exp(-MODE_LEVEL)`` of the peak
