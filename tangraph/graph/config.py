@@ -40,8 +40,10 @@ class GraphConfig:
         (default): a TAP fix (:mod:`tangraph.graph.fixes`) searched around the prediction.
         ``"pmf"``: the window's posterior on a point-mass grid laid on the prediction, with the
         prediction's information removed (:mod:`tangraph.graph.posterior_fix`); its windows
-        are ``front_end_pings`` pings long and share no ping (``n_pings``, ``fix_spacing`` and
-        ``ramp_pings`` are TAP's), and a multimodal window is always refused. With the
+        end every ``front_end_pings`` pings and share no ping (``fix_spacing`` and
+        ``ramp_pings`` are TAP's); a multimodal window is never given as one Gaussian: like an
+        uninformative one it is held and grown by the next ``front_end_pings`` pings, up to
+        ``n_pings`` pings, before it is given up. With the
         calibration estimated and an uncertain tide (``NavigationModel.tide_std > 0``) the
         online graph holds the tide as a variable, and each window's factor is on its end
         position and the tide (``Track.meta["tide"]``). The batch smoother starts from the

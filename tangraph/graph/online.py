@@ -122,6 +122,7 @@ class GraphNavigator(Relocalisation):
         self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
         if c.front_end == "pmf":
             self._terrain = _window_terrain(survey, bathymetry, self.model)
+            self._window_start = 0  # the first ping of the front end's next window
         # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
         # never marginalised), so what one window learnt of it sharpens the next
         self.tide = c.front_end == "pmf" and c.estimate_calibration and self.model.tide_std > 0
@@ -241,11 +242,26 @@ class GraphNavigator(Relocalisation):
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
         self._new_values.insert(k, gtsam.Pose2(*pose))
+        grows = self.config.front_end == "pmf" and self._is_end[k] and fix is None
+        if grows:
+            self.window_first[k] = self._window_start
         extra = self._add_fix(k, pose, joint, fix)
+        if grows:
+            self._grow_window(k)
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
                                                       break_std=extra))
         self._update(k)
         self._rebase(k)
+
+    def _grow_window(self, k: int) -> None:
+        """The point-mass front end's next window: the pings after ``k``, or, when the window
+        ending at ``k`` was multimodal or uninformative and ``GraphConfig.n_pings`` allows, the
+        same window grown by the next ``front_end_pings`` pings (its pings are not lost: one
+        window's soundings together may settle what a few could not)."""
+        record = self.fixes[-1] if self.fixes and self.fixes[-1].index == k else None
+        held = record is not None and record.status in (FixStatus.MULTIMODAL, FixStatus.UNINFORMATIVE)
+        if not (held and k + self.config.spacing - self._window_start + 1 <= self.config.n_pings):
+            self._window_start = k + 1
 
     def _rebase(self, k: int) -> None:
         """Make the pings up to the next planned key take their increments from key ``k`` (a

@@ -268,10 +268,17 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
 
     points, log_post, update, mass, mean, cov = weigh(m, p, True)
     n_parts, other = _parts(log_post, mass)
+    # the soundings alone over the prior's reach: a second place they fit as well is a
+    # prediction's word against theirs, which a window that follows a wrong one would lose
+    log_lik = update.log_likelihood
+    n_fits, elsewhere = _parts(log_lik, _moments(points, log_lik)[0])
     edge = _edge(mass)
     reasons = []
     if other >= MODE_MASS:
         reasons.append(f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one")
+    elif elsewhere >= MODE_MASS:
+        reasons.append(f"multimodal: the soundings fit {n_fits} places within the prediction's reach, "
+                       f"{elsewhere:.0%} of their likelihood away from the best")
     grids, centre, lay, blurred = 1, m, p, True
     while not reasons:
         axes = _axes(lay)
