@@ -1,10 +1,11 @@
 """``tangraph demo``: the whole idea on one real map, in a few minutes.
 
 Simulate a multibeam survey whose dead reckoning drifts, navigate it with the online iSAM2
-graph (on the point-mass front end), the batch smoother, three particle filters (PF, IPF, SJCPF) and the point-mass filter,
-and write a report with figures: the tracks over the hill-shaded map, the position error against
-time with the graph's 2-sigma bound, one terrain fix close up with its Xie, Wang and calibrated
-regions, and a table of RMSE, final error, NEES, time per step and fixes used.
+graph (on the point-mass front end), the batch smoother, three particle filters (PF, IPF,
+SJCPF) and the point-mass filter, and write a report with figures: the tracks over the
+hill-shaded map, the position error against time with the graph's 2-sigma bound, one terrain
+fix close up with its Xie, Wang and calibrated regions, and a table of RMSE, final error, NEES,
+time per step and fixes used.
 
 The report folder is built beside the destination and renamed into place only when complete,
 so an interrupted demo (Ctrl-C or SIGTERM) leaves no half-written report, and an existing folder
