@@ -14,6 +14,11 @@ chain. Between key poses the output
 is the latest key estimate composed with the DR increment, its covariance grown by the increment's.
 What the navigator does with a fix beyond the gate, and how it finds out that it is lost and
 relocalises, is :mod:`tangraph.graph.lost`.
+
+With ``GraphConfig.front_end = "pmf"`` a window's factor comes from the point-mass front end
+(:mod:`tangraph.graph.posterior_fix`) instead of TAP: its prior is the prediction jointly with
+the tide, which the graph then holds as a variable beside the calibration, its windows share no
+ping, and an ambiguous window is held and grown by the next pings.
 """
 
 from __future__ import annotations
