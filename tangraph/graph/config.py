@@ -46,9 +46,10 @@ class GraphConfig:
         ``n_pings`` pings, before it is given up. With the
         calibration estimated and an uncertain tide (``NavigationModel.tide_std > 0``) the
         online graph holds the tide as a variable, and each window's factor is on its end
-        position and the tide (``Track.meta["tide"]``). The batch smoother starts from the
-        windows' position factors and re-matches with TAP on the same windows (not
-        yet measured: keep ``"tap"`` for it).
+        position and the tide (``Track.meta["tide"]``). It is the online graph's only: the batch
+        smoother always weighs TAP fixes (it re-matches its windows around the smoothed track
+        with TAP, and on the front end's short windows it was 1.5-2.2 x less accurate in the
+        graph_vs_filters study).
     front_end_pings : int
         Pings per window of the point-mass front end (default 3: on three seeds each of
         ``demo``, ``wang2019`` and ``han2020`` windows of 2 and 3 pings gave the lowest online

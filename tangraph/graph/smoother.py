@@ -419,6 +419,8 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         pings belong to) and ``forward_lost_episodes`` (all of the forward pass's).
     """
     started = _time.perf_counter()
+    if isinstance(config, GraphConfig) and config.front_end != "tap":  # the online graph's only
+        config = dataclasses.replace(config, front_end="tap")
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
     forward = _time.perf_counter()
     config = nav.config

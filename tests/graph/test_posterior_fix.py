@@ -248,6 +248,15 @@ def test_the_online_graph_learns_the_tide_from_its_windows(rough_map):
     assert "tide" not in known.meta
 
 
+def test_the_batch_smoother_weighs_tap_fixes_whatever_the_front_end(small_survey, rough_map):
+    from tangraph.graph import smooth_survey
+
+    tap = smooth_survey(small_survey, rough_map, GraphConfig())
+    other = smooth_survey(small_survey, rough_map, GraphConfig(front_end="pmf"))
+    np.testing.assert_array_equal(other.pose, tap.pose)
+    assert other.meta["config"]["front_end"] == "tap"  # the record says what was run
+
+
 def test_front_end_is_validated():
     from tangraph.errors import TangraphError
 
