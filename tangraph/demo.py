@@ -1,11 +1,10 @@
 """``tangraph demo``: the whole idea on one real map, in a few minutes.
 
 Simulate a multibeam survey whose dead reckoning drifts, navigate it with the online iSAM2
-graph (on the point-mass front end), the batch smoother, three particle filters (PF, IPF,
-SJCPF) and the point-mass filter, and write a report with figures: the tracks over the
-hill-shaded map, the position error against time with the graph's 2-sigma bound, one terrain
-fix close up with its Xie, Wang and calibrated regions, and a table of RMSE, final error, NEES,
-time per step and fixes used.
+graph, the batch smoother, three particle filters (PF, IPF, SJCPF) and the point-mass filter,
+and write a report with figures: the tracks over the hill-shaded map, the position error against
+time with the graph's 2-sigma bound, one terrain fix close up with its Xie, Wang and calibrated
+regions, and a table of RMSE, final error, NEES, time per step and fixes used.
 
 The report folder is built beside the destination and renamed into place only when complete,
 so an interrupted demo (Ctrl-C or SIGTERM) leaves no half-written report, and an existing folder
@@ -202,9 +201,8 @@ def _report(folder: Path, survey, bathymetry, rows, settings: dict, seconds: flo
 
 A simulated survey ({survey.meta.get("scenario")}: {survey.n_pings} pings of {survey.n_beams} beams
 over {survey.time[-1] - survey.time[0]:.0f} s) with drifting dead reckoning, navigated by the
-online factor graph (iSAM2; each window's terrain information a point-mass posterior on its own
-prediction, with that prediction removed), the batch smoother (TAP fixes as priors), three
-particle filters and the point-mass filter on the same soundings.
+online factor graph (iSAM2 with terrain-aided position fixes as priors), the batch smoother and
+three particle filters and the point-mass filter on the same soundings.
 {world}
 - Dead reckoning drifts up to {dr["max_error"]:.1f} m from the truth (final {dr["final_error"]:.1f} m,
   RMSE {dr["rmse"]:.1f} m).
@@ -329,10 +327,6 @@ def run_demo(
             for name, child in zip(methods, [None, None, *seeds[1:]], strict=True):
                 bar.set_postfix_str(name)
                 config = None
-                if name == "isam2":  # online: the point-mass front end (the smoother keeps TAP)
-                    from tangraph.graph import GraphConfig
-
-                    config = GraphConfig(front_end="pmf")
                 if name in PARTICLE_FILTERS:
                     from tangraph.filters import default_config
 

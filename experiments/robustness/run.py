@@ -30,6 +30,7 @@ the map; a particle filter entirely off the map no worse than the dead reckoning
 from __future__ import annotations
 
 import json
+import shlex
 import time
 from pathlib import Path
 
@@ -238,10 +239,10 @@ def main(argv=None) -> int:
     table = table[~failed]
     rows = summarise(table)
     tag = (f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "")
-           + "".join(f"_{item}" for item in args.graph))
+           + "".join(f"_{item}".replace('"', "").replace("'", "") for item in args.graph))  # no quotes
     command = (f"tangraph experiment robustness --runs {runs} --seed {args.seed}"
                + (" --quick" if args.quick else f" --cases {' '.join(cases)} --methods {' '.join(methods)}")
-               + ("" if not args.graph else f" --graph {' '.join(args.graph)}"))
+               + ("" if not args.graph else f" --graph {' '.join(shlex.quote(item) for item in args.graph)}"))
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table, args.out / f"rmse_{tag}.png")
     text = markdown(rows)
