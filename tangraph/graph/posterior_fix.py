@@ -42,7 +42,9 @@ and hands the graph exactly what they add to that belief:
 
 The window is refused, never given as one Gaussian, when the posterior on the prior-wide grid
 has a second part (``multimodal``: a connected region above ``exp(-MODE_LEVEL)`` of the peak
-holding at least ``MODE_MASS`` of the mass away from the main one), when ``L`` has an axis
+holding at least ``MODE_MASS`` of the mass away from the main one), or the soundings alone (the
+likelihood over the same grid) do (a second place they fit as well within the prediction's
+reach: a window that follows a wrong prediction would choose the mode near it), when ``L`` has an axis
 along which the posterior is wider than the prior by more than ``MAX_LOSS`` of its information
 (the likelihood is not a Gaussian's there: the terrain's curvature spreads the posterior) or
 adds less than ``MIN_GAIN`` of the prior's information along its best axis (``uninformative``),
@@ -154,8 +156,9 @@ def _floored(cov: np.ndarray, axes: np.ndarray) -> np.ndarray:
 
 
 def _parts(log_density: np.ndarray, mass: np.ndarray) -> tuple[int, float]:
-    """Connected parts of the posterior above ``exp(-MODE_LEVEL)`` of its peak, and the share of
-    the mass in the parts other than the heaviest."""
+    """Connected parts of a density on the grid (posterior or likelihood) above
+    ``exp(-MODE_LEVEL)`` of its peak, and the share of the mass in the parts other than the
+    heaviest (each point counted with the part nearest to it)."""
     image = log_density.reshape(GRID_POINTS, GRID_POINTS)
     labels, n = ndimage.label(image > np.max(image) - MODE_LEVEL)
     if n < 2:
