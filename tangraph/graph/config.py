@@ -49,8 +49,9 @@ class GraphConfig:
         position and the tide (``Track.meta["tide"]``). It is the online graph's only: the batch
         smoother always weighs TAP fixes (it re-matches its windows around the smoothed track
         with TAP, and on the front end's short windows it was 1.5-2.2 x less accurate in the
-        graph_vs_filters study). It is for clean data: blocks of depth-biased pings and a wrong
-        start make it fail where TAP holds (the robustness study).
+        graph_vs_filters study). It is for clean simulated data: blocks of depth-biased pings
+        and a wrong start make it fail where TAP holds (the robustness study), and on a recorded
+        lake survey it converged on the map's noise (the caputh_replay study).
     front_end_pings : int
         Pings per window of the point-mass front end (default 3: on three seeds each of
         ``demo``, ``wang2019`` and ``han2020`` windows of 2 and 3 pings gave the lowest online

@@ -406,23 +406,18 @@ class GraphNavigator(Relocalisation):
         pose[2] = self.survey.dr_pose[k, 2] + _wrap(pose[2] - self.survey.dr_pose[k, 2])
         if self.graph.calibrated:
             self.calibration = np.asarray(self.isam.calculateEstimateVector(CALIBRATION), float)
-            keys = gtsam.KeyVector([k, CALIBRATION])
-            marginal = self.isam.jointMarginalCovariance(keys)
-            joint = np.zeros((5, 5))
-            joint[:3, :3] = marginal.at(k, k)
-            joint[:3, 3:] = marginal.at(k, CALIBRATION)
-            joint[3:, :3] = joint[:3, 3:].T
-            joint[3:, 3:] = marginal.at(CALIBRATION, CALIBRATION)
+            # the key pose with the calibration (and the tide when held), one joint marginal
+            keys = (k, CALIBRATION, TIDE) if self.tide else (k, CALIBRATION)
+            marginal = self.isam.jointMarginalCovariance(gtsam.KeyVector(list(keys)))
+            full = np.block([[marginal.at(a, b) for b in keys] for a in keys])
+            joint = full[:5, :5]
+            if self.tide:
+                self._tide_mean = float(self.isam.calculateEstimateVector(TIDE)[0])
+                self._tide_joint = joint_in_frame(pose[2], full)
         else:
             joint = np.zeros((5, 5))
             joint[:3, :3] = self.isam.marginalCovariance(k)
         self._key_pose, self._key_joint = pose, joint_in_frame(pose[2], joint)
-        if self.tide:
-            self._tide_mean = float(self.isam.calculateEstimateVector(TIDE)[0])
-            marginal = self.isam.jointMarginalCovariance(gtsam.KeyVector([k, CALIBRATION, TIDE]))
-            keys = (k, CALIBRATION, TIDE)
-            full = np.block([[marginal.at(a, b) for b in keys] for a in keys])
-            self._tide_joint = joint_in_frame(pose[2], full)
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 

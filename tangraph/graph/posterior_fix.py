@@ -58,7 +58,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-from scipy import ndimage, stats
+from scipy import ndimage, special, stats
 
 from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.matching import FixQuality, MatchingError, Patch
@@ -304,14 +304,12 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
     joint_mean, joint_cov = np.full(3, np.nan), np.full((3, 3), np.nan)
     if not reasons:
         if joint:  # the tide's posterior joins the grid's moments
-            weights = np.exp(log_post - np.max(log_post))
-            weights /= weights.sum()
-            tide_mean = float(weights @ update.tide)
+            tide_mean = float(mass @ update.tide)
             spread = update.tide - tide_mean
             post3 = np.zeros((3, 3))
             post3[:2, :2] = cov
-            post3[:2, 2] = post3[2, :2] = (weights * spread) @ (points - mean)
-            post3[2, 2] = update.tide_var + weights @ spread**2
+            post3[:2, 2] = post3[2, :2] = (mass * spread) @ (points - mean)
+            post3[2, 2] = update.tide_var + mass @ spread**2
             factor = _remove_prior(np.append(mean, tide_mean), post3, m3, p3, reasons)
             if factor is not None:
                 joint_mean, joint_cov = factor
@@ -325,11 +323,11 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
     residual = likelihood.residuals(mean[None, :], patch.offsets, patch.depths, np.array([tide_best]))[:, 0]
     ok = np.isfinite(residual)
     sigma = float(np.sqrt(np.mean(residual[ok] ** 2))) if ok.any() else float("nan")
-    quality = FixQuality(peak_ratio=float("inf") if n_parts < 2 else other, n_basins=max(n_parts, 1),
+    quality = FixQuality(peak_ratio=float("inf") if n_parts < 2 else other, n_basins=max(n_parts, n_fits, 1),
                          area_fraction=float(np.sqrt(np.linalg.det(cov) / np.linalg.det(p))),
                          touches_edge=edge > EDGE_MASS, reasons=tuple(reasons),
                          best_on_edge=edge > EDGE_MASS)
-    log_density = log_post - np.max(log_post) - np.log(np.exp(log_post - np.max(log_post)).sum())
+    log_density = log_post - special.logsumexp(log_post)
     return WindowFix(int(patch.reference), int(patch.first), position, covariance, tide_best, sigma,
                      patch.n_soundings, quality, mean, cov, m3, p3, points, log_density, grids,
                      joint_mean, joint_cov)
