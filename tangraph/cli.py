@@ -50,6 +50,8 @@ PARTICLES = _bounded(int, 1, 10_000_000, "the particle count")
 DPI = _bounded(int, 20, 1200, "the resolution (dpi)")
 CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
 FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
+WINDOW = _bounded(float, 0.01, 1e6, "the window length (m)")
+SOUNDING_STD = _bounded(float, 0.0, 1000.0, "the sounding std (m)")
 
 
 _READ = ("variable", "sign", "crs", "units", "nodata", "cell", "uncertainty")
@@ -187,12 +189,27 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
                     f"maps grid: {option} applies to x y z text; survey files hold depths (positive "
                     "down) in their own CRS"
                 )
+        loaded = [read_survey(path) for path in surveys]
         grid = grid_surveys(
-            [read_survey(path) for path in surveys], cell=args.cell, statistic=args.statistic,
+            loaded, cell=args.cell, statistic=args.statistic,
             fill=args.fill, use_dr=args.use_dr, names=[str(path) for path in surveys],
             name=args.output.stem,
         )
+        if args.check_lines:
+            from tangraph.eval.map_check import calibrate_error, check_map_error
+            from tangraph.sensors import NavigationModel
+
+            if args.use_dr:
+                raise TangraphError("maps grid: --check-lines compares soundings at reference tracks; "
+                                    "not with --use-dr")
+            check = check_map_error(loaded, cell=args.cell, statistic=args.statistic, fill=args.fill,
+                                    window=args.window, model=NavigationModel(sounding_std=args.sounding_std),
+                                    names=[str(path) for path in surveys])
+            grid = calibrate_error(grid, check)
+            print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
     else:
+        if args.check_lines:
+            raise TangraphError("maps grid: --check-lines needs two or more survey files (.nc)")
         if args.sign is None:
             raise TangraphError("maps grid: x y z text input needs --sign (depth or elevation)")
         if args.use_dr:
@@ -214,6 +231,23 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
            if error else "map error: not told by these soundings (no depth_std written); ")
         + f"wrote {args.output}"
     )
+
+
+def cmd_maps_check(args: argparse.Namespace) -> None:
+    from tangraph.eval.map_check import check_map_error
+    from tangraph.sensors import NavigationModel
+    from tangraph.survey import read_survey
+
+    surveys = [read_survey(path) for path in args.inputs]
+    check = check_map_error(
+        surveys, cell=args.cell, statistic=args.statistic, fill=args.fill, window=args.window,
+        model=NavigationModel(sounding_std=args.sounding_std), names=[str(path) for path in args.inputs],
+        progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True),
+    )
+    print("survey,windows,rms,robust,share_beyond_3")
+    for row in check.per_survey():
+        print(f"{row['survey']},{row['windows']},{row['rms']:.3f},{row['robust']:.3f},{row['share_beyond_3']:.3f}")
+    print(f"all: {check.summary()}")
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
@@ -530,7 +564,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--debug", action="store_true", help="show the traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
 
-    maps = sub.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid")
+    maps = sub.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid, check")
     maps_sub = maps.add_subparsers(dest="maps_command", required=True)
     p = maps_sub.add_parser("list", help="list the map catalogue")
     p.set_defaults(func=cmd_maps_list)
@@ -582,6 +616,15 @@ def build_parser() -> argparse.ArgumentParser:
         help="place survey soundings at the dead reckoning (for surveys without a reference track)",
     )
     p.add_argument(
+        "--check-lines", action="store_true",
+        help="survey files only: hold out each survey, grid the others, and scale depth_std by the RMS "
+        "of the held-out windows' standardised mean residuals when above 1 (see 'maps check')",
+    )
+    p.add_argument("--window", type=WINDOW, default=50.0,
+                   help="--check-lines: window of track (m; default 50)")
+    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
+                   help="--check-lines: the soundings' own noise std (m; default 0.1)")
+    p.add_argument(
         "--sign",
         choices=["depth", "elevation"],
         help="x y z text only (required there): what z is, depth (positive down) or elevation",
@@ -595,6 +638,25 @@ def build_parser() -> argparse.ArgumentParser:
     _output(p, "NetCDF file: depth (the statistic) with its depth_std, mean, median, count and std "
             "per cell")
     p.set_defaults(func=cmd_maps_grid)
+    p = maps_sub.add_parser(
+        "check",
+        help="check lines: is the error a map gridded from these surveys states right?",
+        description="Hold out each survey (.nc, at its reference track) in turn, grid the others as "
+        "'maps grid' would (--cell, --statistic, --fill) and compare the held-out soundings with that "
+        "map in windows of track: each window's mean residual over the std the map's error and the "
+        "sounding noise give it. Prints, per survey and for all, the RMS of these scores (1 when the "
+        "map errs as it says), a robust scale (the bulk of the windows) and the share beyond 3.",
+    )
+    p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY", help="two or more survey files (.nc)")
+    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
+    p.add_argument("--statistic", choices=["mean", "median"], default="median",
+                   help="the statistic that becomes the map's depth (default: median)")
+    p.add_argument("--fill", type=FILL, default=0, metavar="CELLS",
+                   help="fill empty cells from cells with data within CELLS cells (default: 0)")
+    p.add_argument("--window", type=WINDOW, default=50.0, help="window of track (m; default 50)")
+    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
+                   help="the soundings' own noise std (m; default 0.1)")
+    p.set_defaults(func=cmd_maps_check)
 
     p = sub.add_parser("simulate", help="simulate a survey from a scenario")
     p.add_argument(

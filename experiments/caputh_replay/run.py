@@ -1,7 +1,7 @@
 """Lake Caputh replay: real RiverSurveyor runs re-navigated against a map of other days.
 
 The prior map is gridded from the January runs at their GPS positions; each March run is
-re-navigated with every estimator (the batch smoother, online iSAM2, PF, IPF, SJCPF) from its own
+re-navigated with every estimator (the batch smoother, online iSAM2, PF, IPF, SJCPF, PMF) from its own
 dead reckoning and its five soundings per second, and scored against its GPS track. The dead
 reckoning comes in four cases: the file's boat velocity (``boat``), the boat speed along the
 compass heading (``compass``), and each with a constant +3 deg heading and +3 % speed error added
@@ -28,8 +28,9 @@ from tangraph.experiments.study import per_process
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parents[1].parent / "shared" / "data" / "caputh"
-METHODS = ("smoother", "isam2", "pf", "ipf", "sjcpf")
+METHODS = ("smoother", "isam2", "pf", "ipf", "sjcpf", "pmf")
 GRAPH = ("smoother", "isam2")
+DETERMINISTIC = (*GRAPH, "pmf")  # one run each: no seed changes them
 CASES = ("boat", "boat+spoiled", "compass", "compass+spoiled")
 MONTH_RUNS = "2025-03"  # the runs re-navigated
 LONG_RUN = 30 * 60.0  # s: the goals are stated for runs of at least this long
@@ -61,13 +62,25 @@ def _import(cfg: dict, data: Path, path: Path, dr_heading: str = "boat"):
 
 
 def build_map(cfg: dict, data: Path):
-    """The prior map: the runs of ``cfg["map"]["months"]`` gridded at their GPS positions."""
+    """The prior map: the runs of ``cfg["map"]["months"]`` gridded at their GPS positions; with
+    ``check_lines`` its error scaled by what the runs, each held out from a map of the others,
+    show (:func:`tangraph.eval.map_check.calibrate_error`)."""
     from tangraph.maps.gridding import grid_surveys
 
     m = cfg["map"]
-    surveys = [_import(cfg, data, p) for month in m["months"] for p in run_files(data, month)]
-    return grid_surveys(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
+    files = [p for month in m["months"] for p in run_files(data, month)]
+    surveys = [_import(cfg, data, p) for p in files]
+    grid = grid_surveys(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
                         name="caputh-" + "-".join(m["months"]))
+    if not m.get("check_lines", False):
+        return grid
+    from tangraph.eval.map_check import calibrate_error, check_map_error
+    from tangraph.sensors import NavigationModel
+
+    check = check_map_error(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
+                            model=NavigationModel(sounding_std=cfg["navigation"]["boat"]["sounding_std"]),
+                            names=[p.stem for p in files])
+    return calibrate_error(grid, check)
 
 
 def spoil(survey, heading_deg: float, speed_scale: float):
@@ -161,6 +174,33 @@ def terrain(survey, bathymetry, window: int) -> dict:
             "fraction_off_map": float(np.mean(~on))}
 
 
+def check_lines(cfg: dict, data: Path, bathymetry, march: dict, window: float = 50.0) -> dict:
+    """Is the map's stated error right? Each January run against a map of the other January runs
+    (gridded with the study's settings), and each March run against the study's map: the RMS,
+    robust scale and share beyond 3 of the windows' standardised mean residuals
+    (:mod:`tangraph.eval.map_check`)."""
+    from tangraph.eval.map_check import MapCheck, check_map_error, window_scores
+    from tangraph.sensors import NavigationModel
+
+    m = cfg["map"]
+    model = NavigationModel(sounding_std=cfg["navigation"]["boat"]["sounding_std"])
+    prior = [p for month in m["months"] for p in run_files(data, month)]
+    held_out = check_map_error([_import(cfg, data, p) for p in prior], cell=m["cell"],
+                               statistic=m["statistic"], fill=m["fill"], model=model, window=window,
+                               names=[p.stem for p in prior])
+    scores = {name: window_scores(in_map(s, bathymetry), bathymetry, model, window=window)
+              for name, s in march.items()}
+    later = MapCheck(np.concatenate(list(scores.values())),
+                     np.concatenate([np.full(v.size, i) for i, v in enumerate(scores.values())]),
+                     tuple(scores), window)
+
+    def figures(check):
+        return {"windows": check.windows, "rms": check.rms, "robust": check.robust,
+                "share_beyond_3": check.share_beyond_3, "per_survey": check.per_survey()}
+
+    return {"window_m": window, "prior_runs_held_out": figures(held_out), "march_against_map": figures(later)}
+
+
 def in_map(survey, bathymetry):
     from tangraph.navigation import in_map_frame
 
@@ -203,7 +243,10 @@ def estimator(cfg: dict, case: str, method: str):
     model = NavigationModel.from_mapping(cfg["navigation"][source], f"config.toml [navigation.{source}]")
     if method in GRAPH:
         return model, GraphConfig.from_mapping(cfg["graph"], "config.toml [graph]")
-    return model, dataclasses.replace(default_config(method), n_particles=cfg["filters"]["n_particles"])
+    config = default_config(method)
+    if hasattr(config, "n_particles"):  # the point-mass filter has no particles
+        config = dataclasses.replace(config, n_particles=cfg["filters"]["n_particles"])
+    return model, config
 
 
 def scores(track, survey, gps_std: float) -> dict:
@@ -375,13 +418,14 @@ def main(argv=None) -> int:
         "slant_beams": beam_check(cfg, args.data),
         "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["n_pings"])
                     for name, s in march.items()},
+        "check_lines": check_lines(cfg, args.data, bathymetry, march),
     }
     seeds = 1 if args.quick else int(args.runs or cfg["filters"]["seeds"])
     configs = [
         {"cfg": cfg, "data": str(args.data), "map": str(map_path), "file": str(r), "survey": r.stem,
          "case": case, "method": method, "replica": replica}
         for r in runs for case in args.cases for method in args.methods
-        for replica in range(1 if method in GRAPH else seeds)
+        for replica in range(1 if method in DETERMINISTIC else seeds)
     ]
     table = run_many(one_run, configs, 1, args.seed, scheduler=args.scheduler, workers=args.workers)
     failed = table["error"].notna()

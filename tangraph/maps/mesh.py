@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from pathlib import Path
 from typing import Any, Literal
 
@@ -472,7 +473,9 @@ class SoundingGrid:
     elsewhere; None: no gap fill, see :func:`tangraph.maps.gridding.fill_gaps`), and ``meta``
     JSON-ready provenance (sources, vertical datum), written with the grid. :attr:`error` is
     the map's error told from the soundings (:func:`tangraph.maps.gridding.gridded_error`),
-    which :attr:`depth` carries as its ``depth_std`` and ``correlation_length``.
+    which :attr:`depth` carries as its ``depth_std`` (times ``error_scale``: 1, or the factor
+    check lines found, :func:`tangraph.eval.map_check.calibrate_error`) and
+    ``correlation_length``.
     """
 
     mean: BathymetryMap
@@ -483,8 +486,11 @@ class SoundingGrid:
     statistic: Literal["mean", "median"] = "mean"
     gap_fill: np.ndarray | None = None
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
+    error_scale: float = 1.0
 
     def __post_init__(self) -> None:
+        if not (math.isfinite(self.error_scale) and self.error_scale > 0):
+            raise TangraphError(f"error_scale must be a finite number > 0, got {self.error_scale!r}")
         count = np.array(self.count, dtype=np.int64)
         std = np.array(self.std, dtype=np.float64)
         if count.shape != self.mean.shape or std.shape != self.mean.shape:
@@ -526,11 +532,12 @@ class SoundingGrid:
     @property
     def depth(self) -> BathymetryMap:
         """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
-        with the error layer of :attr:`error` (``depth_std``, ``correlation_length``)."""
+        with the error layer of :attr:`error` (``depth_std`` times ``error_scale``,
+        ``correlation_length``)."""
         layer = self.mean.depth if self.statistic == "mean" else self.median
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
-        return self.mean.replace(depth=layer, depth_std=self.error.depth_std,
+        return self.mean.replace(depth=layer, depth_std=self.error.depth_std * self.error_scale,
                                  correlation_length=self.error.correlation_length)
 
 

@@ -59,6 +59,12 @@ def test_import_grid_smooth_on_real_runs(caputh, tmp_path, capsys):
     assert main(["survey", "import", *OPTIONS, *level, str(caputh / "20250327143017.sum"),
                  "-o", str(march)]) == 0
     capsys.readouterr()
+    # check lines: each January run against a map of the other (and March's against both)
+    assert main(["maps", "check", *map(str, january), str(march), "--cell", "5", "--fill", "3"]) == 0
+    rows = capsys.readouterr().out.splitlines()
+    assert rows[0] == "survey,windows,rms,robust,share_beyond_3"
+    assert [r.split(",")[0] for r in rows[1:4]] == [*map(str, january), str(march)]
+    assert sum(int(r.split(",")[1]) for r in rows[1:4]) > 0 and rows[4].startswith("all: ")
     model, graph = tmp_path / "boat.toml", tmp_path / "graph.toml"
     model.write_text(MODEL)
     graph.write_text(GRAPH)

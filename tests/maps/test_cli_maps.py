@@ -112,3 +112,40 @@ def test_info_of_a_bag(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "depth        20.00 .. 26.00 m" in out and "depth std median 0.300 m" in out
     assert "correlation length 15 m" in out
+
+
+def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys):
+    from tangraph.survey import Survey, write_survey
+
+    rng = np.random.default_rng(5)
+    paths = []
+    for day in range(3):  # three days of lines over one plane; the third finds it 0.8 m deeper
+        east = np.arange(0.0, 400.0, 1.0)
+        pose = np.concatenate([np.column_stack([np.full(east.size, n + day), east, np.zeros(east.size)])
+                               for n in np.arange(0.0, 100.0, 5.0)])
+        k = pose.shape[0]
+        depth = 30.0 + 0.01 * pose[:, 1:2] + 0.05 * rng.standard_normal((k, 3)) + (0.8 if day == 2 else 0.0) \
+            * (pose[:, 1:2] > 200)
+        survey = Survey(time=np.arange(float(k)), dr_pose=pose, vehicle_depth=np.zeros(k),
+                        beam_forward=np.zeros((k, 3)), beam_starboard=np.tile([-2.0, 0, 2], (k, 1)),
+                        beam_depth=depth, true_pose=pose)
+        paths.append(str(write_survey(survey, tmp_path / f"day{day}.nc")))
+    plain, checked = tmp_path / "plain.nc", tmp_path / "checked.nc"
+    assert main(["maps", "grid", *paths, "--cell", "5", "-o", str(plain)]) == 0
+    assert main(["maps", "grid", *paths, "--cell", "5", "--check-lines", "--sounding-std", "0.05",
+                 "-o", str(checked)]) == 0
+    out = capsys.readouterr().out
+    assert "check lines: " in out and "depth_std scaled by" in out
+    scale = float(out.split("depth_std scaled by ")[1].split()[0])
+    assert scale > 2.0
+    ratio = read_map(checked).depth_std / read_map(plain).depth_std
+    np.testing.assert_allclose(ratio, np.nanmean(ratio), rtol=1e-9)
+    assert np.nanmean(ratio) == pytest.approx(scale, abs=0.006)
+    # the same figures from `maps check`
+    assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
+    assert f"RMS {scale:.2f}" in capsys.readouterr().out
+    xyz = tmp_path / "s.xyz"
+    np.savetxt(xyz, np.column_stack([rng.uniform(0, 50, 100), rng.uniform(0, 50, 100), np.full(100, 30.0)]))
+    assert main(["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5", "--check-lines",
+                 "-o", str(tmp_path / "x.nc")]) == 2
+    assert "--check-lines needs two or more survey files" in capsys.readouterr().err

@@ -1,0 +1,203 @@
+"""Does a gridded map's stated error hold? Check lines: each survey against a map of the others.
+
+Hydrographers validate a survey's uncertainty with *check lines*: soundings that did not make the
+surface are compared with it (IHO S-44). :func:`check_map_error` does this for a map gridded from
+several surveys (days, lines): each survey in turn is held out, the others are gridded with the
+same settings (:func:`tangraph.maps.gridding.grid_surveys`, which gives the map its error), and the
+held-out soundings, placed at their reference track, are compared with that map in windows of
+track.
+
+What is compared is what the estimators lean on. A window's mean residual ``mean(z - h)`` has,
+under the terrain measurement model (:mod:`tangraph.sensors.terrain`), the variance
+
+    ``(n sounding_std^2 + sum_fields sum_ij a_i a_j rho(|p_i - p_j|)) / n^2``
+
+(exact for the mean: the row sums of the window's dense covariance, added up), so its
+standardised value ``t`` is N(0, 1) where the map errs as it says. Each survey's median
+residual is removed first (its datum or tide offset, which the estimators estimate). The check
+reports the RMS of ``t`` (1 when the stated error holds; a Gaussian fitted to the map's real
+window errors has its std that many times the stated one), a robust scale of ``t`` (the median
+``|t|`` over its normal value: the bulk of the windows) and the share of windows with
+``|t| > 3`` (0.27 % for a Gaussian). An RMS far above the robust scale says the map's error is
+heavy-tailed: most of the map is as good as it says, a few patches are far worse. The held-out
+survey's own position error adds to ``t`` (the slope times the GPS error), so the check errs on
+the side of finding the map worse than it is.
+
+:func:`calibrate_error` gives a gridded map the error its check lines found: its ``depth_std``
+times the RMS (when above 1), the Gaussian of the variance its windows really show (the
+moment-matched one), which the estimators' Gaussian terrain model can use; a map is never made
+better than its gridding says.
+
+Nothing here touches files.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.navigation_model import NavigationModel
+from tangraph.sensors.terrain import MapError, map_error, shared_among
+from tangraph.survey import Survey
+
+__all__ = ["MapCheck", "calibrate_error", "check_map_error", "window_scores"]
+
+MIN_SOUNDINGS = 10  # a window with fewer soundings on the map is not scored
+MIN_WINDOWS = 10  # a calibration rests on at least this many windows
+
+
+@dataclasses.dataclass(frozen=True)
+class MapCheck:
+    """The check-line statistics of a gridded map (:func:`check_map_error`): the standardised
+    window mean residuals ``scores`` of every held-out survey (``survey (W,)`` says whose, by its
+    index), and the window length (m)."""
+
+    scores: np.ndarray
+    survey: np.ndarray
+    names: tuple[str, ...]
+    window: float
+
+    @property
+    def windows(self) -> int:
+        """How many windows were scored."""
+        return int(self.scores.size)
+
+    @property
+    def rms(self) -> float:
+        """The RMS of the scores: 1 when the map errs as it says; the factor by which the
+        stated std would have to grow for a Gaussian of the same variance (NaN: no window)."""
+        return float(np.sqrt(np.mean(self.scores**2))) if self.scores.size else float("nan")
+
+    @property
+    def robust(self) -> float:
+        """The median ``|score|`` over its Gaussian value (0.6745): the scale of the bulk."""
+        return float(np.median(np.abs(self.scores)) / 0.6745) if self.scores.size else float("nan")
+
+    @property
+    def share_beyond_3(self) -> float:
+        """The share of windows with ``|score| > 3`` (0.0027 for a Gaussian)."""
+        return float(np.mean(np.abs(self.scores) > 3.0)) if self.scores.size else float("nan")
+
+    def per_survey(self) -> list[dict]:
+        """One row per held-out survey: name, windows, RMS, robust scale, share beyond 3."""
+        rows = []
+        for i, name in enumerate(self.names):
+            part = dataclasses.replace(self, scores=self.scores[self.survey == i],
+                                       survey=self.survey[self.survey == i])
+            rows.append({"survey": name, "windows": part.windows, "rms": part.rms,
+                         "robust": part.robust, "share_beyond_3": part.share_beyond_3})
+        return rows
+
+    def summary(self) -> str:
+        """One line: windows, RMS, robust scale, share beyond 3 sigma."""
+        return (f"{self.windows} windows of {self.window:g} m: RMS {self.rms:.2f}, robust "
+                f"{self.robust:.2f}, {100 * self.share_beyond_3:.1f} % beyond 3 (1, 1 and 0.3 % when the "
+                "map's error is as stated)")
+
+
+def window_scores(
+    survey: Survey, bathymetry: BathymetryMap, model: NavigationModel, *, window: float,
+    error: MapError | None = None,
+) -> np.ndarray:
+    """The standardised mean residuals of ``survey``'s soundings (at its reference track, less
+    their median) against ``bathymetry`` in consecutive windows of ``window`` m of track (module
+    docstring); windows with fewer than ``MIN_SOUNDINGS`` soundings on the map are left out."""
+    if survey.true_pose is None:
+        name = survey.meta.get("name", "")
+        raise TangraphError(f"survey {name!r}: no reference track (true_pose) to check the map with")
+    error = map_error(bathymetry, model) if error is None else error
+    north, east = survey.footprints(survey.true_pose)
+    residual = survey.beam_depth - bathymetry.depth_at(north, east)
+    ok = np.isfinite(residual)
+    if not ok.any():
+        return np.empty(0)
+    residual = residual - np.median(residual[ok])
+    step = np.hypot(*np.diff(survey.true_pose[:, :2], axis=0).T)
+    block = np.floor(np.concatenate([[0.0], np.cumsum(step)]) / window).astype(np.int64)
+    scores = []
+    for b in np.unique(block):
+        rows = block == b
+        use = ok & rows[:, None]
+        n = int(use.sum())
+        if n < MIN_SOUNDINGS:
+            continue
+        pn, pe = north[use], east[use]
+        variance = n * float(model.sounding_std) ** 2
+        for part in error.components():
+            a = part.std_at(pn, pe)
+            a = np.where(np.isfinite(a), a, part.typical_std)
+            variance += float(np.sum(a * a))
+        variance += float(np.sum(shared_among(pn, pe, error)))
+        scores.append(np.mean(residual[use]) / np.sqrt(variance / n**2))
+    return np.asarray(scores)
+
+
+def check_map_error(
+    surveys: Sequence[Survey], *, cell: float, statistic: str = "median", fill: int = 0,
+    model: NavigationModel | None = None, window: float = 50.0, names: Sequence[str] | None = None,
+    progress=None,
+) -> MapCheck:
+    """Hold out each survey in turn, grid the others (``cell``, ``statistic``, ``fill`` as
+    :func:`~tangraph.maps.gridding.grid_surveys`) and score the held-out soundings against that
+    map in windows of ``window`` m (:func:`window_scores`; the module docstring says what the
+    figures mean). ``model`` gives the sounding std (default: a :class:`NavigationModel`'s);
+    the map's error is the gridded map's own. ``progress(i, n)`` is called after each survey.
+
+    Raises
+    ------
+    TangraphError
+        Fewer than two surveys, a survey without a reference track, ``window <= 0``.
+    """
+    from tangraph.maps.gridding import grid_surveys
+    from tangraph.navigation import in_map_frame
+
+    surveys = list(surveys)
+    if len(surveys) < 2:
+        raise TangraphError("check_map_error: needs at least two surveys (one held out, the others "
+                            f"gridded), got {len(surveys)}")
+    if not (np.isfinite(window) and window > 0):
+        raise TangraphError(f"check_map_error: window must be > 0 m, got {window!r}")
+    names = tuple(names) if names is not None else tuple(
+        str(s.meta.get("name") or f"survey {i}") for i, s in enumerate(surveys))
+    if len(names) != len(surveys):
+        raise TangraphError(f"check_map_error: {len(names)} names for {len(surveys)} surveys")
+    model = NavigationModel() if model is None else model
+    scores, owner = [], []
+    for i, held in enumerate(surveys):
+        if held.true_pose is None:
+            raise TangraphError(f"check_map_error: survey {names[i]!r} has no reference track (true_pose)")
+        others = [s for j, s in enumerate(surveys) if j != i]
+        bathymetry = grid_surveys(others, cell=cell, statistic=statistic, fill=fill,
+                                  name=f"without {names[i]}").depth
+        s = window_scores(in_map_frame(held, bathymetry), bathymetry, model, window=window)
+        scores.append(s)
+        owner.append(np.full(s.size, i))
+        if progress is not None:
+            progress(i + 1, len(surveys))
+    return MapCheck(np.concatenate(scores), np.concatenate(owner), names, float(window))
+
+
+def calibrate_error(grid, check: MapCheck):
+    """The :class:`~tangraph.maps.SoundingGrid` ``grid`` with its error scaled by what its check
+    lines found: ``error_scale = max(1, check.rms)`` (the module docstring), the check's figures
+    kept in its ``meta["check_lines"]``.
+
+    Raises
+    ------
+    TangraphError
+        A check of fewer than ``MIN_WINDOWS`` windows (the held-out surveys hardly overlap the
+        others' maps).
+    """
+    if check.windows < MIN_WINDOWS:
+        raise TangraphError(
+            f"calibrate_error: the check lines scored {check.windows} windows of {check.window:g} m, fewer "
+            f"than {MIN_WINDOWS}: too few to calibrate the map's error with (surveys that overlap more, or "
+            "a shorter window)")
+    figures = {"windows": check.windows, "window_m": check.window, "rms": round(check.rms, 4),
+               "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4)}
+    return dataclasses.replace(grid, error_scale=max(1.0, check.rms),
+                               meta={**grid.meta, "check_lines": figures})
