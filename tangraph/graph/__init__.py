@@ -1,7 +1,8 @@
 """Factor-graph terrain-aided navigation: key poses, DR odometry and TAP fixes solved by GTSAM.
 
 The only package of tangraph that imports gtsam. Online: :class:`GraphNavigator` and
-:func:`navigate_online` (iSAM2); recorded surveys: :func:`smooth_survey` (batch smoother).
+:func:`navigate_online` (iSAM2), whose fix policy (:class:`FixPolicy`, :mod:`tangraph.graph.policy`)
+is pure; recorded surveys: :func:`smooth_survey` (batch smoother).
 """
 
 from tangraph.graph.config import GraphConfig, load_graph_config
@@ -16,14 +17,17 @@ from tangraph.graph.factors import (
 from tangraph.graph.fixes import FixRecord, FixStatus, LostEpisode, search_half_width
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices, window_ends
 from tangraph.graph.online import GraphNavigator, navigate_online
+from tangraph.graph.policy import FixPolicy, PolicyState
 from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
 
 __all__ = [
+    "FixPolicy",
     "FixRecord",
     "FixStatus",
     "GraphConfig",
     "GraphNavigator",
     "LostEpisode",
+    "PolicyState",
     "PoseGraph",
     "SmootherSolution",
     "between_noise",

@@ -131,7 +131,7 @@ class GraphConfig:
     rematch_tolerance : float
         Metres (see ``rematch_iterations``).
     lost_windows : int or None
-        Lost and relocalisation of the online navigator (:mod:`tangraph.graph.lost`). After this
+        Lost and relocalisation of the online navigator (:mod:`tangraph.graph.policy`). After this
         many TAP windows since the last *trusted* fix (one a later fix from a disjoint window
         agreed with) whose precise fix says the prediction is wrong (its best match on the edge
         of the search, ``FixStatus.OUTSIDE_SEARCH``, or beyond the gate, ``GATE``), the navigator

@@ -39,9 +39,10 @@ def fix_name(fix: TapFix) -> str:
 
 
 class FixStatus(enum.StrEnum):
-    """What became of a TAP window: used by the graph, or why not."""
+    """What became of a TAP window: used by the graph, or why not (one meaning per value; what
+    the online navigator's fix policy does with a fix is :mod:`tangraph.graph.policy`)."""
 
-    ACCEPTED = "accepted"
+    ACCEPTED = "accepted"  #: used: its factor is in the graph
     GATE = "gate"  #: its NIS against the prediction is above the gate
     MULTIMODAL = "multimodal"  #: the calibrated region has several parts: two places fit
     UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
@@ -49,7 +50,11 @@ class FixStatus(enum.StrEnum):
     INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
     MISFIT = "misfit"  #: the soundings fit the map nowhere in the search: bad data, not a position
     OUTSIDE_SEARCH = "outside search"  #: the best match lies on the search's edge: the truth may lie beyond
-    UNCONFIRMED = "unconfirmed"  #: a relocalisation candidate that no following fix agreed with
+    HELD = "held"  #: within the gate but surprising: waiting for a later fix to agree (still so at the end)
+    UNCONFIRMED = "unconfirmed"  #: held, then dropped: no later fix agreed with it (``detail`` says why)
+    CANDIDATE = "candidate"  #: a lost navigator's relocalisation candidate that no relocalisation used
+    GIVEN_UP = "given up"  #: used, then removed: the navigator found the belief it was searched around wrong
+    LEFT_WINDOW = "left window"  #: to be used late, but its key pose had left iSAM2's window: not added
     OUTLIER = "outlier"  #: the batch smoother's robust solve found it inconsistent with the rest
 
     @property
@@ -99,7 +104,7 @@ class FixRecord:
         return {**dataclasses.asdict(self), "status": self.status.value}
 
 
-@dataclasses.dataclass
+@dataclasses.dataclass(frozen=True)
 class LostEpisode:
     """A time an online navigator was lost (``Track.meta["lost_episodes"]``): from ``start`` (the
     last fix it trusted, or the first ping) through ``declared`` (the window that made it lost)
@@ -109,14 +114,15 @@ class LostEpisode:
     start: int
     declared: int
     end: int | None = None
-    breaks: list[float] = dataclasses.field(default_factory=list)
+    breaks: tuple[float, ...] = ()
 
     def pings(self, n_pings: int) -> range:
         """The pings flagged lost."""
         return range(self.start, n_pings if self.end is None else self.end + 1)
 
     def as_dict(self) -> dict:
-        return dataclasses.asdict(self)
+        """JSON-ready form (``breaks`` a list)."""
+        return {**dataclasses.asdict(self), "breaks": list(self.breaks)}
 
 
 @dataclasses.dataclass(frozen=True)

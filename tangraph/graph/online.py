@@ -12,8 +12,10 @@ the calibration and marginalises the older poses, so the work per update stays b
 mission grows: without it each new fix moves the whole past and the update time grows with the
 chain. Between key poses the output
 is the latest key estimate composed with the DR increment, its covariance grown by the increment's.
-What the navigator does with a fix beyond the gate, and how it finds out that it is lost and
-relocalises, is :mod:`tangraph.graph.lost`.
+What the navigator does with a fix beyond the gate (use it, hold it for confirmation, drop it),
+and how it finds out that it is lost and relocalises, is decided by the pure fix policy
+(:mod:`tangraph.graph.policy`); :mod:`tangraph.graph.lost` puts each window to it and executes
+its actions on the graph and iSAM2.
 
 With ``GraphConfig.front_end = "pmf"`` a window's factor comes from the point-mass front end
 (:mod:`tangraph.graph.posterior_fix`) instead of TAP: its prior is the prediction jointly with
@@ -50,6 +52,7 @@ from tangraph.graph.fixes import (
     FixOutcome,
     FixRecord,
     FixStatus,
+    LostEpisode,
     failed,
     fix_name,
     judge_fix,
@@ -58,7 +61,8 @@ from tangraph.graph.fixes import (
     window_noise,
 )
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
-from tangraph.graph.lost import Relocalisation
+from tangraph.graph.lost import take_window
+from tangraph.graph.policy import FixPolicy, PolicyState
 from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix, window_patch
@@ -81,7 +85,7 @@ log = logging.getLogger(__name__)
 MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
 
 
-class GraphNavigator(Relocalisation):
+class GraphNavigator:
     """Online navigator: one :meth:`step` per ping, iSAM2 updated at key poses only.
 
     The key poses are in the DR frame and the graph holds the DR's calibration ``c = (k, b)``
@@ -169,11 +173,25 @@ class GraphNavigator(Relocalisation):
         self.pose = np.full((n, 3), np.nan)
         self.covariance = np.full((n, 3, 3), np.nan)
         self.fixes: list[FixRecord] = []
-        self._init_lost()
+        # what to do with each fix (use, hold, drop, lost, relocalise): decided by the policy
+        self.policy = FixPolicy.from_config(c, float(min(bathymetry.cell_size)))
+        self.state = PolicyState()
+        self._start_factor = None  # the start's position prior as in iSAM2 (widened when found wrong)
+        self._remove: list[int] = []  # iSAM2 factor indices to remove at the next update
         self._residuals: dict[int, float] = {}  # the last windows' residual stds (_misfit_noise)
         self.step_times: list[float] = []
         self.update_times: list[float] = []
         self.tap_times: list[float] = []
+
+    @property
+    def lost(self) -> bool:
+        """Whether the navigator is lost now (:mod:`tangraph.graph.policy`)."""
+        return self.state.lost
+
+    @property
+    def episodes(self) -> tuple[LostEpisode, ...]:
+        """The lost episodes so far."""
+        return self.state.episodes
 
     # -- one step ------------------------------------------------------------------------------
     def predicted_frame(self, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -238,7 +256,7 @@ class GraphNavigator(Relocalisation):
         joint[2, 2] = heading_std**2
         if self.graph.calibrated:
             joint[3:, 3:] = np.diag(m.calibration_std**2)
-        self._add_fix(0, dr, joint, fix)
+        take_window(self, 0, dr, joint, fix)
         self._update(0)
         self._rebase(0)
 
@@ -250,7 +268,7 @@ class GraphNavigator(Relocalisation):
         grows = self.config.front_end == "pmf" and self._is_end[k] and fix is None
         if grows:
             self.window_first[k] = self._window_start
-        extra = self._add_fix(k, pose, joint, fix)
+        extra = take_window(self, k, pose, joint, fix)
         if grows:
             self._grow_window(k)
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
@@ -566,7 +584,7 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
         counted once per ping where windows overlap, grown by what is uncertain of the
         calibrated patch), its :class:`~tangraph.graph.FixStatus` and ``detail``, ``nis`` and
         ``half_width``), ``n_fixes_accepted``, ``n_fixes_rejected``, ``n_lost``,
-        ``lost_steps`` and ``lost_episodes`` (:mod:`tangraph.graph.lost`), ``key_indices`` and
+        ``lost_steps`` and ``lost_episodes`` (:mod:`tangraph.graph.policy`), ``key_indices`` and
         ``calibration`` (:func:`calibration_summary` at the last ping).
     """
     return GraphNavigator(survey, bathymetry, config, model=model).run(progress).track()

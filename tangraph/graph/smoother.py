@@ -289,9 +289,11 @@ def _moved(before: list[FixRecord], after: list[FixRecord], tolerance: float) ->
 
 
 #: Outcomes whose fix the robust solve weighs: used online, refused by the online gate (which
-#: may have been wrong), held as a relocalisation candidate or given up online, or found an
-#: outlier by an earlier robust solve (records passed in again are weighed afresh).
-_CANDIDATES = (FixStatus.ACCEPTED, FixStatus.GATE, FixStatus.UNCONFIRMED, FixStatus.OUTLIER)
+#: may have been wrong), held for confirmation (still held, or never confirmed), a relocalisation
+#: candidate, given up, or left when its key pose left iSAM2's window online, or found an outlier
+#: by an earlier robust solve (records passed in again are weighed afresh).
+_CANDIDATES = (FixStatus.ACCEPTED, FixStatus.GATE, FixStatus.HELD, FixStatus.UNCONFIRMED, FixStatus.CANDIDATE,
+               FixStatus.GIVEN_UP, FixStatus.LEFT_WINDOW, FixStatus.OUTLIER)
 
 
 def _solve(graph: PoseGraph, records: list[FixRecord], config: GraphConfig, initial, calibration

@@ -74,7 +74,7 @@ def _navigator_at(survey, bathymetry, k):
 @pytest.mark.parametrize(("second", "confirmed"), [((0.0, 0.0), True), ((25.0, -20.0), False)])
 def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, second, confirmed):
     """A fix whose NIS is between the confirmation quantile and the gate is held; the next fix
-    confirms it (both used) or, disagreeing, drops it (UNCONFIRMED)."""
+    confirms it (both used), or, refused by the gate, leaves it held."""
     k1, k2 = 99, 109  # window ends (spacing 10)
     nav = _navigator_at(small_survey, rough_map, k1)
     _, cov = nav.predicted(k1)
@@ -82,12 +82,12 @@ def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, s
     nav.step(fix=_fix_at(small_survey, rough_map, k1, [2.9 * spread, 0.0]))
     held = nav.fixes[-1]
     assert 4.6 < held.nis < 13.8  # between the confirmation quantile and the gate
-    assert held.status is FixStatus.UNCONFIRMED and "held" in held.detail
+    assert held.status is FixStatus.HELD and "held" in held.detail
     while nav.index + 1 < k2:
         nav.step()
     nav.step(fix=_fix_at(small_survey, rough_map, k2, second))
     first = next(f for f in nav.fixes if f.index == k1)
-    assert (first.status is FixStatus.ACCEPTED) == confirmed
+    assert first.status is (FixStatus.ACCEPTED if confirmed else FixStatus.HELD)
 
 
 def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):
@@ -155,7 +155,8 @@ def test_a_false_alarm_ends_when_a_fix_agrees_with_the_belief_held(small_survey,
 def test_two_fixes_agree_through_the_dead_reckoning_alone(small_survey, rough_map):
     """Agreement is judged on the DR from the first fix's prediction: the second's own
     prediction (moved by every fix used since, the first's among them) does not enter."""
-    from tangraph.graph.lost import _Candidate
+    from tangraph.graph.lost import agreement
+    from tangraph.graph.policy import Candidate
 
     k1, k2 = 99, 139
     nav = _navigator_at(small_survey, rough_map, k2)
@@ -164,34 +165,20 @@ def test_two_fixes_agree_through_the_dead_reckoning_alone(small_survey, rough_ma
 
     def candidate(k, pose, offset):
         fix = _fix_at(small_survey, rough_map, k, offset)
-        return _Candidate(k, int(fix.first), fix, np.asarray(pose, float), 0)
+        return Candidate(k, int(fix.first), fix, np.asarray(pose, float), 0)
 
     first = candidate(k1, pose1, [0.0, 0.0])
     moved = pose2 + np.array([40.0, -30.0, 0.0])  # as if a fix had pulled the prediction
-    assert nav._agree(first, candidate(k2, moved, [0.0, 0.0]), joint2)
-    assert nav._agree(first, candidate(k2, pose2, [0.0, 0.0]), joint2)
-    assert not nav._agree(first, candidate(k2, pose2, [40.0, -30.0]), joint2)
-
-
-def test_a_lost_navigator_widens_only_up_to_the_widest_search(small_survey, rough_map):
-    """With the fixed search half-width every widening is the same size; the belief is widened
-    until the breaks together reach what the widest search can see, then no more."""
-    config = dataclasses.replace(CONFIG, half_width_rule="fixed")
-    nav = GraphNavigator(small_survey, rough_map, config)
-    for _ in range(60):
-        nav.step()
-    cap = config.max_half_width_cells * float(min(rough_map.cell_size)) / config.half_width_sigmas
-    tries = int((cap / config.tap.half_width) ** 2) + 8
-    widenings = [nav._widen(59, config.tap.half_width) for _ in range(tries)]
-    breaks = nav.episodes[-1].breaks
-    assert widenings[-1] == 0.0 and len(breaks) < len(widenings)
-    assert np.sqrt(np.sum(np.square(breaks))) == pytest.approx(cap)
+    assert agreement(nav, first, candidate(k2, moved, [0.0, 0.0]), joint2)
+    assert agreement(nav, first, candidate(k2, pose2, [0.0, 0.0]), joint2)
+    assert not agreement(nav, first, candidate(k2, pose2, [40.0, -30.0]), joint2)
 
 
 def test_a_fix_whose_key_left_the_isam2_window_is_left_to_the_smoother(small_survey, rough_map):
     """A held or relocalising fix used late, after its key pose was marginalised, is not added
     to iSAM2 (GTSAM would refuse it): its record says so and the navigator goes on."""
-    from tangraph.graph.lost import _Candidate
+    from tangraph.graph.lost import use
+    from tangraph.graph.policy import Candidate
 
     config = dataclasses.replace(CONFIG, isam_window=3)
     nav = GraphNavigator(small_survey, rough_map, config)
@@ -201,8 +188,8 @@ def test_a_fix_whose_key_left_the_isam2_window_is_left_to_the_smoother(small_sur
     key = 19
     fix = _fix_at(small_survey, rough_map, key, [0.0, 0.0])
     at = next(n for n, r in enumerate(nav.fixes) if r.index == key)
-    nav._use(_Candidate(key, int(fix.first), fix, small_survey.dr_pose[key], at), "late")
-    assert nav.fixes[at].status is FixStatus.UNCONFIRMED and "left iSAM2" in nav.fixes[at].detail
+    use(nav, Candidate(key, int(fix.first), fix, small_survey.dr_pose[key], at), "late")
+    assert nav.fixes[at].status is FixStatus.LEFT_WINDOW and "left iSAM2" in nav.fixes[at].detail
     nav.run()
     assert np.all(np.isfinite(nav.track().pose))
 
