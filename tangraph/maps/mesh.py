@@ -537,7 +537,8 @@ class SoundingGrid:
         layer = self.mean.depth if self.statistic == "mean" else self.median
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
-        return self.mean.replace(depth=layer, depth_std=self.error.depth_std * self.error_scale,
+        std = self.error.depth_std
+        return self.mean.replace(depth=layer, depth_std=None if std is None else std * self.error_scale,
                                  correlation_length=self.error.correlation_length)
 
 
