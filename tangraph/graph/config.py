@@ -173,6 +173,11 @@ class GraphConfig:
     gnc_probability : float
         A GNC candidate is an inlier while its whitened squared error is below the
         ``chi2(dim)`` quantile of this probability (default 0.99).
+    smoother_terrain : {"fixes", "soundings"}
+        What the batch smoother's final solve sees of the terrain: ``"fixes"``, one TAP fix per
+        window (default); ``"soundings"``, every sounding as its own factor on the key pose
+        before its ping (:mod:`tangraph.graph.terrain_factors`), iterated from the fixes'
+        solution, which the soundings then replace (the same soundings are not counted twice).
 
     Examples
     --------
@@ -220,6 +225,7 @@ class GraphConfig:
     misfit_ratio: float | None = 3.0
     robust_solve: Literal["gnc", "none"] = "gnc"
     gnc_probability: float = 0.99
+    smoother_terrain: Literal["fixes", "soundings"] = "fixes"
 
     @classmethod
     def from_mapping(cls, fields, where: str = "GraphConfig") -> GraphConfig:
@@ -308,7 +314,8 @@ class GraphConfig:
                               ("half_width_rule", ("marginal", "fixed")),
                               ("optimizer", ("lm", "gn", "dogleg")),
                               ("smoother_covariance", ("all", "none")),
-                              ("robust_solve", ("gnc", "none"))):
+                              ("robust_solve", ("gnc", "none")),
+                              ("smoother_terrain", ("fixes", "soundings"))):
             if getattr(self, name) not in allowed:
                 raise TangraphError(
                     f"GraphConfig.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}"

@@ -7,6 +7,11 @@ chain, which overflows the stack on chains of about 10^5 poses. The marginal cov
 key pose comes from one multifrontal elimination of the linearised graph, also ordered by METIS
 (``gtsam.Marginals`` cannot be given an ordering from Python and crashes on such chains).
 
+With ``GraphConfig.smoother_terrain = "soundings"`` a last solve replaces the fixes by every
+sounding, each a terrain factor on the key pose before its ping
+(:mod:`tangraph.graph.terrain_factors`): Gauss-Newton from the fixes' solution, with a tide
+variable, re-linearised at every iteration, the soundings re-gated at each converged solve.
+
 The ping-rate track is recovered from the key poses and the DR: a ping between keys ``a`` and
 ``b`` is predicted forward from ``a`` and backward from ``b`` by the DR increments, and the two
 are blended linearly in time (the correction is distributed between the neighbouring keys); its
@@ -23,7 +28,8 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.graph.calibration import CALIBRATION, joint_in_frame, to_world, world_covariance
+from tangraph.graph import terrain_factors
+from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
 from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
@@ -163,28 +169,38 @@ def _gauss_newton(factors, values, ordering, max_iterations: int, tolerance: flo
 
 
 def _ordering(factors, calibrated: bool):
-    """METIS ordering, with the calibration (joined to every fix) moved to the end: eliminated
-    early it would join all the fixed poses into one dense clique."""
-    metis = gtsam.Ordering.MetisNonlinearFactorGraph(factors)
-    if not calibrated:
+    """METIS ordering, with the calibration (joined to every fix) and the tide (joined to every
+    terrain factor) moved to the end: eliminated early they would join all the poses they touch
+    into one dense clique."""
+    return _shared_last(gtsam.Ordering.MetisNonlinearFactorGraph(factors))
+
+
+def _shared_last(metis):
+    """A METIS ordering with the calibration and the tide, where present, moved to the end."""
+    shared = [key for key in (CALIBRATION, TIDE) if key in {metis.at(i) for i in range(metis.size())}]
+    if not shared:
         return metis
     ordering = gtsam.Ordering()
     for i in range(metis.size()):
         key = metis.at(i)
-        if key != CALIBRATION:
+        if key not in shared:
             ordering.push_back(key)
-    ordering.push_back(CALIBRATION)
+    for key in shared:
+        ordering.push_back(key)
     return ordering
 
 
-def _marginals(factors, result, keys, ordering, calibrated: bool) -> tuple[np.ndarray, np.ndarray]:
+def _marginals(factors, result, keys, ordering, calibrated: bool, extra=()) -> tuple[np.ndarray, np.ndarray]:
     """Joint covariances (tangent, then ``c``) of every key pose with the calibration, and that of
-    the calibration, from one METIS-ordered elimination of the linearised graph.
+    the calibration, from one METIS-ordered elimination of the linearised graph (and the linear
+    factors ``extra``, the terrain's).
 
     The pose blocks are the tree's marginals; the cross-covariance of a pose with ``c`` is
     ``E Sigma_cc``, ``E`` the sensitivity of the pose's conditional mean to ``c``, which two more
     solves of the linear system with ``c`` pinned to a unit step give."""
     linear = factors.linearize(result)
+    for factor in extra:
+        linear.push_back(factor)
     try:
         tree = linear.eliminateMultifrontal(ordering)
     except RuntimeError as exc:
@@ -386,6 +402,108 @@ def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
     return out
 
 
+#: A sounding whose standardised residual is beyond this is left out of the terrain solve
+#: (two-sided 0.999 of a normal): where the map or the sounding is wrong.
+SOUNDING_GATE = 3.29
+_GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
+
+
+def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
+                   config: GraphConfig) -> tuple[SmootherSolution, dict]:  # fmt: skip
+    """The batch solve with every sounding as a terrain factor instead of the fixes
+    (:mod:`tangraph.graph.terrain_factors`), from ``solution``: Gauss-Newton on the odometry,
+    the priors (the start's if the robust solve kept it), the tide's and the soundings, the
+    soundings re-gated at each converged solve. Returns the solution and what it used."""
+    started = _time.perf_counter()
+    graph = nav.graph
+    terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
+                                           nav.origin, graph.calibrated)
+    factors = graph.with_fixes([], start=start_kept, breaks=False).factor_graph()
+    values = graph.with_fixes([]).values(solution.pose, solution.calibration)
+    if terrain.estimates_tide:  # started at the soundings' median residual, gated around it
+        factors.add(gtsam.PriorFactorVector(TIDE, np.array([terrain.tide]),
+                                            gtsam.noiseModel.Isotropic.Sigma(1, terrain.tide_std)))
+        residual = terrain_factors.sounding_jacobians(terrain, nav.bathymetry, solution.pose,
+                                                      solution.calibration, 0.0)[0]
+        finite = residual[np.isfinite(residual)]
+        start = float(np.median(finite)) if finite.size else terrain.tide
+        values.insert(TIDE, np.array([start]))
+    state = _unpack(values, terrain, solution.pose)
+    used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
+    iterations = 0
+    for _ in range(_GATE_ROUNDS):
+        # COLAMD on the linear system with the terrain factors, c and the tide last (GTSAM's METIS
+        # fails on these graphs)
+        linear = factors.linearize(values)
+        for factor in terrain_factors.linear_factors(terrain, nav.bathymetry, *state, used):
+            linear.push_back(factor)
+        shared = [key for key in (CALIBRATION, TIDE) if linear.keys().count(key)]
+        ordering = gtsam.Ordering.ColamdConstrainedLastGaussianFactorGraph(linear, shared)
+        values, n = _terrain_gauss_newton(factors, values, terrain, nav.bathymetry, used, ordering,
+                                          config.max_iterations, solution.pose)
+        iterations += n
+        state = _unpack(values, terrain, solution.pose)
+        regated = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
+        if np.array_equal(regated, used):
+            break
+        used = regated
+    solved = _time.perf_counter()
+    pose, calibration, tide = state
+    keys = np.asarray(graph.keys, np.int64)
+    cov, calib_cov = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2))
+    if config.smoother_covariance == "all":
+        extra = terrain_factors.linear_factors(terrain, nav.bathymetry, pose, calibration, tide, used)
+        cov, calib_cov = _marginals(factors, values, keys, ordering, graph.calibrated, extra)
+        cov = joint_in_frame(pose[:, 2], cov)
+    error = factors.error(values) + terrain_factors.terrain_cost(terrain, nav.bathymetry, *state, used)
+    timings = {"solve": solved - started, "marginals": _time.perf_counter() - solved}
+    used_info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
+                 "tide": float(tide)}
+    return SmootherSolution(keys, pose, cov, calibration if graph.calibrated else np.zeros(2), calib_cov,
+                            iterations, float(error), timings), used_info
+
+
+def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:
+    """Key poses (headings unwrapped near ``reference``), calibration and tide of ``values``."""
+    pose = np.array(gtsam.utilities.extractPose2(values), float)
+    pose[:, 2] = reference[:, 2] + _wrap(pose[:, 2] - reference[:, 2])
+    calibration = np.asarray(values.atVector(CALIBRATION), float) if terrain.calibrated else np.zeros(2)
+    tide = float(values.atVector(TIDE)[0]) if terrain.estimates_tide else terrain.tide
+    return pose, calibration, tide
+
+
+def _terrain_gauss_newton(factors, values, terrain, bathymetry, used, ordering, max_iterations: int,
+                          reference, tolerance: float = 1e-6):  # fmt: skip
+    """:func:`_gauss_newton` with the terrain factors of the soundings ``used`` re-linearised at
+    every iteration."""
+
+    def cost(v) -> float:
+        state = _unpack(v, terrain, reference)
+        return factors.error(v) + terrain_factors.terrain_cost(terrain, bathymetry, *state, used)
+
+    error = cost(values)
+    for iteration in range(1, max_iterations + 1):
+        linear = factors.linearize(values)
+        state = _unpack(values, terrain, reference)
+        for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
+            linear.push_back(factor)
+        delta = linear.optimize(ordering)
+        step = 1.0
+        while True:
+            trial = values.retract(delta if step == 1.0 else delta.scale(step))
+            new = cost(trial)
+            if new <= error or step < 1e-3:
+                break
+            step *= 0.5
+        if new > error:
+            return values, iteration
+        converged = error - new <= tolerance * max(error, 1e-12)
+        values, error = trial, new
+        if converged:
+            return values, iteration
+    return values, max_iterations
+
+
 def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
                   model: NavigationModel | None = None, progress: bool = False) -> Track:
     """Re-navigate a recorded survey with a batch smoother over all key poses and fixes.
@@ -442,6 +560,12 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         solution, records, start_kept = new_solution, new_records, new_start
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("re-match %d: %d fixes accepted", rounds, sum(r.accepted for r in records))
+    soundings = None
+    if config.smoother_terrain == "soundings":
+        solution, soundings = _terrain_solve(nav, start_kept, solution, config)
+        dense = dense_track(survey, nav.white, solution, nav.origin)
+        log.info("terrain solve: %d of %d soundings used", soundings["soundings_used"],
+                 soundings["soundings"])
     pose, cov = dense
     if config.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
@@ -470,7 +594,10 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         "start_prior": "kept" if start_kept else "outlier",
         "optimizer_iterations": solution.iterations,
         "final_error": solution.error,
+        "terrain": config.smoother_terrain,
     })
+    if soundings is not None:
+        meta["soundings"] = soundings
     total = _time.perf_counter() - started
     timings = {"total": total, "per_step": total / survey.n_pings, "forward_pass": forward - started,
                **solution.timings}

@@ -1,0 +1,198 @@
+"""Terrain factors per ping: every sounding's residual against the map, in the batch smoother.
+
+A TAP fix gives the graph one Gaussian summary per window of pings. Here every sounding enters
+the smoother's least squares directly. Each ping hangs from the key pose before it, through the
+DR increment from that key, which is exact in the DR frame up to the white DR noise
+(:mod:`tangraph.graph.calibration`). A sounding ``b`` of ping ``i`` measures
+
+    ``z = h(f(x_a, c)) + t + e``,   ``f = p_w + R(psi_w) o_b``,
+
+with ``x_a`` the key pose, ``c = (k, b)`` the calibration, ``t`` the tide, ``p_w`` and ``psi_w``
+the ping's world position and heading (the key composed with the increment, mapped to the world
+by ``c``), ``o_b`` the beam's body-frame offset and ``h`` the map's bilinear depth. Its residual
+``r = z - t - h(f)`` is linearised with the map's gradient (:func:`sounding_jacobians`, checked
+against numerical derivatives in the tests).
+
+Each sounding's variance is the terrain model's (:func:`~tangraph.sensors.sounding_variances`:
+the noise plus the map error it shares with the survey's soundings, the row-sum bound), plus what
+the white DR noise between the key and the ping moves its depth by. Soundings that fall on no
+map data are left out, as are those beyond a gate on their standardised residual, re-judged at
+each converged solve (:func:`gate`).
+
+The normal equations of a key's soundings are summed into one small information block on the
+key pose, the calibration and the tide. A :class:`gtsam.JacobianFactor` of at most 6 rows
+carries it (:func:`linear_factors`), so a ping's soundings cost the linear solve no more than a
+fix does.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+
+from tangraph.graph.calibration import CALIBRATION, TIDE
+from tangraph.graph.keyposes import increments
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors import rotation_matrix, sounding_variances
+
+__all__ = ["PingTerrain", "gate", "linear_factors", "ping_terrain", "sounding_jacobians", "terrain_cost"]
+
+_J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class PingTerrain:
+    """The soundings of a survey hung from the key poses of a graph: per ping the index of its
+    key among ``keys`` (``key_index (K,)``), the DR increment from the key and its white
+    covariance (``increment (K, 3)``, ``increment_cov (K, 3, 3)``, frame of the key), the beams'
+    body offsets ``offsets (K, B, 2)`` (forward, starboard), measured ``depth (K, B)`` and the
+    terrain model's ``variance (K, B)`` (NaN: no sounding). ``origin`` is the calibration's,
+    ``calibrated`` whether the graph holds ``c``, ``tide`` and ``tide_std`` the tide's prior
+    (a tide variable when ``tide_std > 0``)."""
+
+    keys: np.ndarray
+    key_index: np.ndarray
+    increment: np.ndarray
+    increment_cov: np.ndarray
+    offsets: np.ndarray
+    depth: np.ndarray
+    variance: np.ndarray
+    origin: np.ndarray
+    calibrated: bool
+    tide: float
+    tide_std: float
+
+    @property
+    def estimates_tide(self) -> bool:
+        """Whether the tide is a variable (a prior std above zero)."""
+        return self.tide_std > 0
+
+    @property
+    def n_parameters(self) -> int:
+        """Columns of a key's block: the pose, then ``c`` and the tide when they are variables."""
+        return 3 + 2 * self.calibrated + int(self.estimates_tide)
+
+
+def ping_terrain(survey, bathymetry: BathymetryMap, model, keys, white, origin,
+                 calibrated: bool) -> PingTerrain:  # fmt: skip
+    """Hang every ping of ``survey`` from the last key pose at or before it (``keys``, ping
+    indices ascending, the first at ping 0); ``white`` is the DR's white error model,
+    ``model`` the :class:`~tangraph.sensors.NavigationModel` (sounding and map error, tide)."""
+    keys = np.asarray(keys, np.int64)
+    ping = np.arange(survey.n_pings)
+    index = np.searchsorted(keys, ping, side="right") - 1
+    increment, cov = increments(white, survey.time, survey.dr_pose, keys[index], ping)
+    offsets = np.stack([survey.beam_forward, survey.beam_starboard], axis=-1).astype(float)
+    variance = sounding_variances(survey, bathymetry, model)
+    return PingTerrain(keys, index, increment, cov, offsets, np.asarray(survey.beam_depth, float), variance,
+                       np.asarray(origin, float), bool(calibrated), float(model.tide), float(model.tide_std))
+
+
+def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float):
+    """Residuals ``r = z - t - h(f) (K, B)``, their Jacobians ``(K, B, P)`` with respect to the
+    key pose (GTSAM's tangent: x, y in the key's frame, then the heading), ``c`` and the tide
+    (:attr:`PingTerrain.n_parameters` columns), and the variance the white DR noise between
+    the key and the ping adds to each ``(K, B)``. NaN where there is no sounding or no map."""
+    key_pose = np.asarray(key_pose, float)[terrain.key_index]
+    k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
+    delta = terrain.increment
+    rot_a = rotation_matrix(key_pose[:, 2])  # (K, 2, 2)
+    frame = key_pose[:, :2] + np.einsum("kij,kj->ki", rot_a, delta[:, :2])
+    heading = key_pose[:, 2] + delta[:, 2] - b
+    scale = rotation_matrix(-b) / (1.0 + k)  # DR frame -> world
+    rel = frame - terrain.origin
+    world = terrain.origin + rel @ scale.T
+    rot_w = rotation_matrix(heading)
+    lever = np.einsum("kij,kbj->kbi", rot_w, terrain.offsets)  # (K, B, 2)
+    north, east = world[:, None, 0] + lever[..., 0], world[:, None, 1] + lever[..., 1]
+    residual = terrain.depth - tide - bathymetry.depth_at(north, east)
+    grad = bathymetry.gradient_at(north, east)  # (K, B, 2)
+    turn = np.einsum("ij,kbj->kbi", _J, terrain.offsets)
+    d_heading = np.einsum("kij,kbj->kbi", rot_w, turn)  # d f / d psi_w (K, B, 2)
+    d_xy = np.einsum("ij,kjl->kil", scale, rot_a)  # d f / d (x, y) of the key, (K, 2, 2)
+    d_theta = np.einsum("kil,kl->ki", d_xy, delta[:, :2] @ _J.T)  # d f / d heading of the key, less turn
+    jac = np.zeros((*residual.shape, terrain.n_parameters))
+    jac[..., 0:2] = -np.einsum("kbi,kij->kbj", grad, d_xy)
+    jac[..., 2] = -np.einsum("kbi,kbi->kb", grad, d_theta[:, None, :] + d_heading)
+    column = 3
+    if terrain.calibrated:
+        d_k = -(rel @ scale.T) / (1.0 + k)  # (K, 2)
+        d_b = -(rel @ (scale @ _J).T)
+        jac[..., column] = -np.einsum("kbi,ki->kb", grad, d_k)
+        jac[..., column + 1] = -np.einsum("kbi,kbi->kb", grad, d_b[:, None, :] - d_heading)
+        column += 2
+    if terrain.estimates_tide:
+        jac[..., column] = -1.0
+    # the white DR noise from the key to the ping: d f / d increment = [scale R_a, d_heading]
+    d_inc = np.concatenate([np.broadcast_to(d_xy[:, None], (*residual.shape, 2, 2)), d_heading[..., None]],
+                           axis=-1)
+    g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
+    dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
+    return residual, jac, dr_variance
+
+
+def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
+         threshold: float) -> np.ndarray:  # fmt: skip
+    """The soundings used: a sounding, with map data under it, whose standardised residual is
+    within ``threshold`` at the given solution."""
+    residual, _, dr_variance = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    z = residual / np.sqrt(terrain.variance + dr_variance)
+    return np.isfinite(z) & (np.abs(z) <= threshold)
+
+
+def terrain_cost(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
+                 used: np.ndarray) -> float:  # fmt: skip
+    """``1/2 sum r^2 / v`` over the soundings ``used`` (the least-squares cost the factors add;
+    a sounding that has lost its map since it was gated counts as at its gate)."""
+    residual, _, dr_variance = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    z2 = residual[used] ** 2 / (terrain.variance + dr_variance)[used]
+    return 0.5 * float(np.sum(np.where(np.isfinite(z2), z2, np.nanmax(z2, initial=0.0))))
+
+
+def linear_factors(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
+                   used: np.ndarray) -> list[gtsam.JacobianFactor]:  # fmt: skip
+    """The linearised terrain factors at a solution: one :class:`gtsam.JacobianFactor` per key
+    with soundings ``used``, on the key pose, ``c`` and the tide, whose information is the sum
+    of its soundings' (``sum J^T J / v``, with the gradient ``sum J^T r / v``)."""
+    residual, jac, dr_variance = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    ok = used & np.isfinite(residual) & np.all(np.isfinite(jac), axis=-1)
+    weight = np.where(ok, 1.0 / (terrain.variance + dr_variance), 0.0)
+    jac = np.where(ok[..., None], jac, 0.0)
+    residual = np.where(ok, residual, 0.0)
+    p = terrain.n_parameters
+    per_ping_h = np.einsum("kb,kbi,kbj->kij", weight, jac, jac)
+    per_ping_g = np.einsum("kb,kbi,kb->ki", weight, jac, residual)
+    n = terrain.keys.size
+    info = np.zeros((n, p, p))
+    grad = np.zeros((n, p))
+    np.add.at(info, terrain.key_index, per_ping_h)
+    np.add.at(grad, terrain.key_index, per_ping_g)
+    values, vectors = np.linalg.eigh(info)
+    scale = np.max(values, axis=1, keepdims=True)
+    keep = values > 1e-12 * np.maximum(scale, 1e-300)
+    root = np.sqrt(np.where(keep, values, 0.0))
+    inv_root = np.where(keep, 1.0 / np.where(keep, root, 1.0), 0.0)
+    a = root[..., None] * np.swapaxes(vectors, 1, 2)  # (n, P, P): A^T A = info
+    b = -inv_root * np.einsum("nji,nj->ni", vectors, grad)  # A^T b = -grad: minimises |A d - b|^2
+    factors = []
+    unit = gtsam.noiseModel.Unit.Create(p)
+    for n_key in np.flatnonzero(np.any(keep, axis=1)):
+        blocks = [int(terrain.keys[n_key]), a[n_key, :, 0:3]]
+        column = 3
+        if terrain.calibrated:
+            blocks += [CALIBRATION, a[n_key, :, column:column + 2]]
+            column += 2
+        if terrain.estimates_tide:
+            blocks += [TIDE, a[n_key, :, column:column + 1]]
+        factors.append(_jacobian_factor(blocks, b[n_key], unit))
+    return factors
+
+
+def _jacobian_factor(blocks, b, noise) -> gtsam.JacobianFactor:
+    if len(blocks) == 2:
+        return gtsam.JacobianFactor(blocks[0], blocks[1], b, noise)
+    if len(blocks) == 4:
+        return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], b, noise)
+    return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4], blocks[5], b, noise)

@@ -1,0 +1,191 @@
+"""Terrain factors per ping (tangraph.graph.terrain_factors): Jacobians, the information they
+carry, and the smoother that uses every sounding."""
+
+import gtsam
+import numpy as np
+import pytest
+
+from tangraph.graph.terrain_factors import linear_factors, ping_terrain, sounding_jacobians, terrain_cost
+from tangraph.maps import BathymetryMap
+from tangraph.sensors import NavigationModel
+from tangraph.survey import Survey
+
+AXIS = np.arange(0.0, 400.0, 2.0)
+
+
+def smooth_map(slope=(0.0, 0.0), wavy=1.0) -> BathymetryMap:
+    n, e = AXIS[:, None], AXIS[None, :]
+    relief = 3.0 * np.sin(n / 23.0) * np.cos(e / 31.0) + np.sin(e / 11.0)
+    depth = 50.0 + slope[0] * n + slope[1] * e + wavy * relief
+    return BathymetryMap(AXIS, AXIS, depth)
+
+
+def line_survey(n_pings=9, beams=(-12.0, -4.0, 0.0, 5.0, 13.0)) -> Survey:
+    t = np.arange(float(n_pings))
+    pose = np.column_stack([150.0 + 2.0 * t, 160.0 + 1.0 * t, np.full(n_pings, 0.4) + 0.01 * t])
+    b = len(beams)
+    return Survey(time=t, dr_pose=pose, vehicle_depth=np.zeros(n_pings),
+                  beam_forward=np.tile([1.0, -2.0, 0.0, 3.0, 0.5][:b], (n_pings, 1)),
+                  beam_starboard=np.tile(beams, (n_pings, 1)), beam_depth=np.full((n_pings, b), 50.0),
+                  true_pose=pose)
+
+
+MODEL = NavigationModel(sounding_std=0.2, tide_std=1.0, speed_noise=0.05, heading_noise=0.01)
+
+
+def terrain_of(survey, bathymetry, keys, calibrated=True, model=MODEL):
+    origin = survey.dr_pose[0, :2]
+    return ping_terrain(survey, bathymetry, model, keys, model.dead_reckoning, origin, calibrated)
+
+
+@pytest.mark.parametrize("calibrated", [True, False])
+def test_jacobians_match_numerical_derivatives(calibrated):
+    bathymetry = smooth_map(slope=(0.02, -0.01))
+    survey = line_survey()
+    keys = np.array([0, 4])
+    terrain = terrain_of(survey, bathymetry, keys, calibrated)
+    key_pose = survey.dr_pose[keys] + np.array([[1.3, -0.7, 0.02], [-0.4, 0.9, -0.03]])
+    calibration, tide = np.array([0.02, 0.03]), 0.3
+    residual, jac, _ = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    assert np.all(np.isfinite(residual)) and jac.shape == (*residual.shape, 6 if calibrated else 4)
+    eps = 1e-5
+    for key in range(2):
+        for axis in range(3):
+            plus, minus = key_pose.copy(), key_pose.copy()
+            xi = np.zeros(3)
+            xi[axis] = eps
+            up, down = gtsam.Pose2(*key_pose[key]).retract(xi), gtsam.Pose2(*key_pose[key]).retract(-xi)
+            plus[key] = [up.x(), up.y(), up.theta()]
+            minus[key] = [down.x(), down.y(), down.theta()]
+            numeric = (sounding_jacobians(terrain, bathymetry, plus, calibration, tide)[0]
+                       - sounding_jacobians(terrain, bathymetry, minus, calibration, tide)[0]) / (2 * eps)
+            rows = terrain.key_index == key
+            np.testing.assert_allclose(jac[rows, :, axis], numeric[rows], atol=2e-6)
+            np.testing.assert_allclose(numeric[~rows], 0.0, atol=1e-9)
+    column = 3
+    if calibrated:
+        for axis in range(2):
+            step = np.zeros(2)
+            step[axis] = eps
+            up = sounding_jacobians(terrain, bathymetry, key_pose, calibration + step, tide)[0]
+            down = sounding_jacobians(terrain, bathymetry, key_pose, calibration - step, tide)[0]
+            numeric = (up - down) / (2 * eps)
+            np.testing.assert_allclose(jac[..., column + axis], numeric, atol=2e-6)
+        column += 2
+    numeric = (sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide + eps)[0]
+               - sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide - eps)[0]) / (2 * eps)
+    np.testing.assert_allclose(jac[..., column], numeric, atol=1e-9)
+
+
+def test_linear_factors_carry_the_soundings_normal_equations():
+    bathymetry = smooth_map(slope=(0.02, -0.01))
+    survey = line_survey()
+    keys = np.array([0, 4])
+    terrain = terrain_of(survey, bathymetry, keys)
+    key_pose = survey.dr_pose[keys] + np.array([[1.3, -0.7, 0.02], [-0.4, 0.9, -0.03]])
+    calibration, tide = np.array([0.02, 0.03]), 0.3
+    used = np.isfinite(survey.beam_depth)
+    factors = linear_factors(terrain, bathymetry, key_pose, calibration, tide, used)
+    assert len(factors) == 2
+    residual, jac, dr_var = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    w = 1.0 / (terrain.variance + dr_var)
+    for n_key, factor in enumerate(factors):
+        rows = terrain.key_index == n_key
+        j, r, wk = jac[rows].reshape(-1, 6), residual[rows].ravel(), w[rows].ravel()
+        info = j.T @ (wk[:, None] * j)
+        a, b = factor.jacobian()
+        np.testing.assert_allclose(a.T @ a, info, rtol=1e-8, atol=1e-8 * np.abs(info).max())
+        np.testing.assert_allclose(a.T @ b, -j.T @ (wk * r), rtol=1e-6, atol=1e-8)
+    assert terrain_cost(terrain, bathymetry, key_pose, calibration, tide, used) == \
+        pytest.approx(0.5 * np.sum(w * residual**2))
+
+
+def test_a_flat_map_informs_the_tide_only():
+    flat = BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0))
+    survey = line_survey()
+    terrain = terrain_of(survey, flat, np.array([0, 4]))
+    used = np.isfinite(survey.beam_depth)
+    factors = linear_factors(terrain, flat, survey.dr_pose[[0, 4]], np.zeros(2), 0.0, used)
+    for factor in factors:
+        a, _ = factor.jacobian()
+        np.testing.assert_allclose(a[:, :5], 0.0, atol=1e-12)  # pose and calibration: nothing
+        assert np.linalg.norm(a[:, 5]) > 0  # the tide: the soundings' level
+
+
+def lawnmower(n_pings=240, start_error=(6.0, 0.0)):
+    """Three east-going legs 40 m apart, a ping every 2 m, 11 beams across; the DR is the truth
+    shifted by ``start_error`` (north, east) with exact increments."""
+    legs = []
+    for leg in range(3):
+        east = np.arange(n_pings // 3) * 2.0
+        along = (east if leg % 2 == 0 else east[::-1]) + 80.0
+        heading = np.full(east.size, np.pi / 2 if leg % 2 == 0 else -np.pi / 2)
+        legs.append(np.column_stack([100.0 + 40.0 * leg + 0 * east, along, heading]))
+    truth = np.concatenate(legs)
+    k = truth.shape[0]
+    beams = np.linspace(-20.0, 20.0, 11)
+    return truth, Survey(time=np.arange(float(k)), dr_pose=truth + np.array([*start_error, 0.0]),
+                         vehicle_depth=np.zeros(k), beam_forward=np.zeros((k, beams.size)),
+                         beam_starboard=np.tile(beams, (k, 1)), beam_depth=np.zeros((k, beams.size)),
+                         true_pose=truth)
+
+
+def noise_free(survey, bathymetry):
+    north, east = survey.footprints(survey.true_pose)
+    return survey.replace(beam_depth=bathymetry.depth_at(north, east))
+
+
+def smooth(survey, bathymetry, terrain, model):
+    from tangraph.graph import GraphConfig, smooth_survey
+
+    config = GraphConfig(smoother_terrain=terrain, estimate_calibration=False, rematch_iterations=0)
+    return smooth_survey(survey, bathymetry, config, model=model)
+
+
+def test_a_plane_sloped_north_gives_the_north_offset_and_nothing_east():
+    # noise-free soundings of a plane rising to the north: the soundings say exactly where the
+    # track lies across the slope, and nothing along it: the east covariance stays the DR's
+    n, e = AXIS[:, None], AXIS[None, :]
+    plane = BathymetryMap(AXIS, AXIS, 50.0 + 0.05 * n + 0.0 * e)
+    model = NavigationModel(sounding_std=0.1, tide_std=0.0, speed_noise=0.02, initial_position_std=30.0)
+    truth, survey = lawnmower()
+    survey = noise_free(survey, plane)
+    track = smooth(survey, plane, "soundings", model)
+    assert track.meta["soundings"]["soundings_used"] == np.isfinite(survey.beam_depth).sum()
+    np.testing.assert_allclose(track.pose[:, 0], truth[:, 0], atol=1e-4)
+    dr_only = smooth(survey, BathymetryMap(AXIS, AXIS, np.full(plane.shape, 50.0)), "soundings", model)
+    np.testing.assert_allclose(track.covariance[:, 1, 1], dr_only.covariance[:, 1, 1], rtol=1e-6)
+    assert np.all(track.covariance[:, 0, 0] < 1e-3 * dr_only.covariance[:, 0, 0])
+
+
+def test_a_flat_map_leaves_the_dead_reckoning_as_it_is():
+    flat = BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0))
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    _, survey = lawnmower()
+    survey = noise_free(survey, flat)
+    with_soundings = smooth(survey, flat, "soundings", model)
+    with_fixes = smooth(survey, flat, "fixes", model)
+    assert with_fixes.meta["n_fixes_accepted"] == 0
+    np.testing.assert_allclose(with_soundings.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
+    np.testing.assert_allclose(np.angle(np.exp(1j * (with_soundings.pose[:, 2] - survey.dr_pose[:, 2]))), 0.0,
+                               atol=1e-9)
+    np.testing.assert_allclose(with_soundings.covariance, with_fixes.covariance, rtol=1e-6, atol=1e-9)
+    assert with_soundings.meta["soundings"]["tide"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_every_sounding_recovers_a_start_error_on_textured_terrain():
+    # sounding noise, a start 6 m off: the soundings smoother ends nearer the truth than the
+    # DR and within its covariance
+    bathymetry = smooth_map(wavy=1.0)
+    model = NavigationModel(sounding_std=0.2, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    truth, survey = lawnmower()
+    rng = np.random.default_rng(7)
+    survey = noise_free(survey, bathymetry)
+    noise = 0.2 * rng.standard_normal(survey.beam_depth.shape)
+    survey = survey.replace(beam_depth=survey.beam_depth + 0.3 + noise)
+    track = smooth(survey, bathymetry, "soundings", model)
+    error = track.pose[:, :2] - truth[:, :2]
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 0.2
+    nees = np.einsum("ki,kij,kj->k", error, np.linalg.inv(track.covariance[:, :2, :2]), error)
+    assert np.mean(nees) < 6.0
+    assert track.meta["soundings"]["tide"] == pytest.approx(0.3, abs=0.02)
