@@ -210,7 +210,7 @@ def figure(table, path: Path) -> None:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
-    from tangraph.experiments.study import output_folder, study_parser
+    from tangraph.experiments.study import field_values, output_folder, study_parser
 
     parser = study_parser(HERE, __doc__.splitlines()[0], runs=20, seed=6,
                           quick="4 runs of PF, IPF and SJCPF: minutes")
@@ -228,9 +228,7 @@ def main(argv=None) -> int:
     args.out = output_folder(args, HERE)
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
-    import ast
-
-    graph = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.graph)}
+    graph = field_values(args.graph)
     configs = [
         {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr,
          "graph": graph}

@@ -212,7 +212,7 @@ def figure(table, path: Path) -> None:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
-    from tangraph.experiments.study import output_folder, study_parser
+    from tangraph.experiments.study import field_values, output_folder, study_parser
 
     parser = study_parser(HERE, __doc__.splitlines()[0], runs=12, seed=13,
                           quick="3 runs of the graph on clean, shift-30 and start-200")
@@ -226,9 +226,7 @@ def main(argv=None) -> int:
     runs = 3 if args.quick else args.runs
     cases = ["clean", "shift-30", "start-200"] if args.quick else args.cases
     methods = ["isam2", "smoother"] if args.quick else args.methods
-    import ast
-
-    graph = {k: ast.literal_eval(v) for k, v in (item.split("=", 1) for item in args.graph)}
+    graph = field_values(args.graph)
     config = {"cases": cases, "methods": methods, "graph": graph}
     table = run_many(one_run, [config], runs, args.seed, scheduler=args.scheduler, workers=args.workers)
     failed = table["error"].notna()

@@ -16,7 +16,7 @@ from pathlib import Path
 from tangraph.cli import DefaultsHelpFormatter
 from tangraph.errors import TangraphError
 
-__all__ = ["output_folder", "per_process", "study_parser"]
+__all__ = ["field_values", "output_folder", "per_process", "study_parser"]
 
 _CACHE: dict = {}  # per process, here in the package: see per_process
 
@@ -65,6 +65,27 @@ def study_parser(here: Path, description: str, *, runs: int | None, seed: int,
                         "beside the study in a checkout; required for an installed study)")
     parser.add_argument("--force", action="store_true", help="write into an --out folder that holds files")
     return parser
+
+
+def field_values(items, option: str = "--graph") -> dict:
+    """``FIELD=VALUE`` items (a study's ``--graph`` options) as a mapping: each value a Python
+    literal (``3``, ``0.5``, ``None``, ``"pmf"``) or, when it is none, the bare string.
+
+    >>> field_values(["n_pings=30", "front_end=pmf", 'smoother_terrain="soundings"'])
+    {'n_pings': 30, 'front_end': 'pmf', 'smoother_terrain': 'soundings'}
+    """
+    import ast
+
+    fields = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise TangraphError(f"{option} {item!r}: expected FIELD=VALUE")
+        try:
+            fields[name] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            fields[name] = value
+    return fields
 
 
 def output_folder(args: argparse.Namespace, here: Path) -> Path:

@@ -411,15 +411,20 @@ _GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
 def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
                    config: GraphConfig) -> tuple[SmootherSolution, dict]:  # fmt: skip
     """The batch solve with every sounding as a terrain factor instead of the fixes
-    (:mod:`tangraph.graph.terrain_factors`), from ``solution``: Gauss-Newton on the odometry,
-    the priors (the start's if the robust solve kept it), the tide's and the soundings, the
-    soundings re-gated at each converged solve. Returns the solution and what it used."""
+    (:mod:`tangraph.graph.terrain_factors`), from ``solution``, on a key pose at every ping
+    (:func:`_ping_graph`: the white DR noise between pings is then the odometry's, correlations
+    and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
+    it), the tide's and the soundings, the soundings re-gated at each converged solve. Returns
+    the solution (its keys every ping) and what it used."""
     started = _time.perf_counter()
-    graph = nav.graph
+    graph = _ping_graph(nav)
     terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
                                            nav.origin, graph.calibrated)
-    factors = graph.with_fixes([], start=start_kept, breaks=False).factor_graph()
-    values = graph.with_fixes([]).values(solution.pose, solution.calibration)
+    factors = graph.with_fixes([], start=start_kept).factor_graph()
+    world = dense_track(nav.survey, nav.white, solution, nav.origin)[0]
+    initial = _frame_poses(world, solution.calibration, nav.origin) if graph.calibrated else world
+    solution = dataclasses.replace(solution, keys=np.asarray(graph.keys), pose=initial)
+    values = graph.values(solution.pose, solution.calibration)
     if terrain.estimates_tide:  # started at the soundings' median residual, gated around it
         factors.add(gtsam.PriorFactorVector(TIDE, np.array([terrain.tide]),
                                             gtsam.noiseModel.Isotropic.Sigma(1, terrain.tide_std)))
@@ -461,6 +466,26 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
                  "tide": float(tide)}
     return SmootherSolution(keys, pose, cov, calibration if graph.calibrated else np.zeros(2), calib_cov,
                             iterations, float(error), timings), used_info
+
+
+def _ping_graph(nav: GraphNavigator) -> PoseGraph:
+    """The forward pass's graph with a key pose at every ping: its start (the DR's first pose,
+    the model's uncertainty), its calibration prior, and the DR increments between consecutive
+    pings as odometry; no fix, no break. The odometry's noise floors (added to every increment)
+    are shrunk so that over the forward pass's key interval they add up to the same."""
+    survey, model, c = nav.survey, nav.model, nav.config
+    shrink = np.sqrt(max(len(nav.graph.keys) - 1, 1) / max(survey.n_pings - 1, 1))
+    graph = PoseGraph(nav.graph.calibration_std, nav.graph.calibration_mean, nav.origin, c.robust_kernel,
+                      c.robust_parameter, c.odometry_min_std * shrink, c.odometry_min_heading_std * shrink)
+    for k in range(survey.n_pings):
+        graph.add_pose(k, survey.time[k], survey.dr_pose[k])
+    graph.add_start(0, survey.dr_pose[0], model.initial_position_std,
+                    max(model.heading_noise, c.odometry_min_heading_std))  # as the forward pass's
+    ping = np.arange(survey.n_pings)
+    delta, cov = increments(nav.white, survey.time, survey.dr_pose, ping[:-1], ping[1:])
+    for k in range(survey.n_pings - 1):
+        graph.add_odometry(k, k + 1, delta[k], cov[k])
+    return graph
 
 
 def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:

@@ -135,10 +135,11 @@ def noise_free(survey, bathymetry):
     return survey.replace(beam_depth=bathymetry.depth_at(north, east))
 
 
-def smooth(survey, bathymetry, terrain, model):
+def smooth(survey, bathymetry, terrain, model, **options):
     from tangraph.graph import GraphConfig, smooth_survey
 
-    config = GraphConfig(smoother_terrain=terrain, estimate_calibration=False, rematch_iterations=0)
+    config = GraphConfig(smoother_terrain=terrain, estimate_calibration=False, rematch_iterations=0,
+                         **options)
     return smooth_survey(survey, bathymetry, config, model=model)
 
 
@@ -154,7 +155,8 @@ def test_a_plane_sloped_north_gives_the_north_offset_and_nothing_east():
     assert track.meta["soundings"]["soundings_used"] == np.isfinite(survey.beam_depth).sum()
     np.testing.assert_allclose(track.pose[:, 0], truth[:, 0], atol=1e-4)
     dr_only = smooth(survey, BathymetryMap(AXIS, AXIS, np.full(plane.shape, 50.0)), "soundings", model)
-    np.testing.assert_allclose(track.covariance[:, 1, 1], dr_only.covariance[:, 1, 1], rtol=1e-6)
+    # (to 1e-4: the heading, which the soundings do tell, reaches east only through the turns)
+    np.testing.assert_allclose(track.covariance[:, 1, 1], dr_only.covariance[:, 1, 1], rtol=1e-4)
     assert np.all(track.covariance[:, 0, 0] < 1e-3 * dr_only.covariance[:, 0, 0])
 
 
@@ -163,12 +165,13 @@ def test_a_flat_map_leaves_the_dead_reckoning_as_it_is():
     model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
     _, survey = lawnmower()
     survey = noise_free(survey, flat)
-    with_soundings = smooth(survey, flat, "soundings", model)
-    with_fixes = smooth(survey, flat, "fixes", model)
+    with_soundings = smooth(survey, flat, "soundings", model, key_interval=0.5)
+    with_fixes = smooth(survey, flat, "fixes", model, key_interval=0.5)  # a key at every ping too
     assert with_fixes.meta["n_fixes_accepted"] == 0
     np.testing.assert_allclose(with_soundings.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
     np.testing.assert_allclose(np.angle(np.exp(1j * (with_soundings.pose[:, 2] - survey.dr_pose[:, 2]))), 0.0,
                                atol=1e-9)
+    # the DR's covariance, as the smoother with no fix gives it
     np.testing.assert_allclose(with_soundings.covariance, with_fixes.covariance, rtol=1e-6, atol=1e-9)
     assert with_soundings.meta["soundings"]["tide"] == pytest.approx(0.0, abs=1e-6)
 
