@@ -417,6 +417,7 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     it), the tide's and the soundings, the soundings re-gated at each converged solve. Returns
     the solution (its keys every ping) and what it used."""
     started = _time.perf_counter()
+    fixes_solution = solution
     graph = _ping_graph(nav)
     terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
                                            nav.origin, graph.calibrated)
@@ -437,13 +438,16 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
     iterations = 0
     for _ in range(_GATE_ROUNDS):
-        # COLAMD on the linear system with the terrain factors, c and the tide last (GTSAM's METIS
-        # fails on these graphs)
+        if not used.any():  # nothing ties c and the tide to the poses (and METIS fails on that)
+            log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution "
+                        "is kept", SOUNDING_GATE)
+            return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
+                                    "tide": float(terrain.tide)}
+        # METIS on the linear system with the terrain factors (their links to c and the tide)
         linear = factors.linearize(values)
         for factor in terrain_factors.linear_factors(terrain, nav.bathymetry, *state, used):
             linear.push_back(factor)
-        shared = [key for key in (CALIBRATION, TIDE) if linear.keys().count(key)]
-        ordering = gtsam.Ordering.ColamdConstrainedLastGaussianFactorGraph(linear, shared)
+        ordering = _shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
         values, n = _terrain_gauss_newton(factors, values, terrain, nav.bathymetry, used, ordering,
                                           config.max_iterations, solution.pose)
         iterations += n

@@ -192,3 +192,19 @@ def test_every_sounding_recovers_a_start_error_on_textured_terrain():
     nees = np.einsum("ki,kij,kj->k", error, np.linalg.inv(track.covariance[:, :2, :2]), error)
     assert np.mean(nees) < 6.0
     assert track.meta["soundings"]["tide"] == pytest.approx(0.3, abs=0.02)
+
+
+def test_no_sounding_on_the_map_keeps_the_fixes_solution(caplog):
+    # the map's data lie in a corner the track never reaches: no sounding can be weighed, the
+    # fixes' solve (here the DR) stands
+    depth = np.full((AXIS.size, AXIS.size), np.nan)
+    depth[:10, :10] = 50.0
+    partial = BathymetryMap(AXIS, AXIS, depth)
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    _, survey = lawnmower()
+    survey = survey.replace(beam_depth=np.full(survey.beam_depth.shape, 50.0))
+    with_soundings = smooth(survey, partial, "soundings", model)
+    with_fixes = smooth(survey, partial, "fixes", model)
+    assert with_soundings.meta["soundings"]["soundings_used"] == 0
+    assert "no sounding fits the map" in caplog.text
+    np.testing.assert_array_equal(with_soundings.pose, with_fixes.pose)
