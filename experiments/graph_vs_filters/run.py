@@ -85,12 +85,17 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     model = NavigationModel.from_survey(survey)
     bound = {kind: bound_rmse(posterior_crb(survey, bathymetry, model, kind=kind))
              for kind in ("smoother", "filter")}
+    # the physical limit: the same bound with the soundings' simulated noise (the model's
+    # sounding_std has a margin of 1.5 over it, NavigationModel.from_survey)
+    noise = dataclasses.replace(model, sounding_std=float(survey.meta["settings"]["sonar"]["depth_noise"]))
+    limit = {kind: bound_rmse(posterior_crb(survey, bathymetry, noise, kind=kind))
+             for kind in ("smoother", "filter")}
     truth_scale = float(survey.meta["settings"]["dead_reckoning"]["speed_scale"])
     truth_heading = float(survey.dr_pose[-1, 2] - survey.true_pose[-1, 2])
     rows = []
     dr = track_metrics(dead_reckoning_track(survey), survey.true_pose)
     rows.append({"method": "dr", **dr, "ms_per_step": 0.0, "n_fixes_accepted": -1, "n_fixes_rejected": -1,
-                 "pcrb": bound["filter"]})
+                 "pcrb": bound["filter"], "pcrb_noise": limit["filter"]})
     for method in config["methods"]:
         settings = None
         if method in GRAPH and config.get("graph"):
@@ -105,7 +110,8 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         track = navigate(survey, bathymetry, method, settings, rng=rng, model=model)
         seconds = time.perf_counter() - started
         metrics = track_metrics(track, survey.true_pose)
-        pcrb = bound["smoother" if method == "smoother" else "filter"]
+        kind = "smoother" if method == "smoother" else "filter"
+        pcrb = bound[kind]
         calibration = track.meta.get("calibration") or {}
         heading_miss = np.angle(np.exp(1j * (calibration.get("heading_error", np.nan) - truth_heading)))
         used, covered = _fix_coverage(track, survey.true_pose) if method in GRAPH else (0, 0)
@@ -114,6 +120,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                 "method": method,
                 **metrics,
                 "pcrb": pcrb,
+                "pcrb_noise": limit[kind],
                 "rmse_over_pcrb": metrics["rmse"] / pcrb,
                 "scale_z": (calibration.get("speed_scale", np.nan) - truth_scale)
                 / calibration.get("speed_scale_std", np.nan),
@@ -140,6 +147,11 @@ def summarise(table) -> list[dict]:
         pooled = group.assign(mse=group["rmse"] ** 2, bound=group["pcrb"] ** 2).groupby("method")[
             ["mse", "bound"]].mean()
         means["rmse_over_pcrb"] = np.sqrt(pooled["mse"] / pooled["bound"])
+        if "pcrb_noise" in group:  # results made before the column have none
+            limit = group.assign(bound=group["pcrb_noise"] ** 2).groupby("method")["bound"].mean()
+            means["rmse_over_limit"] = np.sqrt(pooled["mse"] / limit)
+        else:
+            means["rmse_over_limit"] = np.nan
         sums = group.groupby("method")[["fixes_used", "fixes_covered"]].sum()
         within = group.assign(
             ok=(group["scale_z"].abs() <= 2) & (group["heading_z"].abs() <= 2)
@@ -161,6 +173,7 @@ def summarise(table) -> list[dict]:
                     "runs": runs,
                     "RMSE (m)": m.rmse,
                     "RMSE / PCRB": m.rmse_over_pcrb if method != "dr" else np.nan,
+                    "RMSE / PCRB (simulated noise)": m.rmse_over_limit if method != "dr" else np.nan,
                     "PCRB goal": "" if goal_pcrb is None
                     else f"<= {goal_pcrb}: {'met' if m.rmse_over_pcrb <= goal_pcrb else 'missed'}",
                     "RMSE / best filter": ratio,
