@@ -43,8 +43,9 @@ def survey_of(n: int, beams: int, rng: np.random.Generator):
                                   heading_noise=np.deg2rad(0.05))
     dr = simulate_dead_reckoning(time_s, truth, dr_model, rng=rng)
     starboard = np.tile(np.linspace(-30.0, 30.0, beams), (n, 1))
-    survey = Survey(time=time_s, dr_pose=dr.pose, vehicle_depth=np.zeros(n), beam_forward=np.zeros((n, beams)),
-                    beam_starboard=starboard, beam_depth=np.zeros((n, beams)), true_pose=truth)
+    survey = Survey(time=time_s, dr_pose=dr.pose, vehicle_depth=np.zeros(n),
+                    beam_forward=np.zeros((n, beams)), beam_starboard=starboard,
+                    beam_depth=np.zeros((n, beams)), true_pose=truth)
     north_b, east_b = survey.footprints(truth)
     depth = bathymetry.depth_at(north_b, east_b) + 0.2 * rng.standard_normal((n, beams))
     model = NavigationModel.from_dead_reckoning(dr_model, sounding_std=0.3, tide_std=1.0,

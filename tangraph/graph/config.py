@@ -175,9 +175,13 @@ class GraphConfig:
         ``chi2(dim)`` quantile of this probability (default 0.99).
     smoother_terrain : {"fixes", "soundings"}
         What the batch smoother's final solve sees of the terrain: ``"fixes"``, one TAP fix per
-        window (default); ``"soundings"``, every sounding as its own factor on the key pose
-        before its ping (:mod:`tangraph.graph.terrain_factors`), iterated from the fixes'
-        solution, which the soundings then replace (the same soundings are not counted twice).
+        window (default); ``"soundings"``, every sounding as its own factor on a key pose at its
+        ping (:mod:`tangraph.graph.terrain_factors`), iterated from the fixes' solution, which
+        the soundings then replace (the same soundings are not counted twice). On simulated
+        surveys whose map errs as it states, ``"soundings"`` is at the Cramér-Rao bound; it
+        trusts the stated map error far more than the fixes do, so on a recorded survey use it
+        only with a map whose error check lines confirm (``tangraph maps check``): on Lake
+        Caputh's map, whose error is heavy-tailed, its track ANEES was 7-520 (fixes: 0-6).
 
     Examples
     --------
