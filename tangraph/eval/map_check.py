@@ -101,22 +101,24 @@ class MapCheck:
 
 def window_scores(
     survey: Survey, bathymetry: BathymetryMap, model: NavigationModel, *, window: float,
-    error: MapError | None = None,
+    error: MapError | None = None, poses=None, used=None,
 ) -> np.ndarray:
-    """The standardised mean residuals of ``survey``'s soundings (at its reference track, less
-    their median) against ``bathymetry`` in consecutive windows of ``window`` m of track (module
-    docstring); windows with fewer than ``MIN_SOUNDINGS`` soundings on the map are left out."""
-    if survey.true_pose is None:
+    """The standardised mean residuals of ``survey``'s soundings (at its reference track, or at
+    ``poses (K, 3)``, less their median; only those ``used (K, B)`` if given) against
+    ``bathymetry`` in consecutive windows of ``window`` m of track (module docstring); windows
+    with fewer than ``MIN_SOUNDINGS`` soundings on the map are left out."""
+    if poses is None and survey.true_pose is None:
         name = survey.meta.get("name", "")
         raise TangraphError(f"survey {name!r}: no reference track (true_pose) to check the map with")
+    poses = survey.true_pose if poses is None else np.asarray(poses, float)
     error = map_error(bathymetry, model) if error is None else error
-    north, east = survey.footprints(survey.true_pose)
+    north, east = survey.footprints(poses)
     residual = survey.beam_depth - bathymetry.depth_at(north, east)
-    ok = np.isfinite(residual)
+    ok = np.isfinite(residual) & (True if used is None else np.asarray(used, bool))
     if not ok.any():
         return np.empty(0)
     residual = residual - np.median(residual[ok])
-    step = np.hypot(*np.diff(survey.true_pose[:, :2], axis=0).T)
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
     block = np.floor(np.concatenate([[0.0], np.cumsum(step)]) / window).astype(np.int64)
     scores = []
     for b in np.unique(block):

@@ -28,6 +28,7 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.eval.map_check import window_scores
 from tangraph.graph import terrain_factors
 from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
@@ -406,6 +407,10 @@ def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
 #: (two-sided 0.999 of a normal): where the map or the sounding is wrong.
 SOUNDING_GATE = 3.29
 _GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
+#: Windows of track (m) whose mean residuals test the soundings' variances after a solve, as
+#: check lines test a map (:func:`tangraph.eval.map_check.window_scores`)
+WINDOW = 50.0
+_FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show still moves
 
 
 def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
@@ -436,26 +441,26 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
     used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
-    iterations = 0
-    for _ in range(_GATE_ROUNDS):
-        if not used.any():  # nothing ties c and the tide to the poses (and METIS fails on that)
-            log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution "
-                        "is kept", SOUNDING_GATE)
-            return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
-                                    "tide": float(terrain.tide)}
-        # METIS on the linear system with the terrain factors (their links to c and the tide)
-        linear = factors.linearize(values)
-        for factor in terrain_factors.linear_factors(terrain, nav.bathymetry, *state, used):
-            linear.push_back(factor)
-        ordering = _shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
-        values, n = _terrain_gauss_newton(factors, values, terrain, nav.bathymetry, used, ordering,
-                                          config.max_iterations, solution.pose)
+    if not used.any():  # nothing ties c and the tide to the poses (and METIS fails on that)
+        log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution "
+                    "is kept", SOUNDING_GATE)
+        return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
+                                "tide": float(terrain.tide), "variance_factor": 1.0}
+    base, factor, iterations = terrain, 1.0, 0
+    for _ in range(_FACTOR_ROUNDS):
+        values, used, ordering, n = _gated_solve(factors, values, terrain, nav.bathymetry, used, config,
+                                                 solution.pose)
         iterations += n
         state = _unpack(values, terrain, solution.pose)
-        regated = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
-        if np.array_equal(regated, used):
+        world = to_world(state[0], state[1], nav.origin) if graph.calibrated else state[0]
+        scores = window_scores(nav.survey, nav.bathymetry, nav.model, window=WINDOW, poses=world, used=used)
+        found = max(1.0, float(np.sqrt(np.mean(scores**2)))) if scores.size else 1.0
+        if abs(found - factor) <= 0.05 * factor:
             break
-        used = regated
+        factor = found
+        terrain = dataclasses.replace(base, variance=base.variance * factor**2)
+        log.info("terrain solve: the soundings' windows scatter %.2f times what the model says: "
+                 "their variances grown by that", factor)
     solved = _time.perf_counter()
     pose, calibration, tide = state
     keys = np.asarray(graph.keys, np.int64)
@@ -467,9 +472,32 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     error = factors.error(values) + terrain_factors.terrain_cost(terrain, nav.bathymetry, *state, used)
     timings = {"solve": solved - started, "marginals": _time.perf_counter() - solved}
     used_info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
-                 "tide": float(tide)}
+                 "tide": float(tide), "variance_factor": factor}
     return SmootherSolution(keys, pose, cov, calibration if graph.calibrated else np.zeros(2), calib_cov,
                             iterations, float(error), timings), used_info
+
+
+def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference):
+    """Gauss-Newton with the soundings ``used``, re-gated at each converged solve until the gate
+    keeps the same soundings (at most ``_GATE_ROUNDS``). Returns the values, the soundings used,
+    the last ordering and the iterations."""
+    iterations = 0
+    for _ in range(_GATE_ROUNDS):
+        # METIS on the linear system with the terrain factors (their links to c and the tide)
+        linear = factors.linearize(values)
+        state = _unpack(values, terrain, reference)
+        for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
+            linear.push_back(factor)
+        ordering = _shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
+        values, n = _terrain_gauss_newton(factors, values, terrain, bathymetry, used, ordering,
+                                          config.max_iterations, reference)
+        iterations += n
+        state = _unpack(values, terrain, reference)
+        regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE)
+        if np.array_equal(regated, used) or not regated.any():
+            break
+        used = regated
+    return values, used, ordering, iterations
 
 
 def _ping_graph(nav: GraphNavigator) -> PoseGraph:
