@@ -427,7 +427,9 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
                                            nav.origin, graph.calibrated)
     factors = graph.with_fixes([], start=start_kept).factor_graph()
-    world = dense_track(nav.survey, nav.white, solution, nav.origin)[0]
+    world, world_cov = dense_track(nav.survey, nav.white, solution, nav.origin)
+    # the soundings are judged as innovations of the fixes' solution, whose uncertainty this is
+    prior = np.where(np.isfinite(world_cov[:, :2, :2]), world_cov[:, :2, :2], 0.0)
     initial = _frame_poses(world, solution.calibration, nav.origin) if graph.calibrated else world
     solution = dataclasses.replace(solution, keys=np.asarray(graph.keys), pose=initial)
     values = graph.values(solution.pose, solution.calibration)
@@ -440,7 +442,7 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
         start = float(np.median(finite)) if finite.size else terrain.tide
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
-    used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE)
+    used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE, prior)
     if not used.any():  # nothing ties c and the tide to the poses (and METIS fails on that)
         log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution "
                     "is kept", SOUNDING_GATE)
@@ -449,7 +451,7 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     base, factor, iterations = terrain, 1.0, 0
     for _ in range(_FACTOR_ROUNDS):
         values, used, ordering, n = _gated_solve(factors, values, terrain, nav.bathymetry, used, config,
-                                                 solution.pose)
+                                                 solution.pose, prior)
         iterations += n
         state = _unpack(values, terrain, solution.pose)
         world = to_world(state[0], state[1], nav.origin) if graph.calibrated else state[0]
@@ -477,10 +479,10 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
                             iterations, float(error), timings), used_info
 
 
-def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference):
-    """Gauss-Newton with the soundings ``used``, re-gated at each converged solve until the gate
-    keeps the same soundings (at most ``_GATE_ROUNDS``). Returns the values, the soundings used,
-    the last ordering and the iterations."""
+def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference, prior):
+    """Gauss-Newton with the soundings ``used``, re-gated at each converged solve (as innovations
+    against ``prior``) until the gate keeps the same soundings (at most ``_GATE_ROUNDS``).
+    Returns the values, the soundings used, the last ordering and the iterations."""
     iterations = 0
     for _ in range(_GATE_ROUNDS):
         # METIS on the linear system with the terrain factors (their links to c and the tide)
@@ -493,7 +495,7 @@ def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig
                                           config.max_iterations, reference)
         iterations += n
         state = _unpack(values, terrain, reference)
-        regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE)
+        regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE, prior)
         if np.array_equal(regated, used) or not regated.any():
             break
         used = regated

@@ -16,8 +16,9 @@ against numerical derivatives in the tests).
 Each sounding's variance is the terrain model's (:func:`~tangraph.sensors.sounding_variances`:
 the noise plus the map error it shares with the survey's soundings, the row-sum bound), plus what
 the white DR noise between the key and the ping moves its depth by. Soundings that fall on no
-map data are left out, as are those beyond a gate on their standardised residual, re-judged at
-each converged solve (:func:`gate`).
+map data are left out, as are those beyond a gate on their standardised residual and the pings
+whose soundings together fit the map worse than noise allows, re-judged at each converged solve
+(:func:`gate`).
 
 The normal equations of a key's soundings are summed into one small information block on the
 key pose, the calibration and the tide. A :class:`gtsam.JacobianFactor` of at most 6 rows
@@ -31,6 +32,7 @@ import dataclasses
 
 import gtsam
 import numpy as np
+from scipy import stats
 
 from tangraph.graph.calibration import CALIBRATION, TIDE
 from tangraph.graph.keyposes import increments
@@ -40,6 +42,7 @@ from tangraph.sensors import rotation_matrix, sounding_variances
 __all__ = ["PingTerrain", "gate", "linear_factors", "ping_terrain", "sounding_jacobians", "terrain_cost"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
+PING_PROBABILITY = 0.999  #: a ping's soundings together beyond this chi-square quantile: left out
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -95,6 +98,11 @@ def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose
     key pose (GTSAM's tangent: x, y in the key's frame, then the heading), ``c`` and the tide
     (:attr:`PingTerrain.n_parameters` columns), and the variance the white DR noise between
     the key and the ping adds to each ``(K, B)``. NaN where there is no sounding or no map."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide)[:3]
+
+
+def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float):
+    """:func:`sounding_jacobians` and the map's gradient ``(K, B, 2)`` under every footprint."""
     key_pose = np.asarray(key_pose, float)[terrain.key_index]
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
@@ -130,16 +138,43 @@ def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose
                            axis=-1)
     g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
     dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
-    return residual, jac, dr_variance
+    return residual, jac, dr_variance, grad
 
 
 def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-         threshold: float) -> np.ndarray:  # fmt: skip
-    """The soundings used: a sounding, with map data under it, whose standardised residual is
-    within ``threshold`` at the given solution."""
-    residual, _, dr_variance = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
-    z = residual / np.sqrt(terrain.variance + dr_variance)
-    return np.isfinite(z) & (np.abs(z) <= threshold)
+         threshold: float, prior=None) -> np.ndarray:  # fmt: skip
+    """The soundings used at the given solution, judged as innovations against ``prior (K, 2,
+    2)``, the covariance of each ping's world position the solution is uncertain by (None: 0):
+
+    - a sounding with map data under it whose residual is within ``threshold`` of its std
+      (its variance plus ``g^T P g``, ``g`` the map's gradient under it);
+    - of a ping whose soundings are consistent together: ``r^T (V + G P G^T)^-1 r`` over all
+      its soundings with map data, each residual cut at the gate, within the chi-square
+      quantile ``PING_PROBABILITY`` of their number. A ping whose footprints are misplaced as a
+      whole (a position or attitude fault) fits the map nowhere near, though some of its
+      soundings may each pass: the ping test leaves it out.
+    """
+    residual, _, dr_variance, grad = _evaluate(terrain, bathymetry, key_pose, calibration, tide)
+    variance = terrain.variance + dr_variance
+    cov = np.zeros((residual.shape[0], 2, 2)) if prior is None else np.asarray(prior, float)
+    spread = np.einsum("kbi,kij,kbj->kb", grad, cov, grad)
+    limit = threshold * np.sqrt(variance + spread)
+    finite = np.isfinite(residual) & np.isfinite(spread)
+    ok = finite & (np.abs(residual) <= limit)
+    # the ping test weighs all its soundings, each at most at the gate (one spike cannot fail a
+    # good ping; many soundings beyond the gate fail it)
+    w = np.where(finite, 1.0 / variance, 0.0)
+    r = np.where(finite, np.clip(residual, -limit, limit), 0.0)
+    g = np.where(finite[..., None], grad, 0.0)
+    stat = np.sum(w * r * r, axis=1)
+    if prior is not None:  # Woodbury: less b^T P (I + C P)^-1 b, what a shift within P explains
+        b = np.einsum("kb,kbi,kb->ki", w, g, r)
+        c = np.einsum("kb,kbi,kbj->kij", w, g, g)
+        y = np.linalg.solve(np.eye(2) + c @ cov, b[..., None])[..., 0]
+        stat = stat - np.einsum("ki,kij,kj->k", b, cov, y)
+    count = finite.sum(axis=1)
+    consistent = stat <= stats.chi2.ppf(PING_PROBABILITY, np.maximum(count, 1))
+    return ok & consistent[:, None]
 
 
 def terrain_cost(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,

@@ -208,3 +208,29 @@ def test_no_sounding_on_the_map_keeps_the_fixes_solution(caplog):
     assert with_soundings.meta["soundings"]["soundings_used"] == 0
     assert "no sounding fits the map" in caplog.text
     np.testing.assert_array_equal(with_soundings.pose, with_fixes.pose)
+
+
+def test_the_gate_leaves_out_misplaced_pings_not_an_uncertain_track():
+    # pings 20-29 measured 30 m further east than their footprints (a position fault): the
+    # ping test leaves them out at the true track; the same soundings with the whole track
+    # 6 m off are kept when the track's prior says it may be that far off, and not otherwise
+    from tangraph.graph.terrain_factors import gate
+
+    bathymetry = smooth_map(wavy=1.0)
+    _, survey = lawnmower(start_error=(0.0, 0.0))
+    north, east = survey.footprints(survey.true_pose)
+    depth = bathymetry.depth_at(north, east)
+    depth[20:30] = bathymetry.depth_at(north[20:30], east[20:30] + 30.0)
+    survey = survey.replace(beam_depth=depth + 0.05 * np.random.default_rng(3).standard_normal(depth.shape))
+    model = NavigationModel(sounding_std=0.1, tide_std=0.0)
+    keys = np.arange(survey.n_pings)
+    terrain = terrain_of(survey, bathymetry, keys, calibrated=False, model=model)
+    tight = np.tile(np.eye(2), (survey.n_pings, 1, 1))
+    used = gate(terrain, bathymetry, survey.true_pose, np.zeros(2), 0.0, 3.29, tight)
+    assert not used[20:30].any()
+    assert used[np.r_[0:20, 30:survey.n_pings]].mean() > 0.99
+    off = survey.true_pose + np.array([6.0, 0.0, 0.0])
+    clean = survey.replace(beam_depth=bathymetry.depth_at(north, east))
+    terrain = terrain_of(clean, bathymetry, keys, calibrated=False, model=model)
+    assert gate(terrain, bathymetry, off, np.zeros(2), 0.0, 3.29, 100.0 * tight).mean() > 0.95
+    assert gate(terrain, bathymetry, off, np.zeros(2), 0.0, 3.29, 0.01 * tight).mean() < 0.5
