@@ -181,7 +181,7 @@ class GraphConfig:
         surveys whose map errs as it states, ``"soundings"`` is at the Cramér-Rao bound; it
         trusts the stated map error far more than the fixes do, so on a recorded survey use it
         only with a map whose error check lines confirm (``tangraph maps check``): on Lake
-        Caputh's map, whose error is heavy-tailed, its track ANEES was 7-520 (fixes: 0-6).
+        Caputh's map, whose error is heavy-tailed, its track ANEES was 3-160 (fixes: 0-6).
 
     Examples
     --------
