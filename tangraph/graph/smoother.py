@@ -8,9 +8,11 @@ key pose comes from one multifrontal elimination of the linearised graph, also o
 (``gtsam.Marginals`` cannot be given an ordering from Python and crashes on such chains).
 
 With ``GraphConfig.smoother_terrain = "soundings"`` a last solve replaces the fixes by every
-sounding, each a terrain factor on the key pose before its ping
-(:mod:`tangraph.graph.terrain_factors`): Gauss-Newton from the fixes' solution, with a tide
-variable, re-linearised at every iteration, the soundings re-gated at each converged solve.
+sounding, each a terrain factor on a key pose at its ping (:mod:`tangraph.graph.terrain_factors`):
+Gauss-Newton from the fixes' solution, with a tide variable, re-linearised at every iteration;
+the soundings judged as innovations of the fixes' solution, one by one and ping by ping, again
+after each converged solve; their variances grown by the scatter of the solution's own windows
+(an a posteriori variance factor) while it moves.
 
 The ping-rate track is recovered from the key poses and the DR: a ping between keys ``a`` and
 ``b`` is predicted forward from ``a`` and backward from ``b`` by the DR increments, and the two
