@@ -478,6 +478,9 @@ def track_report(track: Track, survey: Survey) -> dict:
         report["fixes"] = {"accepted": int(meta.get("n_fixes_accepted", 0)),
                            "rejected": int(meta.get("n_fixes_rejected", 0)),
                            "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}
+    if "soundings" in meta:  # the smoother on every sounding
+        report["soundings"] = {k: float(v) if k in ("tide", "variance_factor") else int(v)
+                               for k, v in meta["soundings"].items()}
     if "n_divergences" in meta:
         report["divergences"] = int(meta["n_divergences"])
     if "lost_steps" in meta:
@@ -510,6 +513,11 @@ def track_summary(track: Track, survey: Survey) -> str:
         detail = ", ".join(f"{n} {k}" for k, n in r["fixes"]["by_outcome"].items())
         lines.append(f"fixes        {r['fixes']['accepted']} accepted, {r['fixes']['rejected']} "
                      f"rejected ({detail})")
+    if "soundings" in r:
+        snd = r["soundings"]
+        lines.append(f"soundings    {snd['soundings_used']} of {snd['soundings']} weighed (the others left "
+                     f"out by the gate), tide {snd['tide']:+.2f} m, variances x "
+                     f"{snd['variance_factor']:.2f}^2")
     if "divergences" in r:
         lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")
     if r.get("lost", {}).get("pings"):

@@ -192,6 +192,10 @@ def test_every_sounding_recovers_a_start_error_on_textured_terrain():
     nees = np.einsum("ki,kij,kj->k", error, np.linalg.inv(track.covariance[:, :2, :2]), error)
     assert np.mean(nees) < 6.0
     assert track.meta["soundings"]["tide"] == pytest.approx(0.3, abs=0.02)
+    from tangraph.navigation import track_summary
+
+    used, total = track.meta["soundings"]["soundings_used"], np.isfinite(survey.beam_depth).sum()
+    assert f"soundings    {used} of {total} weighed" in track_summary(track, survey)
 
 
 def test_no_sounding_on_the_map_keeps_the_fixes_solution(caplog):
