@@ -242,7 +242,7 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
     check = check_map_error(
         surveys, cell=args.cell, statistic=args.statistic, fill=args.fill, window=args.window,
         model=NavigationModel(sounding_std=args.sounding_std), names=[str(path) for path in args.inputs],
-        progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True),
+        progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True), lines=args.lines,
     )
     print("survey,windows,rms,robust,share_beyond_3")
     for row in check.per_survey():
@@ -647,7 +647,11 @@ def build_parser() -> argparse.ArgumentParser:
         "sounding noise give it. Prints, per survey and for all, the RMS of these scores (1 when the "
         "map errs as it says), a robust scale (the bulk of the windows) and the share beyond 3.",
     )
-    p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY", help="two or more survey files (.nc)")
+    p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY",
+                   help="two or more survey files (.nc), or one with --lines")
+    p.add_argument("--lines", action="store_true",
+                   help="split every survey into its lines (straight stretches of at least a window) and "
+                   "hold out each line against the map of the others: a map gridded from one survey")
     p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
     p.add_argument("--statistic", choices=["mean", "median"], default="median",
                    help="the statistic that becomes the map's depth (default: median)")

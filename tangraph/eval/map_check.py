@@ -34,6 +34,7 @@ Nothing here touches files.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Sequence
 
 import numpy as np
@@ -44,10 +45,11 @@ from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.sensors.terrain import MapError, map_error, shared_among
 from tangraph.survey import Survey
 
-__all__ = ["MapCheck", "calibrate_error", "check_map_error", "window_scores"]
+__all__ = ["MapCheck", "calibrate_error", "check_map_error", "survey_lines", "window_scores"]
 
 MIN_SOUNDINGS = 10  # a window with fewer soundings on the map is not scored
 MIN_WINDOWS = 10  # a calibration rests on at least this many windows
+TURN = np.deg2rad(30.0)  # a line ends where the course has turned this far from its start
 
 
 @dataclasses.dataclass(frozen=True)
@@ -138,16 +140,57 @@ def window_scores(
     return np.asarray(scores)
 
 
+def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
+    """The lines of a survey (:meth:`Survey.pings` each): stretches of its reference track
+    whose course stays within ``TURN`` of the course it started on, at least ``min_length`` m
+    long (turns and short legs are left out), numbered in ``meta["line"]``.
+
+    Raises
+    ------
+    TangraphError
+        A survey without a reference track.
+    """
+    from tangraph.survey import SurveyError
+
+    if survey.true_pose is None:
+        raise TangraphError(f"survey {survey.meta.get('name', '')!r}: no reference track to split into lines")
+    step = np.diff(survey.true_pose[:, :2], axis=0)
+    length = np.hypot(*step.T)
+    course = np.arctan2(step[:, 1], step[:, 0])
+    starts, reference = [0], None
+    for i in range(course.size):
+        if length[i] == 0:
+            continue
+        if reference is not None and abs(np.angle(np.exp(1j * (course[i] - reference)))) > TURN:
+            starts.append(i + 1)
+            reference = None
+        if reference is None:
+            reference = course[i]
+    bounds = [*starts, survey.n_pings]
+    lines = []
+    for a, b in itertools.pairwise(bounds):
+        if b - a < 2 or np.sum(length[a:b - 1]) < min_length:
+            continue
+        try:
+            part = survey.pings(a, b)
+        except SurveyError:  # a stretch without soundings
+            continue
+        lines.append(part.replace(meta={**part.meta, "line": len(lines)}))
+    return lines
+
+
 def check_map_error(
     surveys: Sequence[Survey], *, cell: float, statistic: str = "median", fill: int = 0,
     model: NavigationModel | None = None, window: float = 50.0, names: Sequence[str] | None = None,
-    progress=None,
+    progress=None, lines: bool = False,
 ) -> MapCheck:
     """Hold out each survey in turn, grid the others (``cell``, ``statistic``, ``fill`` as
     :func:`~tangraph.maps.gridding.grid_surveys`) and score the held-out soundings against that
     map in windows of ``window`` m (:func:`window_scores`; the module docstring says what the
     figures mean). ``model`` gives the sounding std (default: a :class:`NavigationModel`'s);
     the map's error is the gridded map's own. ``progress(i, n)`` is called after each survey.
+    With ``lines`` each survey is first split into its lines (:func:`survey_lines`), each held
+    out in turn against the map of all the others: the check of a map gridded from one survey.
 
     Raises
     ------
@@ -158,15 +201,23 @@ def check_map_error(
     from tangraph.navigation import in_map_frame
 
     surveys = list(surveys)
-    if len(surveys) < 2:
-        raise TangraphError("check_map_error: needs at least two surveys (one held out, the others "
-                            f"gridded), got {len(surveys)}")
     if not (np.isfinite(window) and window > 0):
         raise TangraphError(f"check_map_error: window must be > 0 m, got {window!r}")
-    names = tuple(names) if names is not None else tuple(
-        str(s.meta.get("name") or f"survey {i}") for i, s in enumerate(surveys))
-    if len(names) != len(surveys):
+    if names is not None and len(names) != len(surveys):
         raise TangraphError(f"check_map_error: {len(names)} names for {len(surveys)} surveys")
+    names = list(names) if names is not None else [
+        str(s.meta.get("name") or f"survey {i}") for i, s in enumerate(surveys)]
+    if lines:
+        split = [(f"{name} line {line.meta['line']}", line)
+                 for name, survey in zip(names, surveys, strict=True)
+                 for line in survey_lines(survey, min_length=window)]
+        names, surveys = [name for name, _ in split], [line for _, line in split]
+    if len(surveys) < 2:
+        what = "lines of at least one window" if lines else "surveys"
+        hint = "" if lines else " (one survey: split it into its lines, lines=True, CLI --lines)"
+        raise TangraphError(f"check_map_error: needs at least two {what} (one held out, the others "
+                            f"gridded), got {len(surveys)}{hint}")
+    names = tuple(names)
     model = NavigationModel() if model is None else model
     scores, owner = [], []
     for i, held in enumerate(surveys):

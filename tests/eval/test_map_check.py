@@ -120,3 +120,23 @@ def test_calibrate_error_scales_the_map_error_by_the_check():
     np.testing.assert_array_equal(calm.depth.depth_std, grid.depth.depth_std)
     with pytest.raises(TangraphError, match="scored 3 windows"):
         calibrate_error(grid, MapCheck(scores[:3], np.zeros(3, int), ("a",), 50.0))
+
+
+def test_one_survey_is_checked_line_by_line():
+    # one survey of 20 lines: split at its turns (here jumps between lines), each line held out
+    # against the map of the other 19
+    from tangraph.eval.map_check import survey_lines
+
+    rng = np.random.default_rng(6)
+    survey = line_survey(seafloor, rng, lines=np.arange(100.0, 140.0, 2.0), name="one")
+    lines = survey_lines(survey)
+    assert len(lines) == 20
+    assert [line.meta["line"] for line in lines] == list(range(20))
+    assert all(np.ptp(line.true_pose[:, 0]) == 0 for line in lines)  # each one line of constant north
+    check = check_map_error([survey], cell=5.0, model=NavigationModel(sounding_std=SOUNDING_STD),
+                            window=100.0, lines=True)
+    assert check.names[0] == "one line 0" and len(check.names) == 20
+    assert check.windows > 200
+    assert check.robust < 3.0
+    with pytest.raises(TangraphError, match="at least two lines"):
+        check_map_error([survey.pings(0, 100)], cell=5.0, lines=True)

@@ -144,6 +144,11 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     # the same figures from `maps check`
     assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
     assert f"RMS {scale:.2f}" in capsys.readouterr().out
+    # one survey: its lines against each other (--lines), or a one-line error naming the option
+    assert main(["maps", "check", paths[0], "--cell", "5", "--lines"]) == 0
+    assert f"{paths[0]} line 19," in capsys.readouterr().out
+    assert main(["maps", "check", paths[0], "--cell", "5"]) == 2
+    assert "CLI --lines" in capsys.readouterr().err
     xyz = tmp_path / "s.xyz"
     np.savetxt(xyz, np.column_stack([rng.uniform(0, 50, 100), rng.uniform(0, 50, 100), np.full(100, 30.0)]))
     assert main(["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5", "--check-lines",
