@@ -204,12 +204,12 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
                                     "not with --use-dr")
             check = check_map_error(loaded, cell=args.cell, statistic=args.statistic, fill=args.fill,
                                     window=args.window, model=NavigationModel(sounding_std=args.sounding_std),
-                                    names=[str(path) for path in surveys])
+                                    names=[str(path) for path in surveys], lines=args.lines)
             grid = calibrate_error(grid, check)
             print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
     else:
-        if args.check_lines:
-            raise TangraphError("maps grid: --check-lines needs two or more survey files (.nc)")
+        if args.check_lines or args.lines:
+            raise TangraphError("maps grid: --check-lines and --lines need survey files (.nc)")
         if args.sign is None:
             raise TangraphError("maps grid: x y z text input needs --sign (depth or elevation)")
         if args.use_dr:
@@ -622,6 +622,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--window", type=WINDOW, default=50.0,
                    help="--check-lines: window of track (m; default 50)")
+    p.add_argument("--lines", action="store_true",
+                   help="--check-lines: hold out each line of the surveys, not each survey (a map of one "
+                   "survey)")
     p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
                    help="--check-lines: the soundings' own noise std (m; default 0.1)")
     p.add_argument(

@@ -153,4 +153,9 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     np.savetxt(xyz, np.column_stack([rng.uniform(0, 50, 100), rng.uniform(0, 50, 100), np.full(100, 30.0)]))
     assert main(["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5", "--check-lines",
                  "-o", str(tmp_path / "x.nc")]) == 2
-    assert "--check-lines needs two or more survey files" in capsys.readouterr().err
+    assert "--check-lines and --lines need survey files" in capsys.readouterr().err
+    # one survey whose lines, 5 m apart, do not overlap in the map's cells: nothing to check with
+    assert main(["maps", "grid", paths[0], "--cell", "5", "--check-lines", "--lines",
+                 "-o", str(tmp_path / "one.nc")]) == 2
+    assert "the check lines scored 0 windows" in capsys.readouterr().err
+    assert not (tmp_path / "one.nc").exists()
