@@ -553,6 +553,30 @@ def cmd_demo(args: argparse.Namespace) -> None:
     print(f"wrote {result.report} and {len(result.figures)} figures in {result.seconds:.0f} s")
 
 
+def _gridding_options(p: argparse.ArgumentParser) -> None:
+    """``--cell``, ``--statistic`` and ``--fill``: how soundings are gridded into a map."""
+    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
+    p.add_argument(
+        "--statistic", choices=["mean", "median"], default="median",
+        help="the statistic that becomes the map's depth (default: median, robust to outliers)",
+    )
+    p.add_argument(
+        "--fill", type=FILL, default=0, metavar="CELLS",
+        help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
+        "farther cells stay no-data (default: 0, no fill)",
+    )
+
+
+def _check_line_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """``--lines``, ``--window`` and ``--sounding-std``: how check lines are scored."""
+    p.add_argument("--lines", action="store_true",
+                   help=f"{prefix}split every survey into its lines (straight stretches of at least a "
+                   "window) and hold out each line against the map of the others: a map of one survey")
+    p.add_argument("--window", type=WINDOW, default=50.0, help=f"{prefix}window of track (m; default 50)")
+    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
+                   help=f"{prefix}the soundings' own noise std (m; default 0.1)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser (also used to document the CLI)."""
     from tangraph import __version__
@@ -601,16 +625,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
                    help="survey files (.nc), or one x/east y/north z text file")
-    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
-    p.add_argument(
-        "--statistic", choices=["mean", "median"], default="median",
-        help="the statistic that becomes the map's depth (default: median, robust to outliers)",
-    )
-    p.add_argument(
-        "--fill", type=FILL, default=0, metavar="CELLS",
-        help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
-        "farther cells stay no-data (default: 0, no fill)",
-    )
+    _gridding_options(p)
     p.add_argument(
         "--use-dr", action="store_true",
         help="place survey soundings at the dead reckoning (for surveys without a reference track)",
@@ -620,13 +635,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="survey files only: hold out each survey, grid the others, and scale depth_std by the RMS "
         "of the held-out windows' standardised mean residuals when above 1 (see 'maps check')",
     )
-    p.add_argument("--window", type=WINDOW, default=50.0,
-                   help="--check-lines: window of track (m; default 50)")
-    p.add_argument("--lines", action="store_true",
-                   help="--check-lines: hold out each line of the surveys, not each survey (a map of one "
-                   "survey)")
-    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
-                   help="--check-lines: the soundings' own noise std (m; default 0.1)")
+    _check_line_options(p, "--check-lines: ")
     p.add_argument(
         "--sign",
         choices=["depth", "elevation"],
@@ -652,17 +661,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY",
                    help="two or more survey files (.nc), or one with --lines")
-    p.add_argument("--lines", action="store_true",
-                   help="split every survey into its lines (straight stretches of at least a window) and "
-                   "hold out each line against the map of the others: a map gridded from one survey")
-    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
-    p.add_argument("--statistic", choices=["mean", "median"], default="median",
-                   help="the statistic that becomes the map's depth (default: median)")
-    p.add_argument("--fill", type=FILL, default=0, metavar="CELLS",
-                   help="fill empty cells from cells with data within CELLS cells (default: 0)")
-    p.add_argument("--window", type=WINDOW, default=50.0, help="window of track (m; default 50)")
-    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
-                   help="the soundings' own noise std (m; default 0.1)")
+    _gridding_options(p)
+    _check_line_options(p)
     p.set_defaults(func=cmd_maps_check)
 
     p = sub.add_parser("simulate", help="simulate a survey from a scenario")

@@ -148,17 +148,27 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
                             float(factors.error(result)), timings)
 
 
-def _gauss_newton(factors, values, ordering, max_iterations: int, tolerance: float = 1e-6):
+def _gauss_newton(factors, values, ordering, max_iterations: int, tolerance: float = 1e-6, *,
+                  extra_cost=None, extra_factors=None):
     """Gauss-Newton with step halving, driven from here: GTSAM's optimizer objects take about ten
     times longer per iteration than linearise + solve + retract on a graph with Python factors
-    (measured: 2.8 s against 0.25 s on a 20 000-pose chain)."""
-    error = factors.error(values)
+    (measured: 2.8 s against 0.25 s on a 20 000-pose chain). ``extra_cost(values)`` and
+    ``extra_factors(values)`` (linear factors, re-linearised at every iteration) add terms that
+    are not in ``factors`` (the terrain solve's soundings)."""
+
+    def cost(v) -> float:
+        return factors.error(v) + (extra_cost(v) if extra_cost is not None else 0.0)
+
+    error = cost(values)
     for iteration in range(1, max_iterations + 1):
-        delta = factors.linearize(values).optimize(ordering)
+        linear = factors.linearize(values)
+        for factor in extra_factors(values) if extra_factors is not None else ():
+            linear.push_back(factor)
+        delta = linear.optimize(ordering)
         step = 1.0
         while True:
             trial = values.retract(delta if step == 1.0 else delta.scale(step))
-            new = factors.error(trial)
+            new = cost(trial)
             if new <= error or step < 1e-3:
                 break
             step *= 0.5
@@ -438,8 +448,8 @@ def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolu
     if terrain.estimates_tide:  # started at the soundings' median residual, gated around it
         factors.add(gtsam.PriorFactorVector(TIDE, np.array([terrain.tide]),
                                             gtsam.noiseModel.Isotropic.Sigma(1, terrain.tide_std)))
-        residual = terrain_factors.sounding_jacobians(terrain, nav.bathymetry, solution.pose,
-                                                      solution.calibration, 0.0)[0]
+        residual = terrain_factors.terrain_residuals(terrain, nav.bathymetry, solution.pose,
+                                                     solution.calibration, 0.0)
         finite = residual[np.isfinite(residual)]
         start = float(np.median(finite)) if finite.size else terrain.tide
         values.insert(TIDE, np.array([start]))
@@ -493,8 +503,8 @@ def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig
         for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
             linear.push_back(factor)
         ordering = _shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
-        values, n = _terrain_gauss_newton(factors, values, terrain, bathymetry, used, ordering,
-                                          config.max_iterations, reference)
+        values, n = _gauss_newton(factors, values, ordering, config.max_iterations,
+                                  **_terrain_terms(terrain, bathymetry, used, reference))
         iterations += n
         state = _unpack(values, terrain, reference)
         regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE, prior)
@@ -502,6 +512,18 @@ def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig
             break
         used = regated
     return values, used, ordering, iterations
+
+
+def _terrain_terms(terrain, bathymetry, used, reference) -> dict:
+    """The soundings ``used`` as :func:`_gauss_newton`'s extra cost and linear factors."""
+
+    def cost(values) -> float:
+        return terrain_factors.terrain_cost(terrain, bathymetry, *_unpack(values, terrain, reference), used)
+
+    def linear(values) -> list:
+        return terrain_factors.linear_factors(terrain, bathymetry, *_unpack(values, terrain, reference), used)
+
+    return {"extra_cost": cost, "extra_factors": linear}
 
 
 def _ping_graph(nav: GraphNavigator) -> PoseGraph:
@@ -531,38 +553,6 @@ def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:
     calibration = np.asarray(values.atVector(CALIBRATION), float) if terrain.calibrated else np.zeros(2)
     tide = float(values.atVector(TIDE)[0]) if terrain.estimates_tide else terrain.tide
     return pose, calibration, tide
-
-
-def _terrain_gauss_newton(factors, values, terrain, bathymetry, used, ordering, max_iterations: int,
-                          reference, tolerance: float = 1e-6):  # fmt: skip
-    """:func:`_gauss_newton` with the terrain factors of the soundings ``used`` re-linearised at
-    every iteration."""
-
-    def cost(v) -> float:
-        state = _unpack(v, terrain, reference)
-        return factors.error(v) + terrain_factors.terrain_cost(terrain, bathymetry, *state, used)
-
-    error = cost(values)
-    for iteration in range(1, max_iterations + 1):
-        linear = factors.linearize(values)
-        state = _unpack(values, terrain, reference)
-        for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
-            linear.push_back(factor)
-        delta = linear.optimize(ordering)
-        step = 1.0
-        while True:
-            trial = values.retract(delta if step == 1.0 else delta.scale(step))
-            new = cost(trial)
-            if new <= error or step < 1e-3:
-                break
-            step *= 0.5
-        if new > error:
-            return values, iteration
-        converged = error - new <= tolerance * max(error, 1e-12)
-        values, error = trial, new
-        if converged:
-            return values, iteration
-    return values, max_iterations
 
 
 def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,

@@ -39,7 +39,8 @@ from tangraph.graph.keyposes import increments
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import rotation_matrix, sounding_variances
 
-__all__ = ["PingTerrain", "gate", "linear_factors", "ping_terrain", "sounding_jacobians", "terrain_cost"]
+__all__ = ["PingTerrain", "gate", "linear_factors", "ping_terrain", "sounding_jacobians", "terrain_cost",
+           "terrain_residuals"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 PING_PROBABILITY = 0.999  #: a ping's soundings together beyond this chi-square quantile: left out
@@ -101,8 +102,16 @@ def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose
     return _evaluate(terrain, bathymetry, key_pose, calibration, tide)[:3]
 
 
-def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float):
-    """:func:`sounding_jacobians` and the map's gradient ``(K, B, 2)`` under every footprint."""
+def terrain_residuals(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
+                      tide: float) -> np.ndarray:  # fmt: skip
+    """The residuals ``r = z - t - h(f) (K, B)`` alone (NaN where no sounding or no map)."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)[0]
+
+
+def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float, *,
+              jacobian: bool = True):
+    """:func:`sounding_jacobians` and the map's gradient ``(K, B, 2)`` under every footprint; the
+    Jacobians None unless ``jacobian`` (the cost and the gate need none)."""
     key_pose = np.asarray(key_pose, float)[terrain.key_index]
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
@@ -120,6 +129,13 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     turn = np.einsum("ij,kbj->kbi", _J, terrain.offsets)
     d_heading = np.einsum("kij,kbj->kbi", rot_w, turn)  # d f / d psi_w (K, B, 2)
     d_xy = np.einsum("ij,kjl->kil", scale, rot_a)  # d f / d (x, y) of the key, (K, 2, 2)
+    # the white DR noise from the key to the ping: d f / d increment = [scale R_a, d_heading]
+    d_inc = np.concatenate([np.broadcast_to(d_xy[:, None], (*residual.shape, 2, 2)), d_heading[..., None]],
+                           axis=-1)
+    g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
+    dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
+    if not jacobian:
+        return residual, None, dr_variance, grad
     d_theta = np.einsum("kil,kl->ki", d_xy, delta[:, :2] @ _J.T)  # d f / d heading of the key, less turn
     jac = np.zeros((*residual.shape, terrain.n_parameters))
     jac[..., 0:2] = -np.einsum("kbi,kij->kbj", grad, d_xy)
@@ -133,11 +149,6 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
         column += 2
     if terrain.estimates_tide:
         jac[..., column] = -1.0
-    # the white DR noise from the key to the ping: d f / d increment = [scale R_a, d_heading]
-    d_inc = np.concatenate([np.broadcast_to(d_xy[:, None], (*residual.shape, 2, 2)), d_heading[..., None]],
-                           axis=-1)
-    g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
-    dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
     return residual, jac, dr_variance, grad
 
 
@@ -154,7 +165,8 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
       whole (a position or attitude fault) fits the map nowhere near, though some of its
       soundings may each pass: the ping test leaves it out.
     """
-    residual, _, dr_variance, grad = _evaluate(terrain, bathymetry, key_pose, calibration, tide)
+    residual, _, dr_variance, grad = _evaluate(terrain, bathymetry, key_pose, calibration, tide,
+                                               jacobian=False)
     variance = terrain.variance + dr_variance
     cov = np.zeros((residual.shape[0], 2, 2)) if prior is None else np.asarray(prior, float)
     spread = np.einsum("kbi,kij,kbj->kb", grad, cov, grad)
@@ -181,7 +193,7 @@ def terrain_cost(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, cali
                  used: np.ndarray) -> float:  # fmt: skip
     """``1/2 sum r^2 / v`` over the soundings ``used`` (the least-squares cost the factors add;
     a sounding that has lost its map since it was gated counts as at its gate)."""
-    residual, _, dr_variance = sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide)
+    residual, _, dr_variance, _ = _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)
     z2 = residual[used] ** 2 / (terrain.variance + dr_variance)[used]
     return 0.5 * float(np.sum(np.where(np.isfinite(z2), z2, np.nanmax(z2, initial=0.0))))
 
