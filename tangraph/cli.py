@@ -414,7 +414,8 @@ def _graph_config(args: argparse.Namespace):
 def _check_outputs(args: argparse.Namespace) -> None:
     """Before any work: no output over an input or over another output, none that exists without
     --force, --frame only with a TUM output, a figure only to a suffix matplotlib writes."""
-    outputs = [p for p in (args.output, args.tum, args.plot) if p is not None]
+    outputs = [p for p in (args.output, args.tum, args.plot, getattr(args, "refined_map", None))
+               if p is not None]
     inputs = {"survey": args.survey, "map": args.map, "--dr-model": args.dr_model,
               "--graph-config": args.graph_config}
     taken = {Path(p).resolve(): f"the input {what} {p}" for what, p in inputs.items()
@@ -449,7 +450,8 @@ def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
         "crs": bathymetry.crs, "origin": bathymetry.origin, "reference": survey.true_pose,
         "start_time": survey.meta.get("start_time"), "overwrite": True,  # onto the set's temporary file
     }
-    written = [p for p in (args.output, args.tum, args.plot) if p is not None]
+    refined = getattr(args, "refined_map", None)
+    written = [p for p in (args.output, args.tum, args.plot, refined) if p is not None]
     with sigterm_exits(), OutputSet(overwrite=args.force) as outputs:
         output = outputs.path(args.output)
         if suffix == ".tum":
@@ -462,6 +464,10 @@ def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
             write_track_csv(track, output, **placed)
         if args.tum is not None:
             write_track_tum(track, outputs.path(args.tum), frame=frame, overwrite=True)
+        if refined is not None:
+            from tangraph.maps.io import write_map
+
+            write_map(track.meta["refined_map"], outputs.path(refined), overwrite=True)
         if args.plot is not None:
             from matplotlib.figure import Figure
 
@@ -524,12 +530,33 @@ def _summary(args: argparse.Namespace, track, survey) -> None:
 
 
 def cmd_smooth(args: argparse.Namespace) -> None:
+    import dataclasses
+
+    from tangraph.graph import GraphConfig
     from tangraph.navigation import navigate
 
     _check_outputs(args)
+    config = _graph_config(args)
+    if args.refined_map is not None:
+        from tangraph.maps.io import map_format
+
+        map_format(args.refined_map)  # a map format, before any work
+        config = dataclasses.replace(config or GraphConfig(), smoother_terrain="field")
+        if config.smoother_covariance != "all":
+            raise TangraphError("--refined-map: the refined map's std needs the covariances; the graph "
+                                "config sets smoother_covariance = 'none'")
     survey, bathymetry = _survey_and_map(args)
-    track = navigate(survey, bathymetry, "smoother", _graph_config(args), model=_model(args),
-                     progress=_progress(args), other_map=args.other_map)
+    model = _model(args)
+    unrefined = TangraphError(f"--refined-map {args.refined_map}: the map {bathymetry.name!r} states no "
+                              "error (no depth_std layer, and the navigation model's map_std is 0), so "
+                              "there is nothing to refine; give a map error (map_std in --dr-model)")
+    if args.refined_map is not None and bathymetry.depth_std is None and model is not None \
+            and model.map_std == 0:
+        raise unrefined
+    track = navigate(survey, bathymetry, "smoother", config, model=model, progress=_progress(args),
+                     other_map=args.other_map)
+    if args.refined_map is not None and "refined_map" not in track.meta:
+        raise unrefined
     _summary(args, track, survey)
     for fix in track.meta.get("fixes", []):
         if not fix.accepted:
@@ -782,6 +809,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("smooth", help="re-navigate a recorded survey with the batch factor-graph smoother")
     track_outputs(p)
+    p.add_argument("--refined-map", type=Path, metavar="OUT",
+                   help="also write the map corrected by its error as estimated with the track, with the "
+                   "posterior std as its error layer (any map format by suffix, as maps grid writes); "
+                   "sets the graph's smoother_terrain to 'field'")
     p.set_defaults(func=cmd_smooth)
 
     p = sub.add_parser("demo", help="simulate, navigate with every method, and write a report")

@@ -56,8 +56,31 @@ def _survey(config: dict, rng):
         bathymetry = dataclasses.replace(bathymetry, depth=np.full(bathymetry.depth.shape, depth),
                                          name=f"{bathymetry.name}-flat")
     # a NAME-map-error scenario's estimators navigate on the prior map gridded from its seafloor
-    run = simulate_run(scenario, rng=rng, bathymetry=bathymetry)
-    return run.survey, run.bathymetry
+    return simulate_run(scenario, rng=rng, bathymetry=bathymetry)
+
+
+def _map_errors(run, refined) -> dict[str, float]:
+    """The prior map's and the refined map's RMS error against the simulated seafloor over the
+    map cells under the survey's true footprints, and the refined error in its stated stds."""
+    out = {"map_rms_prior": np.nan, "map_rms_refined": np.nan, "map_z_refined": np.nan}
+    if run.world is None or refined is None:
+        return out
+    prior = run.bathymetry
+    north, east = run.survey.footprints(run.survey.true_pose)
+    seen = np.isfinite(north) & np.isfinite(east)
+    i = np.rint((north[seen] - prior.north[0]) / (prior.north[1] - prior.north[0])).astype(int)
+    j = np.rint((east[seen] - prior.east[0]) / (prior.east[1] - prior.east[0])).astype(int)
+    inside = (i >= 0) & (i < prior.shape[0]) & (j >= 0) & (j < prior.shape[1])
+    under = np.zeros(prior.shape, dtype=bool)
+    under[i[inside], j[inside]] = True
+    truth = run.world.seafloor.depth_at(*np.meshgrid(prior.north, prior.east, indexing="ij"))
+    under &= np.isfinite(truth) & np.isfinite(prior.depth)
+    if not under.any():
+        return out
+    error = refined.depth[under] - truth[under]
+    return {"map_rms_prior": float(np.sqrt(np.mean((prior.depth[under] - truth[under]) ** 2))),
+            "map_rms_refined": float(np.sqrt(np.mean(error**2))),
+            "map_z_refined": float(np.sqrt(np.mean((error / refined.depth_std[under]) ** 2)))}
 
 
 def _fix_coverage(track, truth) -> tuple[int, int]:
@@ -81,7 +104,8 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     from tangraph.navigation import dead_reckoning_track, navigate
     from tangraph.sensors import NavigationModel
 
-    survey, bathymetry = _survey(config, rng)
+    run = _survey(config, rng)
+    survey, bathymetry = run.survey, run.bathymetry
     model = NavigationModel.from_survey(survey)
     bound = {kind: bound_rmse(posterior_crb(survey, bathymetry, model, kind=kind))
              for kind in ("smoother", "filter")}
@@ -95,7 +119,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     rows = []
     dr = track_metrics(dead_reckoning_track(survey), survey.true_pose)
     rows.append({"method": "dr", **dr, "ms_per_step": 0.0, "n_fixes_accepted": -1, "n_fixes_rejected": -1,
-                 "pcrb": bound["filter"], "pcrb_noise": limit["filter"]})
+                 "pcrb": bound["filter"], "pcrb_noise": limit["filter"], **_map_errors(run, None)})
     for method in config["methods"]:
         settings = None
         if method in GRAPH and config.get("graph"):
@@ -130,6 +154,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                 "ms_per_step": 1e3 * seconds / survey.n_pings,
                 "n_fixes_accepted": int(track.meta.get("n_fixes_accepted", -1)),
                 "n_fixes_rejected": int(track.meta.get("n_fixes_rejected", -1)),
+                **_map_errors(run, track.meta.get("refined_map")),
             }
         )
     return rows
@@ -153,6 +178,7 @@ def summarise(table) -> list[dict]:
         else:
             means["rmse_over_limit"] = np.nan
         sums = group.groupby("method")[["fixes_used", "fixes_covered"]].sum()
+        refined = _refined_summary(group)
         within = group.assign(
             ok=(group["scale_z"].abs() <= 2) & (group["heading_z"].abs() <= 2)
         ).groupby("method")["ok"].mean()
@@ -188,19 +214,37 @@ def summarise(table) -> list[dict]:
                     "fixes used": fixes if fixes else np.nan,
                     "fix coverage at 0.95": coverage,
                     "ms per ping": m.ms_per_step,
+                    **refined.get(method, {}),
                 }
             )
     return rows
 
 
+def _refined_summary(group) -> dict[str, dict]:
+    """Per method that refined the map: its error against the prior map's (mean and worst run),
+    the runs where it is smaller, and its RMS in its own stds (results made before these columns,
+    or without a refined map, have none)."""
+    if "map_rms_refined" not in group or not np.isfinite(group["map_rms_refined"]).any():
+        return {}
+    out = {}
+    for method, runs in group[np.isfinite(group["map_rms_refined"])].groupby("method"):
+        ratio = runs["map_rms_refined"] / runs["map_rms_prior"]
+        z = float(np.sqrt(np.mean(runs["map_z_refined"] ** 2)))
+        spread = f"{ratio.mean():.2f}, {ratio.max():.2f}"
+        out[method] = {"refined map RMS / prior map's (mean, worst run)": spread,
+                       "refined map better in runs": f"{int((ratio < 1).sum())} of {ratio.size}",
+                       "refined map error / its std (RMS)": z}
+    return out
+
+
 def markdown(rows: list[dict]) -> str:
     from tangraph.eval import format_figure
 
-    keys = list(rows[0])
+    keys = list(dict.fromkeys(k for row in rows for k in row))  # a refined map's columns: some rows
     lines = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
     for row in rows:
         lines.append(
-            "| " + " | ".join(format_figure(v) for v in row.values()) + " |"
+            "| " + " | ".join(format_figure(row.get(k, "")) for k in keys) + " |"
         )
     return "\n".join(lines)
 

@@ -53,6 +53,7 @@ __all__ = [
     "field_bound",
     "lattice_correlation",
     "map_error_field",
+    "sparse_sum",
     "spde_precision",
 ]
 
@@ -302,9 +303,9 @@ def field_bound(state: ErrorState, field: MapErrorField | CombinedField, node: n
     keep = np.ones(var.n)
     keep[pinned] = 0.0
     rows, row_ping = sparse.csr_array(rows[sort] @ sparse.diags_array(keep)), row_ping[sort]
-    base = _sum(_field_prior(var, field), sparse.coo_array((1.0 - keep[pinned], (pinned, pinned)),
+    base = sparse_sum(_field_prior(var, field), sparse.coo_array((1.0 - keep[pinned], (pinned, pinned)),
                                                            shape=(var.n, var.n)))
-    information = _sum(base, rows.T @ rows)
+    information = sparse_sum(base, rows.T @ rows)
     order = si.fill_reducing_order(information)
     factor = si.factor(information, order)
     z = si.selected_inverse(factor)
@@ -418,7 +419,7 @@ def _field_prior(var: _Variables, field) -> sparse.csc_array:
     return sparse.csc_array(sparse.coo_array((vals, (rows, cols)), shape=(var.n, var.n)))
 
 
-def _sum(*terms) -> sparse.csc_array:
+def sparse_sum(*terms) -> sparse.csc_array:
     """The sum of sparse matrices keeping every stored entry, explicit zeros too (``+`` drops
     them, and with them the entries the bound reads)."""
     parts = [sparse.coo_array(t) for t in terms]
@@ -447,7 +448,7 @@ def _filter_positions(var: _Variables, rows: sparse.csr_array, row_ping: np.ndar
     start = 0
     for t, (ping, end) in enumerate(zip(pings, ends, strict=True)):
         new = rows[start:end]
-        information = _sum(information, new.T @ new)
+        information = sparse_sum(information, new.T @ new)
         start = end
         active = var.active(int(ping))
         local = np.argsort(rank[active], kind="stable")

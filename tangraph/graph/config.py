@@ -173,15 +173,20 @@ class GraphConfig:
     gnc_probability : float
         A GNC candidate is an inlier while its whitened squared error is below the
         ``chi2(dim)`` quantile of this probability (default 0.99).
-    smoother_terrain : {"fixes", "soundings"}
+    smoother_terrain : {"fixes", "soundings", "field"}
         What the batch smoother's final solve sees of the terrain: ``"fixes"``, one TAP fix per
         window (default); ``"soundings"``, every sounding as its own factor on a key pose at its
         ping (:mod:`tangraph.graph.terrain_factors`), iterated from the fixes' solution, which
-        the soundings then replace (the same soundings are not counted twice). On simulated
-        surveys whose map errs as it states, ``"soundings"`` is at the Cramér-Rao bound; it
-        trusts the stated map error far more than the fixes do, so on a recorded survey use it
-        only with a map whose error check lines confirm (``tangraph maps check``): on Lake
-        Caputh's map, whose error is heavy-tailed, its track ANEES was 3-160 (fixes: 0-6).
+        the soundings then replace (the same soundings are not counted twice), the map's error
+        widening each sounding's variance; ``"field"``, every sounding with the map's error as
+        a field of unknowns solved with the track (:mod:`tangraph.graph.field_solve`: its
+        covariance is the map-aware bound's, and the track carries the refined map in
+        ``meta["refined_map"]``; as ``"soundings"`` on a map that states no error). On
+        simulated surveys whose map errs as it states, ``"soundings"`` is at the Cramér-Rao
+        bound; both trust the stated map error far more than the fixes do, so on a recorded
+        survey use them only with a map whose error check lines confirm (``tangraph maps
+        check``): on Lake Caputh's map, whose error is heavy-tailed, the track ANEES with
+        ``"soundings"`` was 3-160 (fixes: 0-6).
 
     Examples
     --------
@@ -229,7 +234,7 @@ class GraphConfig:
     misfit_ratio: float | None = 3.0
     robust_solve: Literal["gnc", "none"] = "gnc"
     gnc_probability: float = 0.99
-    smoother_terrain: Literal["fixes", "soundings"] = "fixes"
+    smoother_terrain: Literal["fixes", "soundings", "field"] = "fixes"
 
     @classmethod
     def from_mapping(cls, fields, where: str = "GraphConfig") -> GraphConfig:
@@ -319,7 +324,7 @@ class GraphConfig:
                               ("optimizer", ("lm", "gn", "dogleg")),
                               ("smoother_covariance", ("all", "none")),
                               ("robust_solve", ("gnc", "none")),
-                              ("smoother_terrain", ("fixes", "soundings"))):
+                              ("smoother_terrain", ("fixes", "soundings", "field"))):
             if getattr(self, name) not in allowed:
                 raise TangraphError(
                     f"GraphConfig.{name} must be one of {', '.join(allowed)}, got {getattr(self, name)!r}"

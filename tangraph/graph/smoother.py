@@ -7,17 +7,9 @@ chain, which overflows the stack on chains of about 10^5 poses. The marginal cov
 key pose comes from one multifrontal elimination of the linearised graph, also ordered by METIS
 (``gtsam.Marginals`` cannot be given an ordering from Python and crashes on such chains).
 
-With ``GraphConfig.smoother_terrain = "soundings"`` a last solve replaces the fixes by every
-sounding, each a terrain factor on a key pose at its ping (:mod:`tangraph.graph.terrain_factors`):
-Gauss-Newton from the fixes' solution, with a tide variable, re-linearised at every iteration;
-the soundings judged as innovations of the fixes' solution, one by one and ping by ping, again
-after each converged solve; their variances grown by the scatter of the solution's own windows
-(an a posteriori variance factor) while it moves.
-
-The ping-rate track is recovered from the key poses and the DR: a ping between keys ``a`` and
-``b`` is predicted forward from ``a`` and backward from ``b`` by the DR increments, and the two
-are blended linearly in time (the correction is distributed between the neighbouring keys); its
-covariance is the same blend of the two propagated covariances.
+With ``GraphConfig.smoother_terrain = "soundings"`` (or ``"field"``) a last solve replaces the
+fixes by every sounding (:mod:`tangraph.graph.terrain_solve`). The ping-rate track is recovered
+from the key poses and the DR (:func:`~tangraph.graph.batch.dense_track`).
 """
 
 from __future__ import annotations
@@ -30,42 +22,30 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.eval.map_check import window_scores
-from tangraph.graph import terrain_factors
-from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
+from tangraph.graph.batch import (
+    SmootherSolution,
+    dense_track,
+    frame_poses,
+    gauss_newton,
+    marginals,
+    metis_ordering,
+)
+from tangraph.graph.calibration import CALIBRATION, joint_in_frame
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
 from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
-from tangraph.graph.keyposes import PoseGraph, increments
+from tangraph.graph.keyposes import PoseGraph
 from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
 from tangraph.graph.robust import gnc
+from tangraph.graph.terrain_solve import terrain_solve
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError
-from tangraph.sensors import DeadReckoningModel, NavigationModel, odometry, rotation_matrix
+from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = ["SmootherSolution", "dense_track", "smooth_pose_graph", "smooth_survey"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclasses.dataclass(frozen=True, eq=False)
-class SmootherSolution:
-    """A batch solve: key poses ``(n, 3)`` (in the DR frame when the graph is calibrated), their
-    joint covariances with the calibration ``(n, 5, 5)`` (pose in world coordinates of its frame,
-    then ``(k, b)``; NaN if not computed), the ``calibration (2,)`` and its covariance ``(2, 2)``
-    (zeros when the graph has no calibration variable)."""
-
-    keys: np.ndarray
-    pose: np.ndarray
-    covariance: np.ndarray
-    calibration: np.ndarray
-    calibration_cov: np.ndarray
-    iterations: int
-    error: float
-    timings: dict
-
 
 def _optimizer(graph, values, config: GraphConfig, ordering):
     if config.optimizer == "lm":
@@ -119,9 +99,9 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     factors, values = graph.factor_graph(), graph.values(initial, calibration)
     started = _time.perf_counter()
     try:
-        ordering = _ordering(factors, graph.calibrated)
+        ordering = metis_ordering(factors, graph.calibrated)
         if graph.calibrated:
-            result, iterations = _gauss_newton(factors, values, ordering, config.max_iterations)
+            result, iterations = gauss_newton(factors, values, ordering, config.max_iterations)
         else:
             optimizer = _optimizer(factors, values, config, ordering)
             result = optimizer.optimize()
@@ -140,141 +120,12 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     cov = np.full((keys.size, 5, 5), np.nan)
     calib_cov = np.zeros((2, 2))
     if config.smoother_covariance == "all":
-        cov, calib_cov = _marginals(factors, result, keys, ordering, graph.calibrated)
+        cov, calib_cov = marginals(factors, result, keys, ordering, graph.calibrated)
         cov = joint_in_frame(pose[:, 2], cov)
     done = _time.perf_counter()
     timings = {"solve": solved - started, "marginals": done - solved}
     return SmootherSolution(keys, pose, cov, calib, calib_cov, iterations,
                             float(factors.error(result)), timings)
-
-
-def _gauss_newton(factors, values, ordering, max_iterations: int, tolerance: float = 1e-6, *,
-                  extra_cost=None, extra_factors=None):
-    """Gauss-Newton with step halving, driven from here: GTSAM's optimizer objects take about ten
-    times longer per iteration than linearise + solve + retract on a graph with Python factors
-    (measured: 2.8 s against 0.25 s on a 20 000-pose chain). ``extra_cost(values)`` and
-    ``extra_factors(values)`` (linear factors, re-linearised at every iteration) add terms that
-    are not in ``factors`` (the terrain solve's soundings)."""
-
-    def cost(v) -> float:
-        return factors.error(v) + (extra_cost(v) if extra_cost is not None else 0.0)
-
-    error = cost(values)
-    for iteration in range(1, max_iterations + 1):
-        linear = factors.linearize(values)
-        for factor in extra_factors(values) if extra_factors is not None else ():
-            linear.push_back(factor)
-        delta = linear.optimize(ordering)
-        step = 1.0
-        while True:
-            trial = values.retract(delta if step == 1.0 else delta.scale(step))
-            new = cost(trial)
-            if new <= error or step < 1e-3:
-                break
-            step *= 0.5
-        if new > error:  # no step lowers the error: converged as far as it goes
-            return values, iteration
-        converged = error - new <= tolerance * max(error, 1e-12)
-        values, error = trial, new
-        if converged:
-            return values, iteration
-    return values, max_iterations
-
-
-def _ordering(factors, calibrated: bool):
-    """METIS ordering, with the calibration (joined to every fix) and the tide (joined to every
-    terrain factor) moved to the end: eliminated early they would join all the poses they touch
-    into one dense clique."""
-    return _shared_last(gtsam.Ordering.MetisNonlinearFactorGraph(factors))
-
-
-def _shared_last(metis):
-    """A METIS ordering with the calibration and the tide, where present, moved to the end."""
-    shared = [key for key in (CALIBRATION, TIDE) if key in {metis.at(i) for i in range(metis.size())}]
-    if not shared:
-        return metis
-    ordering = gtsam.Ordering()
-    for i in range(metis.size()):
-        key = metis.at(i)
-        if key not in shared:
-            ordering.push_back(key)
-    for key in shared:
-        ordering.push_back(key)
-    return ordering
-
-
-def _marginals(factors, result, keys, ordering, calibrated: bool, extra=()) -> tuple[np.ndarray, np.ndarray]:
-    """Joint covariances (tangent, then ``c``) of every key pose with the calibration, and that of
-    the calibration, from one METIS-ordered elimination of the linearised graph (and the linear
-    factors ``extra``, the terrain's).
-
-    The pose blocks are the tree's marginals; the cross-covariance of a pose with ``c`` is
-    ``E Sigma_cc``, ``E`` the sensitivity of the pose's conditional mean to ``c``, which two more
-    solves of the linear system with ``c`` pinned to a unit step give."""
-    linear = factors.linearize(result)
-    for factor in extra:
-        linear.push_back(factor)
-    try:
-        tree = linear.eliminateMultifrontal(ordering)
-    except RuntimeError as exc:
-        raise TangraphError(f"marginal covariances failed: {str(exc).strip().splitlines()[0]}") from None
-    out = np.zeros((keys.size, 5, 5))
-    out[:, :3, :3] = np.array([tree.marginalCovariance(int(k)) for k in keys])
-    if not calibrated:
-        return out, np.zeros((2, 2))
-    calib_cov = np.asarray(tree.marginalCovariance(CALIBRATION), float)
-    base = _pinned_solution(linear, ordering, keys, np.zeros(2))
-    sensitivity = np.stack([_pinned_solution(linear, ordering, keys, e) - base for e in np.eye(2)], axis=-1)
-    cross = sensitivity @ calib_cov
-    out[:, :3, 3:] = cross
-    out[:, 3:, :3] = np.swapaxes(cross, 1, 2)
-    out[:, 3:, 3:] = calib_cov
-    return out, calib_cov
-
-
-def _pinned_solution(linear, ordering, keys, step) -> np.ndarray:
-    """The linear system's solution for every key pose ``(n, 3)`` with ``c``'s step pinned."""
-    pinned = linear.clone()
-    weight = 1e8
-    pinned.add(gtsam.JacobianFactor(CALIBRATION, weight * np.eye(2), weight * np.asarray(step, float),
-                                    gtsam.noiseModel.Unit.Create(2)))
-    delta = pinned.optimize(ordering)
-    return np.array([delta.at(int(k)) for k in keys])
-
-
-def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSolution, origin
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """World poses ``(K, 3)`` and covariances ``(K, 3, 3)`` at every ping from a smoothed solution.
-
-    Between keys ``a < b`` a ping is predicted forward from ``a`` and backward from ``b`` with the
-    DR increments (noise of the white DR model ``white``); DR-frame poses and joint covariances
-    with the calibration are blended with weight ``(t - t_a) / (t_b - t_a)`` and mapped to the
-    world with the smoothed calibration.
-    """
-    keys = np.asarray(solution.keys, np.int64)
-    key_pose, key_cov = solution.pose, np.where(np.isfinite(solution.covariance), solution.covariance, 0.0)
-    t, dr = survey.time, survey.dr_pose
-    ping = np.arange(survey.n_pings)
-    n_key = np.searchsorted(keys, ping, side="right") - 1
-    a = keys[n_key]
-    b = keys[np.minimum(n_key + 1, keys.size - 1)]
-    b = np.where(a == ping, ping, b)
-    ia, ib = n_key, np.searchsorted(keys, b)
-    fwd, fwd_q = increments(white, t, dr, a, ping)
-    back_q = increments(white, t, dr, ping, b)[1]
-    back = odometry(dr, b, ping)
-    back_q = inverse_increment_covariance(back, back_q)
-    pose_f, pose_b = compose(key_pose[ia], fwd), compose(key_pose[ib], back)
-    cov_f = propagate_joint(key_pose[ia], key_cov[ia], fwd, fwd_q)
-    cov_b = propagate_joint(key_pose[ib], key_cov[ib], back, back_q)
-    span = t[b] - t[a]
-    w = np.divide(t - t[a], span, out=np.zeros_like(t), where=span > 0)
-    pose = pose_f + w[:, None] * np.column_stack([pose_b[:, :2] - pose_f[:, :2],
-                                                  _wrap(pose_b[:, 2] - pose_f[:, 2])])
-    joint = (1 - w)[:, None, None] * cov_f + w[:, None, None] * cov_b
-    return (to_world(pose, solution.calibration, origin),
-            world_covariance(pose, joint, solution.calibration, origin))
-
 
 def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list[FixRecord]:
     """Fixes re-made around the smoothed world track ``pose``, searched and gated with the
@@ -292,7 +143,7 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list
             fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
                            poses=pose[window], first=window.start, shared=nav.shared_map_variance,
                            error=nav.map_error)
-            laid = None if window.start < 0 else _frame_poses(pose[window], solution.calibration, nav.origin)
+            laid = None if window.start < 0 else frame_poses(pose[window], solution.calibration, nav.origin)
             # laid with the smoothed calibration: the model's noise is the misfit reference
             outcome = judge_fix(nav._grown(fix, laid, joint), pose[end], cov[end], config, half_width,
                                 noise=nav.model.measurement_std)
@@ -375,11 +226,11 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
 
     full = graph.with_fixes(fixes, breaks=False)
     values = full.values(initial, calibration)
-    ordering = _ordering(full.factor_graph(), graph.calibrated)
+    ordering = metis_ordering(full.factor_graph(), graph.calibrated)
 
     def solve(factors, values):
         if graph.calibrated:
-            return _gauss_newton(factors, values, ordering, config.max_iterations)[0]
+            return gauss_newton(factors, values, ordering, config.max_iterations)[0]
         optimizer = _optimizer(factors, values, config, ordering)
         return optimizer.optimize()
 
@@ -403,157 +254,6 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
     if not keep_start and len({int(f[0]) for f, ok in zip(fixes, inlier, strict=True) if ok}) < 2:
         keep_start = True  # nothing else would tie the graph to the map
     return inlier, keep_start
-
-
-def _frame_poses(world_pose, calibration, origin) -> np.ndarray:
-    """DR-frame poses of world poses (the inverse of :func:`~tangraph.graph.calibration.to_world`)."""
-    k, b = float(calibration[0]), float(calibration[1])
-    d = np.asarray(world_pose, float)[..., :2] - origin
-    out = np.array(world_pose, float)
-    out[..., :2] = origin + (1.0 + k) * (d @ rotation_matrix(b).T)
-    out[..., 2] = out[..., 2] + b
-    return out
-
-
-#: A sounding whose standardised residual is beyond this is left out of the terrain solve
-#: (two-sided 0.999 of a normal): where the map or the sounding is wrong.
-SOUNDING_GATE = 3.29
-_GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
-#: Windows of track (m) whose mean residuals test the soundings' variances after a solve, as
-#: check lines test a map (:func:`tangraph.eval.map_check.window_scores`)
-WINDOW = 50.0
-_FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show still moves
-
-
-def _terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
-                   config: GraphConfig) -> tuple[SmootherSolution, dict]:  # fmt: skip
-    """The batch solve with every sounding as a terrain factor instead of the fixes
-    (:mod:`tangraph.graph.terrain_factors`), from ``solution``, on a key pose at every ping
-    (:func:`_ping_graph`: the white DR noise between pings is then the odometry's, correlations
-    and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
-    it), the tide's and the soundings, the soundings re-gated at each converged solve. Returns
-    the solution (its keys every ping) and what it used."""
-    started = _time.perf_counter()
-    fixes_solution = solution
-    graph = _ping_graph(nav)
-    terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
-                                           nav.origin, graph.calibrated)
-    factors = graph.with_fixes([], start=start_kept).factor_graph()
-    world, world_cov = dense_track(nav.survey, nav.white, solution, nav.origin)
-    # the soundings are judged as innovations of the fixes' solution, whose uncertainty this is
-    prior = np.where(np.isfinite(world_cov[:, :2, :2]), world_cov[:, :2, :2], 0.0)
-    initial = _frame_poses(world, solution.calibration, nav.origin) if graph.calibrated else world
-    solution = dataclasses.replace(solution, keys=np.asarray(graph.keys), pose=initial)
-    values = graph.values(solution.pose, solution.calibration)
-    if terrain.estimates_tide:  # started at the soundings' median residual, gated around it
-        factors.add(gtsam.PriorFactorVector(TIDE, np.array([terrain.tide]),
-                                            gtsam.noiseModel.Isotropic.Sigma(1, terrain.tide_std)))
-        residual = terrain_factors.terrain_residuals(terrain, nav.bathymetry, solution.pose,
-                                                     solution.calibration, 0.0)
-        finite = residual[np.isfinite(residual)]
-        start = float(np.median(finite)) if finite.size else terrain.tide
-        values.insert(TIDE, np.array([start]))
-    state = _unpack(values, terrain, solution.pose)
-    used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE, prior)
-    if not used.any():  # nothing ties c and the tide to the poses (and METIS fails on that)
-        log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution "
-                    "is kept", SOUNDING_GATE)
-        return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
-                                "tide": float(terrain.tide), "variance_factor": 1.0}
-    base, factor, iterations = terrain, 1.0, 0
-    for _ in range(_FACTOR_ROUNDS):
-        values, used, ordering, n = _gated_solve(factors, values, terrain, nav.bathymetry, used, config,
-                                                 solution.pose, prior)
-        iterations += n
-        state = _unpack(values, terrain, solution.pose)
-        world = to_world(state[0], state[1], nav.origin) if graph.calibrated else state[0]
-        scores = window_scores(nav.survey, nav.bathymetry, nav.model, window=WINDOW, poses=world, used=used)
-        found = max(1.0, float(np.sqrt(np.mean(scores**2)))) if scores.size else 1.0
-        if abs(found - factor) <= 0.05 * factor:
-            break
-        factor = found
-        terrain = dataclasses.replace(base, variance=base.variance * factor**2)
-        log.info("terrain solve: the soundings' windows scatter %.2f times what the model says: "
-                 "their variances grown by that", factor)
-    solved = _time.perf_counter()
-    pose, calibration, tide = state
-    keys = np.asarray(graph.keys, np.int64)
-    cov, calib_cov = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2))
-    if config.smoother_covariance == "all":
-        extra = terrain_factors.linear_factors(terrain, nav.bathymetry, pose, calibration, tide, used)
-        cov, calib_cov = _marginals(factors, values, keys, ordering, graph.calibrated, extra)
-        cov = joint_in_frame(pose[:, 2], cov)
-    error = factors.error(values) + terrain_factors.terrain_cost(terrain, nav.bathymetry, *state, used)
-    timings = {"solve": solved - started, "marginals": _time.perf_counter() - solved}
-    used_info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
-                 "tide": float(tide), "variance_factor": factor}
-    return SmootherSolution(keys, pose, cov, calibration if graph.calibrated else np.zeros(2), calib_cov,
-                            iterations, float(error), timings), used_info
-
-
-def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference, prior):
-    """Gauss-Newton with the soundings ``used``, re-gated at each converged solve (as innovations
-    against ``prior``) until the gate keeps the same soundings (at most ``_GATE_ROUNDS``).
-    Returns the values, the soundings used, the last ordering and the iterations."""
-    iterations = 0
-    for _ in range(_GATE_ROUNDS):
-        # METIS on the linear system with the terrain factors (their links to c and the tide)
-        linear = factors.linearize(values)
-        state = _unpack(values, terrain, reference)
-        for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
-            linear.push_back(factor)
-        ordering = _shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
-        values, n = _gauss_newton(factors, values, ordering, config.max_iterations,
-                                  **_terrain_terms(terrain, bathymetry, used, reference))
-        iterations += n
-        state = _unpack(values, terrain, reference)
-        regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE, prior)
-        if np.array_equal(regated, used) or not regated.any():
-            break
-        used = regated
-    return values, used, ordering, iterations
-
-
-def _terrain_terms(terrain, bathymetry, used, reference) -> dict:
-    """The soundings ``used`` as :func:`_gauss_newton`'s extra cost and linear factors."""
-
-    def cost(values) -> float:
-        return terrain_factors.terrain_cost(terrain, bathymetry, *_unpack(values, terrain, reference), used)
-
-    def linear(values) -> list:
-        return terrain_factors.linear_factors(terrain, bathymetry, *_unpack(values, terrain, reference), used)
-
-    return {"extra_cost": cost, "extra_factors": linear}
-
-
-def _ping_graph(nav: GraphNavigator) -> PoseGraph:
-    """The forward pass's graph with a key pose at every ping: its start (the DR's first pose,
-    the model's uncertainty), its calibration prior, and the DR increments between consecutive
-    pings as odometry; no fix, no break. The odometry's noise floors (added to every increment)
-    are shrunk so that over the forward pass's key interval they add up to the same."""
-    survey, model, c = nav.survey, nav.model, nav.config
-    shrink = np.sqrt(max(len(nav.graph.keys) - 1, 1) / max(survey.n_pings - 1, 1))
-    graph = PoseGraph(nav.graph.calibration_std, nav.graph.calibration_mean, nav.origin, c.robust_kernel,
-                      c.robust_parameter, c.odometry_min_std * shrink, c.odometry_min_heading_std * shrink)
-    for k in range(survey.n_pings):
-        graph.add_pose(k, survey.time[k], survey.dr_pose[k])
-    graph.add_start(0, survey.dr_pose[0], model.initial_position_std,
-                    max(model.heading_noise, c.odometry_min_heading_std))  # as the forward pass's
-    ping = np.arange(survey.n_pings)
-    delta, cov = increments(nav.white, survey.time, survey.dr_pose, ping[:-1], ping[1:])
-    for k in range(survey.n_pings - 1):
-        graph.add_odometry(k, k + 1, delta[k], cov[k])
-    return graph
-
-
-def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:
-    """Key poses (headings unwrapped near ``reference``), calibration and tide of ``values``."""
-    pose = np.array(gtsam.utilities.extractPose2(values), float)
-    pose[:, 2] = reference[:, 2] + _wrap(pose[:, 2] - reference[:, 2])
-    calibration = np.asarray(values.atVector(CALIBRATION), float) if terrain.calibrated else np.zeros(2)
-    tide = float(values.atVector(TIDE)[0]) if terrain.estimates_tide else terrain.tide
-    return pose, calibration, tide
-
 
 def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
                   model: NavigationModel | None = None, progress: bool = False) -> Track:
@@ -596,7 +296,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     forward = _time.perf_counter()
     config = nav.config
     graph = nav.graph
-    initial = _frame_poses(nav.pose[graph.keys], nav.calibration, nav.origin) if graph.calibrated \
+    initial = frame_poses(nav.pose[graph.keys], nav.calibration, nav.origin) if graph.calibrated \
         else nav.pose[graph.keys]
     solution, records, start_kept = _solve(graph, nav.fixes, config, initial, nav.calibration)
     dense = dense_track(survey, nav.white, solution, nav.origin)
@@ -611,9 +311,9 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         solution, records, start_kept = new_solution, new_records, new_start
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("re-match %d: %d fixes accepted", rounds, sum(r.accepted for r in records))
-    soundings = None
-    if config.smoother_terrain == "soundings":
-        solution, soundings = _terrain_solve(nav, start_kept, solution, config)
+    soundings = refined = None
+    if config.smoother_terrain != "fixes":
+        solution, soundings, refined = terrain_solve(nav, start_kept, solution, config)
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("terrain solve: %d of %d soundings used", soundings["soundings_used"],
                  soundings["soundings"])
@@ -649,6 +349,8 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     })
     if soundings is not None:
         meta["soundings"] = soundings
+    if refined is not None:
+        meta["refined_map"] = refined
     total = _time.perf_counter() - started
     timings = {"total": total, "per_step": total / survey.n_pings, "forward_pass": forward - started,
                **solution.timings}

@@ -39,8 +39,8 @@ from tangraph.graph.keyposes import increments
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import rotation_matrix, sounding_variances
 
-__all__ = ["PingTerrain", "gate", "linear_factors", "ping_terrain", "sounding_jacobians", "terrain_cost",
-           "terrain_residuals"]
+__all__ = ["PingTerrain", "footprints", "gate", "linear_factors", "ping_terrain", "sounding_jacobians",
+           "terrain_cost", "terrain_residuals"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 PING_PROBABILITY = 0.999  #: a ping's soundings together beyond this chi-square quantile: left out
@@ -94,24 +94,36 @@ def ping_terrain(survey, bathymetry: BathymetryMap, model, keys, white, origin,
                        np.asarray(origin, float), bool(calibrated), float(model.tide), float(model.tide_std))
 
 
-def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float):
+def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
+                       offset: np.ndarray | None = None):  # fmt: skip
     """Residuals ``r = z - t - h(f) (K, B)``, their Jacobians ``(K, B, P)`` with respect to the
     key pose (GTSAM's tangent: x, y in the key's frame, then the heading), ``c`` and the tide
     (:attr:`PingTerrain.n_parameters` columns), and the variance the white DR noise between
-    the key and the ping adds to each ``(K, B)``. NaN where there is no sounding or no map."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, tide)[:3]
+    the key and the ping adds to each ``(K, B)``. NaN where there is no sounding or no map.
+
+    ``offset (K, B)`` is added to the map's depth under each sounding where given (the map's
+    error as estimated there: :mod:`tangraph.graph.field_solve`)."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, offset=offset)[:3]
 
 
 def terrain_residuals(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
-                      tide: float) -> np.ndarray:  # fmt: skip
+                      tide: float, offset: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """The residuals ``r = z - t - h(f) (K, B)`` alone (NaN where no sounding or no map)."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)[0]
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False,
+                     offset=offset)[0]
+
+
+def footprints(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration) -> tuple[np.ndarray,
+                                                                                                 np.ndarray]:
+    """World ``(north, east)`` of every footprint ``(K, B)`` at the given key poses and ``c``."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, 0.0, jacobian=False)[4:6]
 
 
 def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float, *,
-              jacobian: bool = True):
-    """:func:`sounding_jacobians` and the map's gradient ``(K, B, 2)`` under every footprint; the
-    Jacobians None unless ``jacobian`` (the cost and the gate need none)."""
+              jacobian: bool = True, offset: np.ndarray | None = None):
+    """:func:`sounding_jacobians`, the map's gradient ``(K, B, 2)`` under every footprint and the
+    footprints ``north, east (K, B)``; the Jacobians None unless ``jacobian`` (the cost and the
+    gate need none)."""
     key_pose = np.asarray(key_pose, float)[terrain.key_index]
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
@@ -126,6 +138,8 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     north, east = world[:, None, 0] + lever[..., 0], world[:, None, 1] + lever[..., 1]
     residual = terrain.depth - tide - bathymetry.depth_at(north, east)
     grad = bathymetry.gradient_at(north, east)  # (K, B, 2)
+    if offset is not None:
+        residual = residual - offset
     turn = np.einsum("ij,kbj->kbi", _J, terrain.offsets)
     d_heading = np.einsum("kij,kbj->kbi", rot_w, turn)  # d f / d psi_w (K, B, 2)
     d_xy = np.einsum("ij,kjl->kil", scale, rot_a)  # d f / d (x, y) of the key, (K, 2, 2)
@@ -135,7 +149,7 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
     dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
     if not jacobian:
-        return residual, None, dr_variance, grad
+        return residual, None, dr_variance, grad, north, east
     d_theta = np.einsum("kil,kl->ki", d_xy, delta[:, :2] @ _J.T)  # d f / d heading of the key, less turn
     jac = np.zeros((*residual.shape, terrain.n_parameters))
     jac[..., 0:2] = -np.einsum("kbi,kij->kbj", grad, d_xy)
@@ -149,27 +163,35 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
         column += 2
     if terrain.estimates_tide:
         jac[..., column] = -1.0
-    return residual, jac, dr_variance, grad
+    return residual, jac, dr_variance, grad, north, east
 
 
 def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-         threshold: float, prior=None) -> np.ndarray:  # fmt: skip
+         threshold: float, prior=None, offset_variance=None) -> np.ndarray:  # fmt: skip
     """The soundings used at the given solution, judged as innovations against ``prior (K, 2,
-    2)``, the covariance of each ping's world position the solution is uncertain by (None: 0):
+    2)``, the covariance of each ping's world position the solution is uncertain by (None: 0),
+    and ``offset_variance (K,)``, that of an error all of a ping's soundings share (None: 0; the
+    map's error under a footprint smaller than its correlation length):
 
     - a sounding with map data under it whose residual is within ``threshold`` of its std
-      (its variance plus ``g^T P g``, ``g`` the map's gradient under it);
-    - of a ping whose soundings are consistent together: ``r^T (V + G P G^T)^-1 r`` over all
-      its soundings with map data, each residual cut at the gate, within the chi-square
-      quantile ``PING_PROBABILITY`` of their number. A ping whose footprints are misplaced as a
-      whole (a position or attitude fault) fits the map nowhere near, though some of its
-      soundings may each pass: the ping test leaves it out.
+      (its variance plus ``g^T P g``, ``g`` the map's gradient under it, plus the offset's);
+    - of a ping whose soundings are consistent together: ``r^T (V + G P G^T + o 1 1^T)^-1 r``
+      over all its soundings with map data, each residual cut at the gate, within the
+      chi-square quantile ``PING_PROBABILITY`` of their number. A ping whose footprints are
+      misplaced as a whole (a position or attitude fault) fits the map nowhere near, though
+      some of its soundings may each pass: the ping test leaves it out.
     """
-    residual, _, dr_variance, grad = _evaluate(terrain, bathymetry, key_pose, calibration, tide,
-                                               jacobian=False)
+    residual, _, dr_variance, grad, _, _ = _evaluate(terrain, bathymetry, key_pose, calibration, tide,
+                                                     jacobian=False)
     variance = terrain.variance + dr_variance
-    cov = np.zeros((residual.shape[0], 2, 2)) if prior is None else np.asarray(prior, float)
-    spread = np.einsum("kbi,kij,kbj->kb", grad, cov, grad)
+    n = residual.shape[0]
+    cov = np.zeros((n, 3, 3))
+    if prior is not None:
+        cov[:, :2, :2] = np.asarray(prior, float)
+    if offset_variance is not None:
+        cov[:, 2, 2] = np.asarray(offset_variance, float)
+    g = np.concatenate([grad, np.ones((*residual.shape, 1))], axis=-1)  # shift, then offset
+    spread = np.einsum("kbi,kij,kbj->kb", g, cov, g)
     limit = threshold * np.sqrt(variance + spread)
     finite = np.isfinite(residual) & np.isfinite(spread)
     ok = finite & (np.abs(residual) <= limit)
@@ -177,23 +199,23 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
     # good ping; many soundings beyond the gate fail it)
     w = np.where(finite, 1.0 / variance, 0.0)
     r = np.where(finite, np.clip(residual, -limit, limit), 0.0)
-    g = np.where(finite[..., None], grad, 0.0)
-    stat = np.sum(w * r * r, axis=1)
-    if prior is not None:  # Woodbury: less b^T P (I + C P)^-1 b, what a shift within P explains
-        b = np.einsum("kb,kbi,kb->ki", w, g, r)
-        c = np.einsum("kb,kbi,kbj->kij", w, g, g)
-        y = np.linalg.solve(np.eye(2) + c @ cov, b[..., None])[..., 0]
-        stat = stat - np.einsum("ki,kij,kj->k", b, cov, y)
+    g = np.where(finite[..., None], g, 0.0)
+    # Woodbury: less b^T P (I + C P)^-1 b, what a shift within P (and the offset) explains
+    b = np.einsum("kb,kbi,kb->ki", w, g, r)
+    c = np.einsum("kb,kbi,kbj->kij", w, g, g)
+    y = np.linalg.solve(np.eye(3) + c @ cov, b[..., None])[..., 0]
+    stat = np.sum(w * r * r, axis=1) - np.einsum("ki,kij,kj->k", b, cov, y)
     count = finite.sum(axis=1)
     consistent = stat <= stats.chi2.ppf(PING_PROBABILITY, np.maximum(count, 1))
     return ok & consistent[:, None]
 
 
 def terrain_cost(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-                 used: np.ndarray) -> float:  # fmt: skip
+                 used: np.ndarray, offset: np.ndarray | None = None) -> float:  # fmt: skip
     """``1/2 sum r^2 / v`` over the soundings ``used`` (the least-squares cost the factors add;
     a sounding that has lost its map since it was gated counts as at its gate)."""
-    residual, _, dr_variance, _ = _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)
+    residual, _, dr_variance, *_ = _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False,
+                                             offset=offset)
     z2 = residual[used] ** 2 / (terrain.variance + dr_variance)[used]
     return 0.5 * float(np.sum(np.where(np.isfinite(z2), z2, np.nanmax(z2, initial=0.0))))
 

@@ -52,7 +52,8 @@ from tangraph.maps._common import (  # noqa: F401 (the shared pieces, imported f
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.netcdf import NETCDF_SUFFIXES, read_netcdf, write_netcdf, write_sounding_grid
 
-__all__ = ["Soundings", "read_map", "read_soundings", "write_atomically", "write_map", "write_sounding_grid"]
+__all__ = ["Soundings", "map_format", "read_map", "read_soundings", "write_atomically", "write_map",
+           "write_sounding_grid"]
 
 _FORMATS = {
     **dict.fromkeys(NETCDF_SUFFIXES, "netcdf"),
@@ -64,6 +65,12 @@ _FORMATS = {
 }
 #: formats told by content or named, never by suffix alone (``.h5`` is any HDF5 file)
 _NAMED_FORMATS = ("s102",)
+
+
+def map_format(path: str | os.PathLike, format: str | None = None) -> str:
+    """The format a map is written in at ``path`` (by its suffix, or ``format``); a one-line
+    error naming the formats known otherwise (to check an output before any work)."""
+    return _format_of(Path(path), format)
 
 
 def _format_of(path: Path, given: str | None, *, reading: bool = False) -> str:

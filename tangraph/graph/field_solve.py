@@ -1,0 +1,304 @@
+"""The map's error as unknowns of the terrain solve: a correction field estimated with the track.
+
+A map gridded from earlier surveys errs by a correlated field ``d(p)``
+(:mod:`tangraph.sensors.terrain`). The terrain solve on every sounding
+(:mod:`tangraph.graph.terrain_factors`) can only widen each sounding's variance for it (the
+row-sum bound), which leaves the errors' correlation out: a patch of map a metre too deep pulls
+every ping over it the same way. Here the field is a set of unknowns instead, on the nodes of
+:func:`tangraph.eval.map_field.map_error_field` (the field the map-aware bound is solved with):
+``d = S u``, ``S`` the node stds, ``u`` of Gaussian-Markov prior precision ``Q`` (the SPDE's,
+Matérn of the map's correlation length). A sounding then measures
+
+    ``z = t + h(f) + w(f)^T S u + e``,    ``var e = sounding_std^2 + nugget(f)``
+
+(``w`` the bilinear weights of its footprint on the nodes, the nugget the variance the nodes
+miss between them), and the track, the calibration, the tide and ``u`` are solved together:
+Gauss-Newton on the odometry and priors (GTSAM's linearisation), the soundings and
+``1/2 u^T Q u``, assembled as one sparse system.
+
+Each sounding's weights are those of its footprint where the solve starts (:class:`FieldSoundings`),
+held while the track moves, as the bound holds them at the true footprints
+(:mod:`tangraph.eval.map_field`): the field is the error of the map *under the soundings*, and
+its own slope is no evidence of where they lie. The track moves by metres, the field varies over
+its correlation length (tens of metres); and an estimated field's texture, fitted to the same
+soundings, would otherwise be taken for terrain (measured: on a simulated survey trapped 13 m off
+the truth, the field's slope made it claim 0.6 m).
+
+The marginal covariances of the key poses, the calibration and the nodes come from the selected
+inverse of the system at the solution (:mod:`tangraph.eval.selected_inverse`), and the refined
+map (:func:`refined_map`) is the map plus the field, with its posterior std.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gtsam
+import numpy as np
+from scipy import sparse
+from scipy.sparse.linalg import splu
+
+from tangraph.errors import TangraphError
+from tangraph.eval import selected_inverse as si
+from tangraph.eval.map_field import CombinedField, MapErrorField, sparse_sum
+from tangraph.graph import terrain_factors
+from tangraph.graph.calibration import CALIBRATION, TIDE
+from tangraph.graph.terrain_factors import PingTerrain
+from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.terrain import MapError
+
+__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "solve"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FieldSoundings:
+    """The soundings' hold on the field: per sounding ``(K, B)`` its nodes and weights
+    ``(K, B, m)`` (zero weight where it has no footprint on the map) and the field's nugget
+    there (m^2, NaN where none)."""
+
+    field: MapErrorField | CombinedField
+    node: np.ndarray
+    weight: np.ndarray
+    nugget: np.ndarray
+
+    @classmethod
+    def at(cls, field, north: np.ndarray, east: np.ndarray, seen: np.ndarray) -> FieldSoundings:
+        """The field's hold on soundings at footprints ``north, east (K, B)``, those ``seen``."""
+        node, weight = field.weights(north[seen], east[seen])
+        m = node.shape[1]
+        nodes = np.zeros((*seen.shape, m), dtype=np.int64)
+        weights = np.zeros((*seen.shape, m))
+        nugget = np.full(seen.shape, np.nan)
+        nodes[seen], weights[seen], nugget[seen] = node, weight, field.nugget(node, weight)
+        return cls(field, nodes, weights, nugget)
+
+    def offset(self, u: np.ndarray) -> np.ndarray:
+        """The field ``S u`` under every sounding ``(K, B)`` (0 where it has no footprint)."""
+        return np.sum(self.weight * (self.field.std * np.asarray(u, float))[self.node], axis=-1)
+
+
+Field = MapErrorField | CombinedField
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Layout:
+    """Columns of the joint unknowns: GTSAM's variables in key order (its sparse Jacobian's),
+    then the field's nodes."""
+
+    keys: np.ndarray  # sorted GTSAM keys
+    start: np.ndarray  # first column of each
+    dims: np.ndarray
+    n_gtsam: int
+    n_field: int
+
+    @classmethod
+    def of(cls, values, n_field: int) -> _Layout:
+        keys = np.array(sorted(int(k) for k in values.keys()), dtype=np.uint64)
+        dims = np.array([values.atVector(int(k)).size if int(k) in (CALIBRATION, TIDE) else 3 for k in keys])
+        start = np.concatenate([[0], np.cumsum(dims)[:-1]])
+        return cls(keys, start, dims, int(dims.sum()), int(n_field))
+
+    @property
+    def n(self) -> int:
+        return self.n_gtsam + self.n_field
+
+    def pattern(self) -> sparse.coo_array:
+        """Explicit zeros on every variable's own block and between each and the calibration
+        and the tide (the entries the marginals read, which an exact zero of a Jacobian would
+        leave out of the factor's pattern)."""
+        shared = [np.arange(d) + s for s, d, k in zip(self.start, self.dims, self.keys, strict=True)
+                  if int(k) in (CALIBRATION, TIDE)]
+        shared = np.concatenate([*shared, np.zeros(0, np.int64)]).astype(np.int64)
+        own = self.start[:, None] + np.arange(3)  # a pose's columns (a shorter vector: its own, repeated)
+        own = np.minimum(own, (self.start + self.dims - 1)[:, None])
+        joined = np.concatenate([own, np.broadcast_to(shared, (own.shape[0], shared.size))], axis=1)
+        rows = np.repeat(joined, joined.shape[1], axis=1).ravel()
+        cols = np.tile(joined, (1, joined.shape[1])).ravel()
+        return sparse.coo_array((np.zeros(rows.size), (rows, cols)), shape=(self.n, self.n))
+
+    def column(self, key: int) -> int:
+        return int(self.start[np.searchsorted(self.keys, np.uint64(key))])
+
+    def pose_columns(self, keys) -> np.ndarray:
+        """First column of each pose key (ascending ping keys come first)."""
+        return self.start[np.searchsorted(self.keys, np.asarray(keys, dtype=np.uint64))]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FieldSolution:
+    """A converged joint solve: the GTSAM ``values`` (poses, ``c``, tide), the field's unit
+    nodes ``u``, the iterations run and the system's information matrix at the solution."""
+
+    values: gtsam.Values
+    u: np.ndarray
+    iterations: int
+    information: sparse.csc_array
+    layout: _Layout
+
+
+def solve(factors, values, terrain: PingTerrain, bathymetry: BathymetryMap, hold: FieldSoundings,
+          used: np.ndarray, unpack, *, u=None, max_iterations: int = 50,
+          tolerance: float = 1e-6) -> FieldSolution:  # fmt: skip
+    """Gauss-Newton with step halving on the odometry and priors ``factors`` (a GTSAM nonlinear
+    graph), the soundings ``used`` of ``terrain`` (their variances the noise and nugget alone)
+    holding the field as ``hold`` says, and the field's prior, from ``values`` and ``u``
+    (default zero). ``unpack(values)`` gives the key poses, ``c`` and the tide."""
+    field = hold.field
+    layout = _Layout.of(values, field.n_nodes)
+    prior = sparse.csc_array(field.precision)
+    u = np.zeros(field.n_nodes) if u is None else np.asarray(u, float)
+
+    def cost(v, x) -> float:
+        state = unpack(v)
+        return (factors.error(v) + 0.5 * float(x @ (prior @ x))
+                + terrain_factors.terrain_cost(terrain, bathymetry, *state, used, hold.offset(x)))
+
+    def system(v, x):
+        return _normal_equations(factors, v, x, terrain, bathymetry, hold, used, unpack, layout, prior)
+
+    error, iterations = cost(values, u), 0
+    while iterations < max_iterations:
+        iterations += 1
+        information, gradient = system(values, u)
+        try:
+            delta = splu(information, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                         options={"SymmetricMode": True}).solve(gradient)
+        except RuntimeError as exc:
+            raise TangraphError(f"terrain solve with the map's error: {exc}") from None
+        step = 1.0
+        while True:
+            trial = _retract(values, layout, step * delta[:layout.n_gtsam])
+            trial_u = u + step * delta[layout.n_gtsam:]
+            new = cost(trial, trial_u)
+            if new <= error or step < 1e-3:
+                break
+            step *= 0.5
+        if new > error:
+            break
+        converged = error - new <= tolerance * max(error, 1e-12)
+        values, u, error = trial, trial_u, new
+        if converged:
+            break
+    return FieldSolution(values, u, iterations, system(values, u)[0], layout)
+
+
+def _normal_equations(factors, values, u, terrain, bathymetry, hold: FieldSoundings, used, unpack,
+                      layout: _Layout, prior):
+    """``A^T A + Q`` and ``A^T b - Q u`` of the linearised problem at ``values, u``."""
+    triplets = np.asarray(factors.linearize(values).sparseJacobian_())
+    rows, cols, vals = triplets[0].astype(np.int64) - 1, triplets[1].astype(np.int64) - 1, triplets[2]
+    rhs_col = cols == layout.n_gtsam  # the augmented column holds b
+    n_rows = int(rows.max()) + 1 if rows.size else 0
+    b0 = np.zeros(n_rows)
+    np.add.at(b0, rows[rhs_col], vals[rhs_col])
+    a0 = sparse.csr_array((vals[~rhs_col], (rows[~rhs_col], cols[~rhs_col])), shape=(n_rows, layout.n))
+    a1, b1 = _sounding_rows(values, u, terrain, bathymetry, hold, used, unpack, layout)
+    a = sparse.vstack([a0, a1], format="csr")
+    b = np.concatenate([b0, b1])
+    embedded = sparse.block_diag([sparse.csc_array((layout.n_gtsam, layout.n_gtsam)), prior], format="csc")
+    information = sparse_sum(a.T @ a, embedded, layout.pattern())
+    gradient = a.T @ b
+    gradient[layout.n_gtsam:] -= prior @ u
+    return information, gradient
+
+
+def _sounding_rows(values, u, terrain: PingTerrain, bathymetry, hold: FieldSoundings, used, unpack,
+                   layout: _Layout):
+    """The whitened rows ``(A, b)`` of the soundings ``used``: key pose, ``c``, tide, nodes."""
+    pose, calibration, tide = unpack(values)
+    residual, jac, dr_variance = terrain_factors.sounding_jacobians(terrain, bathymetry, pose, calibration,
+                                                                    tide, hold.offset(u))
+    ok = used & np.isfinite(residual) & np.all(np.isfinite(jac), axis=-1)
+    ping = np.nonzero(ok)[0]
+    sigma = np.sqrt(terrain.variance[ok] + dr_variance[ok])
+    j = jac[ok] / sigma[:, None]
+    m = ping.size
+    columns = [layout.pose_columns(terrain.keys[terrain.key_index[ping]])[:, None] + np.arange(3)]
+    blocks = [j[:, :3]]
+    at = 3
+    if terrain.calibrated:
+        columns.append(np.broadcast_to(layout.column(CALIBRATION) + np.arange(2), (m, 2)))
+        blocks.append(j[:, at:at + 2])
+        at += 2
+    if terrain.estimates_tide:
+        columns.append(np.full((m, 1), layout.column(TIDE)))
+        blocks.append(j[:, at:at + 1])
+    node = hold.node[ok]
+    columns.append(layout.n_gtsam + node)
+    blocks.append(-hold.weight[ok] * hold.field.std[node] / sigma[:, None])
+    col = np.concatenate(columns, axis=1)
+    val = np.concatenate(blocks, axis=1)
+    a = sparse.csr_array((val.ravel(), (np.repeat(np.arange(m), col.shape[1]), col.ravel())),
+                         shape=(m, layout.n))
+    return a, -residual[ok] / sigma
+
+
+def _retract(values, layout: _Layout, delta: np.ndarray):
+    vector = gtsam.VectorValues()
+    for key, start, dim in zip(layout.keys, layout.start, layout.dims, strict=True):
+        vector.insert(int(key), delta[start:start + dim])
+    return values.retract(vector)
+
+
+def marginals(solution: FieldSolution, keys, calibrated: bool) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Joint covariances ``(n, 5, 5)`` of the key poses (GTSAM's tangent) with ``c``, that of
+    ``c`` ``(2, 2)``, and the selected inverse for the field (:func:`refined_map`)."""
+    layout = solution.layout
+    factor = si.factor(solution.information, si.fill_reducing_order(solution.information))
+    z = si.selected_inverse(factor)
+    at = layout.pose_columns(keys)[:, None] + np.arange(3)
+    out = np.zeros((at.shape[0], 5, 5))
+    out[:, :3, :3] = si.inverse_entries(factor, z, at[:, :, None], at[:, None, :])
+    calib_cov = np.zeros((2, 2))
+    if calibrated:
+        c = layout.column(CALIBRATION) + np.arange(2)
+        calib_cov = si.inverse_entries(factor, z, c[:, None], c[None, :])
+        cross = si.inverse_entries(factor, z, at[:, :, None], np.broadcast_to(c, (at.shape[0], 1, 2)))
+        out[:, :3, 3:] = cross
+        out[:, 3:, :3] = np.swapaxes(cross, 1, 2)
+        out[:, 3:, 3:] = calib_cov
+    return out, calib_cov, {"factor": factor, "z": z}
+
+
+def field_variance(field: Field, inverse: dict, layout: _Layout, north, east) -> np.ndarray:
+    """The posterior variance of ``w^T S u`` at points (each field's own part; a combined
+    field's parts summed, their posterior correlation left out)."""
+    node, weight = field.weights(north, east)
+    ws = weight * field.std[node]
+    col = layout.n_gtsam + node
+    part = np.arange(node.shape[1]) // 4  # a field's four nodes
+    same = part[:, None] == part[None, :]
+    rows, cols = np.broadcast_arrays(col[:, :, None], col[:, None, :])
+    cov = np.zeros(rows.shape)
+    cov[:, same] = si.inverse_entries(inverse["factor"], inverse["z"], rows[:, same], cols[:, same])
+    return np.einsum("mi,mij,mj->m", ws, cov, ws)
+
+
+def refined_map(error: MapError, field: Field, solution: FieldSolution, inverse: dict) -> BathymetryMap:
+    """The map of ``error`` corrected by the estimated field over the field's grid, with its
+    posterior std (the field's posterior variance plus the nugget there, at most the stated std) and
+    the error's correlation length; beyond the grid the map and its error's std as they were, and no data
+    where the map has none."""
+    bathymetry = error.bathymetry
+    north, east = np.meshgrid(bathymetry.north, bathymetry.east, indexing="ij")
+    inside = np.isfinite(bathymetry.depth) & _inside(field, north, east)
+    depth = np.array(bathymetry.depth, float)
+    node, weight = field.weights(north[inside], east[inside])
+    depth[inside] += np.sum(weight * (field.std * solution.u)[node], axis=-1)
+    std = np.where(np.isfinite(depth), np.nan_to_num(error.std), np.nan)
+    variance = field_variance(field, inverse, solution.layout, north[inside], east[inside])
+    nugget = field.nugget(node, weight)
+    # never above the stated std (the field's grid inflates its prior variance towards its edges,
+    # beyond the soundings, where the posterior is the prior)
+    std[inside] = np.minimum(np.sqrt(np.maximum(variance, 0.0) + nugget), std[inside])
+    return bathymetry.replace(depth=depth, depth_std=std, correlation_length=error.correlation_length,
+                              name=f"{bathymetry.name} refined")
+
+
+def _inside(field: Field, north, east) -> np.ndarray:
+    fields = field.fields if isinstance(field, CombinedField) else (field,)
+    ok = np.ones(np.shape(north), dtype=bool)
+    for f in fields:
+        top = (f.origin[0] + (f.shape[0] - 1) * f.spacing, f.origin[1] + (f.shape[1] - 1) * f.spacing)
+        ok &= (north >= f.origin[0]) & (north <= top[0]) & (east >= f.origin[1]) & (east <= top[1])
+    return ok

@@ -1,0 +1,248 @@
+"""The smoother's last solve on every sounding: terrain factors per ping instead of the fixes,
+and optionally the map's error estimated with the track.
+
+With ``GraphConfig.smoother_terrain = "soundings"`` the fixes are replaced by every sounding,
+each a terrain factor on a key pose at its ping (:mod:`tangraph.graph.terrain_factors`):
+Gauss-Newton from the fixes' solution, with a tide variable, re-linearised at every iteration;
+the soundings judged as innovations of the fixes' solution, one by one and ping by ping, again
+after each converged solve; their variances grown by the scatter of the solution's own windows
+(an a posteriori variance factor) while it moves.
+
+With ``"field"`` the map's error is a field of unknowns solved with the track
+(:mod:`tangraph.graph.field_solve`) instead of a variance each sounding is widened by: the
+soundings are judged against the map's stated error (each sounding's own, and an offset a
+ping's soundings share), and the solution carries the refined map.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time as _time
+
+import gtsam
+import numpy as np
+
+from tangraph.eval.map_check import window_scores
+from tangraph.eval.map_field import map_error_field
+from tangraph.graph import batch, field_solve, terrain_factors
+from tangraph.graph.batch import SmootherSolution
+from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world
+from tangraph.graph.config import GraphConfig
+from tangraph.graph.keyposes import PoseGraph, increments
+from tangraph.graph.online import GraphNavigator, _wrap
+from tangraph.maps.grid import BathymetryMap
+
+__all__ = ["SOUNDING_GATE", "WINDOW", "terrain_solve"]
+
+log = logging.getLogger(__name__)
+
+
+#: A sounding whose standardised residual is beyond this is left out of the terrain solve
+#: (two-sided 0.999 of a normal): where the map or the sounding is wrong.
+SOUNDING_GATE = 3.29
+_GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
+#: Windows of track (m) whose mean residuals test the soundings' variances after a solve, as
+#: check lines test a map (:func:`tangraph.eval.map_check.window_scores`)
+WINDOW = 50.0
+_FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show still moves
+
+
+def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
+                   config: GraphConfig) -> tuple[SmootherSolution, dict]:  # fmt: skip
+    """The batch solve with every sounding as a terrain factor instead of the fixes
+    (:mod:`tangraph.graph.terrain_factors`), from ``solution``, on a key pose at every ping
+    (:func:`_ping_graph`: the white DR noise between pings is then the odometry's, correlations
+    and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
+    it), the tide's and the soundings, the soundings re-gated at each converged solve. Returns
+    the solution (its keys every ping) and what it used."""
+    started = _time.perf_counter()
+    fixes_solution = solution
+    graph = _ping_graph(nav)
+    terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
+                                           nav.origin, graph.calibrated)
+    factors = graph.with_fixes([], start=start_kept).factor_graph()
+    world, world_cov = batch.dense_track(nav.survey, nav.white, solution, nav.origin)
+    # the soundings are judged as innovations of the fixes' solution, whose uncertainty this is
+    prior = np.where(np.isfinite(world_cov[:, :2, :2]), world_cov[:, :2, :2], 0.0)
+    initial = batch.frame_poses(world, solution.calibration, nav.origin) if graph.calibrated else world
+    solution = dataclasses.replace(solution, keys=np.asarray(graph.keys), pose=initial)
+    values = graph.values(solution.pose, solution.calibration)
+    if terrain.estimates_tide:  # started at the soundings' median residual, gated around it
+        factors.add(gtsam.PriorFactorVector(TIDE, np.array([terrain.tide]),
+                                            gtsam.noiseModel.Isotropic.Sigma(1, terrain.tide_std)))
+        residual = terrain_factors.terrain_residuals(terrain, nav.bathymetry, solution.pose,
+                                                     solution.calibration, 0.0)
+        finite = residual[np.isfinite(residual)]
+        start = float(np.median(finite)) if finite.size else terrain.tide
+        values.insert(TIDE, np.array([start]))
+    state = _unpack(values, terrain, solution.pose)
+    if config.smoother_terrain == "field" and nav.map_error is not None:
+        return _field_solve(nav, factors, values, terrain, prior, solution.pose, fixes_solution, config,
+                            started)
+    used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE, prior)
+    if not used.any():
+        return _nothing_fits(fixes_solution, terrain)
+    base, factor, iterations = terrain, 1.0, 0
+    for _ in range(_FACTOR_ROUNDS):
+        values, used, ordering, n = _gated_solve(factors, values, terrain, nav.bathymetry, used, config,
+                                                 solution.pose, prior)
+        iterations += n
+        state = _unpack(values, terrain, solution.pose)
+        world = to_world(state[0], state[1], nav.origin) if graph.calibrated else state[0]
+        scores = window_scores(nav.survey, nav.bathymetry, nav.model, window=WINDOW, poses=world, used=used)
+        found = max(1.0, float(np.sqrt(np.mean(scores**2)))) if scores.size else 1.0
+        if abs(found - factor) <= 0.05 * factor:
+            break
+        factor = found
+        terrain = dataclasses.replace(base, variance=base.variance * factor**2)
+        log.info("terrain solve: the soundings' windows scatter %.2f times what the model says: "
+                 "their variances grown by that", factor)
+    solved = _time.perf_counter()
+    pose, calibration, tide = state
+    keys = np.asarray(graph.keys, np.int64)
+    cov, calib_cov = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2))
+    if config.smoother_covariance == "all":
+        extra = terrain_factors.linear_factors(terrain, nav.bathymetry, pose, calibration, tide, used)
+        cov, calib_cov = batch.marginals(factors, values, keys, ordering, graph.calibrated, extra)
+        cov = joint_in_frame(pose[:, 2], cov)
+    error = factors.error(values) + terrain_factors.terrain_cost(terrain, nav.bathymetry, *state, used)
+    timings = {"solve": solved - started, "marginals": _time.perf_counter() - solved}
+    used_info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
+                 "tide": float(tide), "variance_factor": factor}
+    return SmootherSolution(keys, pose, cov, calibration if graph.calibrated else np.zeros(2), calib_cov,
+                            iterations, float(error), timings), used_info, None
+
+
+def _nothing_fits(fixes_solution: SmootherSolution, terrain) -> tuple[SmootherSolution, dict, None]:
+    """The fixes' solution when no sounding passes the gate (nothing would tie ``c`` and the
+    tide to the poses, and METIS fails on that)."""
+    log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution is kept",
+                SOUNDING_GATE)
+    return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
+                            "tide": float(terrain.tide), "variance_factor": 1.0}, None
+
+
+def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference, fixes_solution,
+                 config: GraphConfig, started: float) -> tuple[SmootherSolution, dict, BathymetryMap | None]:
+    """The terrain solve with the map's error as a field of unknowns
+    (:mod:`tangraph.graph.field_solve`) over the footprints of the fixes' solution. Each
+    sounding's variance is its noise and the field's nugget; the gate judges the soundings
+    against the map's stated error (its std under each, and its mean under a ping as an
+    offset the ping's soundings share). Returns the solution, what it used and the refined map
+    (None when no covariance is computed: the map's std is then the posterior's to say)."""
+    bathymetry, error = nav.bathymetry, nav.map_error
+    pose, calibration, _ = _unpack(values, terrain, reference)
+    north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
+    seen = np.isfinite(terrain.depth) & np.isfinite(bathymetry.depth_at(north, east))
+    if not seen.any():
+        return _nothing_fits(fixes_solution, terrain)
+    field = map_error_field(north[seen], east[seen], error)
+    hold = field_solve.FieldSoundings.at(field, north, east, seen)
+    noise = float(nav.model.sounding_std) ** 2
+    solving = dataclasses.replace(terrain, variance=noise + hold.nugget)
+    s2 = np.where(seen, error.std_at(north, east) ** 2, np.nan)
+    s2 = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2)
+    judging = dataclasses.replace(terrain, variance=np.where(seen, noise + s2, np.nan))
+    counts = seen.sum(axis=1)
+    shared = np.divide(np.nansum(np.where(seen, s2, 0.0), axis=1), counts, out=np.zeros(counts.size),
+                       where=counts > 0)
+    used = terrain_factors.gate(judging, bathymetry, *_unpack(values, terrain, reference), SOUNDING_GATE,
+                                prior, shared)
+    if not used.any():
+        return _nothing_fits(fixes_solution, terrain)
+
+    def unpack(v):
+        return _unpack(v, terrain, reference)
+
+    u, iterations = None, 0
+    for _ in range(_GATE_ROUNDS):
+        solved = field_solve.solve(factors, values, solving, bathymetry, hold, used, unpack, u=u,
+                                   max_iterations=config.max_iterations)
+        values, u, iterations = solved.values, solved.u, iterations + solved.iterations
+        regated = terrain_factors.gate(judging, bathymetry, *unpack(values), SOUNDING_GATE, prior, shared)
+        if np.array_equal(regated, used) or not regated.any():
+            break
+        used = regated
+    done = _time.perf_counter()
+    pose, calibration, tide = unpack(values)
+    keys = np.asarray(terrain.keys, np.int64)
+    cov, calib_cov, refined = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2)), None
+    if config.smoother_covariance == "all":
+        cov, calib_cov, inverse = field_solve.marginals(solved, keys, terrain.calibrated)
+        cov = joint_in_frame(pose[:, 2], cov)
+        refined = field_solve.refined_map(error, field, solved, inverse)
+    offset = hold.offset(u)
+    value = offset[used]
+    cost = factors.error(values) + 0.5 * float(u @ (field.precision @ u)) + terrain_factors.terrain_cost(
+        solving, bathymetry, pose, calibration, tide, used, offset)
+    info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
+            "tide": float(tide), "variance_factor": 1.0, "field_nodes": int(field.n_nodes),
+            "field_spacing": float(field.spacing), "field_rms": float(np.sqrt(np.mean(value**2)))}
+    timings = {"solve": done - started, "marginals": _time.perf_counter() - done}
+    return SmootherSolution(keys, pose, cov, calibration if terrain.calibrated else np.zeros(2), calib_cov,
+                            iterations, float(cost), timings), info, refined
+
+
+def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference, prior):
+    """Gauss-Newton with the soundings ``used``, re-gated at each converged solve (as innovations
+    against ``prior``) until the gate keeps the same soundings (at most ``_GATE_ROUNDS``).
+    Returns the values, the soundings used, the last ordering and the iterations."""
+    iterations = 0
+    for _ in range(_GATE_ROUNDS):
+        # METIS on the linear system with the terrain factors (their links to c and the tide)
+        linear = factors.linearize(values)
+        state = _unpack(values, terrain, reference)
+        for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
+            linear.push_back(factor)
+        ordering = batch.shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
+        values, n = batch.gauss_newton(factors, values, ordering, config.max_iterations,
+                                  **_terrain_terms(terrain, bathymetry, used, reference))
+        iterations += n
+        state = _unpack(values, terrain, reference)
+        regated = terrain_factors.gate(terrain, bathymetry, *state, SOUNDING_GATE, prior)
+        if np.array_equal(regated, used) or not regated.any():
+            break
+        used = regated
+    return values, used, ordering, iterations
+
+
+def _terrain_terms(terrain, bathymetry, used, reference) -> dict:
+    """The soundings ``used`` as :func:`gauss_newton`'s extra cost and linear factors."""
+
+    def cost(values) -> float:
+        return terrain_factors.terrain_cost(terrain, bathymetry, *_unpack(values, terrain, reference), used)
+
+    def linear(values) -> list:
+        return terrain_factors.linear_factors(terrain, bathymetry, *_unpack(values, terrain, reference), used)
+
+    return {"extra_cost": cost, "extra_factors": linear}
+
+
+def _ping_graph(nav: GraphNavigator) -> PoseGraph:
+    """The forward pass's graph with a key pose at every ping: its start (the DR's first pose,
+    the model's uncertainty), its calibration prior, and the DR increments between consecutive
+    pings as odometry; no fix, no break. The odometry's noise floors (added to every increment)
+    are shrunk so that over the forward pass's key interval they add up to the same."""
+    survey, model, c = nav.survey, nav.model, nav.config
+    shrink = np.sqrt(max(len(nav.graph.keys) - 1, 1) / max(survey.n_pings - 1, 1))
+    graph = PoseGraph(nav.graph.calibration_std, nav.graph.calibration_mean, nav.origin, c.robust_kernel,
+                      c.robust_parameter, c.odometry_min_std * shrink, c.odometry_min_heading_std * shrink)
+    for k in range(survey.n_pings):
+        graph.add_pose(k, survey.time[k], survey.dr_pose[k])
+    graph.add_start(0, survey.dr_pose[0], model.initial_position_std,
+                    max(model.heading_noise, c.odometry_min_heading_std))  # as the forward pass's
+    ping = np.arange(survey.n_pings)
+    delta, cov = increments(nav.white, survey.time, survey.dr_pose, ping[:-1], ping[1:])
+    for k in range(survey.n_pings - 1):
+        graph.add_odometry(k, k + 1, delta[k], cov[k])
+    return graph
+
+
+def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:
+    """Key poses (headings unwrapped near ``reference``), calibration and tide of ``values``."""
+    pose = np.array(gtsam.utilities.extractPose2(values), float)
+    pose[:, 2] = reference[:, 2] + _wrap(pose[:, 2] - reference[:, 2])
+    calibration = np.asarray(values.atVector(CALIBRATION), float) if terrain.calibrated else np.zeros(2)
+    tide = float(values.atVector(TIDE)[0]) if terrain.estimates_tide else terrain.tide
+    return pose, calibration, tide

@@ -1,0 +1,180 @@
+"""The map's error estimated with the track (tangraph.graph.field_solve, smoother_terrain="field"):
+the joint cost's gradient, the covariance against the bound of the same model, a planted error
+recovered with its std, and the refined map from the CLI."""
+
+import dataclasses
+
+import gtsam
+import numpy as np
+import pytest
+from scipy import sparse
+
+from tangraph.eval import bound_rmse, posterior_crb
+from tangraph.eval.map_field import map_error_field
+from tangraph.graph import GraphConfig, field_solve, smooth_survey, terrain_factors, terrain_solve
+from tangraph.graph.calibration import TIDE
+from tangraph.graph.online import GraphNavigator
+from tangraph.maps import BathymetryMap
+from tangraph.sensors import NavigationModel, rotation_matrix
+from tests.graph.terrain_cases import AXIS, lawnmower, noise_free, smooth_map
+
+MODEL = NavigationModel(sounding_std=0.2, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
+                        speed_scale_std=0.02, heading_bias_std=0.03)
+
+
+def with_error(bathymetry: BathymetryMap, std: float, length: float) -> BathymetryMap:
+    return bathymetry.replace(depth_std=np.full(bathymetry.shape, std), correlation_length=length)
+
+
+def biased_dr(survey, truth, scale=0.01, bias_deg=1.0):
+    """The survey with a DR of speed scale ``scale`` and heading bias ``bias_deg`` about the start."""
+    origin, bias = truth[0, :2], np.radians(bias_deg)
+    dr = truth.copy()
+    dr[:, :2] = origin + (1 + scale) * (truth[:, :2] - origin) @ rotation_matrix(bias).T
+    dr[:, 2] = truth[:, 2] + bias
+    return survey.replace(dr_pose=dr)
+
+
+def test_the_normal_equations_are_the_joint_costs_gradient():
+    # directional derivatives of odometry + priors + soundings + field prior, against A^T b - Q u
+    bathymetry = with_error(smooth_map(), 0.3, 30.0)
+    _, survey = lawnmower()
+    survey = noise_free(survey, bathymetry)
+    rng = np.random.default_rng(3)
+    survey = survey.replace(beam_depth=survey.beam_depth + 0.2 * rng.standard_normal(survey.beam_depth.shape))
+    nav = GraphNavigator(survey, bathymetry, GraphConfig(), model=MODEL).run(False)
+    graph = terrain_solve._ping_graph(nav)
+    terrain = terrain_factors.ping_terrain(survey, bathymetry, MODEL, graph.keys, nav.white, nav.origin,
+                                           graph.calibrated)
+    factors = graph.with_fixes([], start=True).factor_graph()
+    factors.add(gtsam.PriorFactorVector(TIDE, np.array([0.0]), gtsam.noiseModel.Isotropic.Sigma(1, 1.0)))
+    pose = survey.dr_pose + rng.normal(0.0, [0.5, 0.5, 0.01], survey.dr_pose.shape)
+    calibration = np.array([0.01, 0.02])
+    values = graph.values(pose, calibration)
+    values.insert(TIDE, np.array([0.1]))
+    north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
+    seen = np.isfinite(terrain.depth)
+    hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], nav.map_error), north, east,
+                                         seen)
+    terrain = dataclasses.replace(terrain, variance=0.04 + hold.nugget)
+    layout = field_solve._Layout.of(values, hold.field.n_nodes)
+    prior = sparse.csc_array(hold.field.precision)
+    u = 0.3 * rng.standard_normal(hold.field.n_nodes)
+
+    def unpack(v):
+        return terrain_solve._unpack(v, terrain, pose)
+
+    def cost(v, x):
+        return (factors.error(v) + 0.5 * float(x @ (prior @ x))
+                + terrain_factors.terrain_cost(terrain, bathymetry, *unpack(v), seen, hold.offset(x)))
+
+    _, gradient = field_solve._normal_equations(factors, values, u, terrain, bathymetry, hold, seen, unpack,
+                                                layout, prior)
+    for part in (slice(0, layout.n_gtsam), slice(layout.n_gtsam, layout.n), slice(0, layout.n)):
+        step = np.zeros(layout.n)
+        step[part] = 1e-5 * rng.standard_normal(step[part].size)
+        up = cost(field_solve._retract(values, layout, step[:layout.n_gtsam]), u + step[layout.n_gtsam:])
+        down = cost(field_solve._retract(values, layout, -step[:layout.n_gtsam]), u - step[layout.n_gtsam:])
+        assert (up - down) / 2 == pytest.approx(-gradient @ step, rel=1e-4, abs=1e-9)
+
+
+def test_the_covariance_is_the_bound_of_the_same_model():
+    # noise-free soundings of a textured map stated to err by 0.3 m over 30 m, a DR 1 % / 1 deg
+    # off: the smoother with the field claims what the map-aware bound allows (the soundings
+    # alone, the map's error only widening their variances, claim far more)
+    bathymetry = with_error(smooth_map(), 0.3, 30.0)
+    truth, survey = lawnmower(start_error=(0.0, 0.0))
+    survey = noise_free(biased_dr(survey, truth), bathymetry)
+    bound = bound_rmse(posterior_crb(survey, bathymetry, MODEL, kind="smoother"))
+    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    track = smooth_survey(survey, bathymetry, config, model=MODEL)
+    claimed = np.sqrt(np.mean(np.trace(track.covariance[:, :2, :2], axis1=1, axis2=2)))
+    assert claimed == pytest.approx(bound, rel=0.05)
+    widened = smooth_survey(survey, bathymetry, dataclasses.replace(config, smoother_terrain="soundings"),
+                            model=MODEL)
+    assert np.sqrt(np.mean(np.trace(widened.covariance[:, :2, :2], axis1=1, axis2=2))) > 1.5 * bound
+    info = track.meta["soundings"]
+    assert info["field_nodes"] > 0 and info["field_spacing"] == pytest.approx(10.0)
+    error = track.pose[:, :2] - truth[:, :2]
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < bound
+
+
+def blob(north, east, centre=(140.0, 160.0), height=0.8, width=12.0):
+    return height * np.exp(-0.5 * ((north - centre[0]) ** 2 + (east - centre[1]) ** 2) / width**2)
+
+
+def test_a_planted_map_error_is_recovered_with_its_std():
+    # a flat map, a seafloor with a bump the map never had: the refined map has it, within its
+    # stated std, and the track stays the DR's (a flat map tells nothing of where it lies)
+    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.3, 30.0)
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    truth, survey = lawnmower(start_error=(0.0, 0.0))
+    north, east = survey.footprints(truth)
+    rng = np.random.default_rng(5)
+    survey = survey.replace(beam_depth=50.0 + blob(north, east) + 0.1 * rng.standard_normal(north.shape))
+    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
+    track = smooth_survey(survey, flat, config, model=model)
+    np.testing.assert_allclose(track.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
+    refined = track.meta["refined_map"]
+    assert refined.shape == flat.shape and refined.correlation_length == 30.0
+    cell_n, cell_e = np.meshgrid(AXIS, AXIS, indexing="ij")
+    surveyed = (np.abs(cell_n - 140.0) <= 50.0) & (np.abs(cell_e - 160.0) <= 70.0)
+    truth_error = blob(cell_n, cell_e)
+    before = np.sqrt(np.mean(truth_error[surveyed] ** 2))
+    after = np.sqrt(np.mean((refined.depth - 50.0 - truth_error)[surveyed] ** 2))
+    assert after < 0.3 * before
+    at = (np.abs(cell_n - 140.0) < 1.0) & (np.abs(cell_e - 160.0) < 1.0)
+    assert float(refined.depth[at][0]) - 50.0 == pytest.approx(0.8, abs=0.15)
+    # never surer than it is (the bump is smoother than the prior's field, so it is cautious)
+    z = (refined.depth - 50.0 - truth_error)[surveyed] / refined.depth_std[surveyed]
+    assert np.sqrt(np.mean(z**2)) < 1.0 and np.max(np.abs(z)) < 3.0
+    # the std shrinks where the soundings are (to what the nodes leave between them) and is the
+    # prior's far from them
+    assert np.max(refined.depth_std[surveyed]) < 0.7 * 0.3
+    assert np.median(refined.depth_std[surveyed]) < 0.6 * 0.3
+    np.testing.assert_allclose(refined.depth_std[0, 0], 0.3)
+    np.testing.assert_allclose(refined.depth[0, 0], 50.0)
+
+
+def test_a_map_without_error_is_solved_as_soundings():
+    bathymetry = smooth_map()
+    _, survey = lawnmower()
+    survey = noise_free(survey, bathymetry)
+    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    field = smooth_survey(survey, bathymetry, config, model=MODEL)
+    soundings = smooth_survey(survey, bathymetry, dataclasses.replace(config, smoother_terrain="soundings"),
+                              model=MODEL)
+    np.testing.assert_array_equal(field.pose, soundings.pose)
+    assert "refined_map" not in field.meta and "field_nodes" not in field.meta["soundings"]
+
+
+def test_smooth_writes_the_refined_map(tmp_path, capsys):
+    from tangraph.cli import main
+    from tangraph.maps import read_map, write_map
+    from tangraph.survey import write_survey
+
+    bathymetry = smooth_map()
+    _, survey = lawnmower()
+    survey = noise_free(survey, bathymetry)
+    map_file, survey_file = tmp_path / "map.nc", tmp_path / "survey.nc"
+    write_map(bathymetry, map_file)
+    write_survey(survey, survey_file)
+    model = tmp_path / "model.toml"
+    model.write_text("sounding_std = 0.2\ntide_std = 1.0\nspeed_noise = 0.02\ninitial_position_std = 10.0\n")
+    refined, out = tmp_path / "refined.nc", tmp_path / "track.csv"
+    base = ["smooth", str(survey_file), "--map", str(map_file), "--dr-model", str(model), "-q",
+            "-o", str(out)]
+    # a map that states no error has nothing to refine: said in one line, nothing written
+    assert main([*base, "--refined-map", str(refined)]) == 2
+    assert "states no error" in capsys.readouterr().err and not refined.exists() and not out.exists()
+    assert main([*base, "--refined-map", str(tmp_path / "refined.map")]) == 2
+    assert "cannot tell the format" in capsys.readouterr().err
+    model.write_text(model.read_text() + "map_std = 0.2\nmap_correlation_length = 30.0\n")
+    assert main([*base, "--refined-map", str(refined)]) == 0
+    written = read_map(refined)
+    assert written.shape == bathymetry.shape and written.depth_std is not None
+    assert written.correlation_length == pytest.approx(30.0)
+    # noise-free soundings of the map itself: the refined map stays it, and is surer under the track
+    np.testing.assert_allclose(written.depth, bathymetry.depth, atol=0.05)
+    assert np.nanmin(written.depth_std) < 0.5 * 0.2 and np.nanmax(written.depth_std) == pytest.approx(0.2)
+    assert out.exists()
