@@ -47,7 +47,8 @@ from tangraph.graph.terrain_factors import PingTerrain
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.terrain import MapError
 
-__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "solve"]
+__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "solve",
+           "variance_components"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -71,6 +72,13 @@ class FieldSoundings:
         nugget = np.full(seen.shape, np.nan)
         nodes[seen], weights[seen], nugget[seen] = node, weight, field.nugget(node, weight)
         return cls(field, nodes, weights, nugget)
+
+    def scaled(self, factor: float) -> FieldSoundings:
+        """The hold of the field whose stds are ``factor`` times these (the nugget with them)."""
+        fields = self.field.fields if isinstance(self.field, CombinedField) else (self.field,)
+        scaled = tuple(dataclasses.replace(f, std=f.std * factor) for f in fields)
+        field = CombinedField(scaled) if isinstance(self.field, CombinedField) else scaled[0]
+        return dataclasses.replace(self, field=field, nugget=self.nugget * factor**2)
 
     def offset(self, u: np.ndarray) -> np.ndarray:
         """The field ``S u`` under every sounding ``(K, B)`` (0 where it has no footprint)."""
@@ -258,6 +266,31 @@ def marginals(solution: FieldSolution, keys, calibrated: bool) -> tuple[np.ndarr
         out[:, 3:, :3] = np.swapaxes(cross, 1, 2)
         out[:, 3:, 3:] = calib_cov
     return out, calib_cov, {"factor": factor, "z": z}
+
+
+def variance_components(solution: FieldSolution, terrain: PingTerrain, bathymetry: BathymetryMap,
+                        hold: FieldSoundings, used: np.ndarray, unpack, inverse: dict) -> dict[str, float]:
+    """A posteriori variance factors of the soundings' noise and of the field (Förstner's
+    variance component estimates): each component's weighted squares over its redundancy,
+
+        ``f_noise^2 = sum (r / sigma)^2 / (m - tr(H_e Sigma))``,
+        ``f_field^2 = u^T Q u / (n - tr(Q Sigma_uu))``,
+
+    ``H_e`` the soundings' information, ``Q`` the field's prior precision, ``Sigma`` the inverse
+    of the whole system (on its pattern, ``inverse`` from :func:`marginals`); each 1 when the
+    data scatter as the model says. Returns both (squared), with the redundancies."""
+    layout, factor, z = solution.layout, inverse["factor"], inverse["z"]
+    a, b = _sounding_rows(solution.values, solution.u, terrain, bathymetry, hold, used, unpack, layout)
+    h = sparse.coo_array(a.T @ a)
+    redundancy = float(b.size - np.sum(h.data * si.inverse_entries(factor, z, h.row, h.col)))
+    q = sparse.coo_array(hold.field.precision)
+    at = layout.n_gtsam
+    field_redundancy = float(hold.field.n_nodes - np.sum(q.data * si.inverse_entries(factor, z, q.row + at,
+                                                                                       q.col + at)))
+    u = solution.u
+    return {"noise": float(b @ b) / redundancy if redundancy > 0 else 1.0,
+            "field": float(u @ (q.tocsr() @ u)) / field_redundancy if field_redundancy > 0 else 1.0,
+            "noise_redundancy": redundancy, "field_redundancy": field_redundancy}
 
 
 def field_variance(field: Field, inverse: dict, layout: _Layout, north, east) -> np.ndarray:

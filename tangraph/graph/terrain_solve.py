@@ -32,6 +32,7 @@ from tangraph.graph.config import GraphConfig
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator, _wrap
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.terrain import MapError
 
 __all__ = ["SOUNDING_GATE", "WINDOW", "terrain_solve"]
 
@@ -129,56 +130,73 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     (:mod:`tangraph.graph.field_solve`) over the footprints of the fixes' solution. Each
     sounding's variance is its noise and the field's nugget; the gate judges the soundings
     against the map's stated error (its std under each, and its mean under a ping as an
-    offset the ping's soundings share). Returns the solution, what it used and the refined map
-    (None when no covariance is computed: the map's std is then the posterior's to say)."""
+    offset the ping's soundings share). After each converged solve the soundings' noise and the
+    field's std are grown by their a posteriori variance factors
+    (:func:`~tangraph.graph.field_solve.variance_components`; never shrunk below the model's)
+    while these move. Returns the solution, what it used and the refined map."""
     bathymetry, error = nav.bathymetry, nav.map_error
     pose, calibration, _ = _unpack(values, terrain, reference)
     north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
     seen = np.isfinite(terrain.depth) & np.isfinite(bathymetry.depth_at(north, east))
     if not seen.any():
         return _nothing_fits(fixes_solution, terrain)
-    field = map_error_field(north[seen], east[seen], error)
-    hold = field_solve.FieldSoundings.at(field, north, east, seen)
+    hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], error), north, east, seen)
     noise = float(nav.model.sounding_std) ** 2
-    solving = dataclasses.replace(terrain, variance=noise + hold.nugget)
     s2 = np.where(seen, error.std_at(north, east) ** 2, np.nan)
     s2 = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2)
-    judging = dataclasses.replace(terrain, variance=np.where(seen, noise + s2, np.nan))
     counts = seen.sum(axis=1)
     shared = np.divide(np.nansum(np.where(seen, s2, 0.0), axis=1), counts, out=np.zeros(counts.size),
                        where=counts > 0)
-    used = terrain_factors.gate(judging, bathymetry, *_unpack(values, terrain, reference), SOUNDING_GATE,
-                                prior, shared)
-    if not used.any():
-        return _nothing_fits(fixes_solution, terrain)
 
     def unpack(v):
         return _unpack(v, terrain, reference)
 
-    u, iterations = None, 0
-    for _ in range(_GATE_ROUNDS):
-        solved = field_solve.solve(factors, values, solving, bathymetry, hold, used, unpack, u=u,
-                                   max_iterations=config.max_iterations)
-        values, u, iterations = solved.values, solved.u, iterations + solved.iterations
-        regated = terrain_factors.gate(judging, bathymetry, *unpack(values), SOUNDING_GATE, prior, shared)
-        if np.array_equal(regated, used) or not regated.any():
+    def judged(v, noise_factor: float, field_factor: float) -> np.ndarray:
+        judging = dataclasses.replace(terrain, variance=np.where(seen, (noise * noise_factor**2
+                                                                        + s2 * field_factor**2), np.nan))
+        return terrain_factors.gate(judging, bathymetry, *unpack(v), SOUNDING_GATE, prior,
+                                    shared * field_factor**2)
+
+    used = judged(values, 1.0, 1.0)
+    if not used.any():
+        return _nothing_fits(fixes_solution, terrain)
+    keys = np.asarray(terrain.keys, np.int64)
+    u, iterations, noise_factor, field_factor, scaled = None, 0, 1.0, 1.0, hold
+    for rounds in range(1, _FACTOR_ROUNDS + 1):
+        solving = dataclasses.replace(terrain, variance=noise * noise_factor**2 + scaled.nugget)
+        for _ in range(_GATE_ROUNDS):
+            solved = field_solve.solve(factors, values, solving, bathymetry, scaled, used, unpack, u=u,
+                                       max_iterations=config.max_iterations)
+            values, u, iterations = solved.values, solved.u, iterations + solved.iterations
+            regated = judged(values, noise_factor, field_factor)
+            if np.array_equal(regated, used) or not regated.any():
+                break
+            used = regated
+        cov, calib_cov, inverse = field_solve.marginals(solved, keys, terrain.calibrated)
+        found = field_solve.variance_components(solved, solving, bathymetry, scaled, used, unpack, inverse)
+        new_noise = max(1.0, noise_factor * np.sqrt(found["noise"]))
+        new_field = max(1.0, field_factor * np.sqrt(found["field"]))
+        if rounds == _FACTOR_ROUNDS or (abs(new_noise - noise_factor) <= 0.05 * noise_factor
+                                        and abs(new_field - field_factor) <= 0.05 * field_factor):
             break
-        used = regated
+        log.info("terrain solve: the soundings scatter %.2f and the map's error %.2f times what the "
+                 "model says: grown by that", new_noise, new_field)
+        noise_factor, field_factor = new_noise, new_field
+        scaled = hold.scaled(field_factor)
     done = _time.perf_counter()
     pose, calibration, tide = unpack(values)
-    keys = np.asarray(terrain.keys, np.int64)
-    cov, calib_cov, refined = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2)), None
-    if config.smoother_covariance == "all":
-        cov, calib_cov, inverse = field_solve.marginals(solved, keys, terrain.calibrated)
-        cov = joint_in_frame(pose[:, 2], cov)
-        refined = field_solve.refined_map(error, field, solved, inverse)
-    offset = hold.offset(u)
-    value = offset[used]
-    cost = factors.error(values) + 0.5 * float(u @ (field.precision @ u)) + terrain_factors.terrain_cost(
-        solving, bathymetry, pose, calibration, tide, used, offset)
+    cov = joint_in_frame(pose[:, 2], cov)
+    found_error = MapError(error.bathymetry, error.std * field_factor, error.correlation_length)
+    refined = field_solve.refined_map(found_error, scaled.field, solved, inverse)
+    if config.smoother_covariance != "all":
+        cov, calib_cov = np.full_like(cov, np.nan), np.zeros((2, 2))
+    offset = scaled.offset(u)
+    cost = factors.error(values) + 0.5 * float(u @ (scaled.field.precision @ u)) + \
+        terrain_factors.terrain_cost(solving, bathymetry, pose, calibration, tide, used, offset)
     info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
-            "tide": float(tide), "variance_factor": 1.0, "field_nodes": int(field.n_nodes),
-            "field_spacing": float(field.spacing), "field_rms": float(np.sqrt(np.mean(value**2)))}
+            "tide": float(tide), "variance_factor": float(noise_factor), "field_factor": float(field_factor),
+            "field_nodes": int(scaled.field.n_nodes), "field_spacing": float(scaled.field.spacing),
+            "field_rms": float(np.sqrt(np.mean(offset[used] ** 2)))}
     timings = {"solve": done - started, "marginals": _time.perf_counter() - done}
     return SmootherSolution(keys, pose, cov, calibration if terrain.calibrated else np.zeros(2), calib_cov,
                             iterations, float(cost), timings), info, refined
