@@ -11,7 +11,8 @@ after each converged solve; their variances grown by the scatter of the solution
 With ``"field"`` the map's error is a field of unknowns solved with the track
 (:mod:`tangraph.graph.field_solve`) instead of a variance each sounding is widened by: the
 soundings are judged against the map's stated error (each sounding's own, and an offset a
-ping's soundings share), and the solution carries the refined map.
+ping's soundings share), the soundings' noise and the field's std grown by their a
+posteriori variance factors, and the solution carries the refined map.
 """
 
 from __future__ import annotations
@@ -50,13 +51,15 @@ _FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show 
 
 
 def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
-                   config: GraphConfig) -> tuple[SmootherSolution, dict]:  # fmt: skip
+                  config: GraphConfig) -> tuple[SmootherSolution, dict, BathymetryMap | None]:  # fmt: skip
     """The batch solve with every sounding as a terrain factor instead of the fixes
     (:mod:`tangraph.graph.terrain_factors`), from ``solution``, on a key pose at every ping
     (:func:`_ping_graph`: the white DR noise between pings is then the odometry's, correlations
     and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
-    it), the tide's and the soundings, the soundings re-gated at each converged solve. Returns
-    the solution (its keys every ping) and what it used."""
+    it), the tide's and the soundings, the soundings re-gated at each converged solve; with
+    ``config.smoother_terrain = "field"`` and a map that states its error, the map's error
+    solved with them (:func:`_field_solve`). Returns the solution (its keys every ping), what it
+    used and the refined map (None but with ``"field"``)."""
     started = _time.perf_counter()
     fixes_solution = solution
     graph = _ping_graph(nav)
@@ -164,12 +167,13 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     u, iterations, noise_factor, field_factor, scaled = None, 0, 1.0, 1.0, hold
     for rounds in range(1, _FACTOR_ROUNDS + 1):
         solving = dataclasses.replace(terrain, variance=noise * noise_factor**2 + scaled.nugget)
-        for _ in range(_GATE_ROUNDS):
+        for attempt in range(_GATE_ROUNDS):
             solved = field_solve.solve(factors, values, solving, bathymetry, scaled, used, unpack, u=u,
                                        max_iterations=config.max_iterations)
             values, u, iterations = solved.values, solved.u, iterations + solved.iterations
             regated = judged(values, noise_factor, field_factor)
-            if np.array_equal(regated, used) or not regated.any():
+            # ``used`` stays the last solve's: its system holds those soundings and no others
+            if np.array_equal(regated, used) or not regated.any() or attempt == _GATE_ROUNDS - 1:
                 break
             used = regated
         cov, calib_cov, inverse = field_solve.marginals(solved, keys, terrain.calibrated)
