@@ -479,8 +479,8 @@ def track_report(track: Track, survey: Survey) -> dict:
                            "rejected": int(meta.get("n_fixes_rejected", 0)),
                            "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}
     if "soundings" in meta:  # the smoother on every sounding
-        report["soundings"] = {k: float(v) if k in ("tide", "variance_factor") else int(v)
-                               for k, v in meta["soundings"].items()}
+        counts = ("soundings", "soundings_used", "field_nodes")
+        report["soundings"] = {k: int(v) if k in counts else float(v) for k, v in meta["soundings"].items()}
     if "n_divergences" in meta:
         report["divergences"] = int(meta["n_divergences"])
     if "lost_steps" in meta:
@@ -518,6 +518,10 @@ def track_summary(track: Track, survey: Survey) -> str:
         lines.append(f"soundings    {snd['soundings_used']} of {snd['soundings']} weighed (the others left "
                      f"out by the gate), tide {snd['tide']:+.2f} m, variances x "
                      f"{snd['variance_factor']:.2f}^2")
+        if "field_factor" in snd:
+            lines.append(f"map error    estimated with the track on {snd['field_nodes']} nodes "
+                         f"{snd['field_spacing']:.0f} m apart, its stated std x {snd['field_factor']:.2f}, "
+                         f"correction RMS {snd['field_rms']:.2f} m")
     if "divergences" in r:
         lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")
     if r.get("lost", {}).get("pings"):

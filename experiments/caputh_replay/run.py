@@ -206,7 +206,8 @@ def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str 
     Each March run is smoothed with the case's DR, and every other March run's soundings, at
     their GPS positions and less their median (the datum), are compared with the prior map and
     with the refined one over the cells the refinement changed: their robust spread (1.4826 x
-    the median absolute deviation) and RMS, m."""
+    the median absolute deviation) and RMS, m, over the soundings whose four surrounding cells
+    the refinement changed."""
     from tangraph.navigation import navigate
 
     rows = []
@@ -218,17 +219,15 @@ def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str 
         refined = track.meta.get("refined_map")
         if refined is None:
             continue
-        changed = np.abs(refined.depth - bathymetry.depth) > 1e-3
+        # the cells the refinement changed, as a map: a sounding counts where all four around it did
+        moved = np.abs(refined.depth - bathymetry.depth) > 1e-3
+        changed = bathymetry.replace(depth=np.where(moved, 1.0, np.nan), depth_std=None)
         for other, held in march.items():
             if other == name:
                 continue
             held = in_map(held, bathymetry)
             north, east = held.footprints(held.true_pose)
-            i = np.rint((north - bathymetry.north[0]) / (bathymetry.north[1] - bathymetry.north[0]))
-            j = np.rint((east - bathymetry.east[0]) / (bathymetry.east[1] - bathymetry.east[0]))
-            inside = np.isfinite(i) & (i >= 0) & (i < changed.shape[0]) & (j >= 0) & (j < changed.shape[1])
-            under = np.zeros(north.shape, dtype=bool)
-            under[inside] = changed[i[inside].astype(int), j[inside].astype(int)]
+            under = changed.contains(north, east)
             row = {"refined_by": name, "case": case, "held_out": other, "soundings": 0}
             for label, m in (("prior", bathymetry), ("refined", refined)):
                 r = held.beam_depth - m.depth_at(north, east)

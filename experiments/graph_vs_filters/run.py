@@ -66,13 +66,7 @@ def _map_errors(run, refined) -> dict[str, float]:
     if run.world is None or refined is None:
         return out
     prior = run.bathymetry
-    north, east = run.survey.footprints(run.survey.true_pose)
-    seen = np.isfinite(north) & np.isfinite(east)
-    i = np.rint((north[seen] - prior.north[0]) / (prior.north[1] - prior.north[0])).astype(int)
-    j = np.rint((east[seen] - prior.east[0]) / (prior.east[1] - prior.east[0])).astype(int)
-    inside = (i >= 0) & (i < prior.shape[0]) & (j >= 0) & (j < prior.shape[1])
-    under = np.zeros(prior.shape, dtype=bool)
-    under[i[inside], j[inside]] = True
+    under = prior.cells_under(*run.survey.footprints(run.survey.true_pose))
     truth = run.world.seafloor.depth_at(*np.meshgrid(prior.north, prior.east, indexing="ij"))
     under &= np.isfinite(truth) & np.isfinite(prior.depth)
     if not under.any():

@@ -107,10 +107,9 @@ def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose
 
 
 def terrain_residuals(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
-                      tide: float, offset: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+                      tide: float) -> np.ndarray:  # fmt: skip
     """The residuals ``r = z - t - h(f) (K, B)`` alone (NaN where no sounding or no map)."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False,
-                     offset=offset)[0]
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)[0]
 
 
 def footprints(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration) -> tuple[np.ndarray,

@@ -357,6 +357,18 @@ class BathymetryMap:
         """True where :meth:`depth_at` returns data: inside the grid and not next to a NaN."""
         return np.isfinite(self.depth_at(north, east))
 
+    def cells_under(self, north, east) -> np.ndarray:
+        """The cells ``(ny, nx)`` whose centre is the nearest to any of the points (points off
+        the grid or NaN are ignored)."""
+        north, east = np.ravel(north), np.ravel(east)
+        i = np.rint((north - self.north[0]) / self.cell_size[0])
+        j = np.rint((east - self.east[0]) / self.cell_size[1])
+        inside = (np.isfinite(i) & np.isfinite(j) & (i >= 0) & (i < self.shape[0])
+                  & (j >= 0) & (j < self.shape[1]))
+        out = np.zeros(self.shape, dtype=bool)
+        out[i[inside].astype(np.int64), j[inside].astype(np.int64)] = True
+        return out
+
     # -- new maps from this one -----------------------------------------------------------
     def replace(self, **changes) -> BathymetryMap:
         """A copy with some fields changed (validated again).

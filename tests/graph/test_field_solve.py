@@ -171,6 +171,7 @@ def test_smooth_writes_the_refined_map(tmp_path, capsys):
     assert "cannot tell the format" in capsys.readouterr().err
     model.write_text(model.read_text() + "map_std = 0.2\nmap_correlation_length = 30.0\n")
     assert main([*base, "--refined-map", str(refined)]) == 0
+    assert "map error    estimated with the track on" in capsys.readouterr().out
     written = read_map(refined)
     assert written.shape == bathymetry.shape and written.depth_std is not None
     assert written.correlation_length == pytest.approx(30.0)

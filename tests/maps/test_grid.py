@@ -128,6 +128,13 @@ def test_cell_size_extent_contains():
     assert m.contains([20.0, 200.0], [0.0, 0.0]).tolist() == [True, False]
 
 
+def test_cells_under_points_are_the_nearest_cells_on_the_grid():
+    m = plane()  # north 10, 15, ... 105; east -50, -46, ... 66
+    under = m.cells_under([11.0, 12.4, 14.0, 500.0, np.nan], [-50.0, -47.9, -48.1, 0.0, 0.0])
+    assert under.shape == m.shape
+    assert sorted(zip(*np.nonzero(under), strict=True)) == [(0, 0), (0, 1), (1, 0)]
+
+
 def test_crop_keeps_cells_inside_bounds():
     m = plane()
     c = m.crop(north=(20, 40), east=(-42, -30))
