@@ -71,13 +71,14 @@ def build_map(cfg: dict, data: Path):
     files = [p for month in m["months"] for p in run_files(data, month)]
     surveys = [_import(cfg, data, p) for p in files]
     grid = grid_surveys(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
-                        name="caputh-" + "-".join(m["months"]))
+                        name="caputh-" + "-".join(m["months"]), position_std=m.get("position_std", 0.0))
     if not m.get("check_lines", False):
         return grid
     from tangraph.eval.map_check import calibrate_error, check_map_error
     from tangraph.sensors import NavigationModel
 
     check = check_map_error(surveys, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
+                            position_std=m.get("position_std", 0.0),
                             model=NavigationModel(sounding_std=cfg["navigation"]["boat"]["sounding_std"]),
                             names=[p.stem for p in files])
     return calibrate_error(grid, check)

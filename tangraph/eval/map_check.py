@@ -182,10 +182,11 @@ def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
 def check_map_error(
     surveys: Sequence[Survey], *, cell: float, statistic: str = "median", fill: int = 0,
     model: NavigationModel | None = None, window: float = 50.0, names: Sequence[str] | None = None,
-    progress=None, lines: bool = False,
+    progress=None, lines: bool = False, position_std: float = 0.0,
 ) -> MapCheck:
     """Hold out each survey in turn, grid the others (``cell``, ``statistic``, ``fill`` as
-    :func:`~tangraph.maps.gridding.grid_surveys`) and score the held-out soundings against that
+    :func:`~tangraph.maps.gridding.grid_surveys`, and ``position_std``, the surveys' positioning
+    std) and score the held-out soundings against that
     map in windows of ``window`` m (:func:`window_scores`; the module docstring says what the
     figures mean). ``model`` gives the sounding std (default: a :class:`NavigationModel`'s);
     the map's error is the gridded map's own. ``progress(i, n)`` is called after each survey.
@@ -225,7 +226,7 @@ def check_map_error(
             raise TangraphError(f"check_map_error: survey {names[i]!r} has no reference track (true_pose)")
         others = [s for j, s in enumerate(surveys) if j != i]
         bathymetry = grid_surveys(others, cell=cell, statistic=statistic, fill=fill,
-                                  name=f"without {names[i]}").depth
+                                  name=f"without {names[i]}", position_std=position_std).depth
         s = window_scores(in_map_frame(held, bathymetry), bathymetry, model, window=window)
         scores.append(s)
         owner.append(np.full(s.size, i))

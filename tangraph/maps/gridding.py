@@ -332,6 +332,18 @@ def gridded_error(grid: SoundingGrid, *, neighbourhood: int = 2) -> GriddedError
     scenarios the filled cells' true error is still 1.2-1.3 times this std (a fill leans on
     data on one or two sides only).
 
+    **Where the soundings were placed.** A sounding's position is known to the gridded
+    surveys' positioning std ``p`` per axis (``meta["position_std"]``, :func:`grid_surveys`'s
+    ``position_std``: their GPS), and its depth is binned where it was placed, not where it was
+    measured. On a slope ``g`` (the map's own gradient; with a gap fill the largest over lags up
+    to its radius, since the fill flattens the map next to its data) a horizontal error ``dx``
+    is a depth error ``g . dx``, so every cell's variance gains ``p^2 |g|^2`` (the horizontal
+    uncertainty propagated through the slope, as a hydrographic total propagated uncertainty
+    counts it): a
+    steep cell's depth is known less well than its soundings' spread alone says, and no
+    sounding placed on it can tell a position better than ``p``. 0 (the default) takes the
+    positions as exact.
+
     **The correlation length**. A measured cell's error is the cell's own (noise averaged in it,
     relief within it), independent from cell to cell: its correlation length is the cell. A
     filled cell's error is the terrain's change since the measured cells it leans on, shared by
@@ -388,10 +400,38 @@ def gridded_error(grid: SoundingGrid, *, neighbourhood: int = 2) -> GriddedError
         variance = std[ni, nj] ** 2 + fill_error(distance / cell)
         std = np.where(filled, np.sqrt(variance), std)
     valid = measured | filled
+    position_std = float(grid.meta.get("position_std", 0.0))
+    if position_std > 0:  # where its soundings were placed: the slope turns that into depth
+        depth = np.where(measured, layer, grid.gap_fill if grid.gap_fill is not None else np.nan)
+        lags = int(grid.meta.get("gap_fill", {}).get("cells", 1)) if filled.any() else 1
+        std = np.sqrt(std**2 + position_std**2 * _slope_squared(depth, cell, lags))
     weight = std[valid] ** 2
     scale = np.maximum(cell, 2.0 * distance[valid])
     length = float(np.sum(weight * scale) / np.sum(weight)) if np.sum(weight) > 0 else float(cell)
     return GriddedError(std, max(length, float(cell)), gamma, spread_median)
+
+
+def _slope_squared(depth: np.ndarray, cell: float, lags: int = 1) -> np.ndarray:
+    """The squared magnitude of the depth's gradient per cell (dimensionless), the largest over
+    central differences ``1 .. lags`` cells either side (a gap fill flattens the map next to its
+    data, over about its radius, so the slope the data hold shows at the longer lags; a sharp
+    feature at the shortest). A difference falls back to one side where the other has no depth,
+    and to 0 along an axis where neither has."""
+    out = np.zeros(depth.shape)
+    for lag in range(1, max(int(lags), 1) + 1):
+        total = np.zeros(depth.shape)
+        for axis in (0, 1):
+            a = np.moveaxis(depth, axis, 0)
+            forward = np.full(a.shape, np.nan)
+            backward = np.full(a.shape, np.nan)
+            if a.shape[0] > lag:
+                forward[:-lag] = (a[lag:] - a[:-lag]) / (lag * cell)
+                backward[lag:] = forward[:-lag]
+            both = 0.5 * (forward + backward)
+            g = np.where(np.isfinite(both), both, np.where(np.isfinite(forward), forward, backward))
+            total += np.moveaxis(np.nan_to_num(g) ** 2, 0, axis)
+        out = np.maximum(out, total)
+    return out
 
 
 def _relief_variance(grid: SoundingGrid) -> np.ndarray:
@@ -535,6 +575,7 @@ def grid_surveys(
     use_dr: bool = False,
     names: Sequence[str] | None = None,
     name: str = "surveys",
+    position_std: float = 0.0,
 ) -> SoundingGrid:
     """Grid the soundings of one or more surveys, placed at their reference tracks, into a map.
 
@@ -563,12 +604,16 @@ def grid_surveys(
         Names of the surveys (e.g. their files) in errors and in the result's ``meta``.
     name : str
         Name of the map.
+    position_std : float
+        The std (m per axis) of the positions the soundings are placed at (the reference
+        track's: a GPS's error; the dead reckoning's with ``use_dr``): the map's error gains it
+        times the map's slope (:func:`gridded_error`). 0: the positions are exact.
 
     Returns
     -------
     SoundingGrid
         The map is ``.depth``, in the first survey's CRS and origin; ``meta`` holds the
-        sources, the vertical datum, the track used and the gap fill.
+        sources, the vertical datum, the track used, the position std and the gap fill.
 
     Raises
     ------
@@ -592,6 +637,10 @@ def grid_surveys(
     surveys = list(surveys)
     if not surveys:
         raise TangraphError("grid_surveys: no surveys")
+    if isinstance(position_std, bool) or not isinstance(position_std, int | float | np.floating) \
+            or not (math.isfinite(position_std) and position_std >= 0):
+        raise TangraphError(f"grid_surveys: position_std must be a number of metres >= 0, "
+                            f"got {position_std!r}")
     names = [f"survey {k + 1}" for k in range(len(surveys))] if names is None else [str(n) for n in names]
     if len(names) != len(surveys):
         raise TangraphError(f"grid_surveys: {len(names)} names for {len(surveys)} surveys")
@@ -618,7 +667,7 @@ def grid_surveys(
     grid = block_reduce(points, cell=cell, extent=(lo[0], hi[0], lo[1], hi[1]), statistic=statistic,
                         name=name, crs=frame_crs, origin=frame_origin)
     meta = {**grid.meta, "sources": names, "vertical_datum": datum,
-            "track": "dr_pose" if use_dr else "true_pose"}
+            "track": "dr_pose" if use_dr else "true_pose", "position_std": float(position_std)}
     grid = SoundingGrid(grid.mean, grid.count, grid.std, grid.n_dropped, median=grid.median,
                         statistic=grid.statistic, meta=meta)
     return fill_gaps(grid, fill) if fill else grid

@@ -11,7 +11,8 @@ in its TOML, :mod:`tangraph.sim.scenario`). Then:
   from a simulated earlier survey of that seafloor: a lawnmower of parallel lines
   ``prior_map.line_spacing`` apart, ray cast with the scenario's sonar (or
   ``[prior_map.sonar]``), placed at a GPS track with a slowly varying error of std
-  ``prior_map.position_std``, binned at ``prior_map.cell``, with gaps of up to
+  ``prior_map.position_std`` (which the gridding counts in the map's error through its slope,
+  :func:`tangraph.maps.gridded_error`), binned at ``prior_map.cell``, with gaps of up to
   ``prior_map.fill`` cells filled. Its error is spatially correlated, larger between lines and
   in filled gaps, and its data stop at edges, as a real map's do, while the truth stays known.
 
@@ -213,7 +214,7 @@ def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng
                     beam_starboard=pings.beam_starboard, beam_depth=pings.beam_depth, true_pose=gps,
                     meta={"crs": seafloor.crs, "origin": list(seafloor.origin), "name": f"{name} survey"})
     grid = grid_surveys([survey], cell=settings.cell, statistic=settings.statistic,  # type: ignore[arg-type]
-                        fill=settings.fill, name=name)
+                        fill=settings.fill, name=name, position_std=settings.position_std)
     log.info("prior map %r: %d pings, %.0f %% of cells measured", name, time.size,
              100 * float(np.mean(grid.count > 0)))
     return grid.depth.replace(name=name), survey
