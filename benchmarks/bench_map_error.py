@@ -40,7 +40,7 @@ def main(argv=None) -> None:
     args = parser.parse_args(argv)
 
     from tangraph.filters import FilterModel, survey_pings
-    from tangraph.filters.core import model_belief
+    from tangraph.filters.belief import model_belief
     from tangraph.filters.likelihood import TerrainLikelihood
     from tangraph.matching import TapConfig, tap_fix, window_patch
     from tangraph.sensors import NavigationModel, map_error, shared_map_variances, sounding_variances

@@ -74,8 +74,7 @@ def main(argv=None) -> None:
 
 def relocalisation(repeat: int) -> None:
     from tangraph.filters import pmf
-    from tangraph.filters.core import FilterModel
-    from tangraph.filters.model import Ping
+    from tangraph.filters.model import FilterModel, Ping
     from tangraph.maps import fractal
 
     chart = fractal((501, 501), 10.0, rng=np.random.default_rng(0), relief=10.0, mean_depth=60.0)

@@ -9,28 +9,15 @@ algorithm settings only.
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
-from tangraph.filters.config import ParticleConfig
-from tangraph.filters.core import (
+from tangraph.filters.belief import (
     Belief,
-    FilterModel,
-    Innovation,
-    Measurement,
-    StepResult,
     calibration_estimate,
     initial_belief,
-    jitter,
-    measure,
     model_belief,
-    predict,
-    resample_belief,
-    resample_if_needed,
-    reweight,
-    run_particle_filter,
-    shrink_calibration,
-    shrink_state,
     state_moments,
     weighted_moments,
 )
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.correlation import (
     Correlation,
     correlate_rows,
@@ -48,11 +35,25 @@ from tangraph.filters.likelihood import (
     log_normalise,
 )
 from tangraph.filters.mle import MLEConfig, mle_filter
-from tangraph.filters.model import MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
+from tangraph.filters.model import FilterModel, MotionModel, Ping, TerrainModel, TerrainUpdate, survey_pings
 from tangraph.filters.pf import PFConfig, bootstrap_pf, pf_step
 from tangraph.filters.pmf import PMFConfig, point_mass_filter
 from tangraph.filters.resampling import Resampler, resample
+from tangraph.filters.runner import run_particle_filter
 from tangraph.filters.sjcpf import SJCPFConfig, correlation_log_weight, sjcpf, sjcpf_step
+from tangraph.filters.steps import (
+    Innovation,
+    Measurement,
+    StepResult,
+    jitter,
+    measure,
+    predict,
+    resample_belief,
+    resample_if_needed,
+    reweight,
+    shrink_calibration,
+    shrink_state,
+)
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf, tercom_pf_step
 
 __all__ = [

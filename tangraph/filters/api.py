@@ -8,12 +8,12 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.filters.core import check_run_inputs
 from tangraph.filters.ipf import IPFConfig, ipf
 from tangraph.filters.jbpf import JBPFConfig, jbpf
 from tangraph.filters.mle import MLEConfig, mle_filter
 from tangraph.filters.pf import PFConfig, bootstrap_pf
 from tangraph.filters.pmf import PMFConfig, point_mass_filter
+from tangraph.filters.runner import check_run_inputs
 from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
 from tangraph.maps.grid import BathymetryMap
@@ -112,7 +112,7 @@ def run_filter(
         filter's innovations say it has lost the vehicle), ``calibration`` (``speed_scale``,
         ``speed_scale_std``, ``heading_error`` (rad, DR minus true, at the last ping),
         ``heading_error_std``), ``navigation_model``, ``config``, ``seed`` (of ``rng``, particle
-        filters: :func:`~tangraph.filters.core.rng_seed`) and the method's counts;
+        filters: :func:`~tangraph.filters.runner.rng_seed`) and the method's counts;
         ``timings``: ``total``, ``per_step`` (s).
 
     Raises

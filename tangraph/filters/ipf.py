@@ -27,7 +27,7 @@ Monte Carlo error depends on). If no child can be weighted (every child off the 
 falls back to plain copies.
 
 The children's calibrations ``(k, b)`` are their parents' moved by the shrinkage kernel
-(:func:`~tangraph.filters.core.shrink_calibration`) before they are redrawn. A ping whose
+(:func:`~tangraph.filters.shrink_calibration`) before they are redrawn. A ping whose
 likelihood is too peaked for the cloud (the ESS after it below ``tempering_ess`` times the ESS
 before, ``tempering`` on) is a tempered bootstrap update instead (:func:`~tangraph.filters.measure`,
 then resampling if needed as the bootstrap PF; ``info["tempered"]`` True): the auxiliary redraw
@@ -40,10 +40,13 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.belief import Belief, state_moments, weighted_moments
 from tangraph.filters.config import ParticleConfig
-from tangraph.filters.core import (
-    Belief,
-    FilterModel,
+from tangraph.filters.likelihood import FilterDivergence, effective_sample_size
+from tangraph.filters.model import FilterModel, Ping
+from tangraph.filters.resampling import resample
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.steps import (
     StepResult,
     _kernel_floor,
     evaluate,
@@ -53,14 +56,8 @@ from tangraph.filters.core import (
     predict,
     resample_if_needed,
     reweight,
-    run_particle_filter,
     shrink_calibration,
-    state_moments,
-    weighted_moments,
 )
-from tangraph.filters.likelihood import FilterDivergence, effective_sample_size
-from tangraph.filters.model import Ping
-from tangraph.filters.resampling import resample
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey

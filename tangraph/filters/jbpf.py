@@ -13,10 +13,12 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.belief import Belief
 from tangraph.filters.config import ParticleConfig, check_number
-from tangraph.filters.core import Belief, FilterModel, StepResult, jitter, run_particle_filter
-from tangraph.filters.model import Ping
+from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.pf import pf_step
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.steps import StepResult, jitter
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey

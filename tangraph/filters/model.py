@@ -1,8 +1,8 @@
 """The state-space model every particle filter shares: motion between pings and terrain likelihood.
 
 It is built from a :class:`~tangraph.sensors.NavigationModel` (the one model of the survey's dead
-reckoning and terrain measurements every estimator shares): the filter configs hold only
-algorithm settings.
+reckoning and terrain measurements every estimator shares) as a run's :class:`FilterModel`: the
+filter configs hold only algorithm settings.
 
 State of a particle: horizontal position ``x = (north, east)``, the constant dead-reckoning errors
 ``c = (k, b)`` (``k`` the DVL speed scale: the DVL reads ``1 + k`` times the true speed; ``b`` the
@@ -43,13 +43,14 @@ import operator
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.sensors.dead_reckoning import _rotate as rotate  # R(psi), written once
 from tangraph.survey import Survey
 
-__all__ = ["MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
+__all__ = ["FilterModel", "MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -292,3 +293,39 @@ class TerrainModel:
         )  # fmt: skip
         return TerrainUpdate(update.log_likelihood, update.tide, update.tide_var, update.predicted,
                              update.exponent, update.mapped)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FilterModel:
+    """The state-space model of a run (apart from the algorithm): motion, terrain measurement and
+    the navigation model they come from (start uncertainty, calibration and tide priors)."""
+
+    motion: MotionModel
+    terrain: TerrainModel
+    navigation: NavigationModel = dataclasses.field(default_factory=NavigationModel)
+
+    @classmethod
+    def from_model(
+        cls, navigation: NavigationModel, bathymetry: BathymetryMap, config: ParticleConfig | None = None
+    ) -> FilterModel:
+        """The filter model of a navigation model on a map; ``config`` adds its
+        ``process_floor`` (if any) to the motion noise.
+
+        Examples
+        --------
+        >>> from tangraph.maps import fractal
+        >>> chart = fractal((20, 20), 5.0, rng=np.random.default_rng(0))
+        >>> model = FilterModel.from_model(NavigationModel(sounding_std=0.3, map_std=0.4), chart)
+        >>> round(model.terrain.sounding_std, 6)  # the map error inflates the likelihood
+        0.5
+        """
+        if not isinstance(navigation, NavigationModel):
+            raise TangraphError(
+                f"model must be a tangraph.sensors.NavigationModel, got {type(navigation).__name__}"
+            )
+        floor = getattr(config, "process_floor", 0.0) if config is not None else 0.0
+        return cls(
+            MotionModel.from_model(navigation, floor),
+            TerrainModel(bathymetry, navigation.measurement_std, navigation.tide_std),
+            navigation,
+        )

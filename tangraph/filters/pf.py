@@ -5,7 +5,7 @@ noise (:class:`~tangraph.filters.MotionModel`), multiply its weight by the terra
 the ping's soundings turned by its heading error (:class:`~tangraph.filters.TerrainModel`;
 tempered when too peaked, :func:`~tangraph.filters.measure`), take the weighted mean and
 covariance, and resample when the effective sample size falls below ``ess_threshold * N`` (the
-calibrations then moved by the shrinkage kernel, :func:`~tangraph.filters.core.shrink_calibration`).
+calibrations then moved by the shrinkage kernel, :func:`~tangraph.filters.shrink_calibration`).
 The loop runs over time only; every step is vectorised over particles and soundings.
 """
 
@@ -15,18 +15,11 @@ import dataclasses
 
 import numpy as np
 
+from tangraph.filters.belief import Belief, weighted_moments
 from tangraph.filters.config import ParticleConfig
-from tangraph.filters.core import (
-    Belief,
-    FilterModel,
-    StepResult,
-    measure,
-    predict,
-    resample_if_needed,
-    run_particle_filter,
-    weighted_moments,
-)
-from tangraph.filters.model import Ping
+from tangraph.filters.model import FilterModel, Ping
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.steps import StepResult, measure, predict, resample_if_needed
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey

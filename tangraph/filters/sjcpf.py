@@ -36,20 +36,12 @@ from typing import Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.belief import Belief, weighted_moments
 from tangraph.filters.config import ParticleConfig, check_count, check_number
-from tangraph.filters.core import (
-    Belief,
-    FilterModel,
-    StepResult,
-    measure,
-    predict,
-    resample_if_needed,
-    reweight,
-    run_particle_filter,
-    weighted_moments,
-)
 from tangraph.filters.correlation import Correlation, correlate_rows
-from tangraph.filters.model import Ping
+from tangraph.filters.model import FilterModel, Ping
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.steps import StepResult, measure, predict, resample_if_needed, reweight
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey

@@ -24,7 +24,7 @@ per-ping terrain likelihood is not used by the step (the soundings enter through
 only, and the fix estimates the tide itself), so the model's sounding std and tide prior do not
 affect it; they are used only by the divergence recovery of
 :func:`~tangraph.filters.run_particle_filter`, which weights a re-drawn cloud by the ping's
-terrain likelihood. No terrain update, no :class:`~tangraph.filters.core.Innovation`: TERCOM-PF
+terrain likelihood. No terrain update, no :class:`~tangraph.filters.Innovation`: TERCOM-PF
 never reports itself lost (a rejected fix is counted instead).
 """
 
@@ -35,19 +35,12 @@ import functools
 
 import numpy as np
 
+from tangraph.filters.belief import Belief, weighted_moments
 from tangraph.filters.config import ParticleConfig, check_number
-from tangraph.filters.core import (
-    Belief,
-    FilterModel,
-    StepResult,
-    predict,
-    resample_if_needed,
-    reweight,
-    run_particle_filter,
-    weighted_moments,
-)
 from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
-from tangraph.filters.model import Ping
+from tangraph.filters.model import FilterModel, Ping
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.steps import StepResult, predict, resample_if_needed, reweight
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion
 from tangraph.sensors import NavigationModel

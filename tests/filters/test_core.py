@@ -186,7 +186,7 @@ def test_bad_configuration_is_named(cls, field, value):
 def test_a_vehicle_never_on_the_map_follows_dead_reckoning_and_says_so(caplog):
     survey = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([1e5, 0.0, 0.0]))
     config = PFConfig(n_particles=200)
-    with caplog.at_level("WARNING", logger="tangraph.filters.core"):
+    with caplog.at_level("WARNING", logger="tangraph.filters.runner"):
         track = run_filter("pf", survey, MAP, config, model=MODEL, rng=np.random.default_rng(6))
     assert track.meta["off_map_steps"] == list(range(survey.n_pings))
     assert track.meta["divergence_steps"] == []

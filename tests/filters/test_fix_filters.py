@@ -23,8 +23,8 @@ from tangraph.filters import (
     survey_pings,
     tercom_pf_step,
 )
-from tangraph.filters.core import predict
 from tangraph.filters.fixes import fix_due, fix_window
+from tangraph.filters.steps import predict
 from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 

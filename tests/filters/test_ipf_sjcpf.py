@@ -21,7 +21,7 @@ from tangraph.filters import (
     state_moments,
     survey_pings,
 )
-from tangraph.filters.core import evaluate, predict
+from tangraph.filters.steps import evaluate, predict
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)

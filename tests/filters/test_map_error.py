@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from tangraph.filters import FilterModel, PFConfig, default_config, model_belief, run_filter, survey_pings
-from tangraph.filters.core import evaluate, measure, reweight
+from tangraph.filters.steps import evaluate, measure, reweight
 from tangraph.sensors import sounding_variances
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
