@@ -89,3 +89,35 @@ def test_json_figures_and_options_after_the_subcommand(capsys, tmp_path):
     commands = next(a for a in build_parser()._actions if a.dest == "command")
     demo_help = commands.choices["demo"].format_help()
     assert "(default: 7)" in demo_help and "(default: None)" not in demo_help
+
+
+def test_survey_import_is_the_library_s_import_survey(tmp_path):
+    from tangraph.errors import TangraphError
+    from tangraph.formats import SURVEY_FORMATS, import_survey
+
+    assert list(SURVEY_FORMATS) == ["csv-xyz", "sontek-sum", "xtf", "gsf"]
+    with pytest.raises(TangraphError, match="format 'xtf' takes no timezone"):
+        import_survey("xtf", [tmp_path / "a.xtf"], crs="EPSG:32610", timezone="UTC")
+    with pytest.raises(TangraphError, match=r"format 'csv-xyz' takes two files \(navigation log, "):
+        import_survey("csv-xyz", [tmp_path / "nav.csv"])
+    with pytest.raises(TangraphError, match="unknown survey format 'kmall'"):
+        import_survey("kmall", [tmp_path / "a.kmall"])
+
+
+def test_the_package_runs_as_a_module_and_keeps_its_modules_small():
+    import ast
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import tangraph.cli
+
+    done = subprocess.run([sys.executable, "-m", "tangraph.cli", "--version"], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.startswith("tangraph ")
+    for path in Path(tangraph.cli.__file__).parent.glob("*.py"):  # one role each, short handlers
+        text = path.read_text()
+        assert text.count("\n") <= 500, path
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef):
+                assert node.end_lineno - node.lineno < 80, f"{path.name}: {node.name}"

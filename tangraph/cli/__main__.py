@@ -1,0 +1,7 @@
+"""``python -m tangraph.cli``: the ``tangraph`` command."""
+
+import sys
+
+from tangraph.cli import main
+
+sys.exit(main())

@@ -1,0 +1,241 @@
+"""``tangraph maps``: list, describe, plot and mesh maps; grid soundings into one; check lines."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from tangraph.cli._common import (
+    CELL,
+    DPI,
+    FILL,
+    SOUNDING_STD,
+    WINDOW,
+    figure_file,
+    json_option,
+    load_map,
+    map_argument,
+    output_option,
+    print_json,
+    write_figure,
+)
+from tangraph.errors import TangraphError
+
+
+def cmd_maps_list(args: argparse.Namespace) -> None:
+    from tangraph.maps import catalogue
+
+    rows = [(e.name, e.title, e.licence) for e in catalogue().values()]
+    width = max(len(r[0]) for r in rows)
+    for name, title, licence in rows:
+        print(f"{name:<{width}}  {title}  [{licence}]")
+
+
+def cmd_maps_info(args: argparse.Namespace) -> None:
+    from tangraph.maps.statistics import describe
+
+    bathymetry = load_map(args)
+    report = {**describe(bathymetry), **bathymetry.error_summary()}
+    if args.json:
+        print_json(report)
+    else:
+        print("\n".join(_info_lines(report)))
+
+
+def _info_lines(r: dict) -> list[str]:
+    """``maps info`` as text, one figure a line."""
+    d, w = r["depth_m"], r["roughness_window"]
+    lines = [
+        f"name         {r['name']}",
+        f"shape        {r['shape'][0]} x {r['shape'][1]} cells of {r['cell_m'][0]:g} x {r['cell_m'][1]:g} m",
+        f"extent       north {r['extent_m']['north'][0]:g} .. {r['extent_m']['north'][1]:g} m, "
+        f"east {r['extent_m']['east'][0]:g} .. {r['extent_m']['east'][1]:g} m",
+        f"depth        {d['min']:.2f} .. {d['max']:.2f} m (mean {d['mean']:.2f}), "
+        f"{r['valid_fraction']:.1%} of cells hold data",
+        f"crs          {r['crs']}",
+        f"origin       northing {r['origin']['northing']:.3f}, easting {r['origin']['easting']:.3f}",
+    ]
+    if "centre" in r:
+        lines.append(f"centre       {r['centre']['lat']:.5f} N, {r['centre']['lon']:.5f} E")
+    lines.append(f"slope        median {r['slope_median_deg']:.2f} deg")
+    lines.append(f"roughness    median {r['roughness_median_m']:.3f} m "
+                 f"(plane-fit residual std, {w} x {w} cells)")
+    error = [f"depth std median {r['depth_std_m']['median']:.3f} m, max {r['depth_std_m']['max']:.3f} m"
+             ] if "depth_std_m" in r else []
+    error += [f"correlation length {r['correlation_length_m']:g} m"] if "correlation_length_m" in r else []
+    lines.append(f"map error    {'; '.join(error) or 'not in the map (the model states its map std)'}")
+    return lines
+
+
+def cmd_maps_plot(args: argparse.Namespace) -> None:
+    from matplotlib.figure import Figure
+
+    from tangraph.plot import plot_map
+
+    figure_file(args.output)
+    m = load_map(args)
+    fig = Figure(figsize=(8, 6.5), layout="constrained")
+    plot_map(m, fig.add_subplot(), title=args.title)
+    write_figure(fig, args.output, args.force, args.dpi)
+    print(f"wrote {args.output}")
+
+
+def cmd_maps_mesh(args: argparse.Namespace) -> None:
+    from tangraph.maps.io import write_atomically
+    from tangraph.maps.mesh import write_mesh
+
+    sidecar = args.output.with_name(args.output.name + ".json")
+    source = Path(args.map).resolve() if Path(args.map).exists() else None
+    for path in (args.output, sidecar):
+        if path.resolve() == source:
+            raise TangraphError(f"maps mesh: refusing to write over the input map {args.map}")
+        if path.exists() and not args.force:
+            raise FileExistsError(f"{path} exists; pass --force to replace it")
+    m = load_map(args)
+    write_atomically(
+        args.output, args.force, lambda tmp: write_mesh(m, tmp, z_up=args.z_up, sidecar=sidecar)
+    )
+    print(f"wrote {args.output}, {sidecar}")
+
+
+def cmd_maps_grid(args: argparse.Namespace) -> None:
+    from tangraph.cli._gridding import grid_inputs, grid_summary
+    from tangraph.maps.io import write_sounding_grid
+
+    grid, check = grid_inputs(
+        list(args.inputs), args.output, cell=args.cell, statistic=args.statistic, fill=args.fill,
+        use_dr=args.use_dr, sign=args.sign, crs=args.crs, units=args.units, check_lines=args.check_lines,
+        lines=args.lines, window=args.window, sounding_std=args.sounding_std,
+    )
+    if check is not None:
+        print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
+    write_sounding_grid(grid, args.output, overwrite=args.force)
+    print(grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
+
+
+def cmd_maps_check(args: argparse.Namespace) -> None:
+    from tangraph.eval.map_check import check_map_error
+    from tangraph.sensors import NavigationModel
+    from tangraph.survey import read_survey
+
+    surveys = [read_survey(path) for path in args.inputs]
+    check = check_map_error(
+        surveys, cell=args.cell, statistic=args.statistic, fill=args.fill, window=args.window,
+        model=NavigationModel(sounding_std=args.sounding_std), names=[str(path) for path in args.inputs],
+        progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True), lines=args.lines,
+    )
+    print("survey,windows,rms,robust,share_beyond_3")
+    for row in check.per_survey():
+        print(f"{row['survey']},{row['windows']},{row['rms']:.3f},{row['robust']:.3f},{row['share_beyond_3']:.3f}")
+    print(f"all: {check.summary()}")
+
+
+# -- the parsers --------------------------------------------------------------------------------
+def _gridding_options(p: argparse.ArgumentParser) -> None:
+    """``--cell``, ``--statistic`` and ``--fill``: how soundings are gridded into a map."""
+    p.add_argument("--cell", type=CELL, required=True, help="cell size (m)")
+    p.add_argument(
+        "--statistic", choices=["mean", "median"], default="median",
+        help="the statistic that becomes the map's depth (default: median, robust to outliers)",
+    )
+    p.add_argument(
+        "--fill", type=FILL, default=0, metavar="CELLS",
+        help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
+        "farther cells stay no-data (default: 0, no fill)",
+    )
+
+
+def _check_line_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
+    """``--lines``, ``--window`` and ``--sounding-std``: how check lines are scored."""
+    p.add_argument("--lines", action="store_true",
+                   help=f"{prefix}split every survey into its lines (straight stretches of at least a "
+                   "window) and hold out each line against the map of the others: a map of one survey")
+    p.add_argument("--window", type=WINDOW, default=50.0, help=f"{prefix}window of track (m; default 50)")
+    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
+                   help=f"{prefix}the soundings' own noise std (m; default 0.1)")
+
+
+def add_parser(subparsers) -> None:
+    """``maps`` and its subcommands."""
+    maps = subparsers.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid, check")
+    maps_sub = maps.add_subparsers(dest="maps_command", required=True)
+    p = maps_sub.add_parser("list", help="list the map catalogue")
+    p.set_defaults(func=cmd_maps_list)
+    p = maps_sub.add_parser("info", help="describe a map (and its error layer, if it has one)")
+    map_argument(p)
+    json_option(p)
+    p.set_defaults(func=cmd_maps_info)
+    p = maps_sub.add_parser("plot", help="hill-shaded figure of a map")
+    map_argument(p)
+    output_option(p, "figure file (.png, .pdf, .svg)")
+    p.add_argument("--title", help="figure title (default: the map's name)")
+    p.add_argument("--dpi", type=DPI, default=150, help="resolution of a raster figure")
+    p.set_defaults(func=cmd_maps_plot)
+    p = maps_sub.add_parser(
+        "mesh", help="export a map as a triangle mesh (NED vertices, or ENU with --z-up)",
+        description="Export a map as a triangle mesh, with its CRS, origin, units and axes in a "
+        "JSON sidecar named after it (lake.ply -> lake.ply.json).",
+    )
+    map_argument(p)
+    output_option(p, "mesh file (.ply or .obj); its sidecar OUTPUT.json is written too")
+    p.add_argument(
+        "--z-up", action="store_true",
+        help="vertices east, north, elevation (= -depth): a right-handed ENU mesh for viewers "
+        "that expect z up (default: north, east, depth, NED)",
+    )
+    p.set_defaults(func=cmd_maps_mesh)
+    _add_grid(maps_sub)
+    p = maps_sub.add_parser(
+        "check",
+        help="check lines: is the error a map gridded from these surveys states right?",
+        description="Hold out each survey (.nc, at its reference track) in turn, grid the others as "
+        "'maps grid' would (--cell, --statistic, --fill) and compare the held-out soundings with that "
+        "map in windows of track: each window's mean residual over the std the map's error and the "
+        "sounding noise give it. Prints, per survey and for all, the RMS of these scores (1 when the "
+        "map errs as it says), a robust scale (the bulk of the windows) and the share beyond 3.",
+    )
+    p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY",
+                   help="two or more survey files (.nc), or one with --lines")
+    _gridding_options(p)
+    _check_line_options(p)
+    p.set_defaults(func=cmd_maps_check)
+
+
+def _add_grid(maps_sub) -> None:
+    p = maps_sub.add_parser(
+        "grid",
+        help="grid surveys (.nc, at their reference tracks) or scattered soundings (x y z text) into a map",
+        description="Grid the soundings of one or more survey files (.nc), each placed at its "
+        "reference track (GPS or truth) and put in the frame (CRS, origin) of the first, or of one "
+        "x y z text file, into a map: median or mean, count and std per cell, and the map's error "
+        "(depth_std per cell: the standard error of a measured cell, growing with the distance to "
+        "the data in a filled one; a correlation length).",
+    )
+    p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
+                   help="survey files (.nc), or one x/east y/north z text file")
+    _gridding_options(p)
+    p.add_argument(
+        "--use-dr", action="store_true",
+        help="place survey soundings at the dead reckoning (for surveys without a reference track)",
+    )
+    p.add_argument(
+        "--check-lines", action="store_true",
+        help="survey files only: hold out each survey, grid the others, and scale depth_std by the RMS "
+        "of the held-out windows' standardised mean residuals when above 1 (see 'maps check')",
+    )
+    _check_line_options(p, "--check-lines: ")
+    p.add_argument(
+        "--sign",
+        choices=["depth", "elevation"],
+        help="x y z text only (required there): what z is, depth (positive down) or elevation",
+    )
+    p.add_argument("--crs", help="x y z text only: CRS of x, y (e.g. EPSG:4326); default local metres")
+    p.add_argument(
+        "--units",
+        help="x y z text only: unit of z (m, ft, us-ft, US survey foot, fathom; default m; required "
+        "with x, y in a CRS in feet)",
+    )
+    output_option(p, "NetCDF file: depth (the statistic) with its depth_std, mean, median, count and std "
+                  "per cell")
+    p.set_defaults(func=cmd_maps_grid)
