@@ -59,6 +59,33 @@ def test_maps_grid_soundings_to_netcdf(tmp_path, capsys):
     assert np.nanmax(np.abs(m.depth - (30 + 0.1 * nn))) < 0.1 * 10 / 2 + 5 * 0.2 / np.sqrt(20)
 
 
+def test_maps_grid_position_std_is_the_librarys(tmp_path):
+    """``--position-std`` gives the map the error ``grid_surveys(position_std=)`` gives it: the
+    slope's share on top of the soundings' own."""
+    from tangraph.maps import grid_surveys
+    from tangraph.survey import Survey, write_survey
+
+    east = np.arange(0.0, 200.0)
+    surveys = []
+    for k, line in enumerate((0.0, 20.0, 40.0)):
+        pose = np.column_stack([np.full(east.size, line), east, np.full(east.size, np.pi / 2)])
+        starboard = np.tile([-3.0, 0.0, 3.0], (east.size, 1))
+        depth = 30.0 + 0.1 * (line - starboard) + 0.05 * east[:, None]
+        surveys.append(Survey(time=east.copy(), dr_pose=pose, vehicle_depth=np.zeros(east.size),
+                              beam_forward=np.zeros((east.size, 3)), beam_starboard=starboard,
+                              beam_depth=depth, true_pose=pose))
+        write_survey(surveys[-1], tmp_path / f"line{k}.nc")
+    paths = [str(tmp_path / f"line{k}.nc") for k in range(3)]
+    for std in ("0", "2.5"):
+        out = tmp_path / f"grid{std}.nc"
+        args = ["maps", "grid", *paths, "--cell", "5", "--fill", "2", "--position-std", std, "-o", str(out)]
+        assert main(args) == 0
+        expected = grid_surveys(surveys, cell=5.0, fill=2, position_std=float(std)).depth
+        np.testing.assert_allclose(read_map(out).depth_std, expected.depth_std, rtol=1e-12)
+    placed, exact = read_map(tmp_path / "grid2.5.nc"), read_map(tmp_path / "grid0.nc")
+    assert np.nanmean(placed.depth_std) > np.nanmean(exact.depth_std)
+
+
 def test_unknown_map_and_bad_file_are_clear_errors(tmp_path, capsys):
     assert main(["maps", "info", "atlantis"]) == 2
     assert "neither a catalogue map (merimbula" in capsys.readouterr().err

@@ -24,6 +24,8 @@ USAGE = [
     (["maps", "grid", "a.xyz", "--sign", "depth", "--cell", "0.001", "-o", "g.nc"],
      "the cell size (m) must lie in"),
     (["maps", "info", "merimbula", "--cell", "nan"], "the cell size (m) must lie in"),
+    (["maps", "grid", "a.xyz", "--sign", "depth", "--cell", "5", "--position-std", "-1", "-o", "g.nc"],
+     "the position std (m) must lie in"),
 ]
 
 

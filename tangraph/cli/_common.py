@@ -37,6 +37,7 @@ CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
 FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
 WINDOW = _bounded(float, 0.01, 1e6, "the window length (m)")
 SOUNDING_STD = _bounded(float, 0.0, 1000.0, "the sounding std (m)")
+POSITION_STD = _bounded(float, 0.0, 100_000.0, "the position std (m)")
 
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):

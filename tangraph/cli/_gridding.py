@@ -8,6 +8,7 @@ messages name the command's options, as they always did.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -17,14 +18,15 @@ from tangraph.errors import TangraphError
 
 def grid_inputs(inputs: list[Path], output: Path, *, cell: float, statistic: str, fill: int,
                 use_dr: bool, sign: str | None, crs: str | None, units: str | None,
-                check_lines: bool, lines: bool, window: float, sounding_std: float):
+                check_lines: bool, lines: bool, window: float, sounding_std: float,
+                position_std: float = 0.0):
     """The grid of ``inputs`` named after ``output``, and its check (None without ``check_lines``)."""
     if output.resolve() in {path.resolve() for path in inputs}:
         raise TangraphError(f"maps grid: the output {output} is one of the inputs")
     surveys = [path for path in inputs if path.suffix.lower() == ".nc"]
     if (surveys and len(surveys) != len(inputs)) or (not surveys and len(inputs) > 1):
         raise TangraphError("maps grid: give survey files (.nc) or one x y z text file, not both")
-    gridding = {"cell": cell, "statistic": statistic, "fill": fill}
+    gridding = {"cell": cell, "statistic": statistic, "fill": fill, "position_std": position_std}
     if surveys:
         for option, given in (("--sign", sign), ("--crs", crs), ("--units", units)):
             if given is not None:
@@ -46,18 +48,19 @@ def grid_inputs(inputs: list[Path], output: Path, *, cell: float, statistic: str
     soundings = read_soundings(inputs[0], sign=sign, crs=crs, units=units)
     grid = block_reduce(soundings.points, cell=cell, statistic=statistic,
                         name=output.stem, crs=soundings.crs, origin=soundings.origin)
+    grid = dataclasses.replace(grid, meta={**grid.meta, "position_std": float(position_std)})
     return (fill_gaps(grid, fill) if fill else grid), None
 
 
-def _grid_surveys(surveys: list[Path], output: Path, *, cell, statistic, fill, use_dr, check_lines,
-                  lines, window, sounding_std):
+def _grid_surveys(surveys: list[Path], output: Path, *, cell, statistic, fill, position_std, use_dr,
+                  check_lines, lines, window, sounding_std):
     from tangraph.maps.gridding import grid_surveys
     from tangraph.survey import read_survey
 
     loaded = [read_survey(path) for path in surveys]
     names = [str(path) for path in surveys]
     grid = grid_surveys(loaded, cell=cell, statistic=statistic, fill=fill, use_dr=use_dr, names=names,
-                        name=output.stem)
+                        name=output.stem, position_std=position_std)
     if not check_lines:
         return grid, None
     from tangraph.eval.map_check import calibrate_error, check_map_error
@@ -67,7 +70,8 @@ def _grid_surveys(surveys: list[Path], output: Path, *, cell, statistic, fill, u
         raise TangraphError("maps grid: --check-lines compares soundings at reference tracks; "
                             "not with --use-dr")
     check = check_map_error(loaded, cell=cell, statistic=statistic, fill=fill, window=window,
-                            model=NavigationModel(sounding_std=sounding_std), names=names, lines=lines)
+                            model=NavigationModel(sounding_std=sounding_std), names=names, lines=lines,
+                            position_std=position_std)
     return calibrate_error(grid, check), check
 
 

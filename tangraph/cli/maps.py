@@ -10,6 +10,7 @@ from tangraph.cli._common import (
     CELL,
     DPI,
     FILL,
+    POSITION_STD,
     SOUNDING_STD,
     WINDOW,
     figure_file,
@@ -106,7 +107,7 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
     grid, check = grid_inputs(
         list(args.inputs), args.output, cell=args.cell, statistic=args.statistic, fill=args.fill,
         use_dr=args.use_dr, sign=args.sign, crs=args.crs, units=args.units, check_lines=args.check_lines,
-        lines=args.lines, window=args.window, sounding_std=args.sounding_std,
+        lines=args.lines, window=args.window, sounding_std=args.sounding_std, position_std=args.position_std,
     )
     if check is not None:
         print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
@@ -124,6 +125,7 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
         surveys, cell=args.cell, statistic=args.statistic, fill=args.fill, window=args.window,
         model=NavigationModel(sounding_std=args.sounding_std), names=[str(path) for path in args.inputs],
         progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True), lines=args.lines,
+        position_std=args.position_std,
     )
     print("survey,windows,rms,robust,share_beyond_3")
     for row in check.per_survey():
@@ -143,6 +145,11 @@ def _gridding_options(p: argparse.ArgumentParser) -> None:
         "--fill", type=FILL, default=0, metavar="CELLS",
         help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
         "farther cells stay no-data (default: 0, no fill)",
+    )
+    p.add_argument(
+        "--position-std", type=POSITION_STD, default=0.0, metavar="M",
+        help="std (m per axis) of the positions the soundings are placed at (their GPS): the map's "
+        "error gains it times the map's slope (default: 0, the positions taken as exact)",
     )
 
 
