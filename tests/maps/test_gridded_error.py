@@ -62,12 +62,19 @@ def test_a_filled_cell_grows_with_the_distance_to_the_data_as_the_variogram_says
     layer = np.where(measured, g.mean.depth, np.nan)
     gamma = 0.5 * np.nanmean(np.diff(layer, axis=1) ** 2)  # along the lines: the only pairs
     assert e.semivariance == pytest.approx(gamma, rel=1e-12)
-    # the semivariogram at k cells, along the lines (the only pairs that close), never falling
-    gammas = [0.5 * np.nanmean((layer[:, k:] - layer[:, :-k]) ** 2) for k in (1, 2, 3)]
+    # twice the semivariogram at k cells, along the lines (the only pairs that close), never
+    # falling, linear between lags
+    errors = [0.0]
+    for k in range(1, 7):
+        errors.append(max(errors[-1], np.nanmean((layer[:, k:] - layer[:, :-k]) ** 2)))
     column = e.depth_std[:, 10]
-    sigma_near_low = e.depth_std[0, 10]
-    for row in (1, 2, 3):  # nearer the southern line: d / cell = row
-        expected = np.sqrt(sigma_near_low**2 + 2 * max(gammas[:row]))
+    data = np.argwhere(measured)
+    for row in range(1, 7):  # the fill's own weights over the measured cells within 6 cells
+        r = np.hypot(*(data - [row, 10]).T)
+        near = (r > 0) & (r <= 6)
+        w = 1.0 / r[near] ** 2
+        own = e.depth_std[data[near, 0], data[near, 1]] ** 2
+        expected = np.sqrt(np.sum(w * (np.interp(r[near], np.arange(7.0), errors) + own)) / np.sum(w))
         assert column[row] == pytest.approx(expected, rel=1e-12)
     assert np.all(np.diff(column[0:4]) > 0)  # grows towards the middle of the gap
     assert np.all(np.diff(column[4:8]) < 0)  # and falls towards the northern line
@@ -77,8 +84,8 @@ def test_a_filled_cell_grows_with_the_distance_to_the_data_as_the_variogram_says
 def test_the_gridded_std_matches_a_simulated_prior_maps_true_error():
     """Recovery of a known map error's statistics: a prior map gridded from a simulated earlier
     survey of a seafloor that is the map plus a random field (the realistic-map scenarios); its
-    true error normalised by the std it carries has an RMS near one where measured (within 25 %)
-    and at most 1.5 in the filled gaps (the fill leans on data on one or two sides)."""
+    true error normalised by the std it carries has an RMS near one where measured and in the
+    filled gaps (within 25 %; 0.90 and 0.92 with this seed)."""
     from tangraph.sim.scenario import load_scenario, simulate_run
 
     run = simulate_run(load_scenario("wang2019-map-error"), rng=np.random.default_rng(3))
@@ -92,7 +99,7 @@ def test_the_gridded_std_matches_a_simulated_prior_maps_true_error():
     filled = (counts == 0) & np.isfinite(z)
     assert measured.sum() > 1000 and filled.sum() > 1000
     assert 0.75 < np.sqrt(np.mean(z[measured] ** 2)) < 1.25
-    assert 0.75 < np.sqrt(np.mean(z[filled] ** 2)) < 1.5
+    assert 0.75 < np.sqrt(np.mean(z[filled] ** 2)) < 1.25
 
 
 def test_the_correlation_length_is_the_cell_under_dense_coverage():
