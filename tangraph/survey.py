@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import body_to_world, world_to_body
 
 _log = logging.getLogger(__name__)
 
@@ -46,22 +47,16 @@ def footprints(pose: np.ndarray, forward: np.ndarray, starboard: np.ndarray) -> 
     ``pose`` is (K, 3) ``(north, east, psi)``; ``forward``, ``starboard`` are (K, B).
     """
     pose = np.asarray(pose, float)
-    forward = np.asarray(forward, float)
-    starboard = np.asarray(starboard, float)
-    c = np.cos(pose[:, 2])[:, None]
-    s = np.sin(pose[:, 2])[:, None]
-    north = pose[:, 0:1] + c * forward - s * starboard
-    east = pose[:, 1:2] + s * forward + c * starboard
-    return north, east
+    body = np.stack(np.broadcast_arrays(np.asarray(forward, float), np.asarray(starboard, float)), axis=-1)
+    world = body_to_world(pose[:, None, :], body)
+    return world[..., 0].copy(), world[..., 1].copy()
 
 
 def to_body(pose: np.ndarray, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`footprints`: body ``(forward, starboard)`` of world points."""
-    dn = north - pose[:, 0:1]
-    de = east - pose[:, 1:2]
-    c = np.cos(pose[:, 2])[:, None]
-    s = np.sin(pose[:, 2])[:, None]
-    return c * dn + s * de, -s * dn + c * de
+    world = np.stack(np.broadcast_arrays(np.asarray(north, float), np.asarray(east, float)), axis=-1)
+    body = world_to_body(np.asarray(pose, float)[:, None, :], world)
+    return body[..., 0].copy(), body[..., 1].copy()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -40,6 +40,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import wrap_angle
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.sensors.terrain import MapError, map_error, shared_among
@@ -161,7 +162,7 @@ def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
     for i in range(course.size):
         if length[i] == 0:
             continue
-        if reference is not None and abs(np.angle(np.exp(1j * (course[i] - reference)))) > TURN:
+        if reference is not None and abs(wrap_angle(course[i] - reference)) > TURN:
             starts.append(i + 1)
             reference = None
         if reference is None:

@@ -10,6 +10,7 @@ import numpy as np
 from scipy import stats
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import mahalanobis2
 from tangraph.track import Track, position_errors
 
 __all__ = ["anees_band", "format_figure", "position_nees", "track_metrics"]
@@ -37,9 +38,7 @@ def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
     a, b, d = p[:, 0, 0], p[:, 0, 1], p[:, 1, 1]
     det = a * d - b * b
     ok = np.isfinite(det) & (det > 0) & (a > 0)
-    safe = np.where(ok, det, 1.0)
-    out = (d * e[:, 0] ** 2 - 2 * b * e[:, 0] * e[:, 1] + a * e[:, 1] ** 2) / safe
-    return np.where(ok, out, np.nan)
+    return np.where(ok, mahalanobis2(e, np.where(ok[:, None, None], p, np.eye(2))), np.nan)
 
 
 def anees_band(n: int, dof: int = 2, probability: float = 0.95) -> tuple[float, float]:

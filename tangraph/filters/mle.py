@@ -30,8 +30,9 @@ from typing import Any
 import numpy as np
 
 from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
-from tangraph.filters.model import MotionModel, rotate, survey_pings
+from tangraph.filters.model import MotionModel, survey_pings
 from tangraph.filters.runner import check_run_inputs, step_timings
+from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, survey_navigation_model
 from tangraph.survey import Survey

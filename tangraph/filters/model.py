@@ -45,9 +45,9 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
-from tangraph.sensors.dead_reckoning import _rotate as rotate  # R(psi), written once
 from tangraph.survey import Survey
 
 __all__ = ["FilterModel", "MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]

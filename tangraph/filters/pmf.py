@@ -68,11 +68,12 @@ import numpy as np
 from tangraph.filters.belief import Belief
 from tangraph.filters.config import check_count, check_number
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
-from tangraph.filters.model import FilterModel, Ping, rotate, survey_pings
+from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
 from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _regrid
 from tangraph.filters.runner import check_run_inputs, step_timings
 from tangraph.filters.steps import _chi2_quantile, innovation
+from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
 from tangraph.survey import Survey

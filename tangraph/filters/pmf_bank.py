@@ -13,6 +13,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tangraph.geometry import mahalanobis2
+
 if TYPE_CHECKING:
     from tangraph.filters.pmf_grid import PointMass
 
@@ -84,7 +86,7 @@ def _log_gaussian(nodes: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.nd
     if not live.any():
         return np.zeros(len(nodes))
     d = (nodes - mean)[:, live]
-    return -0.5 * np.einsum("mi,ij,mj->m", d, np.linalg.inv(cov[np.ix_(live, live)]), d)
+    return -0.5 * mahalanobis2(d, cov[np.ix_(live, live)])
 
 
 def _calibration_moved(state: PointMass) -> bool:

@@ -41,6 +41,7 @@ from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_w
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.runner import run_particle_filter
 from tangraph.filters.steps import StepResult, predict, resample_if_needed, reweight
+from tangraph.geometry import mahalanobis2
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion
 from tangraph.sensors import NavigationModel
@@ -124,7 +125,7 @@ def tercom_pf_step(
     counts["n_fixes_accepted"] = 1
     r = fix.covariance
     d = fix.position - prior_mean
-    distance2 = float(d @ np.linalg.solve(prior_cov + r, d))
+    distance2 = float(mahalanobis2(d, prior_cov + r))
     record["mahalanobis2"] = distance2
     n = moved.n_particles
     if moved.n_fixes == 0 or distance2 > config.gate:
@@ -138,7 +139,7 @@ def tercom_pf_step(
     else:
         action = "reweight"
         e = moved.particles - fix.position
-        log_factor = -0.5 * np.einsum("ij,ij->i", e @ np.linalg.inv(r), e)
+        log_factor = -0.5 * mahalanobis2(e, r)
         updated = reweight(moved, log_factor, where=f"ping {ping.index} (fix)").replace(
             n_fixes=moved.n_fixes + 1
         )

@@ -18,11 +18,11 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import to_dr_frame, wrap_angle
 from tangraph.graph.calibration import CALIBRATION, TIDE, to_world, world_covariance
 from tangraph.graph.factors import compose, inverse_increment_covariance, propagate_joint
 from tangraph.graph.keyposes import increments
-from tangraph.graph.online import _wrap
-from tangraph.sensors import DeadReckoningModel, odometry, rotation_matrix
+from tangraph.sensors import DeadReckoningModel, odometry
 from tangraph.survey import Survey
 
 __all__ = ["SmootherSolution", "dense_track", "frame_poses", "gauss_newton", "marginals", "metis_ordering",
@@ -168,7 +168,7 @@ def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSol
     span = t[b] - t[a]
     w = np.divide(t - t[a], span, out=np.zeros_like(t), where=span > 0)
     pose = pose_f + w[:, None] * np.column_stack([pose_b[:, :2] - pose_f[:, :2],
-                                                  _wrap(pose_b[:, 2] - pose_f[:, 2])])
+                                                  wrap_angle(pose_b[:, 2] - pose_f[:, 2])])
     joint = (1 - w)[:, None, None] * cov_f + w[:, None, None] * cov_b
     return (to_world(pose, solution.calibration, origin),
             world_covariance(pose, joint, solution.calibration, origin))
@@ -176,9 +176,4 @@ def dense_track(survey: Survey, white: DeadReckoningModel, solution: SmootherSol
 
 def frame_poses(world_pose, calibration, origin) -> np.ndarray:
     """DR-frame poses of world poses (the inverse of :func:`~tangraph.graph.calibration.to_world`)."""
-    k, b = float(calibration[0]), float(calibration[1])
-    d = np.asarray(world_pose, float)[..., :2] - origin
-    out = np.array(world_pose, float)
-    out[..., :2] = origin + (1.0 + k) * (d @ rotation_matrix(b).T)
-    out[..., 2] = out[..., 2] + b
-    return out
+    return to_dr_frame(world_pose, calibration, origin)

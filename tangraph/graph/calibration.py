@@ -30,8 +30,8 @@ from functools import partial
 import gtsam
 import numpy as np
 
+from tangraph.geometry import from_dr_frame, rotation_matrix
 from tangraph.graph.factors import robust_noise
-from tangraph.sensors import rotation_matrix
 
 __all__ = [
     "CALIBRATION",
@@ -59,25 +59,18 @@ def joint_in_frame(psi, joint) -> np.ndarray:
     n = np.shape(joint)[-1]
     a = np.zeros((*psi.shape, n, n))
     a[..., :, :] = np.eye(n)
-    c, s = np.cos(psi), np.sin(psi)
-    a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1] = c, -s, s, c
+    a[..., :2, :2] = rotation_matrix(psi)
     return a @ joint @ np.swapaxes(a, -1, -2)
 
 
 def world_position(position, calibration, origin) -> np.ndarray:
     """World positions ``(..., 2)`` of DR-frame positions ``(..., 2)`` under ``c = (k, b)``."""
-    k, b = float(calibration[0]), float(calibration[1])
-    d = np.asarray(position, float) - np.asarray(origin, float)
-    return np.asarray(origin, float) + d @ rotation_matrix(-b).T / (1.0 + k)
+    return from_dr_frame(np.asarray(position, float)[..., :2], calibration, origin)
 
 
 def to_world(pose, calibration, origin) -> np.ndarray:
     """World poses ``(..., 3)`` of DR-frame poses ``(..., 3)`` under ``c = (k, b)``."""
-    pose = np.asarray(pose, float)
-    out = np.empty_like(pose)
-    out[..., :2] = world_position(pose[..., :2], calibration, origin)
-    out[..., 2] = pose[..., 2] - float(calibration[1])
-    return out
+    return from_dr_frame(pose, calibration, origin)
 
 
 def world_jacobian(pose, calibration, origin) -> np.ndarray:

@@ -22,6 +22,7 @@ import numpy as np
 from scipy import stats
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import compose, mahalanobis2, rotation_matrix  # compose: re-exported
 
 __all__ = [
     "between_noise",
@@ -42,9 +43,8 @@ __all__ = [
 def _blk_rotation(psi) -> np.ndarray:
     """``blkdiag(R(psi), 1)`` for an array of headings, shape ``(..., 3, 3)``."""
     psi = np.asarray(psi, float)
-    c, s = np.cos(psi), np.sin(psi)
     a = np.zeros((*psi.shape, 3, 3))
-    a[..., 0, 0], a[..., 0, 1], a[..., 1, 0], a[..., 1, 1], a[..., 2, 2] = c, -s, s, c, 1.0
+    a[..., :2, :2], a[..., 2, 2] = rotation_matrix(psi), 1.0
     return a
 
 
@@ -83,20 +83,10 @@ def inverse_increment_covariance(inverse, cov) -> np.ndarray:
     position by its lever arm, which a rotation alone would miss.
     """
     inverse = np.asarray(inverse, float)
-    c, s = np.cos(inverse[..., 2]), np.sin(inverse[..., 2])
     jac = np.zeros((*inverse.shape[:-1], 3, 3))
-    jac[..., 0, 0], jac[..., 0, 1], jac[..., 1, 0], jac[..., 1, 1] = -c, s, -s, -c
+    jac[..., :2, :2] = -rotation_matrix(inverse[..., 2])
     jac[..., 0, 2], jac[..., 1, 2], jac[..., 2, 2] = inverse[..., 1], -inverse[..., 0], -1.0
     return jac @ np.asarray(cov, float) @ np.swapaxes(jac, -1, -2)
-
-
-def compose(pose, increment) -> np.ndarray:
-    """``pose (+) increment`` for arrays ``(..., 3)``: the SE(2) composition of tangraph's poses."""
-    pose, increment = np.asarray(pose, float), np.asarray(increment, float)
-    c, s = np.cos(pose[..., 2]), np.sin(pose[..., 2])
-    north = pose[..., 0] + c * increment[..., 0] - s * increment[..., 1]
-    east = pose[..., 1] + s * increment[..., 0] + c * increment[..., 1]
-    return np.stack([north, east, pose[..., 2] + increment[..., 2]], axis=-1)
 
 
 def propagate(pose, cov, increment, increment_cov) -> np.ndarray:
@@ -166,8 +156,7 @@ def pose_prior_factor(key: int, pose, cov_world):
 
 def nis(error, cov) -> float:
     """Normalised innovation squared ``e^T C^-1 e``."""
-    error = np.asarray(error, float)
-    return float(error @ np.linalg.solve(cov, error))
+    return float(mahalanobis2(error, cov))
 
 
 def gate_threshold(probability: float | None) -> float:

@@ -33,6 +33,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.geometry import wrap_angle, wrap_near
 from tangraph.graph.calibration import (
     CALIBRATION,
     TIDE,
@@ -421,7 +422,7 @@ class GraphNavigator:
         self.isam = self.smoother.getISAM2()
         estimate = self.isam.calculateEstimatePose2(k)
         pose = np.array([estimate.x(), estimate.y(), estimate.theta()])
-        pose[2] = self.survey.dr_pose[k, 2] + _wrap(pose[2] - self.survey.dr_pose[k, 2])
+        pose[2] = wrap_near(pose[2], self.survey.dr_pose[k, 2])
         if self.graph.calibrated:
             self.calibration = np.asarray(self.isam.calculateEstimateVector(CALIBRATION), float)
             # the key pose with the calibration (and the tide when held), one joint marginal
@@ -517,7 +518,7 @@ def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
     plus the heading walk so far) with its std; ``joint (5, 5)`` is the covariance of the
     DR-frame ``pose`` and the calibration."""
     joint = np.asarray(joint, float)
-    error = float(_wrap(dr_heading - (pose[2] - calibration[1])))
+    error = float(wrap_angle(dr_heading - (pose[2] - calibration[1])))
     grad = np.array([0.0, 0.0, -1.0, 0.0, 1.0])
     return {
         "speed_scale": float(calibration[0]),
@@ -536,10 +537,6 @@ def _window_terrain(survey: Survey, bathymetry: BathymetryMap, model: Navigation
     return (TerrainLikelihood(bathymetry, model.measurement_std),
             sounding_variances(survey, bathymetry, model),
             sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
-
-
-def _wrap(angle):
-    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def _translate(exc: Exception, graph: PoseGraph) -> Exception:

@@ -61,6 +61,7 @@ import numpy as np
 from scipy import ndimage, special, stats
 
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.geometry import mahalanobis2
 from tangraph.matching import FixQuality, MatchingError, Patch
 
 __all__ = ["WindowFix", "posterior_fix"]
@@ -133,8 +134,7 @@ def _grid(centre: np.ndarray, axes: np.ndarray) -> np.ndarray:
 
 
 def _log_gaussian(points: np.ndarray, mean: np.ndarray, cov: np.ndarray) -> np.ndarray:
-    d = points - mean
-    return -0.5 * np.einsum("ni,ij,nj->n", d, np.linalg.inv(cov), d)
+    return -0.5 * mahalanobis2(points - mean, cov)
 
 
 def _moments(points: np.ndarray, log_density: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

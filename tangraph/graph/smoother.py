@@ -22,6 +22,7 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import wrap_near
 from tangraph.graph.batch import (
     SmootherSolution,
     dense_track,
@@ -34,7 +35,7 @@ from tangraph.graph.calibration import CALIBRATION, joint_in_frame
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph
-from tangraph.graph.online import GraphNavigator, _translate, _wrap, calibration_summary
+from tangraph.graph.online import GraphNavigator, _translate, calibration_summary
 from tangraph.graph.robust import gnc
 from tangraph.graph.terrain_solve import terrain_solve
 from tangraph.maps.grid import BathymetryMap
@@ -113,7 +114,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     pose = np.array(gtsam.utilities.extractPose2(result), float)  # in key order: the pings ascending
     if initial is None:
         initial = np.asarray(graph.initial)
-    pose[:, 2] = np.asarray(initial)[:, 2] + _wrap(pose[:, 2] - np.asarray(initial)[:, 2])
+    pose[:, 2] = wrap_near(pose[:, 2], np.asarray(initial)[:, 2])
     calib = np.zeros(2)
     if graph.calibrated:
         calib = np.asarray(result.atVector(CALIBRATION), float)

@@ -26,12 +26,13 @@ import numpy as np
 
 from tangraph.eval.map_check import window_scores
 from tangraph.eval.map_field import map_error_field
+from tangraph.geometry import wrap_near
 from tangraph.graph import batch, field_solve, terrain_factors
 from tangraph.graph.batch import SmootherSolution
 from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.keyposes import PoseGraph, increments
-from tangraph.graph.online import GraphNavigator, _wrap
+from tangraph.graph.online import GraphNavigator
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.terrain import MapError
 
@@ -264,7 +265,7 @@ def _ping_graph(nav: GraphNavigator) -> PoseGraph:
 def _unpack(values, terrain, reference) -> tuple[np.ndarray, np.ndarray, float]:
     """Key poses (headings unwrapped near ``reference``), calibration and tide of ``values``."""
     pose = np.array(gtsam.utilities.extractPose2(values), float)
-    pose[:, 2] = reference[:, 2] + _wrap(pose[:, 2] - reference[:, 2])
+    pose[:, 2] = wrap_near(pose[:, 2], reference[:, 2])
     calibration = np.asarray(values.atVector(CALIBRATION), float) if terrain.calibrated else np.zeros(2)
     tide = float(values.atVector(TIDE)[0]) if terrain.estimates_tide else terrain.tide
     return pose, calibration, tide

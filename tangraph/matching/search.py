@@ -35,6 +35,7 @@ import numpy as np
 import scipy.fft
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 
 __all__ = ["CandidateGrid", "CriterionSums", "SearchMethod", "criterion_sums"]
@@ -477,8 +478,7 @@ def criterion_sums(
             f"criterion_sums: method 'fft' needs candidate steps of whole map cells ({dn:g} m x {de:g} m); "
             "use method 'direct' for this grid"
         )
-    c, s = np.cos(grid.headings)[:, None], np.sin(grid.headings)[:, None]
-    off_n, off_e = c * offsets[:, 0] - s * offsets[:, 1], s * offsets[:, 0] + c * offsets[:, 1]
+    off_n, off_e = np.moveaxis(rotate(grid.headings[:, None], offsets), -1, 0).copy()  # (nh, N) each
     layouts = [_layout(bathymetry, np.column_stack([a, b]), grid) for a, b in zip(off_n, off_e, strict=True)]
     windows = [_fft_window(lay, nn, ne, mi, mj) for lay in layouts] if whole_cell else []
     if method == "auto":

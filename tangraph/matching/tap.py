@@ -44,6 +44,8 @@ import numpy as np
 from scipy import ndimage, stats
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import mahalanobis2
+from tangraph.geometry import rotate as _rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching.patch import MatchingError, Patch, window_patch
 from tangraph.matching.search import CandidateGrid, criterion_sums
@@ -185,8 +187,7 @@ class TapFix:
 
 def rotate(offsets: np.ndarray, angle: float) -> np.ndarray:
     """Offsets ``(N, 2)`` (north, east) rotated clockwise (as headings grow) by ``angle``."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.column_stack([c * offsets[:, 0] - s * offsets[:, 1], s * offsets[:, 0] + c * offsets[:, 1]])
+    return _rotate(angle, offsets)
 
 
 def criterion_at(
@@ -205,8 +206,7 @@ def criterion_at(
 
 def nees(error, covariance) -> float:
     """Normalised estimation error squared ``e^T P^-1 e``."""
-    error = np.asarray(error, float)
-    return float(error @ np.linalg.solve(covariance, error))
+    return float(mahalanobis2(error, covariance))
 
 
 def tap_fix(

@@ -18,6 +18,7 @@ import dataclasses
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import between, rotate, rotation_matrix, wrap_angle  # rotation_matrix: re-exported
 
 __all__ = [
     "DeadReckoning",
@@ -48,16 +49,6 @@ def _check_number(obj, name: str, *, low: float | None = 0.0, open_low: bool = F
         raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
     object.__setattr__(obj, name, v)
     return v
-
-
-def _wrap(angle):
-    return (angle + np.pi) % (2 * np.pi) - np.pi
-
-
-def _rotate(psi, vec: np.ndarray) -> np.ndarray:
-    """``R(psi) vec`` for body vectors ``vec (..., 2)``; ``_rotate(-psi, v)`` is the inverse."""
-    c, s = np.cos(psi), np.sin(psi)
-    return np.stack([c * vec[..., 0] - s * vec[..., 1], s * vec[..., 0] + c * vec[..., 1]], axis=-1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -242,13 +233,13 @@ def simulate_dead_reckoning(time, true_pose, model: DeadReckoningModel, *,
     dt = np.diff(t)
     valid, n_dropouts = _dropouts(t, model, rng)
     walk = np.concatenate([[0.0], np.cumsum(model.heading_walk * np.sqrt(dt) * rng.standard_normal(k - 1))])
-    heading_error = (model.heading_bias + _wrap(start[2] - pose[0, 2]) + walk
+    heading_error = (model.heading_bias + wrap_angle(start[2] - pose[0, 2]) + walk
                      + model.heading_noise * rng.standard_normal(k))
-    body = _rotate(-pose[:-1, 2], np.diff(pose[:, :2], axis=0))  # true (forward, starboard) steps
+    body = rotate(-pose[:-1, 2], np.diff(pose[:, :2], axis=0))  # true (forward, starboard) steps
     lock = valid[:-1, None]
     dvl = (1.0 + model.speed_scale) * body + model.speed_noise * dt[:, None] * rng.standard_normal((k - 1, 2))
     psi = pose[:, 2] + heading_error
-    step = _rotate(psi[:-1], np.where(lock, dvl, body))
+    step = rotate(psi[:-1], np.where(lock, dvl, body))
     # INS velocity error: a (north, east) random walk restarted at each dropout's first interval.
     kick = model.dropout_speed_noise * np.sqrt(dt)[:, None] * rng.standard_normal((k - 1, 2))
     kick = np.where(lock, 0.0, kick)
@@ -289,8 +280,7 @@ def odometry(dr_pose, i, j) -> np.ndarray:
     if pose.ndim != 2 or pose.shape[1] != 3:
         raise TangraphError(f"dr_pose must have shape (K, 3), got {pose.shape}")
     ii, jj = _check_pairs(i, j, pose.shape[0])
-    delta = _rotate(-pose[ii, 2], pose[jj, :2] - pose[ii, :2])
-    return np.concatenate([delta, _wrap(pose[jj, 2] - pose[ii, 2])[..., None]], axis=-1)
+    return between(pose[ii], pose[jj])
 
 
 def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_valid=None,
@@ -362,20 +352,6 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
         cov[:, :2, :2] += model.heading_bias**2 * across[:, :, None] * across[:, None, :]
         cov[:, :2, :2] += model.speed_scale**2 * d[:, :, None] * d[:, None, :]
     return cov.reshape(*shape, 3, 3)
-
-
-def rotation_matrix(psi) -> np.ndarray:
-    """Matrices ``R(psi) (..., 2, 2)`` (a heading's, clockwise from north, on ``(north, east)``)
-    for a heading or an array of them.
-
-    Examples
-    --------
-    >>> rotation_matrix(np.pi / 2).round(6).tolist()
-    [[0.0, -1.0], [1.0, 0.0]]
-    """
-    psi = np.asarray(psi, float)
-    c, s = np.cos(psi), np.sin(psi)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], axis=-2)
 
 
 def _heading_terms(model, t, pose, ii, jj, k, later, dtw) -> np.ndarray:

@@ -20,6 +20,7 @@ import dataclasses
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import rotate
 from tangraph.maps.mesh import TerrainScene, cast_rays
 from tangraph.sensors.dead_reckoning import _check_number
 
@@ -249,9 +250,7 @@ def simulate_pings(scene: TerrainScene, pose, vehicle_depth, config: SonarConfig
     sway = 0.0 if single else config.attitude_noise
     nominal = _levelled(unit, roll, pitch)
     actual = _levelled(unit, roll + sway * rng.standard_normal(k), pitch + sway * rng.standard_normal(k))
-    c, s = np.cos(pose[:, 2:3]), np.sin(pose[:, 2:3])
-    world = np.stack([c * actual[..., 0] - s * actual[..., 1], s * actual[..., 0] + c * actual[..., 1],
-                      actual[..., 2]], axis=-1)
+    world = np.concatenate([rotate(pose[:, 2:3], actual[..., :2]), actual[..., 2:]], axis=-1)
     origin = np.column_stack([pose[:, :2], depth0 - config.tide])[:, None, :]
     true_range = cast_rays(scene, origin, world)  # one call for all pings and beams
     ret = np.isfinite(true_range) & (true_range <= config.max_range)

@@ -25,6 +25,7 @@ from typing import Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import rotate
 from tangraph.survey import Survey
 
 __all__ = ["faulty_pings", "offset_start", "outlier_blocks"]
@@ -120,9 +121,9 @@ def outlier_blocks(
             north, east = shift * np.cos(direction), shift * np.sin(direction)
             # into each ping's body frame by the DR heading: the shift is (north, east) in the
             # footprints a navigator lays with the dead reckoning (the recorded values)
-            psi = survey.dr_pose[pings, 2][:, None]
-            forward[pings] += np.cos(psi) * north + np.sin(psi) * east
-            starboard[pings] += -np.sin(psi) * north + np.cos(psi) * east
+            body = rotate(-survey.dr_pose[pings, 2][:, None], [north, east])  # R(psi)^T (north, east)
+            forward[pings] += body[..., 0]
+            starboard[pings] += body[..., 1]
             record.update(shift_north=float(north), shift_east=float(east))
         else:
             value = float(rng.choice([-1.0, 1.0]) * rng.uniform(low, high))

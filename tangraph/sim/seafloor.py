@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import rotation_matrix
 from tangraph.maps.grid import BathymetryMap
 
 __all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "simulate_world"]
@@ -169,8 +170,7 @@ def _prior_trajectory(seafloor: BathymetryMap, settings: PriorMapSettings) -> tu
         heading = 0.0 if height >= width else np.pi / 2
     else:
         heading = np.radians(settings.line_heading_deg)
-    along = np.array([np.cos(heading), np.sin(heading)])
-    across = np.array([-np.sin(heading), np.cos(heading)])
+    along, across = rotation_matrix(heading).T  # the heading's unit vector and its starboard
     corners = np.array([[n_lo, e_lo], [n_lo, e_hi], [n_hi, e_lo], [n_hi, e_hi]])
     a, c = corners @ along, corners @ across
     length = float(a.max() - a.min())

@@ -12,6 +12,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import rotation_matrix
 
 __all__ = ["lawnmower", "straight_line", "waypoint_route"]
 
@@ -127,8 +128,7 @@ def lawnmower(
     line_length, line_spacing = _positive(line_length, "line_length"), _positive(line_spacing, "line_spacing")
     if int(n_lines) < 1:
         raise TangraphError(f"trajectory: n_lines must be at least 1, got {n_lines!r}")
-    along = np.array([np.cos(heading), np.sin(heading)])
-    across = np.array([-np.sin(heading), np.cos(heading)])  # starboard of the heading
+    along, across = rotation_matrix(heading).T  # the heading's unit vector and its starboard
     points = []
     for k in range(int(n_lines)):
         start = np.asarray(origin, float) + k * line_spacing * across
