@@ -1,5 +1,8 @@
-"""Outputs that never destroy data: several files written as one, SIGTERM as a clean stop, and
-the leftovers of runs that were killed.
+"""Outputs that never destroy data: one file written atomically, several files written as one,
+SIGTERM as a clean stop, and the leftovers of runs that were killed.
+
+:func:`write_atomically` writes one file through a temporary file beside it and renames it
+into place, so an interrupted write never leaves half a file.
 
 A command that writes several files (a track, its TUM copy, a figure) writes each one to a
 hidden temporary file beside its target and moves them all into place only once every one is
@@ -21,7 +24,7 @@ import shutil
 import signal
 import tempfile
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 __all__ = [
@@ -30,6 +33,7 @@ __all__ = [
     "deferred_signals",
     "remove_stale_partials",
     "sigterm_exits",
+    "write_atomically",
     "write_track_outputs",
 ]
 
@@ -150,6 +154,24 @@ def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
             log.info("removed %s, left by process %d that no longer runs", entry, pid)
             removed.append(entry)
     return removed
+
+
+def write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
+    """Write through a temporary file in the same folder, then rename: never a half file."""
+    if path.exists() and not overwrite:
+        raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
+    try:
+        write(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a written file gets the usual mode
+        os.replace(tmp, path)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
 
 
 def _file_mode() -> int:

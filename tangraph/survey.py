@@ -308,7 +308,7 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
     import xarray as xr
 
     import tangraph
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     p = Path(path)
     # CF names depths below the sea surface; a survey on another datum (a gauge's zero, chart

@@ -201,7 +201,7 @@ def write_track_csv(
     ``start_time`` (ISO 8601, ``meta["start_time"]``) a ``utc`` column follows it with each pose's
     absolute UTC time (ISO 8601, microseconds, ``Z``).
     """
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     names, data = _columns(track, crs, origin, reference)
     text = [[_CSV_FORMAT.get(name, "%.10g") % v for v in data[:, j]] for j, name in enumerate(names)]
@@ -320,7 +320,7 @@ def write_track_geojson(
     """
     import json
 
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     lon, lat = _placed(track, crs, origin, "GeoJSON")
     props = {
@@ -377,7 +377,7 @@ def write_track_gpkg(
         import pyogrio.raw
     except ImportError:
         raise TangraphError("writing GeoPackage needs pyogrio (pip install pyogrio)") from None
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     lon, lat = _placed(track, crs, origin, "GeoPackage")
     props = _pose_properties(track, reference, start_time)
@@ -422,7 +422,7 @@ def write_track_tum(
     yaw ``pi/2 - psi`` (counter-clockwise from east) is a rotation about z (up):
     ``q = (0, 0, sin(yaw/2), cos(yaw/2))``. evo's top views then show north up, east right.
     """
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     if frame not in ("ned", "enu"):
         raise TangraphError(f"TUM frame must be 'ned' or 'enu', got {frame!r}")

@@ -65,7 +65,7 @@ def build_map(cfg: dict, data: Path):
     """The prior map: the runs of ``cfg["map"]["months"]`` gridded at their GPS positions; with
     ``check_lines`` its error scaled by what the runs, each held out from a map of the others,
     show (:func:`tangraph.eval.map_check.calibrate_error`)."""
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
 
     m = cfg["map"]
     files = [p for month in m["months"] for p in run_files(data, month)]
@@ -149,7 +149,7 @@ def beam_offsets(pairs, *, min_slope: float = 0.03) -> list[dict]:
 def beam_check(cfg: dict, data: Path) -> list[dict]:
     """:func:`beam_offsets` over every run, each against a map of the other days' vertical beams
     (so that the check does not depend on the slant beams' assumed azimuths)."""
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
 
     m = cfg["map"]
     runs = {p: _import(cfg, data, p) for p in sorted(data.glob("*.sum"))}

@@ -121,7 +121,7 @@ def figure_file(path: Path) -> None:
 
 def write_figure(fig, path: Path, force: bool, dpi: int) -> None:
     """Write a matplotlib figure to ``path`` in the format of its suffix, whole or not at all."""
-    from tangraph.maps.io import write_atomically
+    from tangraph.outputs import write_atomically
 
     write_atomically(path, force, lambda tmp: fig.savefig(tmp, dpi=dpi, format=path.suffix[1:]))
 

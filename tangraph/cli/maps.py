@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from tangraph.cli._common import (
     CELL,
     DPI,
@@ -83,8 +85,8 @@ def cmd_maps_plot(args: argparse.Namespace) -> None:
 
 
 def cmd_maps_mesh(args: argparse.Namespace) -> None:
-    from tangraph.maps.io import write_atomically
     from tangraph.maps.mesh import write_mesh
+    from tangraph.outputs import write_atomically
 
     sidecar = args.output.with_name(args.output.name + ".json")
     source = Path(args.map).resolve() if Path(args.map).exists() else None
@@ -101,18 +103,40 @@ def cmd_maps_mesh(args: argparse.Namespace) -> None:
 
 
 def cmd_maps_grid(args: argparse.Namespace) -> None:
-    from tangraph.cli._gridding import grid_inputs, grid_summary
+    from tangraph.gridding_files import grid_files
     from tangraph.maps.io import write_sounding_grid
 
-    grid, check = grid_inputs(
-        list(args.inputs), args.output, cell=args.cell, statistic=args.statistic, fill=args.fill,
-        use_dr=args.use_dr, sign=args.sign, crs=args.crs, units=args.units, check_lines=args.check_lines,
-        lines=args.lines, window=args.window, sounding_std=args.sounding_std, position_std=args.position_std,
+    grid, check = grid_files(
+        args.inputs, args.output, cell=args.cell, statistic=args.statistic, fill=args.fill,
+        position_std=args.position_std, use_dr=args.use_dr, sign=args.sign, crs=args.crs, units=args.units,
+        check_lines=args.check_lines, lines=args.lines, window=args.window, sounding_std=args.sounding_std,
+        where="maps grid", option_name=_option,
     )
     if check is not None:
         print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
     write_sounding_grid(grid, args.output, overwrite=args.force)
-    print(grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
+    print(_grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
+
+
+def _option(keyword: str) -> str:
+    """The option of a library keyword, as the library's errors name it here (``use_dr`` -> ``--use-dr``)."""
+    return "--" + keyword.replace("_", "-")
+
+
+def _grid_summary(grid, *, cell: float, fill: int, output: Path) -> str:
+    """The line ``maps grid`` prints: what was gridded, filled, dropped, the map's error."""
+    gridded = int(grid.count.sum())
+    measured = int(np.count_nonzero(grid.count))
+    error = grid.depth.error_summary()
+    return (
+        f"gridded {gridded} soundings into {measured} of {grid.count.size} cells "
+        f"({cell:g} m, {grid.statistic}); {grid.n_filled} more filled by --fill {fill}; "
+        f"dropped {grid.n_dropped} without depth; "
+        + (f"map error: std median {error['depth_std_m']['median']:.3f} m, max "
+           f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m; "
+           if error else "map error: not told by these soundings (no depth_std written); ")
+        + f"wrote {output}"
+    )
 
 
 def cmd_maps_check(args: argparse.Namespace) -> None:

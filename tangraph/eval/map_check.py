@@ -199,7 +199,7 @@ def check_map_error(
     TangraphError
         Fewer than two surveys, a survey without a reference track, ``window <= 0``.
     """
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
     from tangraph.navigation import in_map_frame
 
     surveys = list(surveys)

@@ -49,7 +49,7 @@ from tqdm import tqdm
 
 from tangraph import __version__
 from tangraph.errors import TangraphError
-from tangraph.maps.io import write_atomically
+from tangraph.outputs import write_atomically
 
 if TYPE_CHECKING:
     from distributed import Client

@@ -18,8 +18,8 @@ from tangraph.maps.catalogue import (
 _WHERE = {
     "BathymetryMap": "tangraph.maps.grid",
     "HAN2020_AREAS": "tangraph.maps.synthetic",
-    "GriddedError": "tangraph.maps.gridding",
-    "SoundingGrid": "tangraph.maps.mesh",
+    "GriddedError": "tangraph.maps.gridding_error",
+    "SoundingGrid": "tangraph.maps.gridding",
     "Soundings": "tangraph.maps.io",
     "TerrainScene": "tangraph.maps.mesh",
     "block_reduce": "tangraph.maps.gridding",
@@ -31,9 +31,9 @@ _WHERE = {
     "fractal": "tangraph.maps.synthetic",
     "from_lonlat": "tangraph.maps.projection",
     "from_mesh": "tangraph.maps.mesh",
-    "grid_soundings": "tangraph.maps.mesh",
-    "grid_surveys": "tangraph.maps.gridding",
-    "gridded_error": "tangraph.maps.gridding",
+    "grid_soundings": "tangraph.maps.gridding",
+    "grid_surveys": "tangraph.gridding_surveys",  # above maps: it needs tangraph.survey
+    "gridded_error": "tangraph.maps.gridding_error",
     "han2020_chart": "tangraph.maps.synthetic",
     "local_crs": "tangraph.maps.projection",
     "polar_chart": "tangraph.maps.synthetic",

@@ -1,19 +1,18 @@
 """What every map reader shares: the file's existence and size, depth or elevation, units, the
-one projection step and the local origin, the error layer's checks, and writing atomically."""
+one projection step and the local origin, and the error layer's checks."""
 
 from __future__ import annotations
 
 import math
 import os
-import tempfile
-from collections.abc import Callable
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
 from tangraph.errors import MapFormatError, TangraphError
-from tangraph.maps.grid import BathymetryMap, check_correlation_length, check_depth_std
+from tangraph.maps._grid_checks import check_correlation_length, check_depth_std
+from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.projection import project_geographic_grid
 
 Sign = Literal["depth", "elevation"]
@@ -205,7 +204,7 @@ def std_factor(attr_unit, depth_factor: float, where: str) -> float:
 
 def checked_std(values, depth: np.ndarray, *, factor: float, nodata, where: str) -> np.ndarray:
     """An uncertainty layer read from a file: ``nodata`` masked, in metres, no fill value
-    beyond 12 000 m, and checked against ``depth`` (:func:`tangraph.maps.grid.check_depth_std`);
+    beyond 12 000 m, and checked against ``depth`` (:func:`tangraph.maps._grid_checks.check_depth_std`);
     ``where`` names the file and the layer in every refusal."""
     std = _mask_nodata(values, nodata) * factor
     finite = np.isfinite(std)
@@ -295,24 +294,6 @@ def _grid_to_map(
     except MapFormatError as exc:
         raise MapFormatError(f"{where}: {exc}") from None
     return m.resample(cell) if cell is not None else m
-
-
-def write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
-    """Write through a temporary file in the same folder, then rename: never a half file."""
-    if path.exists() and not overwrite:
-        raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}-", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        write(Path(tmp))
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a written file gets the usual mode
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
 
 
 def _is_geographic(crs: str) -> bool:

@@ -1,22 +1,28 @@
-"""`BathymetryMap`: a regular grid of seafloor depths in a local metric frame."""
+"""`BathymetryMap`: a regular grid of seafloor depths in a local metric frame (the checks its parts
+pass are in :mod:`tangraph.maps._grid_checks`)."""
 
 from __future__ import annotations
 
 import dataclasses
-import functools
-import math
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
 from tangraph.errors import MapFormatError, TangraphError
+from tangraph.maps._grid_checks import (
+    as_query,
+    check_axis,
+    check_correlation_length,
+    check_depth_std,
+    check_projected,
+)
 from tangraph.maps._interp import depth_kernel, gradient_kernel
 
 if TYPE_CHECKING:
     import xarray as xr
 
-__all__ = ["BathymetryMap", "check_correlation_length", "check_depth_std"]
+__all__ = ["BathymetryMap"]
 
 Order = Literal[1, 3]
 
@@ -28,112 +34,6 @@ DEPTH_STD_ATTRS = {
     "standard_name": "sea_floor_depth_below_sea_surface standard_error",
     "units": "m",
 }
-
-# Relative tolerance on the spacing of "regular" coordinates (float32 files round them).
-_SPACING_RTOL = 1e-4
-
-
-def _check_axis(values: np.ndarray, name: str, where: str) -> tuple[float, float]:
-    """Return (first, spacing) of a regular ascending axis, or raise naming the problem."""
-    if values.ndim != 1 or values.size < 2:
-        raise MapFormatError(f"{where}: {name} must be 1-D with at least 2 cells, got shape {values.shape}")
-    if not np.all(np.isfinite(values)):
-        raise MapFormatError(f"{where}: {name} holds non-finite coordinates")
-    steps = np.diff(values)
-    if np.any(steps <= 0):
-        k = int(np.argmax(steps <= 0))
-        raise MapFormatError(
-            f"{where}: {name} is not strictly ascending "
-            f"({name}[{k}] = {values[k]!r}, {name}[{k + 1}] = {values[k + 1]!r})"
-        )
-    spacing = (values[-1] - values[0]) / (values.size - 1)
-    worst = float(np.max(np.abs(steps - spacing)))
-    if worst > _SPACING_RTOL * spacing:
-        raise MapFormatError(
-            f"{where}: {name} is not regularly spaced (mean step {spacing!r}, "
-            f"a step deviates by {worst!r}); resample the grid first"
-        )
-    return float(values[0]), float(spacing)
-
-
-@functools.lru_cache(maxsize=64)
-def _crs_problem(crs: str) -> str | None:
-    """Why ``crs`` cannot hold a metric local frame (None if it can)."""
-    import pyproj
-
-    try:
-        parsed = pyproj.CRS(crs)
-    except pyproj.exceptions.CRSError:
-        return None  # named where the CRS is used (to_lonlat, the survey's frame)
-    if parsed.is_geographic:
-        return (f"its CRS {parsed.name!r} is geographic (degrees), but north/east are metres; "
-                "read geographic grids with tangraph.maps.read_map (crs=) or "
-                "tangraph.maps.project_geographic_grid")
-    axes = [a for a in parsed.axis_info if a.direction in ("north", "east", "south", "west")]
-    if axes and any(abs(a.unit_conversion_factor - 1.0) > 1e-12 for a in axes):
-        return (f"its CRS {parsed.name!r} has axes in {axes[0].unit_name} "
-                "(north/east/origin must be metres); read it with tangraph.maps.read_map")
-    return None
-
-
-def _check_projected(crs: str, where: str) -> None:
-    problem = _crs_problem(crs)
-    if problem is not None:
-        raise MapFormatError(f"{where}: {problem}")
-
-
-def check_depth_std(std, depth: np.ndarray, where: str) -> np.ndarray:
-    """The error layer ``std`` as a new float64 array, NaN wherever ``depth`` is NaN; or a
-    one-line `MapFormatError` beginning with ``where`` (which names the file or map and the field).
-
-    Refused: another shape than ``depth``; infinite or negative values; NaN where ``depth``
-    holds data. A finite std over a no-data cell is set to NaN without a word.
-    """
-    std = np.array(std, dtype=np.float64)
-    if std.shape != depth.shape:
-        raise MapFormatError(f"{where} has shape {std.shape}, expected the depth's {depth.shape}")
-    nodata = np.isnan(depth)
-    std[nodata] = np.nan
-    for problem, bad in (("infinite", np.isinf(std)), ("negative", std < 0),
-                         ("NaN", np.isnan(std) & ~nodata)):
-        if np.any(bad):
-            k = tuple(int(i) for i in np.unravel_index(int(np.argmax(bad)), std.shape))
-            if problem == "NaN":
-                raise MapFormatError(
-                    f"{where} is NaN in {int(bad.sum())} cell(s) where depth holds data (e.g. at index "
-                    f"{k}); every cell with a depth needs its standard deviation"
-                )
-            raise MapFormatError(
-                f"{where} holds {int(bad.sum())} {problem} value(s) (e.g. {std[k]:g} m at index {k}); "
-                "a standard deviation is finite and >= 0"
-            )
-    return std
-
-
-def check_correlation_length(value, where: str) -> float:
-    """``value`` as a float if it is a finite length > 0 (metres), else a one-line
-    `MapFormatError` beginning with ``where``."""
-    try:
-        length = float(value)
-    except (TypeError, ValueError):
-        length = math.nan
-    if isinstance(value, bool) or not (math.isfinite(length) and length > 0):
-        raise MapFormatError(f"{where} must be a finite length > 0 m, got {value!r}")
-    return length
-
-
-def _as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
-    n = np.asarray(north, dtype=np.float64)
-    e = np.asarray(east, dtype=np.float64)
-    try:
-        shape = np.broadcast_shapes(n.shape, e.shape)
-    except ValueError:
-        raise TangraphError(
-            f"north and east have shapes {n.shape} and {e.shape}, which do not broadcast"
-        ) from None
-    n = np.ascontiguousarray(np.broadcast_to(n, shape)).ravel()
-    e = np.ascontiguousarray(np.broadcast_to(e, shape)).ravel()
-    return n, e, shape
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -196,8 +96,8 @@ class BathymetryMap:
         north = np.array(self.north, dtype=np.float64)
         east = np.array(self.east, dtype=np.float64)
         depth = np.array(self.depth, dtype=np.float64)
-        n0, dn = _check_axis(north, "north", where)
-        e0, de = _check_axis(east, "east", where)
+        n0, dn = check_axis(north, "north", where)
+        e0, de = check_axis(east, "east", where)
         if depth.shape != (north.size, east.size):
             raise MapFormatError(
                 f"{where}: depth has shape {depth.shape}, expected (len(north), len(east)) = "
@@ -208,7 +108,7 @@ class BathymetryMap:
         if not np.any(np.isfinite(depth)):
             raise MapFormatError(f"{where}: depth is all NaN (no data at all)")
         if self.crs is not None:
-            _check_projected(str(self.crs), where)
+            check_projected(str(self.crs), where)
         origin = tuple(float(v) for v in self.origin)
         if len(origin) != 2 or not all(np.isfinite(origin)):
             raise MapFormatError(f"{where}: origin must be two finite numbers, got {self.origin!r}")
@@ -292,7 +192,7 @@ class BathymetryMap:
     def _query(self, north, east, order: Order, with_grad: bool):
         if order not in (1, 3):
             raise TangraphError(f"order must be 1 (bilinear) or 3 (bicubic), got {order!r}")
-        n, e, shape = _as_query(north, east)
+        n, e, shape = as_query(north, east)
         out = np.empty(n.size)
         n0, e0, dn, de = self._grid  # type: ignore[attr-defined]
         if not with_grad:
@@ -347,7 +247,7 @@ class BathymetryMap:
                 f"map {self.name!r} has no depth_std (error layer); read it from a file that carries "
                 "one, grid the map with tangraph.maps.grid_surveys, or use the model's default map std"
             )
-        n, e, shape = _as_query(north, east)
+        n, e, shape = as_query(north, east)
         out = np.empty(n.size)
         n0, e0, dn, de = self._grid  # type: ignore[attr-defined]
         depth_kernel(self.depth_std, n0, e0, 1.0 / dn, 1.0 / de, n, e, 1, out)

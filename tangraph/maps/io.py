@@ -47,13 +47,12 @@ from tangraph.maps._common import (  # noqa: F401 (the shared pieces, imported f
     metric_crs,
     resolve_sign,
     unit_factor,
-    write_atomically,
 )
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.netcdf import NETCDF_SUFFIXES, read_netcdf, write_netcdf, write_sounding_grid
+from tangraph.outputs import write_atomically
 
-__all__ = ["Soundings", "map_format", "read_map", "read_soundings", "write_atomically", "write_map",
-           "write_sounding_grid"]
+__all__ = ["Soundings", "map_format", "read_map", "read_soundings", "write_map", "write_sounding_grid"]
 
 _FORMATS = {
     **dict.fromkeys(NETCDF_SUFFIXES, "netcdf"),

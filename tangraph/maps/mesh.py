@@ -1,4 +1,4 @@
-"""The Open3D bridge: maps as triangle meshes, meshes (TINs) and soundings as maps, ray casting.
+"""The Open3D bridge: maps as triangle meshes, meshes (TINs) as maps, ray casting.
 
 Mesh and point-cloud coordinates are ``(north, east, depth)``: the right-handed NED frame
 (x north, y east, z down), in metres, in the map's local frame.
@@ -12,23 +12,21 @@ barycentric interpolation for :func:`triangles_to_map`).
 from __future__ import annotations
 
 import dataclasses
-import functools
-import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Literal
 
 import numpy as np
 import open3d as o3d
 
 from tangraph.errors import MapFormatError, TangraphError
+from tangraph.maps._grid_checks import cell_axis, check_cell
 from tangraph.maps.grid import BathymetryMap
+from tangraph.outputs import write_atomically
 
 __all__ = [
-    "SoundingGrid",
     "TerrainScene",
     "cast_rays",
     "from_mesh",
-    "grid_soundings",
     "raycasting_scene",
     "read_mesh",
     "to_mesh",
@@ -42,23 +40,6 @@ _MESH_SUFFIXES = (".ply", ".obj")
 _INVALID = o3d.t.geometry.RaycastingScene.INVALID_ID
 # Nudges tried for vertical rays that slip past a TIN's boundary (Embree's half-open edges).
 _NUDGES = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1], [1, 0], [-1, 0], [0, 1], [0, -1]], float)
-
-
-def _check_cell(cell, where: str) -> float:
-    value = float(cell)
-    if not (np.isfinite(value) and value > 0):
-        raise TangraphError(f"{where}: cell must be a positive number of metres, got {cell!r}")
-    return value
-
-
-def _axis(lo: float, hi: float, cell: float, name: str, where: str) -> np.ndarray:
-    axis = lo + cell * np.arange(int(np.floor((hi - lo) / cell + 1e-9)) + 1)
-    if axis.size < 2:
-        raise TangraphError(
-            f"{where}: {name} spans {hi - lo:g} m, less than 2 cells of {cell:g} m; "
-            "use a smaller cell"
-        )
-    return axis
 
 
 # -- map -> mesh ------------------------------------------------------------------------------
@@ -328,10 +309,10 @@ def triangles_to_map(
            [14., nan, nan]])
     """
     where = f"TIN {name!r}"
-    cell = _check_cell(cell, where)
+    cell = check_cell(cell, where)
     v, t = _check_tin(vertices, triangles)
-    north = _axis(v[:, 0].min(), v[:, 0].max(), cell, "north", where)
-    east = _axis(v[:, 1].min(), v[:, 1].max(), cell, "east", where)
+    north = cell_axis(v[:, 0].min(), v[:, 0].max(), cell, "north", where)
+    east = cell_axis(v[:, 1].min(), v[:, 1].max(), cell, "east", where)
     nn, ee = np.meshgrid(north, east, indexing="ij")
     depth = _linear_depths(v, t, nn.ravel(), ee.ravel()) if method == "linear" else None
     if method not in ("linear", "raycast"):
@@ -435,8 +416,6 @@ def write_mesh(
     if sidecar is not False:
         import json
 
-        from tangraph.maps.io import write_atomically
-
         target = path.with_name(path.name + ".json") if sidecar is True else Path(sidecar)
         crs_wkt = None
         if bathymetry.crs is not None:
@@ -457,136 +436,3 @@ def write_mesh(
         text = json.dumps(about, indent=2) + "\n"
         write_atomically(target, True, lambda tmp: tmp.write_text(text, encoding="utf-8"))
     return path
-
-
-# -- scattered soundings -> map ---------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class SoundingGrid:
-    """Soundings binned on a regular grid.
-
-    ``mean`` is the map of mean depths (NaN in empty cells), ``count (ny, nx)`` the soundings
-    per cell, ``std (ny, nx)`` their sample standard deviation (ddof 1; NaN below 2
-    soundings), ``n_dropped`` the soundings left out (a NaN coordinate or outside the extent).
-    ``median (ny, nx)`` is the (weighted) median depth per cell (NaN in empty cells; None if
-    not computed), ``statistic`` which of ``"mean"`` and ``"median"`` is the map's
-    :attr:`depth`, ``gap_fill (ny, nx)`` the depth a gap fill gave to empty cells (NaN
-    elsewhere; None: no gap fill, see :func:`tangraph.maps.gridding.fill_gaps`), and ``meta``
-    JSON-ready provenance (sources, vertical datum), written with the grid. :attr:`error` is
-    the map's error told from the soundings (:func:`tangraph.maps.gridding.gridded_error`),
-    which :attr:`depth` carries as its ``depth_std`` (times ``error_scale``: 1, or the factor
-    check lines found, :func:`tangraph.eval.map_check.calibrate_error`) and
-    ``correlation_length``.
-    """
-
-    mean: BathymetryMap
-    count: np.ndarray
-    std: np.ndarray
-    n_dropped: int = 0
-    median: np.ndarray | None = None
-    statistic: Literal["mean", "median"] = "mean"
-    gap_fill: np.ndarray | None = None
-    meta: dict[str, Any] = dataclasses.field(default_factory=dict)
-    error_scale: float = 1.0
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.error_scale) and self.error_scale > 0):
-            raise TangraphError(f"error_scale must be a finite number > 0, got {self.error_scale!r}")
-        count = np.array(self.count, dtype=np.int64)
-        std = np.array(self.std, dtype=np.float64)
-        if count.shape != self.mean.shape or std.shape != self.mean.shape:
-            raise TangraphError(
-                f"count {count.shape} and std {std.shape} must match the map's {self.mean.shape}"
-            )
-        if self.statistic not in ("mean", "median"):
-            raise TangraphError(f"statistic must be 'mean' or 'median', got {self.statistic!r}")
-        if self.statistic == "median" and self.median is None:
-            raise TangraphError("statistic 'median' needs the median layer")
-        layers = {"count": count, "std": std}
-        for name in ("median", "gap_fill"):
-            if getattr(self, name) is not None:
-                layers[name] = np.array(getattr(self, name), dtype=np.float64)
-                if layers[name].shape != self.mean.shape:
-                    raise TangraphError(
-                        f"{name} {layers[name].shape} must match the map's {self.mean.shape}"
-                    )
-        if "gap_fill" in layers and np.any(np.isfinite(layers["gap_fill"]) & (count > 0)):
-            raise TangraphError("gap_fill gives a depth to a cell that holds soundings")
-        for key, a in layers.items():
-            a.setflags(write=False)
-            object.__setattr__(self, key, a)
-        object.__setattr__(self, "n_dropped", int(self.n_dropped))
-        object.__setattr__(self, "meta", dict(self.meta))
-
-    @property
-    def n_filled(self) -> int:
-        """Empty cells given a depth by the gap fill."""
-        return 0 if self.gap_fill is None else int(np.isfinite(self.gap_fill).sum())
-
-    @functools.cached_property
-    def error(self):
-        """The map's error (:class:`tangraph.maps.gridding.GriddedError`), computed once."""
-        from tangraph.maps.gridding import gridded_error
-
-        return gridded_error(self)
-
-    @property
-    def depth(self) -> BathymetryMap:
-        """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
-        with the error layer of :attr:`error` (``depth_std`` times ``error_scale``,
-        ``correlation_length``)."""
-        layer = self.mean.depth if self.statistic == "mean" else self.median
-        if self.gap_fill is not None:
-            layer = np.where(self.count > 0, layer, self.gap_fill)
-        std = self.error.depth_std
-        return self.mean.replace(depth=layer, depth_std=None if std is None else std * self.error_scale,
-                                 correlation_length=self.error.correlation_length)
-
-
-def _as_points(points) -> np.ndarray:
-    if isinstance(points, o3d.geometry.PointCloud):
-        return np.asarray(points.points, dtype=np.float64)
-    pts = np.asarray(points, dtype=np.float64)
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise TangraphError(f"points must have shape (N, 3) [north, east, depth], got {pts.shape}")
-    return pts
-
-
-def grid_soundings(
-    points,
-    *,
-    cell: float,
-    name: str = "soundings",
-    crs: str | None = None,
-    origin: tuple[float, float] = (0.0, 0.0),
-    extent: tuple[float, float, float, float] | None = None,
-) -> SoundingGrid:
-    """Bin scattered soundings into square cells: count, mean, median and spread of depth per cell.
-
-    :func:`tangraph.maps.gridding.block_reduce` of an array or an Open3D point cloud.
-
-    Parameters
-    ----------
-    points : array_like (N, 3) or open3d.geometry.PointCloud
-        Soundings ``(north, east, depth)``; rows with a NaN are dropped and counted.
-    cell : float
-        Cell size in metres; a sounding goes to the nearest cell centre.
-    extent : (north_min, north_max, east_min, east_max), optional
-        Cell centres from the minima in steps of ``cell``; soundings outside are dropped.
-        By default the centres start at the soundings' smallest north and east.
-    name, crs, origin
-        As in :class:`BathymetryMap`.
-
-    Examples
-    --------
-    >>> pts = [[0.0, 0, 10], [0.2, 0, 12], [0, 1, 11], [1, 1, 13]]
-    >>> g = grid_soundings(pts, cell=1.0)
-    >>> g.count
-    array([[2, 1],
-           [0, 1]])
-    >>> g.mean.depth
-    array([[11., 11.],
-           [nan, 13.]])
-    """
-    from tangraph.maps.gridding import block_reduce
-
-    return block_reduce(_as_points(points), cell=cell, name=name, crs=crs, origin=origin, extent=extent)

@@ -26,9 +26,9 @@ from tangraph.maps._common import (
     resolve_sign,
     std_factor,
     unit_factor,
-    write_atomically,
 )
 from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, BathymetryMap
+from tangraph.outputs import write_atomically
 
 __all__ = ["NETCDF_SUFFIXES", "read_netcdf", "write_netcdf", "write_sounding_grid"]
 
@@ -317,14 +317,14 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
 
 
 def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a `tangraph.maps.mesh.SoundingGrid` as NetCDF.
+    """Write a `tangraph.maps.gridding.SoundingGrid` as NetCDF.
 
     ``depth`` is the grid's map (:attr:`~tangraph.maps.SoundingGrid.depth`: its ``statistic``
     per cell, said in the CF ``cell_methods`` attribute, e.g. ``"area: median"``, plus any gap
     fill); ``mean``, ``median`` (if computed), ``count`` and ``std`` are the soundings' per-cell
     statistics, ``filled`` (if a gap fill ran) is 1 where ``depth`` came from the gap fill. The
     grid's ``meta`` is the global attribute ``tangraph_meta`` (JSON). The map's error
-    (:func:`tangraph.maps.gridding.gridded_error`) is ``depth_std`` with the correlation length
+    (:func:`tangraph.maps.gridding_error.gridded_error`) is ``depth_std`` with the correlation length
     (:func:`write_netcdf`), and the one-cell semivariance it rests on the global attribute
     ``tangraph_error_semivariance_m2``.
     """

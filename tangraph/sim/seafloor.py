@@ -198,7 +198,7 @@ def _gps_error(time: np.ndarray, std: float, rng: np.random.Generator) -> np.nda
 def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng: np.random.Generator,
               name: str) -> tuple[BathymetryMap, Any]:
     """The map gridded from a simulated earlier survey of ``seafloor``, and that survey."""
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
     from tangraph.maps.mesh import raycasting_scene
     from tangraph.sensors import simulate_pings
     from tangraph.survey import Survey

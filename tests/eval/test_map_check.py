@@ -105,7 +105,7 @@ def test_check_map_error_refuses_bad_input():
 
 def test_calibrate_error_scales_the_map_error_by_the_check():
     from tangraph.eval.map_check import calibrate_error
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
 
     rng = np.random.default_rng(4)
     surveys = [line_survey(seafloor, rng, lines=np.arange(10.0, 390.0, 6.0) + 2.0 * i) for i in range(2)]

@@ -10,7 +10,7 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.maps import block_reduce, fill_gaps
-from tangraph.maps.gridding import gridded_error
+from tangraph.maps.gridding_error import gridded_error
 
 
 def test_a_measured_cell_gets_the_standard_error_of_its_value():
@@ -91,7 +91,7 @@ def test_the_gridded_std_matches_a_simulated_prior_maps_true_error():
     run = simulate_run(load_scenario("wang2019-map-error"), rng=np.random.default_rng(3))
     prior, world = run.bathymetry, run.world
     z = world.map_error() / prior.depth_std
-    from tangraph.maps.gridding import grid_surveys
+    from tangraph.gridding_surveys import grid_surveys
 
     counts = grid_surveys([world.prior_survey], cell=10.0, statistic="median").count
     assert counts.shape == prior.shape

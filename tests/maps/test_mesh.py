@@ -10,11 +10,10 @@ import pytest
 
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps.grid import BathymetryMap
+from tangraph.maps.gridding import SoundingGrid, grid_soundings
 from tangraph.maps.mesh import (
-    SoundingGrid,
     cast_rays,
     from_mesh,
-    grid_soundings,
     raycasting_scene,
     read_mesh,
     to_mesh,
