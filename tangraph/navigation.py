@@ -494,7 +494,7 @@ def track_report(track: Track, survey: Survey) -> dict:
     if "calibration" in meta:
         report["calibration"] = {k: float(v) for k, v in meta["calibration"].items()}
     if survey.true_pose is not None:
-        from tangraph.eval import track_metrics
+        from tangraph.eval.metrics import track_metrics
 
         keys = ("rmse", "median_error", "final_error", "max_error", "anees", "final_nees")
         m = track_metrics(track, survey.true_pose)

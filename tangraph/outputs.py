@@ -10,8 +10,8 @@ written (:class:`OutputSet`): an error, Ctrl-C or SIGTERM on the way leaves no n
 every existing one as it was. :func:`sigterm_exits` makes SIGTERM unwind the stack like Ctrl-C
 (so the clean-ups in ``finally`` and ``except`` run) and end the process with status 143.
 :func:`remove_stale_partials` removes the hidden ``.NAME.partial-PID`` folders of processes
-that no longer exist. :func:`write_track_outputs` writes a track in the format its file's
-suffix names, with its TUM copy, refined map and figure, as one such set.
+that no longer exist. This module imports nothing of tangraph's, so every writer can use it;
+a track's set of outputs is :func:`tangraph.track_outputs.write_track_outputs`.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ __all__ = [
     "remove_stale_partials",
     "sigterm_exits",
     "write_atomically",
-    "write_track_outputs",
 ]
 
 log = logging.getLogger(__name__)
@@ -277,75 +276,3 @@ class OutputSet:
         for backup in backups.values():
             with contextlib.suppress(FileNotFoundError):
                 backup.unlink()
-
-
-def write_track_outputs(
-    track,
-    survey,
-    bathymetry,
-    output: str | os.PathLike,
-    *,
-    tum: str | os.PathLike | None = None,
-    frame: str = "ned",
-    plot: str | os.PathLike | None = None,
-    refined_map: str | os.PathLike | None = None,
-    overwrite: bool = False,
-) -> list[Path]:
-    """Write a track (a :class:`~tangraph.track.Track` of ``survey`` on ``bathymetry``) as one
-    :class:`OutputSet`: all of the files, or (after an error, Ctrl-C or SIGTERM) none, and no
-    existing file touched. Returns the files written.
-
-    ``output``'s suffix picks the format: ``.tum`` (:func:`~tangraph.track.write_track_tum`, in
-    ``frame``), ``.geojson`` or ``.gpkg`` (WGS84; the map needs a CRS) or else CSV
-    (:func:`~tangraph.track.write_track_csv`), placed through the map's CRS and origin with the
-    survey's reference track and start time. ``tum``: also a TUM copy; ``refined_map``: the
-    map the smoother refined (``track.meta["refined_map"]``), in any map format by suffix;
-    ``plot``: a figure of the track vs the dead reckoning (and the truth) over the map.
-    """
-    import tangraph.track as tracks
-
-    output = Path(output)
-    placed = {
-        "crs": bathymetry.crs, "origin": bathymetry.origin, "reference": survey.true_pose,
-        "start_time": survey.meta.get("start_time"), "overwrite": True,  # onto the set's temporary file
-    }
-    writer = {".tum": None, ".geojson": tracks.write_track_geojson, ".gpkg": tracks.write_track_gpkg}.get(
-        output.suffix.lower(), tracks.write_track_csv
-    )
-    written = [Path(p) for p in (output, tum, plot, refined_map) if p is not None]
-    with sigterm_exits(), OutputSet(overwrite=overwrite) as outputs:
-        if writer is None:
-            tracks.write_track_tum(track, outputs.path(output), frame=frame, overwrite=True)
-        else:
-            writer(track, outputs.path(output), **placed)
-        if tum is not None:
-            tracks.write_track_tum(track, outputs.path(tum), frame=frame, overwrite=True)
-        if refined_map is not None:
-            from tangraph.maps.io import write_map
-
-            write_map(track.meta["refined_map"], outputs.path(refined_map), overwrite=True)
-        if plot is not None:
-            _track_figure(track, survey, bathymetry).savefig(
-                outputs.path(plot), dpi=130, format=Path(plot).suffix[1:]
-            )
-    return written
-
-
-def _track_figure(track, survey, bathymetry):
-    """The track, the dead reckoning and (where the survey has one) the truth over the map."""
-    from matplotlib.figure import Figure
-
-    from tangraph.navigation import dead_reckoning_track
-    from tangraph.plot import plot_tracks
-
-    fig = Figure(figsize=(8, 7.5), layout="constrained")
-    tracks = {"dead reckoning": dead_reckoning_track(survey), track.method: track}
-    plot_tracks(
-        tracks,
-        bathymetry,
-        fig.add_subplot(),
-        truth=survey.true_pose,
-        ellipses=track.method,
-        title=f"{track.method} on {bathymetry.name}",
-    )
-    return fig

@@ -155,7 +155,7 @@ def _summary(args: argparse.Namespace, track, survey) -> None:
 
 def _write_track(args: argparse.Namespace, track, survey, bathymetry) -> None:
     """The track file, its TUM copy, figure and refined map, as one (:func:`write_track_outputs`)."""
-    from tangraph.outputs import write_track_outputs
+    from tangraph.track_outputs import write_track_outputs
 
     if args.output.suffix.lower() in (".geojson", ".gpkg") and bathymetry.crs is None:
         raise TangraphError(

@@ -24,8 +24,8 @@ import time as _time
 import gtsam
 import numpy as np
 
-from tangraph.eval.map_check import window_scores
 from tangraph.eval.map_field import map_error_field
+from tangraph.eval.windows import window_scores
 from tangraph.geometry import wrap_near
 from tangraph.graph import batch, field_solve, terrain_factors
 from tangraph.graph.batch import SmootherSolution
@@ -46,7 +46,7 @@ log = logging.getLogger(__name__)
 SOUNDING_GATE = 3.29
 _GATE_ROUNDS = 5  # re-gating rounds of the terrain solve at most
 #: Windows of track (m) whose mean residuals test the soundings' variances after a solve, as
-#: check lines test a map (:func:`tangraph.eval.map_check.window_scores`)
+#: check lines test a map (:func:`tangraph.eval.windows.window_scores`)
 WINDOW = 50.0
 _FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show still moves
 
