@@ -4,7 +4,8 @@ Each ping is a step. At a key pose (see :func:`~tangraph.graph.keyposes.key_indi
 adds the odometry factor from the previous key, and at a TAP window end it makes the fix: the
 search is centred on the predicted position (the latest key estimate composed with the DR
 increment) with a half-width from its covariance, the fix is gated against that prediction, and
-an accepted one becomes a robust translation prior. iSAM2 is then updated with only these new
+an accepted one becomes a robust translation prior (the window's fix is made, weighed for the
+graph and judged in :mod:`tangraph.graph.online_fixes`). iSAM2 is then updated with only these new
 factors and values (the containers are emptied after each update), and the marginal covariance
 of the latest key (jointly with the DR's calibration) only is read. iSAM2 runs inside GTSAM's
 incremental fixed-lag smoother, which keeps the newest ``GraphConfig.isam_window`` key poses and
@@ -25,65 +26,28 @@ ping, and an ambiguous window is held and grown by the next pings.
 
 from __future__ import annotations
 
-import logging
 import time as _time
 
 import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.geometry import wrap_angle, wrap_near
-from tangraph.graph.calibration import (
-    CALIBRATION,
-    TIDE,
-    joint_in_frame,
-    position_tide_factor,
-    to_world,
-    world_covariance,
-    world_jacobian,
-)
+from tangraph.graph import online_fixes
+from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import (
-    check_fix_covariance,
-    compose,
-    propagate_joint,
-)
-from tangraph.graph.fixes import (
-    FixOutcome,
-    FixRecord,
-    FixStatus,
-    LostEpisode,
-    failed,
-    fix_name,
-    judge_fix,
-    make_fix,
-    search_half_width,
-    window_noise,
-)
+from tangraph.graph.factors import compose, propagate_joint
+from tangraph.graph.fixes import FixOutcome, FixRecord, FixStatus, LostEpisode
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import take_window
 from tangraph.graph.policy import FixPolicy, PolicyState
-from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix, window_patch
-from tangraph.sensors import (
-    NavigationModel,
-    odometry,
-    slope_moment,
-    sounding_map_variances,
-    sounding_variances,
-    survey_map_error,
-    survey_navigation_model,
-)
+from tangraph.matching import TapFix
+from tangraph.sensors import NavigationModel, survey_map_error, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
 __all__ = ["GraphNavigator", "navigate_online"]
-
-log = logging.getLogger(__name__)
-
-MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
 
 
 class GraphNavigator:
@@ -131,7 +95,7 @@ class GraphNavigator:
         self.window_first = dict(zip(self.fix_ends.tolist(), firsts.tolist(), strict=True))
         self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
         if c.front_end == "pmf":
-            self._terrain = _window_terrain(survey, bathymetry, self.model)
+            self._terrain = online_fixes.window_terrain(survey, bathymetry, self.model)
             self._window_start = 0  # the first ping of the front end's next window
         # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
         # never marginalised), so what one window learnt of it sharpens the next
@@ -301,106 +265,21 @@ class GraphNavigator:
             self._delta[idx], self._delta_cov[idx] = increments(
                 self.white, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx)
 
+    # the window's fix: made, grown and judged in tangraph.graph.online_fixes
     def _judge(self, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
-        world, cov = self._world(pose, joint)
-        pmf = self.config.front_end == "pmf"
-        if pmf:  # the grid's half-width
-            half_width = GRID_SIGMAS * float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()))
-        else:
-            half_width = search_half_width(self.config, self.bathymetry, cov[:2, :2])
-        laid = self._laid(k, pose)
-        if fix is not None:
-            return judge_fix(self._grown(fix, laid, joint), world, cov, self.config, half_width,
-                             strict=strict, noise=self._misfit_noise(k, fix.sigma))
-        started = _time.perf_counter()
-        poses = None if laid is None else to_world(laid, self.calibration, self.origin)
-        try:
-            if pmf:
-                made = self._posterior_fix(k, poses, world, cov)
-            else:
-                made = make_fix(self.survey, self.bathymetry, k, self.config, world[:2], half_width,
-                                poses=poses, first=self.window_first.get(k), shared=self.shared_map_variance,
-                                error=self.map_error)
-        except MatchingError as exc:
-            return failed(k, exc, half_width)
-        finally:
-            self.tap_times.append(_time.perf_counter() - started)
-        try:
-            return judge_fix(self._grown(made, laid, joint), world, cov, self.config, half_width,
-                             strict=strict or pmf, noise=self._misfit_noise(k, made.sigma))
-        except TangraphError as exc:
-            log.warning("%s", exc)
-            return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
-
-    def _posterior_fix(self, k: int, poses, world, cov) -> WindowFix:
-        """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
-        ``poses`` of its pings, on the prediction ``N(world, cov)``."""
-        first = self.window_first[k]
-        patch = window_patch(self.survey, k, k - first + 1, min_soundings=self.config.tap.min_soundings,
-                             poses=poses)
-        likelihood, variance, map_variance, slope = self._terrain
-        mean, prior = np.append(world[:2], self.model.tide), np.zeros((3, 3))
-        prior[:2, :2], prior[2, 2] = cov[:2, :2], self.model.tide_std**2
-        if self.tide:  # the graph's belief in the tide, and how it goes with the position
-            pose = compose(self._key_pose, self._delta[k])
-            joint = propagate_joint(self._key_pose, self._tide_joint, self._delta[k], self._delta_cov[k])
-            jac = np.zeros((3, 6))
-            jac[:2, :5] = world_jacobian(pose, self.calibration, self.origin)[:2]
-            jac[2, 5] = 1.0
-            tide = jac @ joint @ jac.T
-            mean[2] = self._tide_mean
-            prior[:2, 2] = prior[2, :2] = tide[:2, 2]
-            prior[2, 2] = tide[2, 2]
-        return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
-                             None if map_variance is None else map_variance[patch.ping, patch.beam],
-                             slope, mean, prior, tide_factor=self.tide)
+        return online_fixes.judge(self, k, pose, joint, fix, strict)
 
     def _fix_factor(self, key: int, fix) -> gtsam.NonlinearFactor | None:
-        """The factor of an accepted fix when it is not a position fix: the point-mass front
-        end's on the position and the tide (None otherwise)."""
-        if not (self.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
-            return None
-        return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, self.origin,
-                                    self.config.robust_kernel, self.config.robust_parameter)
+        return online_fixes.fix_factor(self, key, fix)
 
     def _misfit_noise(self, k: int, sigma: float) -> float:
-        """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
-        against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
-        over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger (from
-        the ``MISFIT_WINDOWS // 3``-th window of the survey on). While the DR's constant errors
-        are still unknown every window's patch is laid distorted and fits the map worse than
-        the soundings' noise (2-3 m on steep terrain at the start of a survey with a 3.5 deg
-        heading bias): that says nothing of the data. A window that fits far worse than the
-        ones around it does."""
-        if np.isfinite(sigma):
-            self._residuals[k] = float(sigma)
-            while len(self._residuals) > MISFIT_WINDOWS:
-                del self._residuals[next(iter(self._residuals))]
-        if len(self._residuals) < MISFIT_WINDOWS // 3:  # too few to say what fits
-            return self.model.measurement_std
-        return max(self.model.measurement_std, float(np.median(list(self._residuals.values()))))
+        return online_fixes.misfit_noise(self, k, sigma)
 
     def _laid(self, k: int, pose) -> np.ndarray | None:
-        """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
-        DR increments (no tear at the keys inside the window); mapped to the world with the
-        current calibration they are the calibrated DR's patch."""
-        first = self.window_first.get(k, k - self.config.window + 1)
-        if first < 0:
-            return None
-        return compose(pose, odometry(self.survey.dr_pose, k, np.arange(first, k + 1)))
+        return online_fixes.laid_poses(self, k, pose)
 
     def _grown(self, fix: TapFix, laid, joint) -> TapFix:
-        """The covariance the graph gives ``fix`` (:func:`~tangraph.graph.fixes.window_noise`)."""
-        check_fix_covariance(fix.covariance, fix_name(fix))
-        first, end = int(fix.first), int(fix.index)
-        mid = (first + end) // 2
-        shape = np.zeros((2, 2))
-        if laid is not None and self.graph.calibrated and laid.shape[0] == end - first + 1:
-            jac = world_jacobian(laid[[mid - first, -1]], self.calibration, self.origin)
-            shape = jac[0, :2, 3:] - jac[1, :2, 3:]
-        shared = self.window_overlap.get(end, self.config.window / self.config.spacing)
-        overlap = self.config.fix_inflation * shared
-        return window_noise(fix, self.survey, self.white, shape, joint[3:, 3:], overlap)
+        return online_fixes.grown(self, fix, laid, joint)
 
     def _update(self, k: int) -> None:
         started = _time.perf_counter()
@@ -528,15 +407,6 @@ def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
         "heading_error": error,
         "heading_error_std": float(np.sqrt(max(grad @ joint @ grad, 0.0))),
     }
-
-
-def _window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
-    """What the point-mass front end weighs soundings with: the terrain likelihood, every
-    sounding's variance and map error variance ``(K, B)`` (None: a perfect map) at the DR's
-    footprints (as the filters'), and the map's slope moment."""
-    return (TerrainLikelihood(bathymetry, model.measurement_std),
-            sounding_variances(survey, bathymetry, model),
-            sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
 
 
 def _translate(exc: Exception, graph: PoseGraph) -> Exception:

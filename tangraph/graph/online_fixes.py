@@ -1,0 +1,172 @@
+"""The online navigator's window fixes: made on the prediction, weighed for the graph, judged.
+
+At a window end the :class:`~tangraph.graph.GraphNavigator` makes the window's fix (TAP, or the
+point-mass front end of :mod:`tangraph.graph.posterior_fix` with the graph's belief in the tide)
+centred on its prediction, grows its covariance by what is uncertain of the calibrated patch
+(:func:`grown`), and judges it against the prediction and the residual std of the windows around
+it (:func:`judge`, :func:`misfit_noise`); what it then does with the fix is the fix policy's
+(:mod:`tangraph.graph.lost`). The functions read and update the navigator's state (its fix timings
+and the last windows' residual stds), as :mod:`tangraph.graph.lost`'s do.
+"""
+
+from __future__ import annotations
+
+import logging
+import time as _time
+from typing import TYPE_CHECKING
+
+import gtsam
+import numpy as np
+
+from tangraph.errors import TangraphError
+from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.graph.calibration import position_tide_factor, to_world, world_jacobian
+from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
+from tangraph.graph.fixes import (
+    FixOutcome,
+    FixStatus,
+    failed,
+    fix_name,
+    judge_fix,
+    make_fix,
+    search_half_width,
+    window_noise,
+)
+from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
+from tangraph.matching import MatchingError, window_patch
+from tangraph.sensors import odometry, slope_moment, sounding_map_variances, sounding_variances
+
+if TYPE_CHECKING:
+    from tangraph.graph.online import GraphNavigator
+    from tangraph.maps.grid import BathymetryMap
+    from tangraph.matching import TapFix
+    from tangraph.sensors import NavigationModel
+    from tangraph.survey import Survey
+
+__all__ = ["MISFIT_WINDOWS", "fix_factor", "grown", "judge", "laid_poses", "misfit_noise",
+           "posterior_window_fix", "window_terrain"]
+
+log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, one logger for them
+
+MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
+
+
+def judge(nav: GraphNavigator, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
+    """The fix of the window ending at ping ``k`` (DR-frame ``pose``, ``joint`` covariance with
+    the calibration), made on the prediction (TAP or the point-mass front end) unless ``fix`` is
+    given, its covariance grown for the graph (:func:`grown`) and judged (quality flags, gate,
+    misfit; ``strict`` while lost); a fix whose covariance is not usable fails as
+    ``INVALID_COVARIANCE``."""
+    world, cov = nav._world(pose, joint)
+    pmf = nav.config.front_end == "pmf"
+    if pmf:  # the grid's half-width
+        half_width = GRID_SIGMAS * float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()))
+    else:
+        half_width = search_half_width(nav.config, nav.bathymetry, cov[:2, :2])
+    laid = laid_poses(nav, k, pose)
+    if fix is not None:
+        return judge_fix(grown(nav, fix, laid, joint), world, cov, nav.config, half_width,
+                         strict=strict, noise=misfit_noise(nav, k, fix.sigma))
+    started = _time.perf_counter()
+    poses = None if laid is None else to_world(laid, nav.calibration, nav.origin)
+    try:
+        if pmf:
+            made = posterior_window_fix(nav, k, poses, world, cov)
+        else:
+            made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
+                            poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,
+                            error=nav.map_error)
+    except MatchingError as exc:
+        return failed(k, exc, half_width)
+    finally:
+        nav.tap_times.append(_time.perf_counter() - started)
+    try:
+        return judge_fix(grown(nav, made, laid, joint), world, cov, nav.config, half_width,
+                         strict=strict or pmf, noise=misfit_noise(nav, k, made.sigma))
+    except TangraphError as exc:
+        log.warning("%s", exc)
+        return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
+
+
+def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> WindowFix:
+    """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
+    ``poses`` of its pings, on the prediction ``N(world, cov)``."""
+    first = nav.window_first[k]
+    patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.tap.min_soundings,
+                         poses=poses)
+    likelihood, variance, map_variance, slope = nav._terrain
+    mean, prior = np.append(world[:2], nav.model.tide), np.zeros((3, 3))
+    prior[:2, :2], prior[2, 2] = cov[:2, :2], nav.model.tide_std**2
+    if nav.tide:  # the graph's belief in the tide, and how it goes with the position
+        pose = compose(nav._key_pose, nav._delta[k])
+        joint = propagate_joint(nav._key_pose, nav._tide_joint, nav._delta[k], nav._delta_cov[k])
+        jac = np.zeros((3, 6))
+        jac[:2, :5] = world_jacobian(pose, nav.calibration, nav.origin)[:2]
+        jac[2, 5] = 1.0
+        tide = jac @ joint @ jac.T
+        mean[2] = nav._tide_mean
+        prior[:2, 2] = prior[2, :2] = tide[:2, 2]
+        prior[2, 2] = tide[2, 2]
+    return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
+                         None if map_variance is None else map_variance[patch.ping, patch.beam],
+                         slope, mean, prior, tide_factor=nav.tide)
+
+
+def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | None:
+    """The factor of an accepted fix when it is not a position fix: the point-mass front
+    end's on the position and the tide (None otherwise)."""
+    if not (nav.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
+        return None
+    return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, nav.origin,
+                                nav.config.robust_kernel, nav.config.robust_parameter)
+
+
+def misfit_noise(nav: GraphNavigator, k: int, sigma: float) -> float:
+    """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
+    against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
+    over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger (from
+    the ``MISFIT_WINDOWS // 3``-th window of the survey on). While the DR's constant errors
+    are still unknown every window's patch is laid distorted and fits the map worse than
+    the soundings' noise (2-3 m on steep terrain at the start of a survey with a 3.5 deg
+    heading bias): that says nothing of the data. A window that fits far worse than the
+    ones around it does."""
+    if np.isfinite(sigma):
+        nav._residuals[k] = float(sigma)
+        while len(nav._residuals) > MISFIT_WINDOWS:
+            del nav._residuals[next(iter(nav._residuals))]
+    if len(nav._residuals) < MISFIT_WINDOWS // 3:  # too few to say what fits
+        return nav.model.measurement_std
+    return max(nav.model.measurement_std, float(np.median(list(nav._residuals.values()))))
+
+
+def laid_poses(nav: GraphNavigator, k: int, pose) -> np.ndarray | None:
+    """The window's DR-frame poses laid rigidly from the DR-frame pose of ping ``k`` with the
+    DR increments (no tear at the keys inside the window); mapped to the world with the
+    current calibration they are the calibrated DR's patch."""
+    first = nav.window_first.get(k, k - nav.config.window + 1)
+    if first < 0:
+        return None
+    return compose(pose, odometry(nav.survey.dr_pose, k, np.arange(first, k + 1)))
+
+
+def grown(nav: GraphNavigator, fix: TapFix, laid, joint) -> TapFix:
+    """The covariance the graph gives ``fix`` (:func:`~tangraph.graph.fixes.window_noise`)."""
+    check_fix_covariance(fix.covariance, fix_name(fix))
+    first, end = int(fix.first), int(fix.index)
+    mid = (first + end) // 2
+    shape = np.zeros((2, 2))
+    if laid is not None and nav.graph.calibrated and laid.shape[0] == end - first + 1:
+        jac = world_jacobian(laid[[mid - first, -1]], nav.calibration, nav.origin)
+        shape = jac[0, :2, 3:] - jac[1, :2, 3:]
+    shared = nav.window_overlap.get(end, nav.config.window / nav.config.spacing)
+    overlap = nav.config.fix_inflation * shared
+    return window_noise(fix, nav.survey, nav.white, shape, joint[3:, 3:], overlap)
+
+
+def window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
+    """What the point-mass front end weighs soundings with: the terrain likelihood, every
+    sounding's variance and map error variance ``(K, B)`` (None: a perfect map) at the DR's
+    footprints (as the filters'), and the map's slope moment."""
+    return (TerrainLikelihood(bathymetry, model.measurement_std),
+            sounding_variances(survey, bathymetry, model),
+            sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
