@@ -142,6 +142,12 @@ def navigate(
     method = _method(method)
     survey = survey_on_map(survey, bathymetry, other_map=other_map)
     model = survey_navigation_model(survey, model)
+    return _estimate(method, survey, bathymetry, config, model, rng, progress)
+
+
+def _estimate(method: Method, survey: Survey, bathymetry: BathymetryMap, config, model,
+              rng: np.random.Generator | None, progress: bool) -> Track:
+    """Run ``method`` (the graph's or a filter) on a survey already on the map, with its model."""
     if method is Method.ISAM2 or method is Method.SMOOTHER:
         from tangraph import graph
 

@@ -294,26 +294,9 @@ def _reference_lonlat(survey: Survey) -> tuple[np.ndarray, np.ndarray, str] | No
     return lon, lat, which
 
 
-def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write a survey as CF-1.8 NetCDF (schema version 2); atomic, never over an existing file
-    unless ``overwrite``.
-
-    The file is a CF trajectory (``featureType = "trajectory"``, a ``trajectory`` id variable:
-    ``meta["name"]``, else the file's stem); where ``meta`` places it on Earth (``crs`` and
-    ``origin``), ``lat``/``lon`` of the reference track (``true_pose``, else the dead
-    reckoning) are its auxiliary coordinates. ``time`` is in
-    ``seconds since meta["start_time"]`` (UTC) where the start time is known, else in seconds
-    from the start.
-    """
-    import xarray as xr
-
-    import tangraph
-    from tangraph.outputs import write_atomically
-
-    p = Path(path)
-    # CF names depths below the sea surface; a survey on another datum (a gauge's zero, chart
-    # datum) has none
-    below_surface = survey.meta.get("vertical_datum", "water surface") == "water surface"
+def _coordinates(survey: Survey, p: Path, below_surface: bool) -> dict[str, Any]:
+    """The survey file's coordinates: ``time``, ``vehicle_depth``, the reference track's
+    ``lat``/``lon`` where the survey is placed on Earth, and the ``trajectory`` id."""
     start = _utc(survey.meta["start_time"]) if "start_time" in survey.meta else None
     if start is not None:
         time_attrs = {"standard_name": "time", "long_name": "time of the ping", "axis": "T",
@@ -338,6 +321,11 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
                                            "long_name": f"longitude of the reference track ({which})"})
     coords["trajectory"] = ((), str(survey.meta.get("name", p.stem)),
                             {"cf_role": "trajectory_id", "long_name": "survey"})
+    return coords
+
+
+def _variables(survey: Survey, below_surface: bool) -> dict[str, Any]:
+    """The survey file's data variables: the poses, the attitude and the beams."""
     data: dict[str, Any] = {}
     for prefix, pose in (("dr", survey.dr_pose), ("true", survey.true_pose)):
         if pose is None:
@@ -370,6 +358,31 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
             if below_surface:
                 attrs["standard_name"] = "sea_floor_depth_below_sea_surface"
         data[name] = (("ping", "beam"), getattr(survey, name), attrs)
+    return data
+
+
+def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write a survey as CF-1.8 NetCDF (schema version 2); atomic, never over an existing file
+    unless ``overwrite``.
+
+    The file is a CF trajectory (``featureType = "trajectory"``, a ``trajectory`` id variable:
+    ``meta["name"]``, else the file's stem); where ``meta`` places it on Earth (``crs`` and
+    ``origin``), ``lat``/``lon`` of the reference track (``true_pose``, else the dead
+    reckoning) are its auxiliary coordinates. ``time`` is in
+    ``seconds since meta["start_time"]`` (UTC) where the start time is known, else in seconds
+    from the start.
+    """
+    import xarray as xr
+
+    import tangraph
+    from tangraph.outputs import write_atomically
+
+    p = Path(path)
+    # CF names depths below the sea surface; a survey on another datum (a gauge's zero, chart
+    # datum) has none
+    below_surface = survey.meta.get("vertical_datum", "water surface") == "water surface"
+    coords = _coordinates(survey, p, below_surface)
+    data = _variables(survey, below_surface)
     attrs = {
         "Conventions": "CF-1.8",
         "title": "tangraph survey",

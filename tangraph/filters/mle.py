@@ -140,31 +140,39 @@ def mle_filter(
         mean[k], cov[k, :2, :2] = position, p[:2, :2]
         seconds[k] = _time.perf_counter() - t0
     elapsed = _time.perf_counter() - started
-    calibration = {
-        "speed_scale": float(k_prior),
-        "speed_scale_std": float(np.sqrt(p[2, 2])),
-        "heading_error": float(b_prior),
-        "heading_error_std": float(np.sqrt(p[3, 3])),
-    }
     return Track(
         time=survey.time,
         pose=np.column_stack([mean, survey.dr_pose[:, 2]]),
         covariance=cov,
         method="mle",
         timings=step_timings(elapsed, seconds),
-        meta={
-            "ess": [float("nan")] * k_total,
-            "n_resampled": 0,
-            "n_divergences": 0,
-            "divergence_steps": [],
-            "n_lost": 0,
-            "lost_steps": [],
-            "calibration": calibration,
-            "n_fixes_accepted": accepted,
-            "n_fixes_rejected": rejected,
-            "n_fixes_used": sum(bool(f["used"]) for f in fixes),
-            "fixes": fixes,
-            "navigation_model": navigation.as_dict(),
-            "config": config.as_dict(),
-        },
+        meta=_meta(navigation, config, p, fixes, accepted, rejected, k_total),
     )
+
+
+def _meta(navigation: NavigationModel, config: MLEConfig, p: np.ndarray, fixes: list[dict[str, Any]],
+          accepted: int, rejected: int, k_total: int) -> dict[str, Any]:
+    """The MLE track's ``meta``: the filters' keys (no particles: nothing resampled, never lost),
+    the fixes and the calibration, the model's prior with the final covariance ``p``'s stds."""
+    k_prior, b_prior = navigation.calibration_prior
+    calibration = {
+        "speed_scale": float(k_prior),
+        "speed_scale_std": float(np.sqrt(p[2, 2])),
+        "heading_error": float(b_prior),
+        "heading_error_std": float(np.sqrt(p[3, 3])),
+    }
+    return {
+        "ess": [float("nan")] * k_total,
+        "n_resampled": 0,
+        "n_divergences": 0,
+        "divergence_steps": [],
+        "n_lost": 0,
+        "lost_steps": [],
+        "calibration": calibration,
+        "n_fixes_accepted": accepted,
+        "n_fixes_rejected": rejected,
+        "n_fixes_used": sum(bool(f["used"]) for f in fixes),
+        "fixes": fixes,
+        "navigation_model": navigation.as_dict(),
+        "config": config.as_dict(),
+    }

@@ -110,6 +110,20 @@ def _read_pings(p: Path) -> tuple[dict[str, np.ndarray], dict]:
     return arrays, counts
 
 
+def _grid_pose(p: Path, r, target, crs: str) -> tuple[np.ndarray, tuple[float, float], np.ndarray]:
+    """The pings' poses ``(K, 3)`` in ``target``'s grid from the survey's origin (the floored
+    least north and east), that origin, and the grid convergence at each ping (rad)."""
+    import pyproj
+
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
+    north, east, convergence = north_in_grid(transform, r["lon"], r["lat"], 1e-5)
+    if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
+        raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
+    origin = (float(np.floor(north.min())), float(np.floor(east.min())))
+    heading = np.mod(np.radians(r["heading"]) + convergence, 2 * np.pi)
+    return np.column_stack([north - origin[0], east - origin[1], heading]), origin, convergence
+
+
 def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
     """A survey from a GSF file's swath bathymetry pings.
 
@@ -133,8 +147,6 @@ def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
         (the ping holds no transducer depth; ``depth`` already includes the draft). NaN where
         a beam is flagged ``GSF_IGNORE_BEAM``, has depth 0, or its ping is ``GSF_IGNORE_PING``.
     """
-    import pyproj
-
     if crs is None:
         raise SurveyError(f"{path}: give the projected CRS of the survey (crs=, CLI: --crs), e.g. EPSG:32658")
     target = projected_crs(crs)
@@ -146,13 +158,7 @@ def import_gsf(path: str | os.PathLike, *, crs: str | None) -> Survey:
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
         raise SurveyError(f"{p}: ping time does not increase at swath ping {i + 1}")
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
-    north, east, convergence = north_in_grid(transform, r["lon"], r["lat"], 1e-5)
-    if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
-        raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
-    origin = (float(np.floor(north.min())), float(np.floor(east.min())))
-    heading = np.mod(np.radians(r["heading"]) + convergence, 2 * np.pi)
-    pose = np.column_stack([north - origin[0], east - origin[1], heading])
+    pose, origin, convergence = _grid_pose(p, r, target, crs)
     ignored_ping = (r["flags"] & _IGNORE_PING) != 0
     flagged = (r["beam_flags"] & _IGNORE_BEAM) != 0
     null = ~np.isfinite(r["depth"]) | (r["depth"] == 0.0)

@@ -48,7 +48,7 @@ from tangraph.geometry import mahalanobis2
 from tangraph.geometry import rotate as _rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching.patch import MatchingError, Patch, window_patch
-from tangraph.matching.search import CandidateGrid, criterion_sums
+from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
 from tangraph.survey import Survey
 
 __all__ = [
@@ -238,13 +238,10 @@ def tap_fix(
     return tap_fix_patch(patch, bathymetry, config, prior=prior)
 
 
-def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *, prior=None) -> TapFix:
-    """:func:`tap_fix` of a prepared :class:`Patch`."""
-    prior = patch.reference_position if prior is None else np.asarray(prior, float)
-    if prior.shape != (2,) or not np.all(np.isfinite(prior)):  # an estimator that lost its way
-        raise MatchingError(f"window {patch.first}..{patch.reference}: the search centre must be a "
-                            f"finite (north, east), got {prior.tolist()!r}")
-    step = config.step or min(bathymetry.cell_size)
+def _search(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, prior: np.ndarray,
+            step: float) -> tuple[CandidateGrid, CriterionSums]:
+    """The candidate grid around ``prior`` and the criterion's sums on it; a MatchingError when no
+    candidate has every sounding on the map."""
     grid = CandidateGrid.around(prior, config.half_width, step, np.asarray(config.headings))
     method = (
         "direct"
@@ -257,6 +254,17 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
             f"window {patch.first}..{patch.reference}: no candidate within {config.half_width} m of "
             f"{prior.tolist()} has every sounding on the map"
         )
+    return grid, sums
+
+
+def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *, prior=None) -> TapFix:
+    """:func:`tap_fix` of a prepared :class:`Patch`."""
+    prior = patch.reference_position if prior is None else np.asarray(prior, float)
+    if prior.shape != (2,) or not np.all(np.isfinite(prior)):  # an estimator that lost its way
+        raise MatchingError(f"window {patch.first}..{patch.reference}: the search centre must be a "
+                            f"finite (north, east), got {prior.tolist()!r}")
+    step = config.step or min(bathymetry.cell_size)
+    grid, sums = _search(patch, bathymetry, config, prior, step)
     n = patch.n_soundings
     sigma2 = sums.sigma2()
     score = {

@@ -48,6 +48,22 @@ def _check_fraction(fraction: float, block: int, n_pings: int) -> int:
     return count
 
 
+def _block_sizes(shift, bias) -> tuple[float, float, float]:
+    """:func:`outlier_blocks`' ``shift`` and ``bias`` range ``(low, high)`` checked, as floats."""
+    try:
+        shift = float(shift)
+        low, high = (float(v) for v in bias)
+    except (TypeError, ValueError):
+        raise TangraphError(f"outlier_blocks: shift must be a number and bias a range (low, high), "
+                            f"got shift={shift!r}, bias={bias!r}") from None
+    if not (np.isfinite(shift) and shift >= 0):
+        raise TangraphError(f"outlier_blocks: shift must be a finite number >= 0, got {shift!r}")
+    if not (np.isfinite(low) and np.isfinite(high) and 0 <= low <= high):
+        raise TangraphError(
+            f"outlier_blocks: bias must be a range (low, high) with 0 <= low <= high, got {bias!r}")
+    return shift, low, high
+
+
 def outlier_blocks(
     survey: Survey,
     kind: FaultKind,
@@ -96,17 +112,7 @@ def outlier_blocks(
         raise TangraphError(f"outlier_blocks: kind must be footprint_shift or depth_bias, got {kind!r}")
     n = survey.n_pings
     count = _check_fraction(fraction, block, n)
-    try:
-        shift = float(shift)
-        low, high = (float(v) for v in bias)
-    except (TypeError, ValueError):
-        raise TangraphError(f"outlier_blocks: shift must be a number and bias a range (low, high), "
-                            f"got shift={shift!r}, bias={bias!r}") from None
-    if not (np.isfinite(shift) and shift >= 0):
-        raise TangraphError(f"outlier_blocks: shift must be a finite number >= 0, got {shift!r}")
-    if not (np.isfinite(low) and np.isfinite(high) and 0 <= low <= high):
-        raise TangraphError(
-            f"outlier_blocks: bias must be a range (low, high) with 0 <= low <= high, got {bias!r}")
+    shift, low, high = _block_sizes(shift, bias)
     phase = int(rng.integers(block))
     slots = (n - phase) // block
     firsts = phase + block * np.sort(rng.choice(slots, size=count, replace=False)) if count else []
