@@ -112,7 +112,6 @@ LONG_FUNCTIONS: dict[str, int] = {
     "tangraph.formats.sontek.import_sontek_sum": 169,
     "tangraph.formats.xtf.import_xtf": 104,
     "tangraph.graph.posterior_fix.posterior_fix": 111,
-    "tangraph.graph.smoother.smooth_survey": 100,
     "tangraph.matching.search.criterion_sums": 100,
 }
 

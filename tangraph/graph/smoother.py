@@ -256,6 +256,43 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
         keep_start = True  # nothing else would tie the graph to the map
     return inlier, keep_start
 
+
+def _smoothed_meta(nav: GraphNavigator, solution: SmootherSolution, records, rounds: int,
+                   start_kept: bool) -> dict:
+    """The smoothed track's ``meta`` (see :func:`smooth_survey`): the forward pass's, with the
+    fixes the solve kept, the calibration it found and the pings lost to the end (those of the
+    forward pass's episodes never relocalised that no kept fix follows)."""
+    survey, config = nav.survey, nav.config
+    n_accepted = sum(r.accepted for r in records)
+    meta = nav.meta()
+    last = survey.n_pings - 1
+    joint = np.zeros((5, 5))
+    joint[3:, 3:] = solution.calibration_cov
+    if config.smoother_covariance == "all" and solution.keys[-1] == last:
+        joint = solution.covariance[-1]
+    last_inlier = max((r.index for r in records if r.accepted), default=-1)
+    tails = [e for e in nav.episodes  # never relocalised online and no fix kept after
+             if e.end is None and max(e.start, last_inlier + 1) < survey.n_pings]
+    lost = sorted({p for e in tails for p in range(max(e.start, last_inlier + 1), survey.n_pings)})
+    meta.update({
+        "n_lost": len(lost),
+        "lost_steps": lost,
+        "lost_episodes": [e.as_dict() for e in tails],
+        "forward_lost_episodes": meta["lost_episodes"],
+        "fixes": records,
+        "n_fixes_accepted": int(n_accepted),
+        "n_fixes_rejected": len(records) - int(n_accepted),
+        "calibration": calibration_summary(solution.calibration, joint, solution.pose[-1],
+                                           survey.dr_pose[last, 2]),
+        "rematch_iterations": int(rounds),
+        "start_prior": "kept" if start_kept else "outlier",
+        "optimizer_iterations": solution.iterations,
+        "final_error": solution.error,
+        "terrain": config.smoother_terrain,
+    })
+    return meta
+
+
 def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
                   model: NavigationModel | None = None, progress: bool = False) -> Track:
     """Re-navigate a recorded survey with a batch smoother over all key poses and fixes.
@@ -321,33 +358,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     pose, cov = dense
     if config.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
-    n_accepted = sum(r.accepted for r in records)
-    meta = nav.meta()
-    last = survey.n_pings - 1
-    joint = np.zeros((5, 5))
-    joint[3:, 3:] = solution.calibration_cov
-    if config.smoother_covariance == "all" and solution.keys[-1] == last:
-        joint = solution.covariance[-1]
-    last_inlier = max((r.index for r in records if r.accepted), default=-1)
-    tails = [e for e in nav.episodes  # never relocalised online and no fix kept after
-             if e.end is None and max(e.start, last_inlier + 1) < survey.n_pings]
-    lost = sorted({p for e in tails for p in range(max(e.start, last_inlier + 1), survey.n_pings)})
-    meta.update({
-        "n_lost": len(lost),
-        "lost_steps": lost,
-        "lost_episodes": [e.as_dict() for e in tails],
-        "forward_lost_episodes": meta["lost_episodes"],
-        "fixes": records,
-        "n_fixes_accepted": int(n_accepted),
-        "n_fixes_rejected": len(records) - int(n_accepted),
-        "calibration": calibration_summary(solution.calibration, joint, solution.pose[-1],
-                                           survey.dr_pose[last, 2]),
-        "rematch_iterations": int(rounds),
-        "start_prior": "kept" if start_kept else "outlier",
-        "optimizer_iterations": solution.iterations,
-        "final_error": solution.error,
-        "terrain": config.smoother_terrain,
-    })
+    meta = _smoothed_meta(nav, solution, records, rounds, start_kept)
     if soundings is not None:
         meta["soundings"] = soundings
     if refined is not None:
