@@ -71,8 +71,8 @@ def _track_figure(track, survey, bathymetry):
     """The track, the dead reckoning and (where the survey has one) the truth over the map."""
     from matplotlib.figure import Figure
 
-    from tangraph.navigation import dead_reckoning_track
     from tangraph.plot import plot_tracks
+    from tangraph.track_reports import dead_reckoning_track
 
     fig = Figure(figsize=(8, 7.5), layout="constrained")
     tracks = {"dead reckoning": dead_reckoning_track(survey), track.method: track}

@@ -145,7 +145,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 
 def _summary(args: argparse.Namespace, track, survey) -> None:
-    from tangraph.navigation import track_report, track_summary
+    from tangraph.track_reports import track_report, track_summary
 
     if args.json:
         print_json(track_report(track, survey))

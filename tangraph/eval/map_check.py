@@ -159,7 +159,7 @@ def check_map_error(
         Fewer than two surveys, a survey without a reference track, ``window <= 0``.
     """
     from tangraph.gridding_surveys import grid_surveys
-    from tangraph.navigation import in_map_frame
+    from tangraph.map_frame import in_map_frame
 
     surveys = list(surveys)
     if not (np.isfinite(window) and window > 0):

@@ -365,7 +365,7 @@ def simulate_run(
     vehicle_depth = np.full(time.size, scenario.vehicle_depth)
     pings = simulate_pings(raycasting_scene(seafloor), true_pose, vehicle_depth, scenario.sonar, rng=rng)
     import tangraph
-    from tangraph.navigation import map_identity
+    from tangraph.map_frame import map_identity
 
     meta = {
         "map": estimators_map.name,
