@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.survey import Survey, footprints
+
+if TYPE_CHECKING:
+    from tangraph.sensors.terrain import MapError
 
 __all__ = ["MatchingError", "Patch", "window_patch"]
 
@@ -26,7 +30,9 @@ class Patch:
     ping of each sounding; ``beam (N,)`` its beam. ``reference_position`` is the DR position of
     ping ``reference``. ``shared (N,)``: the map error variance each sounding shares with the
     survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none), and
-    ``within (N,)`` the part it shares with the window's own (:func:`tangraph.sensors.shared_among`).
+    ``error`` the map's error (:class:`tangraph.sensors.MapError`; None: none), from which what
+    the window's own soundings share is computed where the fix is made
+    (:func:`tangraph.sensors.shared_quadratic`).
     """
 
     offsets: np.ndarray
@@ -38,7 +44,7 @@ class Patch:
     reference_position: np.ndarray
     n_dropped: int
     shared: np.ndarray | None = None
-    within: np.ndarray | None = None
+    error: MapError | None = None
 
     @property
     def n_soundings(self) -> int:
@@ -55,8 +61,8 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
     laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
     window's footprints are computed. ``shared (K, B)``: the survey's soundings' shared map
     error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's;
-    ``error``: the map's error (:func:`tangraph.sensors.map_error`), whose part shared among the
-    window's own soundings is computed (:attr:`Patch.within`).
+    ``error``: the map's error (:func:`tangraph.sensors.map_error`), kept (:attr:`Patch.error`)
+    unless it is zero.
 
     Raises
     ------
@@ -98,11 +104,5 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         reference_position=ref,
         n_dropped=int((~keep).sum()),
         shared=None if shared is None else np.asarray(shared, float)[window][keep],
-        within=None if error is None or error.is_zero else _within(north[keep], east[keep], error),
+        error=None if error is None or error.is_zero else error,
     )
-
-
-def _within(north, east, error) -> np.ndarray:
-    from tangraph.sensors.terrain import shared_among
-
-    return shared_among(north, east, error)

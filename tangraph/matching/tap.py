@@ -20,9 +20,11 @@ residual scatter cannot show an error the window's soundings share with each oth
 survey's other passes over the same cells, and a graph that adds every window's fix must not
 count that error once per window. The regions and the quality flags are those of the window's
 own likelihood (its shape: one basin or several, compact or flat): the variance inflation ``c``
-is at least the same sandwich ratio with the map error its soundings share among themselves
-(``Patch.within``, :func:`tangraph.sensors.shared_among`), which the sharing of its map error
-with other windows and passes does not change.
+is at least the sandwich ratio with the map error its soundings share among themselves, computed
+exactly on the gradients (``Patch.error``, :func:`tangraph.sensors.shared_quadratic`: soundings
+whose gradients differ share map error that cancels in the fix, which a row-sum bound would
+count as if it added up), and which the sharing of its map error with other windows and passes
+does not change.
 
 A candidate is valid when every sounding of the window has a map depth there; a prior off the
 map is searched around like any other (the window may reach the map's data from there).
@@ -45,7 +47,7 @@ from tangraph.geometry import rotate as _rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching.patch import MatchingError, Patch, window_patch
 from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
-from tangraph.matching.tap_noise import _gradient, _map_sandwich, _variance_inflation
+from tangraph.matching.tap_noise import _gradient, _map_sandwich, _variance_inflation, _window_sandwich
 from tangraph.matching.tap_regions import (
     _covariances,
     _jackknife,
@@ -184,10 +186,11 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = _residual_variance(q_min, n)
-    gradient = _gradient(bathymetry, patch, position) if patch.shared is not None else None
-    within = _map_sandwich(gradient, s2, patch.within)
+    has_error = patch.shared is not None or patch.error is not None
+    gradient = _gradient(bathymetry, patch, position) if has_error else None
+    within = _window_sandwich(gradient, s2, patch, position)
     if within is not None:  # the map error the window's own soundings share shapes its likelihood
-        inflation = max(inflation, within[0])
+        inflation = max(inflation, within)
     shared = _map_sandwich(gradient, s2, patch.shared)
     regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(

@@ -67,6 +67,28 @@ def _gradient(bathymetry, patch, position) -> np.ndarray:
     return bathymetry.gradient_at(position[0] + patch.offsets[:, 0], position[1] + patch.offsets[:, 1])
 
 
+def _window_sandwich(g, s2, patch, position) -> float | None:
+    """How much the map error the window's own soundings share among themselves widens its
+    likelihood: the mean generalised eigenvalue of the least-squares fix's covariance with that
+    error (the exact quadratic form :func:`tangraph.sensors.shared_quadratic` of the map
+    gradients at the soundings placed at ``position``, the tide's mean removed) over the one
+    without, at least 1; None without a map error or a gradient."""
+    if g is None or patch.error is None:
+        return None
+    ok = np.all(np.isfinite(g), axis=1)
+    if ok.sum() < 3:
+        return None
+    g = g[ok] - g[ok].mean(axis=0)
+    information = g.T @ g
+    if np.linalg.cond(information) > 1e12:
+        return None
+    from tangraph.sensors.terrain import shared_quadratic
+
+    offsets = patch.offsets[ok]
+    shared = shared_quadratic(position[0] + offsets[:, 0], position[1] + offsets[:, 1], g, patch.error)
+    return max(1.0 + float(np.trace(np.linalg.solve(information, shared))) / (2.0 * s2), 1.0)
+
+
 def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
     """Given the map gradients ``g (N, 2)`` at the soundings and their shared map error variances
     ``shared (N,)``: the covariance of the least-squares fix with the soundings' variances

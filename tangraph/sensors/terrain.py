@@ -45,6 +45,12 @@ holds no structure finer than its error's range (a gridded map holds none finer 
 and large for a long-range error over fine terrain. Sums are evaluated on the dead-reckoned
 footprints (:func:`sounding_variances`).
 
+A TAP fix, which weighs one window's soundings together, is widened by the map error they share
+among themselves exactly (:func:`shared_quadratic`, the double sum over pairs on the map
+gradients): there the row-sum bound would count the shared error of soundings whose gradients
+differ in sign as if it added up, where it cancels in the fix, and on rough terrain it made a
+window's likelihood tens of times flatter than the map's error does.
+
 **No data is no information.** A sounding that falls on no map data (off the grid, or by a NaN
 cell) says nothing about a candidate position, for or against: estimators leave it out of the
 comparison instead of giving the candidate zero weight.
@@ -288,12 +294,19 @@ def _map_variances(survey, bathymetry, model, poses) -> tuple[np.ndarray, np.nda
 
 
 def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray:
-    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b``, on a grid: the weights splatted
-    bilinearly onto cells of a sixth of the range, convolved (FFT) with the Matérn correlation
-    sampled on the cells out to four ranges, and read back bilinearly; each point's own term is
-    then made exact (``rho(0) = 1``)."""
+    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b`` and non-negative weights
+    (:func:`_correlation_sums`), never below the point's own term."""
+    return np.maximum(_correlation_sums(north, east, weight, length), weight)
+
+
+def _correlation_sums(north, east, weight, length: float) -> np.ndarray:
+    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b`` (weights ``(N,)`` or ``(N, k)``, of
+    any sign), on a grid: the weights splatted bilinearly onto cells of a sixth of the range,
+    convolved (FFT) with the Matérn correlation sampled on the cells out to four ranges, and
+    read back bilinearly; each point's own term is then made exact (``rho(0) = 1``)."""
     from scipy.signal import fftconvolve
 
+    weight = np.asarray(weight, dtype=np.float64)
     reach = 4.0 * length
     pad = reach + length
     n0, e0 = north.min() - pad, east.min() - pad
@@ -304,19 +317,62 @@ def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray
     i, j = np.floor(fy).astype(np.int64), np.floor(fx).astype(np.int64)
     ty, tx = fy - i, fx - j
     corners = [(0, 0, (1 - ty) * (1 - tx)), (0, 1, (1 - ty) * tx), (1, 0, ty * (1 - tx)), (1, 1, ty * tx)]
-    density = np.zeros(shape)
+    if weight.ndim == 2:  # one channel per column: the corners' shares broadcast over them
+        corners = [(a, b, beta[:, None]) for a, b, beta in corners]
+    density = np.zeros(shape + weight.shape[1:])
     for a, b, beta in corners:
         np.add.at(density, (i + a, j + b), weight * beta)
     half = int(np.ceil(reach / cell))
     kernel = _matern_kernel(float(length), float(cell), half)
-    smooth = fftconvolve(density, kernel, mode="same")
+    kernel = kernel.reshape(kernel.shape + (1,) * (weight.ndim - 1))
+    smooth = fftconvolve(density, kernel, mode="same", axes=(0, 1))
     sums = sum(beta * smooth[i + a, j + b] for a, b, beta in corners)
     near = (kernel[half, half], kernel[half, half + 1], kernel[half + 1, half + 1])  # offsets 0, 1, diagonal
-    self_term = np.zeros_like(weight)
+    self_term = 0.0
     for a, b, beta in corners:
         for c, d, gamma in corners:
-            self_term += beta * gamma * near[abs(a - c) + abs(b - d)]
-    return np.maximum(sums - weight * self_term + weight, weight)
+            self_term = self_term + beta * gamma * near[abs(a - c) + abs(b - d)]
+    return sums - weight * self_term + weight
+
+
+def shared_quadratic(north, east, vectors, error: MapError) -> np.ndarray:
+    """For points ``(N,)`` (one window's soundings) and a vector ``v_b (N, k)`` per point, the
+    covariance that the map error they share among themselves gives ``sum_b v_b d(p_b)``:
+    ``sum_fields sum_(b != j) a_b a_j rho(|p_b - p_j|) v_b v_j^T`` ``(k, k)`` (m^2 times the
+    vectors' units squared). With the map gradients at the soundings as ``v`` it is the map
+    error's part of a least-squares fix's score covariance: exact where :func:`shared_among`'s
+    row sums bound it from above by counting every pair as if their gradients were alike
+    (soundings whose gradients differ in sign share map error that cancels in the fix). A
+    point off the map's data takes the field's median std.
+
+    Examples
+    --------
+    Two points one range apart, unit std: ``2 rho(L) v v^T`` for equal vectors, the negative
+    of it for opposite ones:
+
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> axis = np.arange(0.0, 200.0, 1.0)
+    >>> flat = BathymetryMap(axis, axis, np.full((200, 200), 10.0), depth_std=np.ones((200, 200)),
+    ...                      correlation_length=20.0)
+    >>> error = map_error(flat, None)
+    >>> north, east = np.array([100.0, 120.0]), np.array([100.0, 100.0])
+    >>> same = shared_quadratic(north, east, np.array([[1.0], [1.0]]), error)[0, 0]
+    >>> opposite = shared_quadratic(north, east, np.array([[1.0], [-1.0]]), error)[0, 0]
+    >>> bool(abs(same - 2 * matern_correlation(20.0, 20.0)) < 0.01), bool(abs(same + opposite) < 1e-9)
+    (True, True)
+    """
+    north = np.asarray(north, dtype=np.float64)
+    east = np.asarray(east, dtype=np.float64)
+    vectors = np.asarray(vectors, dtype=np.float64).reshape(north.size, -1)
+    out = np.zeros((vectors.shape[1], vectors.shape[1]))
+    if north.size < 2:
+        return out
+    for part in error.components():
+        a = part.std_at(north, east)
+        w = np.where(np.isfinite(a), a, part.typical_std)[:, None] * vectors
+        out += w.T @ (_correlation_sums(north, east, w, part.correlation_length) - w)
+    return 0.5 * (out + out.T)
 
 
 @functools.lru_cache(maxsize=32)

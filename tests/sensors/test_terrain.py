@@ -132,3 +132,40 @@ def test_the_error_a_windows_soundings_share_among_themselves():
     survey = scattered_survey(np.concatenate([points, rng.uniform(300, 360, (200, 2))]))
     own = shared_among(points[:, 0], points[:, 1], error)
     assert np.all(shared_map_variances(survey, FLAT, model)[:80, 0] > own)
+
+
+def _dense_quadratic(north, east, vectors, error):
+    """The reference of ``shared_quadratic``: every pair's covariance, off the diagonal."""
+    from tangraph.sensors import matern_correlation
+
+    distance = np.hypot(north[:, None] - north[None], east[:, None] - east[None])
+    out = np.zeros((vectors.shape[1], vectors.shape[1]))
+    for part in error.components():
+        w = part.std_at(north, east)[:, None] * vectors
+        correlation = matern_correlation(distance, part.correlation_length)
+        np.fill_diagonal(correlation, 0.0)
+        out += w.T @ correlation @ w
+    return out
+
+
+def test_the_map_error_a_windows_soundings_share_in_a_fix():
+    """``shared_quadratic`` is the dense double sum over pairs (to the grid's 2 %, for vectors of
+    either sign and a two-scale error), the sum of ``shared_among`` for unit vectors, and far
+    below that row-sum bound for gradients of mixed sign, which cancel."""
+    from tangraph.sensors import shared_among, shared_quadratic
+
+    rng = np.random.default_rng(11)
+    std = 0.1 + 0.3 * rng.random((100, 100))  # gappy: a cell-scale and a 40 m field
+    error = map_error(FLAT.replace(depth_std=std, correlation_length=40.0), NavigationModel())
+    assert len(error.components()) == 2
+    north, east = rng.uniform(300, 420, (2, 600))
+    gradients = rng.normal(size=(600, 2)) + np.array([0.3, -0.2])
+    fast = shared_quadratic(north, east, gradients, error)
+    dense = _dense_quadratic(north, east, gradients, error)
+    assert np.linalg.norm(fast - dense) < 0.02 * np.linalg.norm(dense)
+    np.testing.assert_allclose(fast, fast.T)
+    ones = shared_quadratic(north, east, np.ones((600, 1)), error)[0, 0]
+    np.testing.assert_allclose(ones, shared_among(north, east, error).sum(), rtol=1e-9)
+    bound = (gradients * shared_among(north, east, error)[:, None]).T @ gradients
+    assert np.trace(fast) < 0.2 * np.trace(bound)
+    assert shared_quadratic(north[:1], east[:1], gradients[:1], error).tolist() == [[0.0, 0.0], [0.0, 0.0]]
