@@ -9,9 +9,10 @@ fix sits against the belief given up, whether a key pose is still in iSAM2's win
 the window. The rules (``GraphConfig.lost_windows``, ``relocalise_fixes``, ``confirm_probability``):
 
 - a fix close to the prediction is used at once; a surprising one (NIS between the
-  ``confirm_probability`` quantile and the gate) is ``HELD`` until a later accepted fix agrees with
-  it through the DR (it is used then), and is ``UNCONFIRMED`` when one disagrees or none comes
-  within two windows; a fix to be used late whose key pose has left iSAM2's window is not added
+  ``confirm_probability`` quantile and the gate) is ``HELD`` until a later accepted fix, as
+  surprising to the prediction, agrees with it through the DR (it is used then), and is
+  ``UNCONFIRMED`` when one disagrees, agrees with the prediction as well, or none comes within
+  two windows; a fix to be used late whose key pose has left iSAM2's window is not added
   (``LEFT_WINDOW``: the batch smoother weighs it);
 - a fix is *trusted* once a later fix from a window that shares none of its pings agrees with it
   through the DR; the last trusted fix is where a lost episode starts;
@@ -288,17 +289,23 @@ class FixPolicy:
     def _confirm(self, state: PolicyState, window: Window, actions: list) -> tuple[PolicyState, bool]:
         """A tracking navigator's window: an accepted fix is used at once when it is close to the
         prediction, held when its NIS is above ``confirm_nis``; the held fix is used once a later
-        accepted fix agrees with it through the DR, dropped when one disagrees or after two
-        windows. Returns the state and whether the window's fix was accepted (used or held)."""
+        accepted fix with an NIS above ``confirm_nis`` agrees with it through the DR, dropped when
+        one disagrees, agrees with the prediction as well, or after two windows. Returns the
+        state and whether the window's fix was accepted (used or held)."""
         held, agreed = state.held, False
         accepted = window.outcome.accepted
         if held is not None and (accepted or window.key - held.key > 2 * self.spacing):
-            agreed = accepted and window.agree(held, window.candidate, False)
+            # a fix confirms the held one when it agrees with it and is itself as surprising to
+            # the prediction the held one contradicts: a vague fix agrees with both, and tells
+            # them apart no better than a fix that never came
+            agrees = accepted and window.agree(held, window.candidate, False)
+            agreed = agrees and window.outcome.record.nis > self.confirm_nis
             if agreed:
                 state = self._use(state, held, f"confirmed by the fix at ping {window.key}", window, actions,
                                   in_window=window.held_in_window)
             else:
-                why = "the next fix did not agree" if accepted else "no fix came to agree"
+                why = ("no fix came to agree" if not accepted else "the next fix did not agree" if not agrees
+                       else "the next fix agreed with the prediction as well")
                 state = self._drop_held(state, why, actions)
             state = dataclasses.replace(state, held=None)
         if not accepted:

@@ -71,10 +71,16 @@ def _navigator_at(survey, bathymetry, k):
     return nav
 
 
-@pytest.mark.parametrize(("second", "confirmed"), [((0.0, 0.0), True), ((25.0, -20.0), False)])
-def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, second, confirmed):
+@pytest.mark.parametrize(("second", "status"), [
+    ((2.9, 0.0, 0.0), FixStatus.ACCEPTED),  # as surprising, and where the held one says: confirmed
+    ((0.0, 0.0, 0.0), FixStatus.UNCONFIRMED),  # at the prediction: it cannot tell the two apart
+    ((0.0, 25.0, -20.0), FixStatus.HELD),  # refused by the gate: the held fix waits on
+])
+def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, second, status):
     """A fix whose NIS is between the confirmation quantile and the gate is held; the next fix
-    confirms it (both used), or, refused by the gate, leaves it held."""
+    confirms it when it agrees with it and is as surprising to the prediction (both used), drops
+    it when it agrees with the prediction, or, refused by the gate, leaves it held. ``second``:
+    the next fix's offset from the truth, in the prediction's spreads north and in metres."""
     k1, k2 = 99, 109  # window ends (spacing 10)
     nav = _navigator_at(small_survey, rough_map, k1)
     _, cov = nav.predicted(k1)
@@ -85,9 +91,9 @@ def test_a_surprising_fix_waits_for_the_next_to_agree(small_survey, rough_map, s
     assert held.status is FixStatus.HELD and "held" in held.detail
     while nav.index + 1 < k2:
         nav.step()
-    nav.step(fix=_fix_at(small_survey, rough_map, k2, second))
+    nav.step(fix=_fix_at(small_survey, rough_map, k2, [second[0] * spread + second[1], second[2]]))
     first = next(f for f in nav.fixes if f.index == k1)
-    assert first.status is (FixStatus.ACCEPTED if confirmed else FixStatus.HELD)
+    assert first.status is status
 
 
 def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):

@@ -117,10 +117,21 @@ def test_a_surprising_fix_is_held_then_used_when_a_later_disjoint_fix_agrees():
     held, actions = POLICY.decide(PolicyState(), window(19, nis=SURPRISING, position=(3.0, 0.0)))
     assert summary(actions) == [("mark", 0, FixStatus.HELD, "held until a later fix agrees")]
     assert held.held.record == 0 and held.untrusted == ()
-    state, actions = POLICY.decide(held, window(29, record=1, position=(0.0, 1.0)))
+    state, actions = POLICY.decide(held, window(29, record=1, nis=SURPRISING, position=(3.0, 1.0)))
     assert summary(actions) == [("use", 0, "confirmed by the fix at ping 29"), ("use", 1, "")]
     # the held fix is trusted: the later one agrees with it from a window sharing none of its pings
     assert state.held is None and state.last_trusted == 19 and [u.record for u in state.untrusted] == [1]
+
+
+def test_a_held_fix_is_unconfirmed_by_a_later_one_that_agrees_with_the_prediction_too():
+    """A later fix close to both the held fix and the prediction cannot tell them apart: the
+    held fix is dropped, the later one used."""
+    held, _ = POLICY.decide(PolicyState(), window(19, nis=SURPRISING, position=(3.0, 0.0)))
+    state, actions = POLICY.decide(held, window(29, record=1, position=(1.0, 0.0)))
+    assert summary(actions) == [
+        ("mark", 0, FixStatus.UNCONFIRMED, f"{DROPPED}the next fix agreed with the prediction as well"),
+        ("use", 1, "")]
+    assert state.held is None and [u.record for u in state.untrusted] == [1]
 
 
 def test_a_held_fix_a_later_one_contradicts_is_unconfirmed():
@@ -133,7 +144,7 @@ def test_a_held_fix_a_later_one_contradicts_is_unconfirmed():
 
 def test_a_held_fix_whose_key_left_the_window_is_left():
     held, _ = POLICY.decide(PolicyState(), window(19, nis=SURPRISING))
-    state, actions = POLICY.decide(held, window(29, record=1, held_in_window=False))
+    state, actions = POLICY.decide(held, window(29, record=1, nis=SURPRISING, held_in_window=False))
     assert summary(actions) == [("mark", 0, FixStatus.LEFT_WINDOW, LEFT_WINDOW_DETAIL), ("use", 1, "")]
     assert [u.record for u in state.untrusted] == [1] and state.last_trusted is None
 
