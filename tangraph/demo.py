@@ -70,13 +70,13 @@ def _scenario_for(map_name: str, map_error: bool = False) -> str:
             raise TangraphError(f"the demo on map {map_name!r} has no variant whose seafloor is not the map; "
                                 f"--map-error runs on: {with_error}")
         return f"{name}-map-error"
-    known = ", ".join(DEMO_SCENARIOS)
+    runs_on = ", ".join(DEMO_SCENARIOS)
     if map_name in catalogue():
         raise TangraphError(
-            f"the demo has no survey laid out on map {map_name!r}; it runs on: {known} "
+            f"the demo has no survey laid out on map {map_name!r}; it runs on: {runs_on} "
             f"(`tangraph simulate` with a scenario of your own works on any map)"
         )
-    raise TangraphError(f"unknown map {map_name!r}; the demo runs on: {known}")
+    raise TangraphError(f"unknown map {map_name!r}; the demo runs on: {runs_on}")
 
 
 def _row(label: str, track: Track, survey, bounds: dict) -> dict:

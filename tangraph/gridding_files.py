@@ -18,7 +18,7 @@ import dataclasses
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal, cast
 
 from tangraph.errors import TangraphError
 from tangraph.gridding_surveys import grid_surveys
@@ -70,11 +70,11 @@ def grid_files(
         gridding, reading and checking refuse.
     """
     output = Path(output)
-    inputs = [Path(path) for path in inputs]
-    if output.resolve() in {path.resolve() for path in inputs}:
+    paths = [Path(path) for path in inputs]
+    if output.resolve() in {path.resolve() for path in paths}:
         raise TangraphError(f"{where}: the output {output} is one of the inputs")
-    surveys = [path for path in inputs if path.suffix.lower() == ".nc"]
-    if (surveys and len(surveys) != len(inputs)) or (not surveys and len(inputs) > 1):
+    surveys = [path for path in paths if path.suffix.lower() == ".nc"]
+    if (surveys and len(surveys) != len(paths)) or (not surveys and len(paths) > 1):
         raise TangraphError(f"{where}: give survey files (.nc) or one x y z text file, not both")
     gridding = {"cell": cell, "statistic": statistic, "fill": fill, "position_std": position_std}
     if surveys:
@@ -94,7 +94,7 @@ def grid_files(
         raise TangraphError(f"{where}: x y z text input needs {option_name('sign')} (depth or elevation)")
     if use_dr:
         raise TangraphError(f"{where}: {option_name('use_dr')} applies to survey files (.nc), not x y z text")
-    soundings = read_soundings(inputs[0], sign=sign, crs=crs, units=units)
+    soundings = read_soundings(paths[0], sign=cast(Literal["depth", "elevation"], sign), crs=crs, units=units)
     grid = block_reduce(soundings.points, cell=cell, statistic=statistic,
                         name=output.stem, crs=soundings.crs, origin=soundings.origin)
     grid = dataclasses.replace(grid, meta={**grid.meta, "position_std": float(position_std)})

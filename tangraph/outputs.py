@@ -93,8 +93,8 @@ def deferred_signals() -> Iterator[None]:
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
-        for s in dict.fromkeys(came):
-            signal.raise_signal(s)
+        for signum in dict.fromkeys(came):
+            signal.raise_signal(signum)
 
 
 def _alive(pid: int) -> bool:
@@ -132,7 +132,7 @@ def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
     pattern = re.compile(
         rf"^(?:\.{name}\.(partial|old)-(\d+)|\.{stem}\.(partial|old)-(\d+)-[A-Za-z0-9_]+{suffix})$"
     )
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(target.parent.iterdir())
     except FileNotFoundError:
@@ -155,7 +155,7 @@ def remove_stale_partials(target: str | os.PathLike) -> list[Path]:
     return removed
 
 
-def write_atomically(path: Path, overwrite: bool, write: Callable[[Path], None]) -> None:
+def write_atomically(path: Path, overwrite: bool, write: Callable[[Path], object]) -> None:
     """Write through a temporary file in the same folder, then rename: never a half file."""
     if path.exists() and not overwrite:
         raise FileExistsError(f"{path} exists; pass overwrite=True (CLI: --force) to replace it")
@@ -267,12 +267,12 @@ class OutputSet:
             for target in replaced:
                 with contextlib.suppress(FileNotFoundError):
                     target.unlink()
-            for target, backup in backups.items():
+            for target, saved in backups.items():
                 try:
-                    os.replace(backup, target)
+                    os.replace(saved, target)
                 except OSError as exc:  # the old contents stay in the backup, never deleted
-                    log.error("could not put %s back from %s: %s", target, backup, exc)
+                    log.error("could not put %s back from %s: %s", target, saved, exc)
             raise
-        for backup in backups.values():
+        for saved in backups.values():
             with contextlib.suppress(FileNotFoundError):
-                backup.unlink()
+                saved.unlink()

@@ -464,7 +464,7 @@ def read_survey(path: str | os.PathLike) -> Survey:
             dims = ("ping", "beam") if name.startswith("beam_") else ("ping",)
             if ds[name].dims != dims:
                 raise SurveyError(f"{p}: variable {name} has dims {ds[name].dims}, expected {dims}")
-        pose = {
+        pose: dict[str, Any] = {
             prefix: (
                 np.column_stack([ds[f"{prefix}_{c}"].values for c in _POSE])
                 if all(f"{prefix}_{c}" in ds for c in _POSE)

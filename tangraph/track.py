@@ -153,6 +153,7 @@ def _reference(track: Track, reference) -> np.ndarray | None:
 def _columns(track: Track, crs: str | None, origin, reference=None) -> tuple[list[str], np.ndarray]:
     names = ["time", "north", "east", "heading_deg", "var_north", "cov_north_east", "var_east", "var_heading"]
     c = track.covariance
+    assert c is not None  # __post_init__ fills it
     columns = [
         track.time,
         track.pose[:, 0],
@@ -252,6 +253,7 @@ def error_ellipse(covariance: np.ndarray, *, chi2: float = _CHI2_2DOF_95) -> tup
 def _pose_properties(track: Track, reference, start_time) -> dict[str, np.ndarray]:
     """Per-pose attribute columns of the GIS files (float64, NaN where unknown; ``utc`` strings)."""
     c = track.covariance
+    assert c is not None  # __post_init__ fills it
     major, minor, azimuth = error_ellipse(c)
     numbers = {
         "time": track.time,
@@ -286,7 +288,7 @@ def _placed(track: Track, crs: str | None, origin, what: str) -> tuple[np.ndarra
     return _lonlat(track, crs, origin)
 
 
-def _track_properties(track: Track, crs: str, start_time) -> dict[str, Any]:
+def _track_properties(track: Track, crs: str | None, start_time) -> dict[str, Any]:
     props: dict[str, Any] = {"method": track.method, "n_poses": track.n_poses, "map_crs": str(crs),
                              "duration": float(track.time[-1] - track.time[0])}
     if start_time is not None:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Literal, cast
 
 from tangraph.outputs import OutputSet, sigterm_exits
 
@@ -49,13 +50,14 @@ def write_track_outputs(
         output.suffix.lower(), tracks.write_track_csv
     )
     written = [Path(p) for p in (output, tum, plot, refined_map) if p is not None]
+    tum_frame = cast(Literal["ned", "enu"], frame)  # write_track_tum checks it
     with sigterm_exits(), OutputSet(overwrite=overwrite) as outputs:
         if writer is None:
-            tracks.write_track_tum(track, outputs.path(output), frame=frame, overwrite=True)
+            tracks.write_track_tum(track, outputs.path(output), frame=tum_frame, overwrite=True)
         else:
             writer(track, outputs.path(output), **placed)
         if tum is not None:
-            tracks.write_track_tum(track, outputs.path(tum), frame=frame, overwrite=True)
+            tracks.write_track_tum(track, outputs.path(tum), frame=tum_frame, overwrite=True)
         if refined_map is not None:
             from tangraph.maps.io import write_map
 

@@ -83,7 +83,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -258,7 +258,7 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
         filtered, predicted = _forward(p0, f, q, factor)
         p = filtered if kind == "filter" else _rts(filtered, predicted, f)
         p = p * np.outer(scale, scale)
-        position, constants, extra = p[:, :2, :2], p[-1], {}
+        position, constants, extra = p[:, :2, :2], p[-1], dict[str, Any]()
     else:
         position, constants, extra = _field_bound(survey, model, error, kind, layout, scale, f, q, p0,
                                                   features)

@@ -36,6 +36,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 from collections.abc import Sequence
+from typing import Literal, cast
 
 import numpy as np
 
@@ -127,7 +128,7 @@ def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
         if reference is None:
             reference = course[i]
     bounds = [*starts, survey.n_pings]
-    lines = []
+    lines: list[Survey] = []
     for a, b in itertools.pairwise(bounds):
         if b - a < 2 or np.sum(length[a:b - 1]) < min_length:
             continue
@@ -185,7 +186,8 @@ def check_map_error(
         if held.true_pose is None:
             raise TangraphError(f"check_map_error: survey {names[i]!r} has no reference track (true_pose)")
         others = [s for j, s in enumerate(surveys) if j != i]
-        bathymetry = grid_surveys(others, cell=cell, statistic=statistic, fill=fill,
+        bathymetry = grid_surveys(others, cell=cell, fill=fill,
+                                  statistic=cast(Literal["mean", "median"], statistic),
                                   name=f"without {names[i]}", position_std=position_std).depth
         s = window_scores(in_map_frame(held, bathymetry), bathymetry, model, window=window)
         scores.append(s)

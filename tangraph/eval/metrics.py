@@ -34,6 +34,7 @@ def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
     if true_pose.shape != track.pose.shape:
         raise TangraphError(f"truth has shape {true_pose.shape}, the track {track.pose.shape}")
     e = track.pose[:, :2] - true_pose[:, :2]
+    assert track.covariance is not None  # Track.__post_init__ fills it
     p = track.covariance[:, :2, :2]
     a, b, d = p[:, 0, 0], p[:, 0, 1], p[:, 1, 1]
     det = a * d - b * b
@@ -103,4 +104,4 @@ def format_figure(value) -> str:
         return str(value)
     if not np.isfinite(value):
         return ""
-    return f"{value:.2f}" if abs(value) < 1e4 else f"{value:.1e}"
+    return f"{value:.2f}" if abs(float(value)) < 1e4 else f"{value:.1e}"

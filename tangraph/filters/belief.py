@@ -75,6 +75,7 @@ class Belief:
                 raise TangraphError(f"Belief: {name} must have shape ({n},) as particles, got {shape}")
         if history.ndim != 2 or history.shape[0] != n:
             raise TangraphError(f"Belief: history must have shape ({n}, L) as particles, got {history.shape}")
+        assert self.calibration is not None  # filled above
         if self.calibration.shape != (n, 2):
             raise TangraphError(
                 f"Belief: calibration must have shape ({n}, 2) as particles, got {self.calibration.shape}"
@@ -102,6 +103,7 @@ class Belief:
     def take(self, index: np.ndarray) -> Belief:
         """The particles ``index`` (with their tides and histories), equally weighted."""
         n = index.size
+        assert self.calibration is not None  # __post_init__ fills it
         return self.replace(
             particles=self.particles[index],
             log_weights=np.full(n, -np.log(n)),
@@ -247,6 +249,7 @@ def weighted_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
 def state_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
     """Weighted mean ``(4,)`` and covariance ``(4, 4)`` of the particles' full state
     ``(north, east, k, b)``."""
+    assert belief.calibration is not None  # Belief.__post_init__ fills it
     z = np.column_stack([belief.particles, belief.calibration])
     w = belief.weights
     mean = w @ z

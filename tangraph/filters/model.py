@@ -108,9 +108,10 @@ class Ping:
                 f"Ping {index}: offsets must be finite, got {offsets[bad[0]].tolist()!r} at sounding {bad[0]}"
             )
         if np.any(np.isinf(depths)):
-            bad = int(np.flatnonzero(np.isinf(depths))[0])
+            first_bad = int(np.flatnonzero(np.isinf(depths))[0])
             raise TangraphError(
-                f"Ping {index}: depths must be finite or NaN, got {float(depths[bad])!r} at sounding {bad}"
+                f"Ping {index}: depths must be finite or NaN, got {float(depths[first_bad])!r} "
+                f"at sounding {first_bad}"
             )
         keep = ~np.isnan(depths)
         extra = {}

@@ -7,6 +7,7 @@ See :mod:`tangraph.filters.pmf`.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -176,7 +177,7 @@ class _Grid:
         self.sigmas = config.grid_sigmas
         self.min_spacing = min_spacing
 
-    def axes(self, cov: np.ndarray, support: np.ndarray | None = None) -> np.ndarray:
+    def axes(self, cov: np.ndarray, support: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray:
         """Grid steps ``(2, 2)`` (columns) for a density of covariance ``cov``: along its principal
         axes, spanning ``sigmas`` standard deviations each side, and at least its ``support``
         (a function of the axes ``(2, 2) -> (2,)``: the half-widths holding every point of
@@ -247,7 +248,7 @@ def _support(state: PointMass, centres: np.ndarray):
         + np.max(np.abs(state.axes.T @ vectors), axis=0)  # one old step along each
 
 
-def _sample(state: PointMass, member: int, points: np.ndarray) -> tuple[np.ndarray, ...]:
+def _sample(state: PointMass, member: int | np.integer, points: np.ndarray) -> tuple[np.ndarray, ...]:
     """Member ``member``'s density (relative to the state's largest value) at world ``points
     (P, 2)`` and its mass-weighted tide mean there (bilinear; zero outside its grid)."""
     inv = np.linalg.inv(state.axes)

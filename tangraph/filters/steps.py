@@ -22,14 +22,14 @@ from __future__ import annotations
 import dataclasses
 import functools
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from scipy import stats
 
 from tangraph.filters.belief import Belief, state_moments
 from tangraph.filters.config import ParticleConfig
-from tangraph.filters.likelihood import OffMap, effective_sample_size, log_normalise
+from tangraph.filters.likelihood import OffMap, PingLikelihood, effective_sample_size, log_normalise
 from tangraph.filters.model import FilterModel, Ping, TerrainUpdate
 from tangraph.filters.resampling import Resampler, resample
 
@@ -127,6 +127,7 @@ Step = Callable[..., StepResult]
 def predict(belief: Belief, ping: Ping, model: FilterModel, *, rng: np.random.Generator,
             extra_std: float = 0.0) -> Belief:  # fmt: skip
     """The belief moved through the motion model (positions and calibrations)."""
+    assert belief.calibration is not None  # Belief.__post_init__ fills it
     particles, calibration = model.motion.predict(
         belief.particles, belief.calibration, ping, rng=rng, extra_std=extra_std
     )
@@ -137,13 +138,16 @@ def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> T
     """The terrain likelihood of a ping for every particle of a belief (its positions, tide
     posteriors, heading errors and weights); ``exponent``: the information exponents of an
     earlier evaluation of the same ping (None: from this belief)."""
+    assert belief.calibration is not None  # Belief.__post_init__ fills it
     return model.terrain.evaluate(
         belief.particles, belief.tide, belief.tide_var, ping, heading_error=belief.calibration[:, 1],
         weights=belief.weights, exponent=exponent,
     )
 
 
-def innovation(belief: Belief, update: TerrainUpdate, ping: Ping, model: FilterModel) -> Innovation | None:
+def innovation(
+    belief: Belief, update: TerrainUpdate | PingLikelihood, ping: Ping, model: FilterModel
+) -> Innovation | None:
     """The :class:`Innovation` of a ping for the predicted ``belief`` (weights before the ping)
     and its terrain ``update``; None when no particle of positive weight can explain it."""
     finite = np.isfinite(update.log_likelihood) & np.isfinite(update.predicted)
@@ -158,7 +162,7 @@ def innovation(belief: Belief, update: TerrainUpdate, ping: Ping, model: FilterM
     b = ping.n_soundings
     noise = model.terrain.sounding_std**2 / b
     if ping.variance is not None:  # white noise averages out over the ping, its map error may not
-        noise = model.navigation.sounding_std**2 / b + float(np.mean(ping.map_variance))
+        noise = model.navigation.sounding_std**2 / b + float(np.mean(cast(np.ndarray, ping.map_variance)))
     variance = spread + noise + belief.tide_var
     nis = float((np.mean(ping.depths) - mean) ** 2 / variance)
     best = float(-2.0 * np.max(update.log_likelihood[finite]))
@@ -331,6 +335,7 @@ def shrink_calibration(
     gain = ccx @ np.linalg.pinv(cxx)
     centre = mean[2:] + (belief.particles - mean[:2]) @ gain.T
     residual = ccc - gain @ ccx.T + np.diag(np.square(floor))
+    assert belief.calibration is not None  # Belief.__post_init__ fills it
     a = np.sqrt(1.0 - bandwidth**2)
     noise = rng.standard_normal(belief.calibration.shape) @ _sqrtm(residual).T
     return belief.replace(calibration=a * belief.calibration + (1.0 - a) * centre + bandwidth * noise)
@@ -351,6 +356,7 @@ def shrink_state(
     if bandwidth <= 0:
         return belief
     mean, cov = moments
+    assert belief.calibration is not None  # Belief.__post_init__ fills it
     state = np.column_stack([belief.particles, belief.calibration])
     a = np.sqrt(1.0 - bandwidth**2)
     noise = rng.standard_normal(state.shape) @ _sqrtm(cov + np.diag(np.square(floor))).T

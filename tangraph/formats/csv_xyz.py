@@ -14,7 +14,7 @@ import os
 import re
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 
@@ -68,7 +68,7 @@ class _Table:
                 f"{self.path}, line {self.lines[i]}, column {label}: {text[i]!r} is not a "
                 f"{'number' if values is None else 'finite number'}"
             )
-        return values
+        return cast(np.ndarray, values)  # None only after the raise above
 
 
 def _is_number(text: str) -> bool:
@@ -131,22 +131,23 @@ def _nav_columns(
     else:
         geographic = table.header is not None and {"lat", "lon"} <= set(table.header)
     need = ["time", *(("lat", "lon") if geographic else ("north", "east")), "heading", "depth"]
-    spec = {key: given.get(key, key) for key in need}
+    chosen = {key: given.get(key, key) for key in need}
     if table.header is None:
-        named = [key for key in need if isinstance(spec[key], str)]
+        named = [key for key in need if isinstance(chosen[key], str)]
         if named:
             raise SurveyError(
                 f"{table.path}: without a header row, give the 0-based position of every column "
                 f"(columns=, CLI: --columns time=0,...); no position for {named}"
             )
     else:
-        missing = [s.strip().lower() for s in spec.values()
+        missing = [s.strip().lower() for s in chosen.values()
                    if isinstance(s, str) and s.strip().lower() not in table.header]
         if missing:
             raise SurveyError(f"{table.path}: missing columns {missing}; it has {table.header}")
     found = {}
-    for key, s in spec.items():
+    for key, s in chosen.items():
         if isinstance(s, str):
+            assert table.header is not None  # refused above without a header
             found[key] = (table.header.index(s.strip().lower()), s.strip().lower())
         else:
             found[key] = (int(s), f"{int(s)} ({key})")
@@ -189,7 +190,7 @@ def _iso_times(table: _Table, text: list[str], label: str, zone) -> tuple[np.nda
     for i, m in enumerate(matches):
         if m is None:
             refuse(i, "is not a time (seconds, epoch seconds or ISO 8601 such as 2024-05-01T12:00:00Z)")
-    naive = np.array([m.group(1) is None for m in matches])
+    naive = np.array([cast(re.Match[str], m).group(1) is None for m in matches])
     if naive.any() and zone is None:
         refuse(int(np.argmax(naive)), "has no time zone; give the zone of the clock "
                "(timezone=, CLI: --timezone), e.g. UTC or Europe/Berlin")
@@ -207,13 +208,13 @@ def _iso_times(table: _Table, text: list[str], label: str, zone) -> tuple[np.nda
             else:
                 stamps = pd.to_datetime(part, format="ISO8601", utc=True)
         except Exception:  # pandas raises several types (parse, ambiguous, non-existent)
-            for i in rows:
+            for row in rows:
                 try:
-                    stamp = pd.Timestamp(text[i].replace(" ", "T"))
+                    stamp = pd.Timestamp(text[row].replace(" ", "T"))
                     if local:
                         stamp.tz_localize(zone, ambiguous="raise", nonexistent="raise")
                 except Exception:
-                    refuse(int(i), f"is not a valid time in {zone} (or is ambiguous or skipped "
+                    refuse(int(row), f"is not a valid time in {zone} (or is ambiguous or skipped "
                            "there: a daylight-saving change)" if local else "is not a valid time")
             raise SurveyError(f"{table.path}, column {label}: times not readable as ISO 8601") from None
         seconds[rows] = ((stamps - epoch) / pd.Timedelta(seconds=1)).to_numpy(np.float64)
@@ -223,7 +224,7 @@ def _iso_times(table: _Table, text: list[str], label: str, zone) -> tuple[np.nda
 def _utc_iso(seconds: float) -> str:
     """ISO 8601 UTC of epoch seconds, to the microsecond where they have a fraction."""
     us = round(seconds * 1e6)
-    unit = "s" if us % 1_000_000 == 0 else "ms" if us % 1000 == 0 else "us"
+    unit: Literal["s", "ms", "us"] = "s" if us % 1_000_000 == 0 else "ms" if us % 1000 == 0 else "us"
     return np.datetime_as_string(np.datetime64(us, "us"), unit=unit) + "Z"
 
 

@@ -17,6 +17,8 @@ A position fix is a ``PoseTranslationPrior2D``: its error ``t - z`` is in the wo
 
 from __future__ import annotations
 
+from typing import Any
+
 import gtsam
 import numpy as np
 from scipy import stats
@@ -118,8 +120,9 @@ def robust_noise(cov: np.ndarray, kernel: str, parameter: float):
     base = gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float))
     if kernel == "none":
         return base
-    estimator = {"huber": gtsam.noiseModel.mEstimator.Huber,
-                 "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[kernel].Create(float(parameter))
+    kinds: dict[str, Any] = {"huber": gtsam.noiseModel.mEstimator.Huber,
+                             "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
+    estimator = kinds[kernel].Create(float(parameter))
     return gtsam.noiseModel.Robust.Create(estimator, base)
 
 

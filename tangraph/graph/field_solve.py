@@ -114,9 +114,9 @@ class _Layout:
         """Explicit zeros on every variable's own block and between each and the calibration
         and the tide (the entries the marginals read, which an exact zero of a Jacobian would
         leave out of the factor's pattern)."""
-        shared = [np.arange(d) + s for s, d, k in zip(self.start, self.dims, self.keys, strict=True)
+        blocks = [np.arange(d) + s for s, d, k in zip(self.start, self.dims, self.keys, strict=True)
                   if int(k) in (CALIBRATION, TIDE)]
-        shared = np.concatenate([*shared, np.zeros(0, np.int64)]).astype(np.int64)
+        shared = np.concatenate([*blocks, np.zeros(0, np.int64)]).astype(np.int64)
         own = self.start[:, None] + np.arange(3)  # a pose's columns (a shorter vector: its own, repeated)
         own = np.minimum(own, (self.start + self.dims - 1)[:, None])
         joined = np.concatenate([own, np.broadcast_to(shared, (own.shape[0], shared.size))], axis=1)
@@ -157,9 +157,10 @@ def solve(factors, values, terrain: PingTerrain, bathymetry: BathymetryMap, hold
     u = np.zeros(field.n_nodes) if u is None else np.asarray(u, float)
 
     def cost(v, x) -> float:
-        state = unpack(v)
+        pose, calibration, tide = unpack(v)
         return (factors.error(v) + 0.5 * float(x @ (prior @ x))
-                + terrain_factors.terrain_cost(terrain, bathymetry, *state, used, hold.offset(x)))
+                + terrain_factors.terrain_cost(terrain, bathymetry, pose, calibration, tide, used,
+                                               hold.offset(x)))
 
     def system(v, x):
         return _normal_equations(factors, v, x, terrain, bathymetry, hold, used, unpack, layout, prior)

@@ -10,6 +10,7 @@ previous key. The odometry between consecutive keys is the DR increment
 from __future__ import annotations
 
 import dataclasses
+from typing import cast
 
 import gtsam
 import numpy as np
@@ -56,7 +57,7 @@ def fix_windows(n_pings: int, window: int, spacing: int, ramp: int | None = None
     early = np.arange(ramp - 1, min(window - 1, n_pings), ramp, dtype=np.int64) if ramp and ramp < window \
         else np.zeros(0, np.int64)
     end = np.concatenate([early, full])
-    first = np.concatenate([early - ramp + 1 if early.size else early, full - window + 1])
+    first = np.concatenate([early - cast(int, ramp) + 1 if early.size else early, full - window + 1])
     count = np.zeros(n_pings + 1)
     np.add.at(count, first, 1.0)
     np.add.at(count, end + 1, -1.0)
@@ -180,6 +181,7 @@ class PoseGraph:
     def start_factor(self, weight: float = 1.0) -> gtsam.NonlinearFactor:
         """The factor of the start's position (a pose prior without the calibration), widened
         by ``start_break``, its information multiplied by ``weight``."""
+        assert self.start is not None, "start_factor before the start is set"
         key, pose, cov = self.start
         cov = cov + np.diag([self.start_break**2, self.start_break**2, 0.0])
         if not self.calibrated:

@@ -204,8 +204,9 @@ def _widen_start(nav: GraphNavigator, std: float) -> bool:
     if index is None or not nav.isam.getLinearizationPoint().exists(0):
         return False
     nav._remove.append(index)
-    nav._start_factor = nav.graph.widen_start(std)
-    nav._new_factors.add(nav._start_factor)
+    factor = nav.graph.widen_start(std)
+    nav._start_factor = factor
+    nav._new_factors.add(factor)
     return True
 
 
@@ -217,6 +218,7 @@ def _break_into(nav: GraphNavigator, key: int, std: float) -> bool:
     index = None if n is None else _isam_index(nav, graph._factors["odometry"][n])
     if index is None or key == 0:
         return False
+    assert n is not None  # index is None without n
     total = float(np.hypot(graph.breaks.get(key, 0.0), std))
     graph.breaks[key] = total
     graph._factors["odometry"][n] = graph._odometry_factor(*graph.odometry[n], total)

@@ -141,7 +141,8 @@ class GraphNavigator:
         # what to do with each fix (use, hold, drop, lost, relocalise): decided by the policy
         self.policy = FixPolicy.from_config(c, float(min(bathymetry.cell_size)))
         self.state = PolicyState()
-        self._start_factor = None  # the start's position prior as in iSAM2 (widened when found wrong)
+        # the start's position prior as in iSAM2 (widened when found wrong)
+        self._start_factor: gtsam.NonlinearFactor | None = None
         self._remove: list[int] = []  # iSAM2 factor indices to remove at the next update
         self._residuals: dict[int, float] = {}  # the last windows' residual stds (_misfit_noise)
         self.step_times: list[float] = []

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import time as _time
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import gtsam
 import numpy as np
@@ -71,7 +71,8 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TapFix | None, strict: 
     poses = None if laid is None else to_world(laid, nav.calibration, nav.origin)
     try:
         if pmf:
-            made = posterior_window_fix(nav, k, poses, world, cov)
+            # a WindowFix carries the TapFix fields the graph reads (duck-typed)
+            made = cast("TapFix", posterior_window_fix(nav, k, poses, world, cov))
         else:
             made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
                             poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,

@@ -45,7 +45,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
@@ -113,7 +113,7 @@ class Window:
 
     @property
     def candidate(self) -> Candidate:
-        fix = self.outcome.fix
+        fix = cast("TapFix", self.outcome.fix)  # a held window's outcome has a fix
         return Candidate(self.key, int(fix.first), fix, self.pose, self.record)
 
 
@@ -258,7 +258,7 @@ class FixPolicy:
         half-width: an eighth by default, as a relocalisation candidate must be (two vague fixes
         agree with anything); a quarter for a window whose best match on the search's edge is
         evidence of being lost (a vague one there is a window of bad pings)."""
-        largest = float(np.sqrt(np.linalg.eigvalsh(outcome.fix.covariance).max()))
+        largest = float(np.sqrt(np.linalg.eigvalsh(cast("TapFix", outcome.fix).covariance).max()))
         return largest <= share * outcome.record.half_width / self.half_width_sigmas
 
     def decide(self, state: PolicyState, window: Window) -> tuple[PolicyState, tuple[Action, ...]]:
@@ -381,7 +381,7 @@ class FixPolicy:
         enough agreeing candidates from disjoint windows relocalise."""
         outcome = window.outcome
         usable = outcome.accepted if state.lost else (
-            outcome.record.status is FixStatus.GATE and not outcome.fix.quality.multimodal)
+            outcome.record.status is FixStatus.GATE and not cast("TapFix", outcome.fix).quality.multimodal)
         if not usable or self.lost_windows is None or not self.precise(outcome):
             return state
         candidate = window.candidate

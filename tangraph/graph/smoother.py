@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time as _time
+from typing import Any
 
 import gtsam
 import numpy as np
@@ -49,6 +50,8 @@ __all__ = ["SmootherSolution", "dense_track", "smooth_pose_graph", "smooth_surve
 log = logging.getLogger(__name__)
 
 def _optimizer(graph, values, config: GraphConfig, ordering):
+    params: gtsam.NonlinearOptimizerParams
+    cls: Any  # each optimiser takes its own kind of params
     if config.optimizer == "lm":
         params = gtsam.LevenbergMarquardtParams()
         cls = gtsam.LevenbergMarquardtOptimizer

@@ -139,6 +139,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     (:func:`~tangraph.graph.field_solve.variance_components`; never shrunk below the model's)
     while these move. Returns the solution, what it used and the refined map."""
     bathymetry, error = nav.bathymetry, nav.map_error
+    assert error is not None  # the caller's condition
     pose, calibration, _ = _unpack(values, terrain, reference)
     north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
     seen = np.isfinite(terrain.depth) & np.isfinite(bathymetry.depth_at(north, east))
@@ -158,7 +159,8 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     def judged(v, noise_factor: float, field_factor: float) -> np.ndarray:
         judging = dataclasses.replace(terrain, variance=np.where(seen, (noise * noise_factor**2
                                                                         + s2 * field_factor**2), np.nan))
-        return terrain_factors.gate(judging, bathymetry, *unpack(v), SOUNDING_GATE, prior,
+        pose, calibration, tide = unpack(v)
+        return terrain_factors.gate(judging, bathymetry, pose, calibration, tide, SOUNDING_GATE, prior,
                                     shared * field_factor**2)
 
     used = judged(values, 1.0, 1.0)
@@ -195,6 +197,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     refined = field_solve.refined_map(found_error, scaled.field, solved, inverse)
     if config.smoother_covariance != "all":
         cov, calib_cov = np.full_like(cov, np.nan), np.zeros((2, 2))
+    assert u is not None  # solved at least once
     offset = scaled.offset(u)
     cost = factors.error(values) + 0.5 * float(u @ (scaled.field.precision @ u)) + \
         terrain_factors.terrain_cost(solving, bathymetry, pose, calibration, tide, used, offset)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, cast
 
 import numpy as np
 
@@ -132,7 +132,7 @@ class BathymetryMap:
     @property
     def shape(self) -> tuple[int, int]:
         """``(ny, nx)``."""
-        return self.depth.shape  # type: ignore[return-value]
+        return self.depth.shape
 
     @property
     def cell_size(self) -> tuple[float, float]:
@@ -319,7 +319,10 @@ class BathymetryMap:
         coarser cell keeps the mean std of the cells it averages, as if their errors were
         correlated over it (conservative); ``correlation_length`` is unchanged.
         """
-        dn_new, de_new = (float(cell), float(cell)) if np.isscalar(cell) else map(float, cell)
+        if np.isscalar(cell):
+            dn_new = de_new = float(cast(float, cell))
+        else:
+            dn_new, de_new = map(float, cast(tuple[float, float], cell))
         if not (dn_new > 0 and de_new > 0):
             raise TangraphError(f"resample of map {self.name!r}: cell must be positive, got {cell!r}")
         n_lo, n_hi, e_lo, e_hi = self.extent

@@ -16,7 +16,7 @@ import functools
 import logging
 import math
 import sys
-from typing import Any, Literal
+from typing import Any, Literal, cast
 
 import numpy as np
 
@@ -111,7 +111,7 @@ class SoundingGrid:
         """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
         with the error layer of :attr:`error` (``depth_std`` times ``error_scale``,
         ``correlation_length``)."""
-        layer = self.mean.depth if self.statistic == "mean" else self.median
+        layer = self.mean.depth if self.statistic == "mean" else cast(np.ndarray, self.median)
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
         std = self.error.depth_std
@@ -321,7 +321,7 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
     if isinstance(cells, bool) or not isinstance(cells, int | np.integer) or cells < 0:
         raise TangraphError(f"gap fill: cells must be an integer >= 0, got {cells!r}")
     cells = int(cells)
-    depth = grid.mean.depth if grid.statistic == "mean" else grid.median
+    depth = grid.mean.depth if grid.statistic == "mean" else cast(np.ndarray, grid.median)
     measured = grid.count > 0
     gap_fill = np.full(grid.mean.shape, np.nan)
     if cells > 0:

@@ -74,7 +74,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
@@ -157,7 +157,8 @@ def gridded_error(grid: SoundingGrid, *, neighbourhood: int = 2) -> GriddedError
     cell = grid.mean.cell_size[0]
     count = grid.count
     measured = count > 0
-    layer = np.where(measured, grid.mean.depth if grid.statistic == "mean" else grid.median, np.nan)
+    mean_or_median = grid.mean.depth if grid.statistic == "mean" else cast(np.ndarray, grid.median)
+    layer = np.where(measured, mean_or_median, np.nan)
     gamma = _semivariance_one_cell(layer)
     replicated = count >= 2
     spread_median = float(np.median(grid.std[replicated])) if replicated.any() else math.nan

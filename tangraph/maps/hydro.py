@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import re
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -214,7 +215,8 @@ def write_bag(bathymetry: BathymetryMap, path: Path) -> None:
                "crs": rasterio.crs.CRS.from_wkt(pyproj.CRS(bathymetry.crs).to_wkt()),
                "VAR_ABSTRACT": abstract}
     with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(path, "w", **profile) as dst:
-        dst.write(np.stack([_filled(-bathymetry.depth), _filled(bathymetry.depth_std)])[:, ::-1])
+        std = cast(np.ndarray, bathymetry.depth_std)  # check_writable refused a map without it
+        dst.write(np.stack([_filled(-bathymetry.depth), _filled(std)])[:, ::-1])
 
 
 def write_s102(bathymetry: BathymetryMap, path: Path) -> None:
@@ -228,7 +230,7 @@ def write_s102(bathymetry: BathymetryMap, path: Path) -> None:
     check_writable(bathymetry, path, "s102")
     values = np.zeros(bathymetry.shape, dtype=[("depth", "<f4"), ("uncertainty", "<f4")])
     values["depth"] = _filled(bathymetry.depth)
-    values["uncertainty"] = _filled(bathymetry.depth_std)
+    values["uncertainty"] = _filled(cast(np.ndarray, bathymetry.depth_std))
     dn, de = bathymetry.cell_size
     with netCDF4.Dataset(path, "w", format="NETCDF4") as ds:
         ds.setncattr_string("productSpecification", "INT.IHO.S-102.2.2")
@@ -251,6 +253,7 @@ def write_s102(bathymetry: BathymetryMap, path: Path) -> None:
         group.createDimension("numPointsLongitudinal", bathymetry.shape[1])
         kind = group.createCompoundType(values.dtype, "BathymetryValues")
         group.createVariable("values", kind, ("numPointsLatitudinal", "numPointsLongitudinal"))[:] = values
-        for key, layer in (("Depth", bathymetry.depth), ("Uncertainty", bathymetry.depth_std)):
+        std = cast(np.ndarray, bathymetry.depth_std)  # check_writable refused a map without it
+        for key, layer in (("Depth", bathymetry.depth), ("Uncertainty", std)):
             group.setncattr(f"minimum{key}", np.float32(np.nanmin(layer)))
             group.setncattr(f"maximum{key}", np.float32(np.nanmax(layer)))

@@ -26,6 +26,7 @@ import dataclasses
 import os
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -163,7 +164,7 @@ def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None,
     geographic = crs is not None and _is_geographic(crs)
     crs_unit = 1.0 if geographic else metric_crs(crs, str(path))[1]
     z = _mask_nodata(data[:, 2], nodata) * _depth_factor(None, units, crs_unit, str(path), "z")
-    grid = np.full(x_values.size * y_values.size, np.nan)
+    grid: np.ndarray = np.full(x_values.size * y_values.size, np.nan)
     grid[flat] = z
     grid = grid.reshape(y_values.size, x_values.size)
     factor = resolve_sign(grid, {"positive": "down"} if own else {}, "z", sign, str(path))
@@ -324,7 +325,7 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None, 
 def write_npz(bathymetry: BathymetryMap, path: Path) -> None:
     """tangraph's own ``.npz``: ``north``, ``east``, ``depth``, ``crs``, ``origin``, ``name``, and
     ``depth_std`` and ``correlation_length`` where the map has them."""
-    error = {} if bathymetry.depth_std is None else {"depth_std": bathymetry.depth_std}
+    error: dict[str, Any] = {} if bathymetry.depth_std is None else {"depth_std": bathymetry.depth_std}
     if bathymetry.correlation_length is not None:
         error["correlation_length"] = np.float64(bathymetry.correlation_length)
     with open(path, "wb") as f:
@@ -445,9 +446,9 @@ def read_map(
 
     p = Path(path)
     fmt = _format_of(p, format, reading=True)
-    common = {"crs": crs, "cell": cell, "name": name}
-    grid = {**common, "nodata": nodata, "units": units, "uncertainty": uncertainty,
-            "max_scale_error": max_scale_error}
+    common: dict[str, Any] = {"crs": crs, "cell": cell, "name": name}
+    grid: dict[str, Any] = {**common, "nodata": nodata, "units": units, "uncertainty": uncertainty,
+                            "max_scale_error": max_scale_error}
     if fmt == "netcdf":
         return read_netcdf(p, variable=variable, sign=sign, **grid)
     if fmt == "geotiff":
@@ -479,7 +480,7 @@ def write_map(bathymetry: BathymetryMap, path: str | os.PathLike, *, format: str
 
     p = Path(path)
     fmt = _format_of(p, format)
-    writers: dict[str, Callable[[BathymetryMap, Path], None]] = {
+    writers: dict[str, Callable[[BathymetryMap, Path], object]] = {
         "netcdf": write_netcdf, "geotiff": raster.write_geotiff, "xyz": write_xyz, "npz": write_npz,
         "tin": mesh.write_mesh, "bag": hydro.write_bag, "s102": hydro.write_s102,
     }

@@ -111,8 +111,8 @@ class TerrainScene:
         offset = 0.5 * (vertices.min(axis=0) + vertices.max(axis=0))
         scene = o3d.t.geometry.RaycastingScene()
         scene.add_triangles(
-            o3d.core.Tensor((vertices - offset).astype(np.float32)),
-            o3d.core.Tensor(triangles.astype(np.uint32)),
+            o3d.core.Tensor((vertices - offset).astype(np.float32)),  # type: ignore[call-overload]
+            o3d.core.Tensor(triangles.astype(np.uint32)),  # type: ignore[call-overload]
         )
         for a in (vertices, triangles, offset):
             a.setflags(write=False)
@@ -126,7 +126,7 @@ class TerrainScene:
         t = np.empty(rays.shape[0])
         prim = np.empty(rays.shape[0], np.int64)
         for start in range(0, rays.shape[0], _CHUNK):
-            hit = self.scene.cast_rays(o3d.core.Tensor(rays[start : start + _CHUNK]))
+            hit = self.scene.cast_rays(o3d.core.Tensor(rays[start : start + _CHUNK]))  # type: ignore[call-overload]
             t[start : start + _CHUNK] = hit["t_hit"].numpy()
             ids = hit["primitive_ids"].numpy().astype(np.int64)
             prim[start : start + _CHUNK] = np.where(ids == _INVALID, -1, ids)
@@ -364,7 +364,7 @@ def read_mesh(path, *, cell: float, name: str | None = None, **kwargs) -> Bathym
     """
     path = _mesh_path(path, must_exist=True)
     with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-        mesh = o3d.io.read_triangle_mesh(str(path))
+        mesh = o3d.io.read_triangle_mesh(str(path))  # type: ignore[arg-type]
     if len(mesh.triangles) == 0:
         raise MapFormatError(f"mesh file {str(path)!r} is unreadable or holds no triangles")
     try:
@@ -410,7 +410,7 @@ def write_mesh(
             mesh.vertices = o3d.utility.Vector3dVector(np.column_stack([v[:, 1], v[:, 0], -v[:, 2]]))
             mesh.compute_vertex_normals()
         with o3d.utility.VerbosityContextManager(o3d.utility.VerbosityLevel.Error):
-            ok = o3d.io.write_triangle_mesh(str(path), mesh)
+            ok = o3d.io.write_triangle_mesh(str(path), mesh)  # type: ignore[arg-type]
         if not ok:
             raise TangraphError(f"cannot write mesh file {str(path)!r}")
     if sidecar is not False:

@@ -7,6 +7,7 @@ import json
 import math
 import os
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -285,8 +286,8 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
     own = bathymetry.to_dataset()
     depth_attrs = {**own["depth"].attrs, **attrs.pop("depth", {})}
     variables: dict[str, tuple] = {}
-    encoding = {"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan},
-                "x": {"_FillValue": None}, "y": {"_FillValue": None}}
+    encoding: dict[str, Any] = {"depth": {"zlib": True, "complevel": 4, "_FillValue": np.nan},
+                                "x": {"_FillValue": None}, "y": {"_FillValue": None}}
     if bathymetry.crs is not None:
         import pyproj
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 
@@ -113,7 +114,7 @@ def raster_crs(file_crs, own: dict, path: Path) -> str | None:
         if parsed.is_compound:
             parsed = parsed.sub_crs_list[0]
         if parsed.is_bound and _null_towgs84(parsed):  # e.g. GDAL's BAG: TOWGS84[0,0,0,0,0,0,0]
-            parsed = parsed.source_crs
+            parsed = cast(pyproj.CRS, parsed.source_crs)
         if parsed.is_engineering:  # LOCAL_CS: a user-defined CRS GDAL could not read
             parsed = None
     if own.get("crs") and (parsed is None or pyproj.CRS(own["crs"]).equals(parsed, ignore_axis_order=True)):

@@ -40,7 +40,7 @@ HAN2020_AREAS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = tup
 
 
 # -- shared pieces ---------------------------------------------------------------------------
-def _positive(value: float, name: str, where: str, *, allow_zero: bool = False) -> float:
+def _positive(value: float | np.ndarray, name: str, where: str, *, allow_zero: bool = False) -> float:
     """``value`` as a float, or raise naming it if it is not finite and positive."""
     try:
         v = float(value)

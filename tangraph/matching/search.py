@@ -28,7 +28,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from typing import Literal
+from typing import Literal, cast
 
 import numpy as np
 import scipy.fft
@@ -198,7 +198,12 @@ def _clean_patch(offsets, depths) -> tuple[np.ndarray, np.ndarray]:
     return np.ascontiguousarray(offsets[keep]), np.ascontiguousarray(depths[keep])
 
 
-def _choose_method(method: str, whole_cell: bool, windows, grid: CandidateGrid, n: int, max_bytes) -> str:
+_Method = Literal["auto", "direct", "fft"]
+
+
+def _choose_method(
+    method: _Method, whole_cell: bool, windows, grid: CandidateGrid, n: int, max_bytes
+) -> _Method:
     """``method``, ``"auto"`` resolved by the cost model; refuses a search needing over ``max_bytes``."""
     nh, nn, ne = grid.shape
     if method == "auto":
@@ -284,7 +289,8 @@ def criterion_sums(
         )
     off_n, off_e = np.moveaxis(rotate(grid.headings[:, None], offsets), -1, 0).copy()  # (nh, N) each
     layouts = [_layout(bathymetry, np.column_stack([a, b]), grid) for a, b in zip(off_n, off_e, strict=True)]
-    windows = [_fft_window(lay, nn, ne, mi, mj) for lay in layouts] if whole_cell else []
+    windows = [_fft_window(lay, nn, ne, cast(int, mi), cast(int, mj))
+               for lay in layouts] if whole_cell else []
     method = _choose_method(method, whole_cell, windows, grid, n, max_bytes)
     _log.debug("criterion_sums: %s candidates x %d soundings by %s", grid.shape, n, method)
     sum_z, sum_z2 = float(z.sum()), float(z @ z)

@@ -14,7 +14,9 @@ from tangraph.matching.tap_types import FixQuality, Region, RegionMethod, TapCon
 __all__ = ["region_thresholds"]
 
 
-def _quadric(surface: np.ndarray, i: int, j: int, step: float) -> tuple[np.ndarray, np.ndarray | None]:
+def _quadric(
+    surface: np.ndarray, i: int | np.integer, j: int | np.integer, step: float
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Sub-cell minimum and Hessian (per m^2) of a quadric fitted to the 3 x 3 cells around (i, j)."""
     nn, ne = surface.shape
     if not (0 < i < nn - 1 and 0 < j < ne - 1):
@@ -166,7 +168,9 @@ def _crlb(bathymetry, patch, position, s2) -> np.ndarray:
     return np.linalg.inv(information)
 
 
-def _quality(q, q_min, region: Region, config: TapConfig, best: tuple[int, int]) -> FixQuality:
+def _quality(
+    q, q_min, region: Region, config: TapConfig, best: tuple[int | np.integer, int | np.integer]
+) -> FixQuality:
     labels, n_basins = ndimage.label(region.mask)
     mask = region.mask
     touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())

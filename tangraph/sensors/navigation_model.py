@@ -171,7 +171,7 @@ class NavigationModel:
             The survey records no dead-reckoning settings (a recorded survey: use
             :func:`load_navigation_model` or the constructor with the instrument's figures).
         """
-        settings = survey.meta.get("settings") if isinstance(survey.meta, dict) else None
+        settings: Any = survey.meta.get("settings") if isinstance(survey.meta, dict) else None
         try:
             table = dict(settings["dead_reckoning"])
         except (KeyError, TypeError):

@@ -16,6 +16,7 @@ sonar sits at map depth ``vehicle_depth - tide``. Wang et al.'s tide estimate
 from __future__ import annotations
 
 import dataclasses
+from typing import cast
 
 import numpy as np
 
@@ -244,10 +245,11 @@ def simulate_pings(scene: TerrainScene, pose, vehicle_depth, config: SonarConfig
     """
     pose, depth0, roll, pitch = _check_ping_inputs(pose, vehicle_depth, roll, pitch)
     single = isinstance(config, SingleBeamConfig)
+    multibeam = cast(MultibeamConfig, config)  # read only when not single
     angles = beam_angles(config)
     k, b = pose.shape[0], angles.size
     unit = np.column_stack([np.zeros(b), np.sin(angles), np.cos(angles)])
-    sway = 0.0 if single else config.attitude_noise
+    sway = 0.0 if single else multibeam.attitude_noise
     nominal = _levelled(unit, roll, pitch)
     actual = _levelled(unit, roll + sway * rng.standard_normal(k), pitch + sway * rng.standard_normal(k))
     world = np.concatenate([rotate(pose[:, 2:3], actual[..., :2]), actual[..., 2:]], axis=-1)
@@ -255,15 +257,15 @@ def simulate_pings(scene: TerrainScene, pose, vehicle_depth, config: SonarConfig
     true_range = cast_rays(scene, origin, world)  # one call for all pings and beams
     ret = np.isfinite(true_range) & (true_range <= config.max_range)
 
-    range_noise = 0.0 if single else config.range_noise
+    range_noise = 0.0 if single else multibeam.range_noise
     r = np.where(ret, true_range, 0.0) * (1.0 + range_noise * rng.standard_normal((k, b)))
     depth = depth0[:, None] + r * nominal[..., 2] + config.depth_noise * rng.standard_normal((k, b))
     if single:
         outlier = missing = np.zeros((k, b), bool)
     else:
-        outlier = rng.random((k, b)) < config.outlier_rate
-        missing = rng.random((k, b)) < config.missing_rate
-        depth = depth + np.where(outlier, config.outlier_std * rng.standard_normal((k, b)), 0.0)
+        outlier = rng.random((k, b)) < multibeam.outlier_rate
+        missing = rng.random((k, b)) < multibeam.missing_rate
+        depth = depth + np.where(outlier, multibeam.outlier_std * rng.standard_normal((k, b)), 0.0)
     keep = ret & ~missing
     return Pings(
         beam_forward=np.where(keep, r * nominal[..., 0], np.nan),

@@ -152,7 +152,7 @@ class MapError:
         quartile of its std), of range one cell, and the excess over it, of range
         ``correlation_length`` (module docstring); one field of range ``correlation_length``
         when that is at most a cell or the std is uniform; none for a perfect map."""
-        parts = self._parts  # type: ignore[has-type]
+        parts = self._parts  # type: ignore[attr-defined]
         if parts is None:
             parts = self._split()
             object.__setattr__(self, "_parts", parts)
@@ -176,7 +176,7 @@ class MapError:
         if self.is_zero:
             out = np.zeros(np.broadcast_shapes(np.shape(north), np.shape(east)))
             return np.where(np.isfinite(self.bathymetry.depth_at(north, east)), out, np.nan)
-        field = self._field  # type: ignore[has-type]
+        field = self._field  # type: ignore[attr-defined]
         if field is None:
             m = self.bathymetry
             field = BathymetryMap(m.north, m.east, np.where(np.isfinite(m.depth), self.std, np.nan),

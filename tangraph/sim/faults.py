@@ -20,7 +20,7 @@ done (kind, pings, size), so a run can be scored against it.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 
@@ -115,13 +115,13 @@ def outlier_blocks(
     shift, low, high = _block_sizes(shift, bias)
     phase = int(rng.integers(block))
     slots = (n - phase) // block
-    firsts = phase + block * np.sort(rng.choice(slots, size=count, replace=False)) if count else []
+    firsts: Any = phase + block * np.sort(rng.choice(slots, size=count, replace=False)) if count else []
     forward, starboard = survey.beam_forward.copy(), survey.beam_starboard.copy()
     depth = survey.beam_depth.copy()
     records = []
     for first in (int(f) for f in firsts):
         pings = slice(first, first + block)
-        record = {"kind": kind, "first": first, "last": first + block - 1}
+        record: dict[str, Any] = {"kind": kind, "first": first, "last": first + block - 1}
         if kind == "footprint_shift":
             direction = rng.uniform(0.0, 2.0 * np.pi)  # world frame, clockwise from north
             north, east = shift * np.cos(direction), shift * np.sin(direction)
