@@ -108,7 +108,12 @@ def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
         assert meta["n_fixes_accepted"] >= 0.8 * len(meta["fixes"])
         assert isinstance(meta["fixes"][0], FixRecord) and isinstance(meta["fixes"][0].status, FixStatus)
         assert all(f.index in meta["key_indices"] for f in meta["fixes"])
-        assert 0.3 < mean_nees(track, truth) < 8.0  # 2 for an honest covariance
+        # one run's ANEES over its correlated poses has no chi-square band; the bounds cover
+        # what 200 seeds of this set-up measured (1st-99th percentile: isam2 1.20-4.82, smoother
+        # 0.85-2.50; extremes 1.17-5.17 and 0.74-2.52) with a margin. Their means over seeds are
+        # checked in test_covariances_over_seeds_match_the_measured_anees (slow).
+        lo, hi = {"isam2": (1.0, 6.0), "smoother": (0.6, 3.0)}[method]
+        assert lo < mean_nees(track, truth) < hi, (method, mean_nees(track, truth))
     assert {"total", "per_step", "per_step_p99"} <= set(online.timings)
     # heading bias (1 deg) is estimated: the smoothed heading error is well below it
     assert np.abs(np.mean(smoothed.pose[:, 2] - truth[:, 2])) < np.deg2rad(0.5)
@@ -243,13 +248,31 @@ def test_config_is_validated(changes):
 
 
 @pytest.mark.slow
-def test_covariances_are_honest_over_seeds(rough_map):
-    """Over several seeded surveys both tracks beat DR and the smoother's ANEES is near 2."""
+def test_covariances_over_seeds_match_the_measured_anees(rough_map):
+    """Over 20 seeded surveys both tracks beat DR, and the mean over the seeds of each track's
+    ANEES lies within 3 Monte Carlo standard errors of its value measured over 200 seeds.
+
+    A consistent covariance gives an expected ANEES of 2 (each pose's NEES has mean 2, however
+    correlated the poses are), but neither estimator is consistent here, and the bands say so
+    rather than hide it: over seeds 0-199 the smoother's ANEES averages 1.48 (standard deviation
+    of one run's 0.36, so 1.48 +- 0.03: under-confident, its covariance 1.35 times too large in
+    the NEES sense) and iSAM2's 2.54 (sd 0.77, 2.54 +- 0.05: over-confident by a factor 1.27).
+    With R = 20 runs the standard error of the mean is sd / sqrt(20): 0.08 and 0.17, so the
+    bands are 1.48 +- 0.24 and 2.54 +- 0.52 (20-seed block means measured: 1.39-1.63 and
+    2.19-2.83). A change that made either consistent (ANEES 2) fails this test on purpose:
+    move the band to 2 +- 3 sd / sqrt(20) then.
+
+    The final pose's NEES, a chi-square(2) sample per run if the covariance is right, averages
+    2.77 (smoother) and 2.92 (isam2) over the 200 seeds, +-0.14 for chi-square(2): over-confident
+    at the end by a factor ~1.4 too; 20 runs (standard error 0.6 at the measured spread) cannot
+    resolve that, so it is not asserted here.
+    """
     from tangraph.sim.scenario import simulate
     from tests.graph.conftest import small_scenario
 
+    runs = 20
     anees = {"isam2": [], "smoother": []}
-    for seed in range(5):
+    for seed in range(runs):
         survey = simulate(small_scenario(), rng=np.random.default_rng(100 + seed), bathymetry=rough_map)
         truth = survey.true_pose
         dr = float(np.sqrt(np.mean(np.sum((survey.dr_pose[:, :2] - truth[:, :2]) ** 2, axis=1))))
@@ -257,8 +280,9 @@ def test_covariances_are_honest_over_seeds(rough_map):
         for track in (navigate_online(survey, rough_map, config), smooth_survey(survey, rough_map, config)):
             assert rmse(track, truth) < dr / 3
             anees[track.method].append(mean_nees(track, truth))
-    assert 0.5 < np.mean(anees["smoother"]) < 4.0
-    assert 0.5 < np.mean(anees["isam2"]) < 8.0
+    for method, measured, sd in (("smoother", 1.48, 0.36), ("isam2", 2.54, 0.77)):
+        half = 3 * sd / np.sqrt(runs)
+        assert abs(np.mean(anees[method]) - measured) < half, (method, np.mean(anees[method]))
 
 
 def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):

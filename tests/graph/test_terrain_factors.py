@@ -159,7 +159,11 @@ def test_every_sounding_recovers_a_start_error_on_textured_terrain():
     error = track.pose[:, :2] - truth[:, :2]
     assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < 0.2
     nees = np.einsum("ki,kij,kj->k", error, np.linalg.inv(track.covariance[:, :2, :2]), error)
-    assert np.mean(nees) < 6.0
+    # one run's ANEES: over 60 seeds of the sounding noise (the DR, its 6 m start error and the
+    # tide fixed, so the Monte Carlo is conditional on them and 2 is not its expected value) it
+    # measured mean 1.05, sd 0.70, 1st-99th percentile 0.23-2.94, extremes 0.20-3.18; the band
+    # covers that with a margin (covariance 10x too large or too small leaves it)
+    assert 0.15 < np.mean(nees) < 4.0, np.mean(nees)
     assert track.meta["soundings"]["tide"] == pytest.approx(0.3, abs=0.02)
     from tangraph.navigation import track_summary
 
