@@ -153,8 +153,9 @@ class GraphConfig:
     confirm_probability : float or None
         The online navigator uses a fix at once when its NIS against the prediction is below
         the ``chi2(2)`` quantile of this probability; one between that and the gate waits for the
-        next accepted fix to agree with it through the DR (it is used then, late, or dropped as
-        ``UNCONFIRMED``): a fix from a window spoiled by a few bad pings is seldom confirmed.
+        next accepted fix, as surprising, to agree with it through the DR (it is used then, late,
+        or dropped as ``UNCONFIRMED``): a fix from a window spoiled by a few bad pings is seldom
+        confirmed, and a vague fix, which agrees with the prediction as well, confirms nothing.
         None: every fix within the gate is used at once (default 0.9).
     misfit_ratio : float or None
         A fix whose residual std at its best match exceeds this many times the navigation
