@@ -319,9 +319,14 @@ def _correlation_sums(north, east, weight, length: float) -> np.ndarray:
     corners = [(0, 0, (1 - ty) * (1 - tx)), (0, 1, (1 - ty) * tx), (1, 0, ty * (1 - tx)), (1, 1, ty * tx)]
     if weight.ndim == 2:  # one channel per column: the corners' shares broadcast over them
         corners = [(a, b, beta[:, None]) for a, b, beta in corners]
-    density = np.zeros(shape + weight.shape[1:])
-    for a, b, beta in corners:
-        np.add.at(density, (i + a, j + b), weight * beta)
+    columns = weight.reshape(weight.shape[0], -1)
+    density = np.zeros((shape[0] * shape[1], columns.shape[1]))
+    for a, b, beta in corners:  # bilinear splat: a weighted count per cell, channel by channel
+        flat = (i + a) * shape[1] + (j + b)
+        shares = columns * np.reshape(beta, (-1, 1))
+        for c in range(columns.shape[1]):
+            density[:, c] += np.bincount(flat, weights=shares[:, c], minlength=density.shape[0])
+    density = density.reshape(shape + weight.shape[1:])
     half = int(np.ceil(reach / cell))
     kernel = _matern_kernel(float(length), float(cell), half)
     kernel = kernel.reshape(kernel.shape + (1,) * (weight.ndim - 1))
