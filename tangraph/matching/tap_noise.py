@@ -67,6 +67,16 @@ def _gradient(bathymetry, patch, position) -> np.ndarray:
     return bathymetry.gradient_at(position[0] + patch.offsets[:, 0], position[1] + patch.offsets[:, 1])
 
 
+def _centred(g: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """The gradients ``g[ok]`` with their mean removed (the tide estimated with the fix) and their
+    information ``g^T g``; None with fewer than 3 or when it is singular."""
+    if ok.sum() < 3:
+        return None
+    g = g[ok] - g[ok].mean(axis=0)
+    information = g.T @ g
+    return None if np.linalg.cond(information) > 1e12 else (g, information)
+
+
 def _window_sandwich(g, s2, patch, position) -> float | None:
     """How much the map error the window's own soundings share among themselves widens its
     likelihood: the mean generalised eigenvalue of the least-squares fix's covariance with that
@@ -76,12 +86,10 @@ def _window_sandwich(g, s2, patch, position) -> float | None:
     if g is None or patch.error is None:
         return None
     ok = np.all(np.isfinite(g), axis=1)
-    if ok.sum() < 3:
+    centred = _centred(g, ok)
+    if centred is None:
         return None
-    g = g[ok] - g[ok].mean(axis=0)
-    information = g.T @ g
-    if np.linalg.cond(information) > 1e12:
-        return None
+    g, information = centred
     from tangraph.sensors.terrain import shared_quadratic
 
     offsets = patch.offsets[ok]
@@ -98,12 +106,10 @@ def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
     if g is None or shared is None or not np.any(shared > 0):
         return None
     ok = np.all(np.isfinite(g), axis=1) & np.isfinite(shared)
-    if ok.sum() < 3:
+    centred = _centred(g, ok)
+    if centred is None:
         return None
-    g = g[ok] - g[ok].mean(axis=0)
-    information = g.T @ g
-    if np.linalg.cond(information) > 1e12:
-        return None
+    g, information = centred
     inverse = np.linalg.inv(information)
     sandwich = inverse @ ((g * (s2 + shared[ok])[:, None]).T @ g) @ inverse
     ratio = float(np.trace(information @ sandwich) / (2.0 * s2))
