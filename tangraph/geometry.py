@@ -1,5 +1,5 @@
 """Plane geometry of tangraph's poses, written once: rotations, angle wrapping, SE(2) composition,
-the DR calibration's similarity and the Mahalanobis distance.
+the DR calibration's similarity, the Mahalanobis distance and its gates.
 
 The conventions are those of :doc:`/conventions`: positions are ``(north, east)`` in metres, a
 heading ``psi`` is in radians clockwise from north, a pose is ``(north, east, psi)`` and a body
@@ -9,6 +9,8 @@ function takes arrays and works over their leading axes (broadcast where it says
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 __all__ = [
@@ -16,6 +18,7 @@ __all__ = [
     "body_to_world",
     "compose",
     "from_dr_frame",
+    "gate_threshold",
     "mahalanobis2",
     "rotate",
     "rotation_matrix",
@@ -207,3 +210,15 @@ def mahalanobis2(error, cov) -> np.ndarray:
     else:
         x = np.linalg.solve(c, e[..., None])[..., 0]
     return np.einsum("...i,...i->...", e, x)
+
+
+def gate_threshold(probability: float | None) -> float:
+    """The ``chi2(2)`` quantile of a gate on a squared Mahalanobis distance in the plane
+    (``-2 log(1 - p)``, exact for two degrees of freedom); inf without a gate (None).
+
+    Examples
+    --------
+    >>> round(gate_threshold(0.999), 3), gate_threshold(None)
+    (13.816, inf)
+    """
+    return math.inf if probability is None else float(-2.0 * math.log1p(-float(probability)))

@@ -10,6 +10,7 @@ calibration estimate (:func:`calibration_estimate`).
 from __future__ import annotations
 
 import dataclasses
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
@@ -17,6 +18,9 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.filters.config import check_count, check_number
 from tangraph.filters.model import FilterModel
+
+if TYPE_CHECKING:
+    from tangraph.filters.fixes import HeldFix
 
 __all__ = [
     "Belief",
@@ -45,7 +49,8 @@ class Belief:
     depths of each particle and ``measured (L,)`` the measured ones (SJCPF; ``L = 0`` otherwise),
     of which the last ``n_history`` are filled; ``n_fixes`` batch fixes absorbed (TERCOM-PF);
     ``calibration (N, 2)`` each particle's constant DR errors ``(k, b)`` (speed scale, heading
-    error in rad, DR minus true; None: zeros).
+    error in rad, DR minus true; None: zeros); ``held`` a batch fix waiting to be confirmed
+    (TERCOM-PF, :func:`tangraph.filters.fixes.decide_fix`; resampling takes its anchor along).
     """
 
     particles: np.ndarray
@@ -57,6 +62,7 @@ class Belief:
     n_history: int = 0
     n_fixes: int = 0
     calibration: np.ndarray | None = None
+    held: HeldFix | None = None
 
     def __post_init__(self) -> None:
         if self.calibration is None:
@@ -110,6 +116,7 @@ class Belief:
             tide=self.tide[index],
             history=self.history[index] if self.history.shape[1] else np.empty((n, 0)),
             calibration=self.calibration[index],
+            held=None if self.held is None else self.held.take(index),
         )
 
     def replace(self, **changes) -> Belief:

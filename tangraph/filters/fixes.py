@@ -8,36 +8,64 @@ the larger of 3 map cells and the model's ``initial_position_std``), around the 
 attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``, ``position``,
 ``covariance``, ``accepted``, ``reason``: ``"accepted"``, the fix's quality reasons, or
 ``"failed: ..."`` when no match could be made).
+
+What a filter does with an accepted fix is decided by :func:`decide_fix`, the rule the online
+graph's fix policy (:mod:`tangraph.graph.policy`) applies to its windows, without the graph: a fix
+whose NIS against the prediction is within the ``confirm_probability`` quantile of ``chi2(2)`` is
+used at once; a surprising one is *held* (:class:`HeldFix`) until a later accepted fix, as
+surprising to the prediction, agrees with it through the dead reckoning between them (NIS within
+the ``gate`` under both fixes' covariances and the DR displacement's): both then say the
+prediction is wrong, and the later fix is used. A held fix is dropped when a later accepted fix
+agrees with the prediction and not with it, or none confirms it within ``HOLD_ATTEMPTS`` fix
+attempts; a later fix that agrees with both (a vague one) is used and tells nothing about it. One wrong match
+on a map whose error lets a false basin win (a poorly mapped gap) is then never taken, while two
+agreeing matches still relocalise a filter whose prediction is wrong.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import weakref
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.config import check_count, check_number
+from tangraph.geometry import gate_threshold, mahalanobis2
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
 from tangraph.sensors import survey_map_error
 from tangraph.survey import Survey
 
-__all__ = ["attempt_fix", "check_fix_search", "fix_due", "fix_window"]
+__all__ = [
+    "HOLD_ATTEMPTS",
+    "FixDecision",
+    "HeldFix",
+    "attempt_fix",
+    "check_fix_search",
+    "decide_fix",
+    "fix_due",
+    "fix_window",
+]
 
 _log = logging.getLogger(__name__)
 
 
-FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_width", "max_half_width")
+FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_width", "max_half_width",
+              "confirm_probability", "gate")
+
+#: Fix attempts after a held fix within which a later fix must confirm it.
+HOLD_ATTEMPTS = 2
 
 
 def check_fix_search(config) -> None:
     """Validate (in ``__post_init__``) the fix-search fields of a config: ``window`` (pings per
     fix; None: :func:`fix_window`), ``fix_interval`` (pings between fixes; None: ``window``),
     ``criterion`` (mle or msd), ``search_sigmas``, ``min_half_width`` (None: 3 cells or the start std),
-    ``max_half_width``."""
+    ``max_half_width``, ``confirm_probability`` (None or in (0, 1); :func:`decide_fix`) and
+    ``gate`` (> 0)."""
     if config.window is not None:
         check_count(config, "window")
     if config.fix_interval is not None:
@@ -46,6 +74,13 @@ def check_fix_search(config) -> None:
     check_number(config, "max_half_width", open_low=True)
     if config.min_half_width is not None:
         check_number(config, "min_half_width", open_low=True)
+    check_number(config, "gate", open_low=True)
+    if config.confirm_probability is not None and check_number(
+        config, "confirm_probability", open_low=True, high=1.0
+    ) == 1.0:
+        raise TangraphError(
+            f"{type(config).__name__}: confirm_probability must be None or lie in (0, 1), got 1.0"
+        )
     if not hasattr(config, "criterion"):
         return
     try:
@@ -129,3 +164,74 @@ def attempt_fix(
         reason="accepted" if fix.accepted else "; ".join(fix.quality.reasons),
     )
     return fix, record
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class HeldFix:
+    """A surprising fix waiting to be confirmed (:func:`decide_fix`): the ``fix``, the ping
+    ``index`` it ends at, the fix ``attempts`` made since, and for a particle filter the
+    ``anchor (N, 2)``: each particle's position then (its displacement since is the dead
+    reckoning's, whatever the weights did; resampling takes it along, :meth:`take`)."""
+
+    fix: TapFix
+    index: int
+    attempts: int = 0
+    anchor: np.ndarray | None = None
+
+    def take(self, index: np.ndarray) -> HeldFix:
+        """The same held fix after the particles were resampled to ``index``."""
+        anchor = None if self.anchor is None else self.anchor[index]
+        return dataclasses.replace(self, anchor=anchor)
+
+
+class FixDecision(NamedTuple):
+    """What :func:`decide_fix` decided: ``action`` (``"use"``, ``"hold"`` or ``"confirm"``: use
+    this fix, which confirms the held one), the ``held`` fix after it, the fix's ``nis`` against
+    the prediction and the held fix ``dropped`` unconfirmed (None: none)."""
+
+    action: str
+    held: HeldFix | None
+    nis: float
+    dropped: HeldFix | None = None
+
+
+def decide_fix(
+    fix: TapFix,
+    index: int,
+    prediction: np.ndarray,
+    covariance: np.ndarray,
+    held: HeldFix | None,
+    displacement: tuple[np.ndarray, np.ndarray] | None,
+    config,
+) -> FixDecision:
+    """What to do with the accepted ``fix`` of the window ending at ping ``index`` (see the module
+    docstring): ``prediction`` and ``covariance`` are the predicted position and its covariance,
+    ``held`` the fix waiting to be confirmed and ``displacement`` the mean ``(2,)`` and covariance
+    ``(2, 2)`` of the dead-reckoned displacement since it was held (None without one). ``config``
+    gives ``confirm_probability`` (None: every fix is used at once) and ``gate`` (a confirming
+    fix's NIS against the held fix moved by the DR). Pure: nothing is changed."""
+    nis = float(mahalanobis2(fix.position - prediction, covariance + fix.covariance))
+    if config.confirm_probability is None:
+        return FixDecision("use", None, nis)
+    surprising = nis > gate_threshold(config.confirm_probability)
+    if held is not None:
+        assert displacement is not None  # given with a held fix
+        shift, spread = displacement
+        error = fix.position - (held.fix.position + shift)
+        agrees = float(mahalanobis2(error, held.fix.covariance + spread + fix.covariance)) <= config.gate
+        if agrees and surprising:
+            return FixDecision("confirm", None, nis)
+        if agrees:  # with the held fix and the prediction alike: it tells them apart no more
+            return FixDecision("use", waited(held), nis)
+    dropped = held
+    if not surprising:
+        return FixDecision("use", None, nis, dropped)
+    return FixDecision("hold", HeldFix(fix, int(index)), nis, dropped)
+
+
+def waited(held: HeldFix | None) -> HeldFix | None:
+    """The held fix after one more fix attempt that did not settle it: None (dropped) after
+    :data:`HOLD_ATTEMPTS` of them."""
+    if held is None or held.attempts + 1 >= HOLD_ATTEMPTS:
+        return None
+    return dataclasses.replace(held, attempts=held.attempts + 1)

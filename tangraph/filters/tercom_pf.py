@@ -9,13 +9,21 @@ predicted mean, over ``search_sigmas`` times its std. What a fix does:
 
 - a fix that is not accepted (``TapFix.accepted``: informative and unimodal) or could not be
   made does nothing (``meta["n_fixes_rejected"]``);
-- the **first** accepted fix initialises the cloud: the particles are re-drawn from
-  ``N(fix, R)``, ``R`` the fix's covariance (before it the cloud is the dead-reckoned prior);
-- a later accepted fix whose squared Mahalanobis distance to the predicted mean, under ``P + R``
-  (``P`` the cloud's covariance), exceeds ``gate`` (default 13.8, chi2(2) at 0.999) re-centres
-  the cloud: the particles are re-drawn from ``N(fix, R)`` (``meta["n_recentred"]``);
-- otherwise the particles are re-weighted by the fix's Gaussian likelihood
-  ``exp(-(x - fix)^T R^-1 (x - fix) / 2)``, then resampled if ESS < ``ess_threshold * N``.
+- an accepted fix is judged against the cloud's prediction (:func:`tangraph.filters.fixes.decide_fix`,
+  the online graph's rule): one within the ``confirm_probability`` quantile of its NIS re-weights
+  the particles by its Gaussian likelihood ``exp(-(x - fix)^T R^-1 (x - fix) / 2)`` (``R`` the
+  fix's covariance), then they are resampled if ESS < ``ess_threshold * N``; when fewer than
+  :data:`MIN_FIX_ESS` of them would carry the weight (a cloud far wider than the fix), the
+  positions are re-drawn from the Gaussian product of the cloud's moments and the fix instead;
+- a surprising fix is held (``meta["n_fixes_held"]``) until a later accepted fix, as surprising,
+  agrees with it through the particles' own displacements since (NIS within ``gate``, default
+  13.8: chi2(2) at 0.999); the prediction is then wrong, and the cloud is re-centred: its
+  positions re-drawn from ``N(fix, R)`` of the later fix (``meta["n_recentred"]``). A held fix
+  that is not confirmed is dropped;
+- ``confirm_probability=None`` is the plain TERCOM-PF: the first accepted fix initialises the
+  cloud (re-drawn from ``N(fix, R)``), a later one beyond ``gate`` of the prediction
+  (``P + R``, ``P`` the cloud's covariance) re-centres it, any other re-weights it (however few
+  particles carry the weight then).
 
 The particles carry the constant DR errors ``(k, b)`` and move by their calibrated increments
 as in every filter; a fix re-weights them by position only, so the calibration is learnt through
@@ -36,8 +44,9 @@ import functools
 import numpy as np
 
 from tangraph.filters.belief import Belief, weighted_moments
-from tangraph.filters.config import ParticleConfig, check_number
-from tangraph.filters.fixes import attempt_fix, check_fix_search, fix_due, fix_window
+from tangraph.filters.config import ParticleConfig
+from tangraph.filters.fixes import attempt_fix, check_fix_search, decide_fix, fix_due, fix_window, waited
+from tangraph.filters.likelihood import effective_sample_size
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.runner import run_particle_filter
 from tangraph.filters.steps import StepResult, predict, resample_if_needed, reweight
@@ -48,7 +57,10 @@ from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["TercomPFConfig", "tercom_pf", "tercom_pf_step"]
+__all__ = ["MIN_FIX_ESS", "TercomPFConfig", "tercom_pf", "tercom_pf_step"]
+
+#: The counts a TERCOM-PF run adds to its track's ``meta``.
+COUNTS = ("n_fixes_accepted", "n_fixes_rejected", "n_fixes_held", "n_recentred")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -68,8 +80,12 @@ class TercomPFConfig(ParticleConfig):
         Search half-width: ``search_sigmas`` times the cloud's std, within
         ``[min_half_width (None: the larger of 3 map cells and the model's initial_position_std),
         max_half_width]`` metres.
+    confirm_probability : float or None
+        A fix whose NIS against the prediction exceeds the ``chi2(2)`` quantile of this
+        probability is held until a later one confirms it; None: the plain TERCOM-PF.
     gate : float
-        Squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
+        The NIS within which a later fix confirms a held one; with ``confirm_probability=None``,
+        the squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
     """
 
     window: int | None = None
@@ -78,17 +94,48 @@ class TercomPFConfig(ParticleConfig):
     search_sigmas: float = 3.0
     min_half_width: float | None = None
     max_half_width: float = 1000.0
+    confirm_probability: float | None = 0.9
     gate: float = 13.8
 
     def __post_init__(self) -> None:
         super().__post_init__()
         check_fix_search(self)
-        check_number(self, "gate", open_low=True)
+
+
+#: Fewest effective particles a fix may leave by re-weighting; fewer: the positions are re-drawn.
+MIN_FIX_ESS = 0.01
 
 
 def _draw(centre: np.ndarray, covariance: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
     chol = np.linalg.cholesky(covariance + 1e-9 * np.eye(2))
     return centre + rng.standard_normal((n, 2)) @ chol.T
+
+
+def _redrawn(belief: Belief, centre: np.ndarray, covariance: np.ndarray, rng: np.random.Generator) -> Belief:
+    """The belief with its positions re-drawn from ``N(centre, covariance)``, equally weighted
+    (each particle keeps its calibration and tide)."""
+    n = belief.n_particles
+    return belief.replace(particles=_draw(centre, covariance, n, rng), log_weights=np.full(n, -np.log(n)))
+
+
+def _use(belief: Belief, fix, mean: np.ndarray, cov: np.ndarray, where: str,
+         rng: np.random.Generator) -> tuple[Belief, str]:
+    """The belief after a fix that is used (see the module docstring) and what was done."""
+    log_factor = -0.5 * mahalanobis2(belief.particles - fix.position, fix.covariance)
+    weighted = reweight(belief, log_factor, where=where)
+    if effective_sample_size(weighted.weights) >= MIN_FIX_ESS * belief.n_particles:
+        return weighted, "reweight"
+    gain = np.linalg.solve(cov + fix.covariance, cov).T  # the Gaussian product of cloud and fix
+    posterior = cov - gain @ cov
+    centre = mean + gain @ (fix.position - mean)
+    return _redrawn(belief, centre, 0.5 * (posterior + posterior.T), rng), "redraw"
+
+
+def _displacement(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted mean ``(2,)`` and covariance ``(2, 2)`` of the particles' displacements since
+    the held fix's anchor."""
+    assert belief.held is not None and belief.held.anchor is not None
+    return weighted_moments(belief.replace(particles=belief.particles - belief.held.anchor))
 
 
 def tercom_pf_step(
@@ -116,37 +163,48 @@ def tercom_pf_step(
         survey, bathymetry, ping.index, prior_mean, prior_cov, config, window,
         initial_std=model.navigation.initial_position_std, model=model.navigation,
     )  # fmt: skip
-    counts = {"n_fixes_accepted": 0, "n_fixes_rejected": 0, "n_recentred": 0}
+    counts = dict.fromkeys(COUNTS, 0)
     if fix is None or not fix.accepted:
         counts["n_fixes_rejected"] = 1
-        mean, cov = prior_mean, prior_cov
-        new, index, ess = resample_if_needed(moved, config, rng=rng, model=model)
-        return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=(record,))
-    counts["n_fixes_accepted"] = 1
-    r = fix.covariance
-    d = fix.position - prior_mean
-    distance2 = float(mahalanobis2(d, prior_cov + r))
-    record["mahalanobis2"] = distance2
-    n = moved.n_particles
-    if moved.n_fixes == 0 or distance2 > config.gate:
-        action = "initialise" if moved.n_fixes == 0 else "recentre"
-        counts["n_recentred"] = int(action == "recentre")
-        updated = moved.replace(
-            particles=_draw(fix.position, r, n, rng),
-            log_weights=np.full(n, -np.log(n)),
-            n_fixes=moved.n_fixes + 1,
-        )
+        updated, action = moved.replace(held=waited(moved.held)), "none"
     else:
-        action = "reweight"
-        e = moved.particles - fix.position
-        log_factor = -0.5 * mahalanobis2(e, r)
-        updated = reweight(moved, log_factor, where=f"ping {ping.index} (fix)").replace(
-            n_fixes=moved.n_fixes + 1
-        )
+        counts["n_fixes_accepted"] = 1
+        updated, action = _judged(moved, fix, record, prior_mean, prior_cov, config, ping.index, rng)
     record["action"] = action
+    counts["n_recentred"] = int(action == "recentre")
+    counts["n_fixes_held"] = int(action == "hold")
     mean, cov = weighted_moments(updated)
     new, index, ess = resample_if_needed(updated, config, rng=rng, model=model)
     return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=(record,))
+
+
+def _judged(moved: Belief, fix, record: dict, mean: np.ndarray, cov: np.ndarray, config: TercomPFConfig,
+            index: int, rng: np.random.Generator) -> tuple[Belief, str]:
+    """The belief after the accepted ``fix`` of ping ``index`` and the action taken (see the
+    module docstring); the fix's NIS and the decision are written into its ``record``."""
+    if config.confirm_probability is None:  # the plain TERCOM-PF
+        record["mahalanobis2"] = nis = float(mahalanobis2(fix.position - mean, cov + fix.covariance))
+        if moved.n_fixes == 0 or nis > config.gate:
+            action = "initialise" if moved.n_fixes == 0 else "recentre"
+            updated = _redrawn(moved, fix.position, fix.covariance, rng)
+        else:
+            log_factor = -0.5 * mahalanobis2(moved.particles - fix.position, fix.covariance)
+            updated, action = reweight(moved, log_factor, where=f"ping {index} (fix)"), "reweight"
+        return updated.replace(n_fixes=moved.n_fixes + 1), action
+    displacement = None if moved.held is None else _displacement(moved)
+    decision = decide_fix(fix, index, mean, cov, moved.held, displacement, config)
+    record.update(mahalanobis2=decision.nis, decision=decision.action)
+    if decision.dropped is not None:
+        record["dropped"] = decision.dropped.index
+    if decision.action == "hold":
+        held = dataclasses.replace(decision.held, anchor=moved.particles.copy())  # type: ignore[type-var]
+        return moved.replace(held=held), "hold"
+    if decision.action == "confirm":
+        record["confirms"] = moved.held.index  # type: ignore[union-attr]
+        updated, action = _redrawn(moved, fix.position, fix.covariance, rng), "recentre"
+    else:
+        updated, action = _use(moved, fix, mean, cov, f"ping {index} (fix)", rng)
+    return updated.replace(n_fixes=moved.n_fixes + 1, held=decision.held), action
 
 
 def tercom_pf(
@@ -172,5 +230,5 @@ def tercom_pf(
         rng=rng,
         model=model,
         progress=progress,
-        count_keys=("n_fixes_accepted", "n_fixes_rejected", "n_recentred"),
+        count_keys=COUNTS,
     )

@@ -21,7 +21,6 @@ from typing import Any
 
 import gtsam
 import numpy as np
-from scipy import stats
 
 from tangraph.errors import TangraphError
 from tangraph.geometry import compose, mahalanobis2, rotation_matrix  # compose: re-exported
@@ -162,6 +161,3 @@ def nis(error, cov) -> float:
     return float(mahalanobis2(error, cov))
 
 
-def gate_threshold(probability: float | None) -> float:
-    """The ``chi2(2)`` quantile of a gate (inf without a gate)."""
-    return np.inf if probability is None else float(stats.chi2.ppf(probability, 2))

@@ -13,8 +13,9 @@ import enum
 
 import numpy as np
 
+from tangraph.geometry import gate_threshold
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.factors import check_fix_covariance, gate_threshold, nis
+from tangraph.graph.factors import check_fix_covariance, nis
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import MatchingError, TapFix, tap_fix_patch, window_patch
 from tangraph.sensors import DeadReckoningModel, increment_covariance, rotation_matrix

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
-from tangraph.graph.factors import gate_threshold
+from tangraph.geometry import gate_threshold
 from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
 
 if TYPE_CHECKING:

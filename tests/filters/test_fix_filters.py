@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import types
 
 import numpy as np
 import pytest
@@ -23,7 +24,9 @@ from tangraph.filters import (
     survey_pings,
     tercom_pf_step,
 )
-from tangraph.filters.fixes import fix_due, fix_window
+from tangraph.filters.belief import weighted_moments
+from tangraph.filters.fixes import decide_fix, fix_due, fix_window
+from tangraph.filters.mle import _update
 from tangraph.filters.steps import predict
 from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
@@ -44,8 +47,8 @@ def tercom_steps(config, belief, upto):
     return results
 
 
-def test_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
-    config = TercomPFConfig(n_particles=500, window=5)
+def test_plain_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
+    config = TercomPFConfig(n_particles=500, window=5, confirm_probability=None)
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 15)
     fixes = [r.fixes for r in results]
@@ -61,23 +64,64 @@ def test_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it():
     assert results[0].belief.n_fixes == 0 and results[14].belief.n_fixes == 3
 
 
-def test_tercom_pf_recentres_on_a_fix_far_from_the_cloud():
-    config = TercomPFConfig(n_particles=500, window=5, gate=13.8, min_half_width=100.0)
+def test_tercom_pf_uses_a_fix_by_its_likelihood_redrawing_a_cloud_too_wide_for_it():
+    """A fix near the prediction is Bayes' update of the cloud: a 20 m cloud holds too few
+    particles inside a fix of a few metres, so the positions are drawn from the Gaussian product
+    of the cloud's moments and the fix."""
+    config = TercomPFConfig(n_particles=500, window=5)
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
+    results = tercom_steps(config, belief, 15)
+    first = results[4].fixes[0]
+    assert first["decision"] == "use" and first["action"] == "redraw"
+    prior = tercom_steps(config, belief, 4)[-1]  # the prediction the first fix was judged against
+    moved = predict(prior.belief, survey_pings(SURVEY)[4], FilterModel.from_model(MODEL, MAP, config),
+                    rng=np.random.default_rng(0))
+    mean, cov = weighted_moments(moved)
+    r = np.array(first["covariance"])
+    gain = cov @ np.linalg.inv(cov + r)
+    expected_mean, expected_cov = mean + gain @ (np.array(first["position"]) - mean), cov - gain @ cov
+    got_mean, got_cov = weighted_moments(results[4].belief)
+    se = np.sqrt(np.diag(expected_cov) / 500)  # Monte Carlo error of the drawn cloud's mean
+    assert np.all(np.abs(got_mean - expected_mean) < 4 * se)
+    np.testing.assert_allclose(np.diag(got_cov), np.diag(expected_cov), rtol=4 * np.sqrt(2 / 500))
+    assert np.hypot(*(results[14].mean - SURVEY.true_pose[14, :2])) < 5.0
+
+
+def _shifted_steps(config, upto):
+    """TERCOM-PF whose cloud is moved 40 m away after its first fix, run to ping ``upto``."""
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 5)
-    # move the cloud 40 m away after the first fix: the next fix is far outside its gate
-    shifted = results[4].belief.replace(particles=results[4].belief.particles + np.array([40.0, 0.0]))
+    belief = results[4].belief.replace(particles=results[4].belief.particles + np.array([40.0, 0.0]))
     model = FilterModel.from_model(MODEL, MAP, config)
     step = functools.partial(tercom_pf_step, survey=SURVEY, bathymetry=MAP)
     rng = np.random.default_rng(2)
-    belief = shifted
-    for ping in survey_pings(SURVEY)[5:10]:
-        result = step(belief, ping, model, config, rng=rng)
-        belief = result.belief
-    record = result.fixes[0]
+    results = []
+    for ping in survey_pings(SURVEY)[5:upto]:
+        results.append(step(belief, ping, model, config, rng=rng))
+        belief = results[-1].belief
+    return [r.fixes[0] for r in results if r.fixes], results[-1]
+
+
+def test_plain_tercom_pf_recentres_on_a_fix_far_from_the_cloud():
+    config = TercomPFConfig(n_particles=500, window=5, gate=13.8, min_half_width=100.0,
+                            confirm_probability=None)
+    (record,), result = _shifted_steps(config, 10)
     assert record["accepted"] and record["action"] == "recentre" and record["mahalanobis2"] > 13.8
     assert result.counts["n_recentred"] == 1
     assert np.hypot(*(result.mean - SURVEY.true_pose[9, :2])) < 5.0
+
+
+def test_tercom_pf_holds_a_surprising_fix_until_a_second_one_confirms_it():
+    """A cloud 40 m off: the next fix is held (the cloud stays where it is), the one after it
+    agrees with it through the particles' own displacements and is as surprising: the cloud is
+    re-centred on it."""
+    config = TercomPFConfig(n_particles=500, window=5, min_half_width=100.0)
+    (held, confirming), result = _shifted_steps(config, 15)
+    assert held["decision"] == "hold" and held["action"] == "hold" and held["mahalanobis2"] > 13.8
+    assert confirming["decision"] == "confirm" and confirming["action"] == "recentre"
+    assert confirming["confirms"] == held["index"] == 9
+    assert result.counts["n_recentred"] == 1 and result.belief.held is None
+    assert np.hypot(*(result.mean - SURVEY.true_pose[14, :2])) < 5.0
 
 
 @pytest.mark.parametrize("criterion", ["mle", "msd"])
@@ -96,10 +140,9 @@ def test_tercom_pf_records_its_fixes(criterion):
     assert np.hypot(*(track.pose[-1, :2] - SURVEY.true_pose[-1, :2])) < 5.0
 
 
-def test_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_between():
-    track = run_filter(
-        "mle", SURVEY, MAP, MLEConfig(require_accepted=False), model=MODEL, rng=np.random.default_rng(0)
-    )
+def test_plain_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_between():
+    plain = MLEConfig(require_accepted=False, confirm_probability=None, fuse=False)
+    track = run_filter("mle", SURVEY, MAP, plain, model=MODEL, rng=np.random.default_rng(0))
     fixes = track.meta["fixes"]
     assert [f["index"] for f in fixes] == [4, 9, 14, 19, 24, 29]
     for f in fixes:
@@ -200,3 +243,90 @@ def test_progress_bar(capsys):
     config = PFConfig(n_particles=50)
     run_filter("pf", SURVEY, MAP, config, model=MODEL, rng=np.random.default_rng(0), progress=True)
     assert "pf" in capsys.readouterr().err
+
+
+def _fix(position, std):
+    """What :func:`~tangraph.filters.fixes.decide_fix` reads of a fix."""
+    return types.SimpleNamespace(position=np.asarray(position, float), covariance=np.eye(2) * std**2)
+
+
+DECIDE = MLEConfig()  # confirm_probability 0.9 (NIS 4.61), gate 13.8
+STILL = (np.zeros(2), np.zeros((2, 2)))  # no displacement since the held fix
+
+
+def test_decide_fix_uses_a_fix_near_the_prediction_and_holds_a_surprising_one():
+    prediction, covariance = np.zeros(2), np.eye(2)
+    near = decide_fix(_fix([1.0, 1.0], 1.0), 9, prediction, covariance, None, None, DECIDE)
+    assert (near.action, near.held, near.dropped) == ("use", None, None) and near.nis == pytest.approx(1.0)
+    surprising = decide_fix(_fix([4.0, 0.0], 1.0), 9, prediction, covariance, None, None, DECIDE)
+    assert surprising.action == "hold" and surprising.held.index == 9 and surprising.nis == pytest.approx(8.0)
+    plain = decide_fix(_fix([40.0, 0.0], 1.0), 9, prediction, covariance, None, None,
+                       MLEConfig(confirm_probability=None))
+    assert plain.action == "use" and plain.held is None
+
+
+def test_decide_fix_confirms_a_held_fix_by_a_second_that_agrees_through_the_dead_reckoning():
+    held = decide_fix(_fix([10.0, 0.0], 1.0), 9, np.zeros(2), np.eye(2), None, None, DECIDE).held
+    prediction = np.array([0.0, 8.0])  # the DR moved 8 m east since
+    moved = (np.array([0.0, 8.0]), 0.5 * np.eye(2))
+    # as surprising, and where the held fix has moved to: confirmed
+    confirm = decide_fix(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    assert (confirm.action, confirm.held, confirm.dropped) == ("confirm", None, None)
+    # as surprising, but elsewhere: the held fix is dropped and the new one held
+    other = decide_fix(_fix([-10.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    assert other.action == "hold" and other.dropped is held and other.held.index == 14
+    # at the prediction, far from the held fix: used, the held fix dropped
+    refuted = decide_fix(_fix([0.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    assert refuted.action == "use" and refuted.dropped is held and refuted.held is None
+    # a vague fix agrees with both: used, the held fix waits one attempt more, then is dropped
+    vague = decide_fix(_fix([5.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    assert vague.action == "use" and vague.dropped is None and vague.held.attempts == 1
+    again = decide_fix(_fix([5.0, 8.0], 6.0), 19, prediction, np.eye(2), vague.held, moved, DECIDE)
+    assert again.action == "use" and again.held is None
+    assert fixes.waited(held).attempts == 1 and fixes.waited(fixes.waited(held)) is None
+    # the displacement's mean is the DR's: without it the two fixes would not agree
+    assert decide_fix(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, STILL, DECIDE).action == "hold"
+
+
+def test_mle_fuses_a_fix_as_a_kalman_update_of_position_and_calibration():
+    """The update equals the information-form posterior of ``(north, east, k, b)`` given the fix
+    as a measurement of the position."""
+    rng = np.random.default_rng(5)
+    a = rng.standard_normal((4, 4))
+    p = a @ a.T + np.diag([4.0, 4.0, 1e-3, 1e-3])
+    x = np.array([10.0, -5.0, 0.01, 0.02])
+    fix = _fix([12.0, -3.0], 1.5)
+    got_x, got_p = _update(x, p, fix, fuse=True)
+    h = np.zeros((2, 4))
+    h[:, :2] = np.eye(2)
+    info = np.linalg.inv(p) + h.T @ np.linalg.inv(fix.covariance) @ h
+    want_p = np.linalg.inv(info)
+    want_x = want_p @ (np.linalg.solve(p, x) + h.T @ np.linalg.solve(fix.covariance, fix.position))
+    np.testing.assert_allclose(got_p, want_p, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(got_x, want_x, rtol=1e-9)
+    jump_x, jump_p = _update(x, p, fix, fuse=False)
+    np.testing.assert_allclose(jump_x, [12.0, -3.0, 0.01, 0.02])
+    np.testing.assert_allclose(jump_p[:2, :2], fix.covariance)
+    assert np.all(jump_p[:2, 2:] == 0) and np.all(jump_p[2:, 2:] == p[2:, 2:])
+
+
+def test_mle_relocalises_on_two_agreeing_fixes_and_refuses_one_alone():
+    """The DR starts 60 m off with a stated 20 m: the first fix is surprising and held, the next
+    agrees with it and confirms it, and the estimate jumps there."""
+    off = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([60.0, 0.0, 0.0]))
+    config = MLEConfig(min_half_width=150.0)
+    track = run_filter("mle", off, MAP, config, model=MODEL, rng=np.random.default_rng(0))
+    decisions = [f.get("decision") for f in track.meta["fixes"]]
+    assert decisions[:2] == ["hold", "confirm"]
+    assert track.meta["fixes"][1]["confirms"] == track.meta["fixes"][0]["index"] == 4
+    np.testing.assert_allclose(track.pose[4, :2], off.dr_pose[4, :2])  # not taken alone
+    assert np.hypot(*(track.pose[-1, :2] - SURVEY.true_pose[-1, :2])) < 5.0
+
+
+def test_a_held_fixs_anchor_follows_the_particles_through_resampling():
+    belief = initial_belief([0.0, 0.0], 5.0, 6, rng=np.random.default_rng(0))
+    held = fixes.HeldFix(_fix([1.0, 2.0], 1.0), 9, anchor=belief.particles.copy())
+    index = np.array([5, 5, 0, 1, 2, 2])
+    taken = belief.replace(held=held).take(index)
+    np.testing.assert_array_equal(taken.held.anchor, belief.particles[index])
+    assert taken.held.index == 9 and belief.take(index).held is None
