@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+from typing import TypeVar
 
 import numpy as np
 
@@ -17,7 +18,7 @@ from tangraph.geometry import gate_threshold
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, nis
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix, tap_fix_patch, window_patch
+from tangraph.matching import MatchingError, TapFix, TerrainFix, tap_fix_patch, window_patch
 from tangraph.sensors import DeadReckoningModel, increment_covariance, rotation_matrix
 from tangraph.survey import Survey
 
@@ -35,7 +36,11 @@ __all__ = [
 ]
 
 
-def fix_name(fix: TapFix) -> str:
+#: A terrain fix of either front end (:class:`~tangraph.matching.TerrainFix`), kept as its own type.
+Fix = TypeVar("Fix", bound=TerrainFix)
+
+
+def fix_name(fix: TerrainFix) -> str:
     return f"fix at ping {fix.index} (window {fix.first}..{fix.index})"
 
 
@@ -132,7 +137,7 @@ class FixOutcome:
     the covariance the graph gives it; None when no fix could be made)."""
 
     record: FixRecord
-    fix: TapFix | None
+    fix: TerrainFix | None
 
     @property
     def accepted(self) -> bool:
@@ -156,8 +161,8 @@ def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_c
                          config.max_half_width_cells * cell))
 
 
-def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_jacobian,
-                 calibration_cov, overlap: float) -> TapFix:
+def window_noise(fix: Fix, survey: Survey, white: DeadReckoningModel, shape_jacobian,
+                 calibration_cov, overlap: float) -> Fix:
     """``fix`` with the covariance the graph gives it.
 
     TAP's covariance counts the information of its window's soundings; windows that share pings
@@ -178,7 +183,8 @@ def window_noise(fix: TapFix, survey: Survey, white: DeadReckoningModel, shape_j
         rot = rotation_matrix(survey.dr_pose[mid, 2])
         jac = np.asarray(shape_jacobian, float)
         grown = grown + rot @ cov @ rot.T + jac @ np.asarray(calibration_cov, float) @ jac.T
-    return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
+    # both front ends' fixes are frozen dataclasses (the protocol cannot say so)
+    return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))  # type: ignore[type-var]
 
 
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
@@ -207,7 +213,7 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 
 
-def _record(index: int, fix: TapFix | None, status: FixStatus, nis_value: float, half_width: float,
+def _record(index: int, fix: TerrainFix | None, status: FixStatus, nis_value: float, half_width: float,
             detail: str = "") -> FixRecord:
     pos = np.full(2, np.nan) if fix is None else np.asarray(fix.position, float)
     cov = np.full((2, 2), np.nan) if fix is None else np.asarray(fix.covariance, float)
@@ -221,7 +227,7 @@ def failed(index: int, error: Exception, half_width: float,
     return FixOutcome(_record(index, None, status, np.nan, half_width, str(error)), None)
 
 
-def judge_fix(fix: TapFix, predicted, predicted_cov, config: GraphConfig, half_width: float, *,
+def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, half_width: float, *,
               strict: bool = False, noise: float | None = None) -> FixOutcome:
     """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
 

@@ -41,7 +41,7 @@ from tangraph.sensors import rotation_matrix
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
-    from tangraph.matching import TapFix
+    from tangraph.matching import TerrainFix
 
 __all__ = ["agreement", "execute", "take_window", "use", "window"]
 
@@ -56,7 +56,7 @@ def _widened(joint, variance: float) -> np.ndarray:
     return joint
 
 
-def take_window(nav: GraphNavigator, k: int, pose, joint, fix: TapFix | None) -> float:
+def take_window(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None) -> float:
     """Make (or take) the fix of ping ``k`` (DR-frame ``pose`` and its ``joint`` covariance),
     judge it, let the navigator's fix policy decide and execute its actions; after a widening the
     window is judged again on the widened belief and decided again. Returns the std (m) of the

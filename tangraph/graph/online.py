@@ -42,7 +42,7 @@ from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indi
 from tangraph.graph.lost import take_window
 from tangraph.graph.policy import FixPolicy, PolicyState
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import TapFix
+from tangraph.matching import TerrainFix
 from tangraph.sensors import NavigationModel, survey_map_error, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
@@ -175,12 +175,12 @@ class GraphNavigator:
         return (to_world(pose, self.calibration, self.origin),
                 world_covariance(pose, joint, self.calibration, self.origin))
 
-    def step(self, fix: TapFix | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def step(self, fix: TerrainFix | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Process the next ping; returns its world pose ``(3,)`` and covariance ``(3, 3)``.
 
         Parameters
         ----------
-        fix : TapFix, optional
+        fix : TapFix or another TerrainFix, optional
             Use this fix of the ping (its ``index``) instead of making one; the ping becomes a key
             pose. It is judged like any other (quality flags, gate); a covariance that is not
             finite and positive definite raises a TangraphError naming the fix.
@@ -201,7 +201,7 @@ class GraphNavigator:
         self.step_times.append(_time.perf_counter() - started)
         return self.pose[k].copy(), self.covariance[k].copy()
 
-    def _start(self, fix: TapFix | None) -> None:
+    def _start(self, fix: TerrainFix | None) -> None:
         dr = self.survey.dr_pose[0]
         m = self.model
         heading_std = max(m.heading_noise, self.config.odometry_min_heading_std)
@@ -226,7 +226,7 @@ class GraphNavigator:
         self._update(0)
         self._rebase(0)
 
-    def _key_step(self, k: int, fix: TapFix | None) -> None:
+    def _key_step(self, k: int, fix: TerrainFix | None) -> None:
         prev = self.graph.keys[-1]
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
@@ -267,7 +267,7 @@ class GraphNavigator:
                 self.white, self.survey.time, self.survey.dr_pose, np.full(idx.size, k), idx)
 
     # the window's fix: made, grown and judged in tangraph.graph.online_fixes
-    def _judge(self, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
+    def _judge(self, k: int, pose, joint, fix: TerrainFix | None, strict: bool = False) -> FixOutcome:
         return online_fixes.judge(self, k, pose, joint, fix, strict)
 
     def _fix_factor(self, key: int, fix) -> gtsam.NonlinearFactor | None:
@@ -279,7 +279,7 @@ class GraphNavigator:
     def _laid(self, k: int, pose) -> np.ndarray | None:
         return online_fixes.laid_poses(self, k, pose)
 
-    def _grown(self, fix: TapFix, laid, joint) -> TapFix:
+    def _grown(self, fix: TerrainFix, laid, joint) -> TerrainFix:
         return online_fixes.grown(self, fix, laid, joint)
 
     def _update(self, k: int) -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import logging
 import time as _time
-from typing import TYPE_CHECKING, cast
+from typing import TYPE_CHECKING
 
 import gtsam
 import numpy as np
@@ -39,7 +39,7 @@ from tangraph.sensors import odometry, slope_moment, sounding_map_variances, sou
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
     from tangraph.maps.grid import BathymetryMap
-    from tangraph.matching import TapFix
+    from tangraph.matching import TerrainFix
     from tangraph.sensors import NavigationModel
     from tangraph.survey import Survey
 
@@ -51,7 +51,8 @@ log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, on
 MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
 
 
-def judge(nav: GraphNavigator, k: int, pose, joint, fix: TapFix | None, strict: bool = False) -> FixOutcome:
+def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
+          strict: bool = False) -> FixOutcome:
     """The fix of the window ending at ping ``k`` (DR-frame ``pose``, ``joint`` covariance with
     the calibration), made on the prediction (TAP or the point-mass front end) unless ``fix`` is
     given, its covariance grown for the graph (:func:`grown`) and judged (quality flags, gate,
@@ -71,8 +72,7 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TapFix | None, strict: 
     poses = None if laid is None else to_world(laid, nav.calibration, nav.origin)
     try:
         if pmf:
-            # a WindowFix carries the TapFix fields the graph reads (duck-typed)
-            made = cast("TapFix", posterior_window_fix(nav, k, poses, world, cov))
+            made: TerrainFix = posterior_window_fix(nav, k, poses, world, cov)
         else:
             made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
                             poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,
@@ -150,7 +150,7 @@ def laid_poses(nav: GraphNavigator, k: int, pose) -> np.ndarray | None:
     return compose(pose, odometry(nav.survey.dr_pose, k, np.arange(first, k + 1)))
 
 
-def grown(nav: GraphNavigator, fix: TapFix, laid, joint) -> TapFix:
+def grown(nav: GraphNavigator, fix: TerrainFix, laid, joint) -> TerrainFix:
     """The covariance the graph gives ``fix`` (:func:`~tangraph.graph.fixes.window_noise`)."""
     check_fix_covariance(fix.covariance, fix_name(fix))
     first, end = int(fix.first), int(fix.index)

@@ -54,7 +54,7 @@ from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
 
 if TYPE_CHECKING:
     from tangraph.graph.config import GraphConfig
-    from tangraph.matching import TapFix
+    from tangraph.matching import TerrainFix
 
 __all__ = [
     "LEFT_WINDOW_DETAIL",
@@ -82,7 +82,7 @@ class Candidate(NamedTuple):
 
     key: int
     first: int
-    fix: TapFix
+    fix: TerrainFix
     pose: np.ndarray
     record: int
 
@@ -113,7 +113,7 @@ class Window:
 
     @property
     def candidate(self) -> Candidate:
-        fix = cast("TapFix", self.outcome.fix)  # a held window's outcome has a fix
+        fix = cast("TerrainFix", self.outcome.fix)  # a held window's outcome has a fix
         return Candidate(self.key, int(fix.first), fix, self.pose, self.record)
 
 
@@ -258,7 +258,7 @@ class FixPolicy:
         half-width: an eighth by default, as a relocalisation candidate must be (two vague fixes
         agree with anything); a quarter for a window whose best match on the search's edge is
         evidence of being lost (a vague one there is a window of bad pings)."""
-        largest = float(np.sqrt(np.linalg.eigvalsh(cast("TapFix", outcome.fix).covariance).max()))
+        largest = float(np.sqrt(np.linalg.eigvalsh(cast("TerrainFix", outcome.fix).covariance).max()))
         return largest <= share * outcome.record.half_width / self.half_width_sigmas
 
     def decide(self, state: PolicyState, window: Window) -> tuple[PolicyState, tuple[Action, ...]]:
@@ -380,8 +380,9 @@ class FixPolicy:
         ones. A lost navigator's candidate that agrees with the belief it gave up ends the episode;
         enough agreeing candidates from disjoint windows relocalise."""
         outcome = window.outcome
+        gated = outcome.record.status is FixStatus.GATE
         usable = outcome.accepted if state.lost else (
-            outcome.record.status is FixStatus.GATE and not cast("TapFix", outcome.fix).quality.multimodal)
+            gated and not cast("TerrainFix", outcome.fix).quality.multimodal)
         if not usable or self.lost_windows is None or not self.precise(outcome):
             return state
         candidate = window.candidate

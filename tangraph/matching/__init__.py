@@ -15,6 +15,7 @@ from tangraph.matching.tap import (
     tap_fix,
     tap_fix_patch,
 )
+from tangraph.matching.tap_types import TerrainFix
 
 __all__ = [
     "CandidateGrid",
@@ -27,6 +28,7 @@ __all__ = [
     "RegionMethod",
     "TapConfig",
     "TapFix",
+    "TerrainFix",
     "criterion_at",
     "criterion_sums",
     "nees",

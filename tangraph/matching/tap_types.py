@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 import enum
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.matching.search import CandidateGrid
 
-__all__ = ["Criterion", "FixQuality", "Region", "RegionMethod", "TapConfig", "TapFix"]
+__all__ = ["Criterion", "FixQuality", "Region", "RegionMethod", "TapConfig", "TapFix", "TerrainFix"]
 
 
 class Criterion(enum.StrEnum):
@@ -101,6 +101,33 @@ class FixQuality:
     @property
     def multimodal(self) -> bool:
         return any(r.startswith("multimodal") for r in self.reasons)
+
+
+class TerrainFix(Protocol):
+    """What a window's terrain fix gives the graph, whichever front end made it (a TAP search,
+    :class:`TapFix`, or the point-mass front end's :class:`tangraph.graph.posterior_fix.WindowFix`):
+    the window of pings ``first`` to ``index``, the ``position (2,)`` and ``covariance (2, 2)``
+    (world, north/east), the ``tide`` and the soundings' residual std ``sigma`` at it, their
+    number, the ``quality`` flags and whether it is ``accepted``."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def first(self) -> int: ...
+    @property
+    def position(self) -> np.ndarray: ...
+    @property
+    def covariance(self) -> np.ndarray: ...
+    @property
+    def tide(self) -> float: ...
+    @property
+    def sigma(self) -> float: ...
+    @property
+    def n_soundings(self) -> int: ...
+    @property
+    def quality(self) -> FixQuality: ...
+    @property
+    def accepted(self) -> bool: ...
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
