@@ -68,7 +68,7 @@ def test_tercom_pf_uses_a_fix_by_its_likelihood_redrawing_a_cloud_too_wide_for_i
     """A fix near the prediction is Bayes' update of the cloud: a 20 m cloud holds too few
     particles inside a fix of a few metres, so the positions are drawn from the Gaussian product
     of the cloud's moments and the fix."""
-    config = TercomPFConfig(n_particles=500, window=5)
+    config = TercomPFConfig(n_particles=500, window=5, confirm_probability=0.9)
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 15)
     first = results[4].fixes[0]
@@ -115,7 +115,7 @@ def test_tercom_pf_holds_a_surprising_fix_until_a_second_one_confirms_it():
     """A cloud 40 m off: the next fix is held (the cloud stays where it is), the one after it
     agrees with it through the particles' own displacements and is as surprising: the cloud is
     re-centred on it."""
-    config = TercomPFConfig(n_particles=500, window=5, min_half_width=100.0)
+    config = TercomPFConfig(n_particles=500, window=5, min_half_width=100.0, confirm_probability=0.9)
     (held, confirming), result = _shifted_steps(config, 15)
     assert held["decision"] == "hold" and held["action"] == "hold" and held["mahalanobis2"] > 13.8
     assert confirming["decision"] == "confirm" and confirming["action"] == "recentre"
