@@ -48,13 +48,11 @@ __all__ = [
     "decide_fix",
     "fix_due",
     "fix_window",
+    "waited",
 ]
 
 _log = logging.getLogger(__name__)
 
-
-FIX_FIELDS = ("window", "fix_interval", "criterion", "search_sigmas", "min_half_width", "max_half_width",
-              "confirm_probability", "gate")
 
 #: Fix attempts after a held fix within which a later fix must confirm it.
 HOLD_ATTEMPTS = 2
