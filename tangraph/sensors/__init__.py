@@ -8,6 +8,7 @@ from tangraph.sensors.dead_reckoning import (
     rotation_matrix,
     simulate_dead_reckoning,
 )
+from tangraph.sensors.matern import matern_correlation, matern_field
 from tangraph.sensors.navigation_model import (
     NavigationModel,
     load_navigation_model,
@@ -24,8 +25,6 @@ from tangraph.sensors.terrain import (
     MapError,
     information_exponent,
     map_error,
-    matern_correlation,
-    matern_field,
     shared_among,
     shared_map_variances,
     shared_quadratic,

@@ -21,9 +21,9 @@ A field of std ``a(p)`` and range ``L`` has ``cov(d(p), d(q)) = a(p) a(q) rho(|p
     ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / L``  (``rho(L)`` is about 0.14),
 
 the field a second-order SPDE on the plane gives (Lindgren, Rue & Lindström 2011), so the same
-field can be simulated (:func:`matern_field`) and carried as a sparse Gaussian-Markov prior by
-the bound. A map with ``L`` of one cell or less, or a uniform std (a navigation model's
-``map_std``), has one field of range ``L``.
+field can be simulated (:func:`tangraph.sensors.matern.matern_field`) and carried as a sparse
+Gaussian-Markov prior by the bound. A map with ``L`` of one cell or less, or a uniform std (a
+navigation model's ``map_std``), has one field of range ``L``.
 
 **What the estimators use: the row-sum bound.** The exact likelihood of a survey's soundings has
 the dense covariance ``C = sounding_std^2 I + S R S`` (``R_ij = rho(|p_i - p_j|)``, ``S`` the
@@ -68,17 +68,15 @@ import functools
 import weakref
 
 import numpy as np
-from scipy import special
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.matern import _correlation_quadratic, _weighted_correlation_sums
 
 __all__ = [
     "MapError",
     "information_exponent",
     "map_error",
-    "matern_correlation",
-    "matern_field",
     "shared_among",
     "shared_map_variances",
     "slope_moment",
@@ -86,25 +84,6 @@ __all__ = [
     "sounding_variances",
     "survey_map_error",
 ]
-
-# Grid of the row sums: at least this many cells per correlation length, at most this many cells.
-_CELLS_PER_LENGTH = 6
-_MAX_CELLS = 4_000_000
-
-
-def matern_correlation(distance, length: float) -> np.ndarray:
-    """The map error's correlation ``rho(r) = (k r) K_1(k r)``, ``k = sqrt(8) / length`` (1 at 0).
-
-    Examples
-    --------
-    >>> matern_correlation([0.0, 10.0], 10.0).round(3).tolist()
-    [1.0, 0.14]
-    """
-    r = np.sqrt(8.0) * np.abs(np.asarray(distance, dtype=np.float64)) / float(length)
-    with np.errstate(invalid="ignore"):
-        out = r * special.kv(1, r)
-    return np.where(r > 0, out, 1.0)
-
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class MapError:
@@ -135,9 +114,9 @@ class MapError:
         """The map is taken as the truth (no error anywhere)."""
         return not np.any(np.nan_to_num(self.std) > 0)
 
-    @property
+    @functools.cached_property
     def typical_std(self) -> float:
-        """The median std over the map's data (m)."""
+        """The median std over the map's data (m), computed once."""
         values = self.std[np.isfinite(self.std)]
         return float(np.median(values)) if values.size else 0.0
 
@@ -293,53 +272,6 @@ def _map_variances(survey, bathymetry, model, poses) -> tuple[np.ndarray, np.nda
     return own, shared
 
 
-def _weighted_correlation_sums(north, east, weight, length: float) -> np.ndarray:
-    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b`` and non-negative weights
-    (:func:`_correlation_sums`), never below the point's own term."""
-    return np.maximum(_correlation_sums(north, east, weight, length), weight)
-
-
-def _correlation_sums(north, east, weight, length: float) -> np.ndarray:
-    """``sum_j w_j rho(|p_b - p_j|)`` for every point ``b`` (weights ``(N,)`` or ``(N, k)``, of
-    any sign), on a grid: the weights splatted bilinearly onto cells of a sixth of the range,
-    convolved (FFT) with the Matérn correlation sampled on the cells out to four ranges, and
-    read back bilinearly; each point's own term is then made exact (``rho(0) = 1``)."""
-    from scipy.signal import fftconvolve
-
-    weight = np.asarray(weight, dtype=np.float64)
-    reach = 4.0 * length
-    pad = reach + length
-    n0, e0 = north.min() - pad, east.min() - pad
-    span = max(north.max() - north.min(), east.max() - east.min()) + 2 * pad
-    cell = max(length / _CELLS_PER_LENGTH, span / np.sqrt(_MAX_CELLS))
-    shape = (int((north.max() + pad - n0) / cell) + 2, int((east.max() + pad - e0) / cell) + 2)
-    fy, fx = (north - n0) / cell, (east - e0) / cell
-    i, j = np.floor(fy).astype(np.int64), np.floor(fx).astype(np.int64)
-    ty, tx = fy - i, fx - j
-    corners = [(0, 0, (1 - ty) * (1 - tx)), (0, 1, (1 - ty) * tx), (1, 0, ty * (1 - tx)), (1, 1, ty * tx)]
-    if weight.ndim == 2:  # one channel per column: the corners' shares broadcast over them
-        corners = [(a, b, beta[:, None]) for a, b, beta in corners]
-    columns = weight.reshape(weight.shape[0], -1)
-    density = np.zeros((shape[0] * shape[1], columns.shape[1]))
-    for a, b, beta in corners:  # bilinear splat: a weighted count per cell, channel by channel
-        flat = (i + a) * shape[1] + (j + b)
-        shares = columns * np.reshape(beta, (-1, 1))
-        for c in range(columns.shape[1]):
-            density[:, c] += np.bincount(flat, weights=shares[:, c], minlength=density.shape[0])
-    density = density.reshape(shape + weight.shape[1:])
-    half = int(np.ceil(reach / cell))
-    kernel = _matern_kernel(float(length), float(cell), half)
-    kernel = kernel.reshape(kernel.shape + (1,) * (weight.ndim - 1))
-    smooth = fftconvolve(density, kernel, mode="same", axes=(0, 1))
-    sums = sum(beta * smooth[i + a, j + b] for a, b, beta in corners)
-    near = (kernel[half, half], kernel[half, half + 1], kernel[half + 1, half + 1])  # offsets 0, 1, diagonal
-    self_term = 0.0
-    for a, b, beta in corners:
-        for c, d, gamma in corners:
-            self_term = self_term + beta * gamma * near[abs(a - c) + abs(b - d)]
-    return sums - weight * self_term + weight
-
-
 def shared_quadratic(north, east, vectors, error: MapError) -> np.ndarray:
     """For points ``(N,)`` (one window's soundings) and a vector ``v_b (N, k)`` per point, the
     covariance that the map error they share among themselves gives ``sum_b v_b d(p_b)``:
@@ -357,6 +289,7 @@ def shared_quadratic(north, east, vectors, error: MapError) -> np.ndarray:
 
     >>> import numpy as np
     >>> from tangraph.maps import BathymetryMap
+    >>> from tangraph.sensors import matern_correlation
     >>> axis = np.arange(0.0, 200.0, 1.0)
     >>> flat = BathymetryMap(axis, axis, np.full((200, 200), 10.0), depth_std=np.ones((200, 200)),
     ...                      correlation_length=20.0)
@@ -376,17 +309,8 @@ def shared_quadratic(north, east, vectors, error: MapError) -> np.ndarray:
     for part in error.components():
         a = part.std_at(north, east)
         w = np.where(np.isfinite(a), a, part.typical_std)[:, None] * vectors
-        out += w.T @ (_correlation_sums(north, east, w, part.correlation_length) - w)
+        out += _correlation_quadratic(north, east, w, part.correlation_length)
     return 0.5 * (out + out.T)
-
-
-@functools.lru_cache(maxsize=32)
-def _matern_kernel(length: float, cell: float, half: int) -> np.ndarray:
-    """The Matérn correlation sampled on ``(2 half + 1)^2`` cells of side ``cell`` (read-only)."""
-    offsets = np.arange(-half, half + 1) * cell
-    kernel = matern_correlation(np.hypot(offsets[:, None], offsets[None, :]), length)
-    kernel.setflags(write=False)
-    return kernel
 
 
 def information_exponent(predicted: np.ndarray, weights: np.ndarray, map_variance) -> np.ndarray:
@@ -418,40 +342,6 @@ def information_exponent(predicted: np.ndarray, weights: np.ndarray, map_varianc
         spread = np.maximum(spread, 0.0)
         alpha = np.where(map_variance > 0, spread / (spread + 2.0 * map_variance), 1.0)
     return np.where(total >= 1e-3, alpha, 0.0)  # a sub-cloud of under 0.1 % of the weight: left out
-
-
-def matern_field(north, east, std: float, length: float, *, rng: np.random.Generator) -> np.ndarray:
-    """A zero-mean Gaussian random field with the Matérn (nu = 1) covariance of range ``length``
-    and std ``std`` on the regular grid ``north (ny,) x east (nx,)``: white noise filtered in
-    the Fourier domain by the square root of the spectral density ``(k^2 + |w|^2)^-2``, on a grid
-    padded by two ranges so the periodic wrap does not correlate opposite edges.
-
-    Examples
-    --------
-    >>> axis = np.arange(0.0, 1000.0, 5.0)
-    >>> f = matern_field(axis, axis, 0.3, 50.0, rng=np.random.default_rng(0))
-    >>> f.shape, bool(0.2 < f.std() < 0.4)
-    ((200, 200), True)
-    """
-    north = np.asarray(north, dtype=np.float64)
-    east = np.asarray(east, dtype=np.float64)
-    if not (np.isfinite(std) and std >= 0 and np.isfinite(length) and length > 0):
-        raise TangraphError(f"matern_field: std must be >= 0 and length > 0, got {std!r}, {length!r}")
-    dn = float(north[1] - north[0]) if north.size > 1 else 1.0
-    de = float(east[1] - east[0]) if east.size > 1 else 1.0
-    pad_n, pad_e = int(np.ceil(2 * length / dn)), int(np.ceil(2 * length / de))
-    shape = (north.size + 2 * pad_n, east.size + 2 * pad_e)
-    noise = rng.standard_normal(shape)
-    kappa = np.sqrt(8.0) / length
-    wn = 2 * np.pi * np.fft.fftfreq(shape[0], dn)[:, None]
-    we = 2 * np.pi * np.fft.rfftfreq(shape[1], de)[None, :]
-    amplitude = 1.0 / (kappa**2 + wn**2 + we**2)  # sqrt of the spectral density
-    field = np.fft.irfft2(np.fft.rfft2(noise) * amplitude, s=shape)
-    # normalise to the stationary variance: the filter's variance per unit white noise
-    variance = np.sum(amplitude**2 * np.where(we == 0, 1.0, 2.0)) / (shape[0] * shape[1])
-    variance -= np.sum(amplitude[:, -1] ** 2) / (shape[0] * shape[1]) if shape[1] % 2 == 0 else 0.0
-    field = field[pad_n : pad_n + north.size, pad_e : pad_e + east.size] / np.sqrt(variance)
-    return std * field
 
 
 def slope_moment(bathymetry: BathymetryMap) -> np.ndarray:

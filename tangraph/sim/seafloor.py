@@ -150,7 +150,7 @@ def _area(track: np.ndarray, source: BathymetryMap, margin: float) -> tuple[floa
 def true_seafloor(source: BathymetryMap, track: np.ndarray, settings: SeafloorSettings, *,
                   rng: np.random.Generator) -> BathymetryMap:
     """The source map around ``track (K, 2)`` at the seafloor's cell plus its random field."""
-    from tangraph.sensors.terrain import matern_field
+    from tangraph.sensors.matern import matern_field
 
     n_lo, n_hi, e_lo, e_hi = _area(track, source, settings.margin)
     crop = source.crop(north=(n_lo, n_hi), east=(e_lo, e_hi))

@@ -7,7 +7,7 @@ from tangraph.errors import TangraphError
 from tangraph.eval.map_check import MapCheck, check_map_error, window_scores
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel
-from tangraph.sensors.terrain import matern_field
+from tangraph.sensors.matern import matern_field
 from tangraph.survey import Survey
 
 AXIS_N = np.arange(0.0, 400.0, 2.0)

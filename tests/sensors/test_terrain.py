@@ -16,7 +16,7 @@ from tangraph.sensors import (
     shared_map_variances,
     sounding_variances,
 )
-from tangraph.sensors.terrain import _weighted_correlation_sums
+from tangraph.sensors.matern import _weighted_correlation_sums
 from tangraph.survey import Survey
 
 FLAT = BathymetryMap(np.arange(0.0, 1000, 10), np.arange(0.0, 1000, 10), np.full((100, 100), 30.0))
@@ -169,3 +169,17 @@ def test_the_map_error_a_windows_soundings_share_in_a_fix():
     bound = (gradients * shared_among(north, east, error)[:, None]).T @ gradients
     assert np.trace(fast) < 0.2 * np.trace(bound)
     assert shared_quadratic(north[:1], east[:1], gradients[:1], error).tolist() == [[0.0, 0.0], [0.0, 0.0]]
+
+
+def test_the_spectral_quadratic_is_the_read_back_one():
+    """``_correlation_quadratic`` (Parseval on the splatted spectra) is ``w^T (sums - w)`` of the
+    read-back sums to rounding, for weights of either sign on grids of odd and even FFT width."""
+    from tangraph.sensors.matern import _correlation_quadratic, _correlation_sums
+
+    rng = np.random.default_rng(12)
+    for width, length in ((60.0, 10.0), (173.0, 23.0), (20.0, 10.0)):  # FFT widths 100, 108, 75
+        north, east = rng.uniform(0, width, (2, 300))
+        w = rng.normal(size=(300, 3))
+        want = w.T @ (_correlation_sums(north, east, w, length) - w)
+        np.testing.assert_allclose(_correlation_quadratic(north, east, w, length), want,
+                                   rtol=1e-9, atol=1e-9 * np.abs(want).max())
