@@ -19,6 +19,7 @@ __all__ = [
     "compose",
     "from_dr_frame",
     "gate_threshold",
+    "is_precise",
     "mahalanobis2",
     "rotate",
     "rotation_matrix",
@@ -222,3 +223,18 @@ def gate_threshold(probability: float | None) -> float:
     (13.816, inf)
     """
     return math.inf if probability is None else float(-2.0 * math.log1p(-float(probability)))
+
+
+def is_precise(covariance, half_width: float, sigmas: float, share: float = 0.5) -> bool:
+    """Whether a fix of covariance ``(2, 2)`` is precise for its search: its largest std within
+    ``share / sigmas`` of the search's ``half_width`` (a search of ``sigmas`` times the
+    prediction's std: within ``share`` of that std). Two vague fixes agree with anything, so only
+    a precise one may confirm another or relocalise.
+
+    Examples
+    --------
+    >>> is_precise(np.diag([4.0, 1.0]), 40.0, 4.0), is_precise(np.diag([36.0, 1.0]), 40.0, 4.0)
+    (True, False)
+    """
+    largest = float(np.sqrt(np.linalg.eigvalsh(np.asarray(covariance, dtype=np.float64)).max()))
+    return largest <= share * float(half_width) / float(sigmas)

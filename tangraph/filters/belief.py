@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Belief",
     "calibration_estimate",
+    "calibration_moments",
     "initial_belief",
     "model_belief",
     "state_moments",
@@ -264,6 +265,14 @@ def state_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
     return mean, (d * w[:, None]).T @ d
 
 
+def calibration_moments(belief: Belief) -> tuple[np.ndarray, np.ndarray]:
+    """The weighted mean ``(2,)`` and covariance ``(2, 2)`` of the particles' ``(k, b)``."""
+    w = belief.weights
+    mean = w @ belief.calibration
+    centred = belief.calibration - mean
+    return mean, (w[:, None] * centred).T @ centred
+
+
 def calibration_estimate(belief: Belief) -> dict[str, float]:
     """The weighted mean and std of the particles' ``(k, b)``, as ``Track.meta["calibration"]``:
     ``speed_scale``, ``speed_scale_std``, ``heading_error`` (rad, DR minus true),
@@ -276,10 +285,8 @@ def calibration_estimate(belief: Belief) -> dict[str, float]:
     >>> {k: round(v, 2) for k, v in calibration_estimate(b).items()}
     {'speed_scale': 0.02, 'speed_scale_std': 0.01, 'heading_error': 0.05, 'heading_error_std': 0.0}
     """
-    w = belief.weights
-    mean = w @ belief.calibration
-    var = w @ (belief.calibration - mean) ** 2
-    std = np.sqrt(np.maximum(var, 0.0))
+    mean, cov = calibration_moments(belief)
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     return {
         "speed_scale": float(mean[0]),
         "speed_scale_std": float(std[0]),

@@ -4,7 +4,9 @@ A fix matches the window of the last ``window`` pings against the map by
 :func:`tangraph.matching.tap_fix` (the TAP grid search, criterion MSD or MLE) over a square of
 half-width ``search_sigmas`` times the predicted position std (the largest axis of the
 predicted covariance), clipped to ``[min_half_width, max_half_width]`` (``min_half_width`` None:
-the larger of 3 map cells and the model's ``initial_position_std``), around the predicted position. Each
+the larger of 3 map cells and the model's ``initial_position_std``), around the predicted position;
+the window is laid with the dead reckoning the filter's calibration estimate corrects, and the fix
+grown by what is still uncertain of it (``attempt_fix``'s ``calibration``). Each
 attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``, ``position``,
 ``covariance``, ``accepted``, ``reason``: ``"accepted"``, the fix's quality reasons, or
 ``"failed: ..."`` when no match could be made).
@@ -13,13 +15,18 @@ What a filter does with an accepted fix is decided by :func:`decide_fix`, the ru
 graph's fix policy (:mod:`tangraph.graph.policy`) applies to its windows, without the graph: a fix
 whose NIS against the prediction is within the ``confirm_probability`` quantile of ``chi2(2)`` is
 used at once; a surprising one is *held* (:class:`HeldFix`) until a later accepted fix, as
-surprising to the prediction, agrees with it through the dead reckoning between them (NIS within
-the ``gate`` under both fixes' covariances and the DR displacement's): both then say the
-prediction is wrong, and the later fix is used. A held fix is dropped when a later accepted fix
-agrees with the prediction and not with it, or none confirms it within ``HOLD_ATTEMPTS`` fix
-attempts; a later fix that agrees with both (a vague one) is used and tells nothing about it. One wrong match
-on a map whose error lets a false basin win (a poorly mapped gap) is then never taken, while two
-agreeing matches still relocalise a filter whose prediction is wrong.
+surprising to the prediction and precise for its search (its largest std within half of the
+search's half-width over ``search_sigmas``, as the graph's relocalisation demands:
+:func:`tangraph.geometry.is_precise`), agrees with it through the dead reckoning between them
+(NIS within the ``gate`` under both fixes' covariances and the DR displacement's): both then say
+the prediction is wrong, and the later fix is used. A vague fix that agrees with the held one
+and is as surprising is not used and the held fix waits (a vague fix agrees with anything near
+it: a drifted prediction's wrong match was confirmed so). A held fix is dropped when a later
+accepted fix agrees with the prediction and not with it, or none confirms it within
+``HOLD_ATTEMPTS`` fix attempts; a later fix that agrees with both (a vague one) is used and tells
+nothing about it. One wrong match on a map whose error lets a false basin win (a poorly mapped
+gap) is then never taken, while two agreeing matches still relocalise a filter whose prediction
+is wrong.
 """
 
 from __future__ import annotations
@@ -33,9 +40,19 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.config import check_count, check_number
-from tangraph.geometry import gate_threshold, mahalanobis2
+from tangraph.geometry import gate_threshold, is_precise, mahalanobis2
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import Criterion, MatchingError, TapConfig, TapFix, tap_fix
+from tangraph.matching import (
+    Criterion,
+    MatchingError,
+    TapConfig,
+    TapFix,
+    calibrated_window,
+    shape_covariance,
+    tap_fix,
+    tap_fix_patch,
+    window_patch,
+)
 from tangraph.sensors import survey_map_error
 from tangraph.survey import Survey
 
@@ -128,13 +145,19 @@ def attempt_fix(
     *,
     initial_std: float = 0.0,
     model=None,
+    calibration: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> tuple[TapFix | None, dict[str, Any]]:
     """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
     ``None`` (and a ``"failed: ..."`` reason) when no match can be made. ``initial_std`` (the
     model's start std) is the smallest half-width when ``search.min_half_width`` is None (with
     3 map cells). ``model``: the run's navigation model, whose map error widens the fix by what
     its soundings share with the survey's others (:func:`tangraph.sensors.shared_map_variances`,
-    computed once per survey, map and model)."""
+    computed once per survey, map and model). ``calibration``: the filter's estimate of the DR's
+    constant errors ``(k, b)`` and their covariance ``(2, 2)``; the window is then laid with the
+    dead reckoning they correct (:func:`tangraph.matching.calibrated_window`), not the raw one,
+    and the fix's covariance grows by what is still uncertain of that laying (the model's white
+    DR noise and the calibration's covariance, :func:`tangraph.matching.shape_covariance`), as
+    the graph lays and grows its windows; it needs ``model``."""
     cell = min(bathymetry.cell_size)
     spread = np.sqrt(np.max(np.linalg.eigvalsh(covariance))) if np.all(np.isfinite(covariance)) else np.inf
     low = search.min_half_width
@@ -150,7 +173,11 @@ def attempt_fix(
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
         shared, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
-        fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error)
+        if calibration is None:
+            fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error)
+        else:
+            fix = _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error,
+                                  calibration, model.dead_reckoning)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
         record.update(accepted=False, reason=f"failed: {exc}")
@@ -162,6 +189,18 @@ def attempt_fix(
         reason="accepted" if fix.accepted else "; ".join(fix.quality.reasons),
     )
     return fix, record
+
+
+def _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error, calibration,
+                    white) -> TapFix:
+    """The TAP fix of a window laid with the calibrated DR, grown by the laying's uncertainty."""
+    mean, cov = calibration
+    poses, jac = calibrated_window(survey, index, window, mean)
+    patch = window_patch(survey, index, window, min_soundings=config.min_soundings, poses=poses,
+                         shared=shared, error=error)
+    fix = tap_fix_patch(patch, bathymetry, config, prior=prior)
+    grown = fix.covariance + shape_covariance(survey, white, fix.first, fix.index, jac, cov)
+    return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -183,9 +222,10 @@ class HeldFix:
 
 
 class FixDecision(NamedTuple):
-    """What :func:`decide_fix` decided: ``action`` (``"use"``, ``"hold"`` or ``"confirm"``: use
-    this fix, which confirms the held one), the ``held`` fix after it, the fix's ``nis`` against
-    the prediction and the held fix ``dropped`` unconfirmed (None: none)."""
+    """What :func:`decide_fix` decided: ``action`` (``"use"``, ``"hold"``, ``"confirm"``: use
+    this fix, which confirms the held one, or ``"wait"``: use nothing, the held fix waits), the
+    ``held`` fix after it, the fix's ``nis`` against the prediction and the held fix ``dropped``
+    unconfirmed (None: none)."""
 
     action: str
     held: HeldFix | None
@@ -201,13 +241,18 @@ def decide_fix(
     held: HeldFix | None,
     displacement: tuple[np.ndarray, np.ndarray] | None,
     config,
+    *,
+    half_width: float,
 ) -> FixDecision:
     """What to do with the accepted ``fix`` of the window ending at ping ``index`` (see the module
     docstring): ``prediction`` and ``covariance`` are the predicted position and its covariance,
     ``held`` the fix waiting to be confirmed and ``displacement`` the mean ``(2,)`` and covariance
     ``(2, 2)`` of the dead-reckoned displacement since it was held (None without one). ``config``
     gives ``confirm_probability`` (None: every fix is used at once) and ``gate`` (a confirming
-    fix's NIS against the held fix moved by the DR). Pure: nothing is changed."""
+    fix's NIS against the held fix moved by the DR) and ``search_sigmas``; ``half_width`` is the
+    search's (m): only a fix precise for it (:func:`tangraph.geometry.is_precise`) confirms, and a
+    vague one that agrees with the held fix and is as surprising lets it ``"wait"`` (neither is
+    used: it says the prediction is wrong, not where the vehicle is). Pure: nothing is changed."""
     nis = float(mahalanobis2(fix.position - prediction, covariance + fix.covariance))
     if config.confirm_probability is None:
         return FixDecision("use", None, nis)
@@ -218,7 +263,9 @@ def decide_fix(
         error = fix.position - (held.fix.position + shift)
         agrees = float(mahalanobis2(error, held.fix.covariance + spread + fix.covariance)) <= config.gate
         if agrees and surprising:
-            return FixDecision("confirm", None, nis)
+            if is_precise(fix.covariance, half_width, config.search_sigmas):
+                return FixDecision("confirm", None, nis)
+            return FixDecision("wait", waited(held), nis)
         if agrees:  # with the held fix and the prediction alike: it tells them apart no more
             return FixDecision("use", waited(held), nis)
     dropped = held

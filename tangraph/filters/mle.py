@@ -174,7 +174,7 @@ def mle_filter(
         if fix_due(config, k, window):
             fix, record = attempt_fix(
                 survey, bathymetry, k, x[:2], p[:2, :2], config, window,
-                initial_std=navigation.initial_position_std, model=navigation,
+                initial_std=navigation.initial_position_std, model=navigation, calibration=(x[2:], p[2:, 2:]),
             )  # fmt: skip
             action, held = _judge(fix, record, k, x, p, held, (shift, d[:2, :2]), config)
             fixes.append(record)
@@ -198,14 +198,15 @@ def mle_filter(
 
 def _judge(fix, record: dict[str, Any], k: int, x: np.ndarray, p: np.ndarray, held: HeldFix | None,
            displacement: tuple[np.ndarray, np.ndarray], config: MLEConfig) -> tuple[str, HeldFix | None]:
-    """What to do with the fix attempted at ping ``k`` (``"use"``, ``"confirm"``, ``"hold"`` or
-    ``"skip"``) and the held fix after it (:func:`~tangraph.filters.fixes.decide_fix`); the
+    """What to do with the fix attempted at ping ``k`` (``"use"``, ``"confirm"``, ``"hold"``,
+    ``"wait"`` or ``"skip"``) and the held fix after it (:func:`~tangraph.filters.fixes.decide_fix`); the
     decision is written into its ``record``."""
     if fix is None or not (fix.accepted or not config.require_accepted):
         record["used"] = False
         return "skip", waited(held)
-    decision = decide_fix(fix, k, x[:2], p[:2, :2], held, displacement, config)
-    record.update(nis=decision.nis, decision=decision.action, used=decision.action != "hold")
+    decision = decide_fix(fix, k, x[:2], p[:2, :2], held, displacement, config,
+                          half_width=record["half_width"])
+    record.update(nis=decision.nis, decision=decision.action, used=decision.action in ("use", "confirm"))
     if decision.dropped is not None:
         record["dropped"] = decision.dropped.index
     if decision.action == "confirm" and held is not None:

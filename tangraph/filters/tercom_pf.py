@@ -20,11 +20,11 @@ predicted mean, over ``search_sigmas`` times its std. What a fix does:
   are resampled if ESS < ``ess_threshold * N``; when fewer than
   :data:`MIN_FIX_ESS` of them would carry the weight (a cloud far wider than the fix), the
   positions are re-drawn from the Gaussian product of the cloud's moments and the fix instead;
-- a surprising fix is held (``meta["n_fixes_held"]``) until a later accepted fix, as surprising,
-  agrees with it through the particles' own displacements since (NIS within ``gate``, default
-  13.8: chi2(2) at 0.999); the prediction is then wrong, and the cloud is re-centred: its
-  positions re-drawn from ``N(fix, R)`` of the later fix (``meta["n_recentred"]``). A held fix
-  that is not confirmed is dropped.
+- a surprising fix is held (``meta["n_fixes_held"]``) until a later accepted fix, as surprising
+  and precise for its search, agrees with it through the particles' own displacements since
+  (NIS within ``gate``, default 13.8: chi2(2) at 0.999); the prediction is then wrong, and the
+  cloud is re-centred: its positions re-drawn from ``N(fix, R)`` of the later fix
+  (``meta["n_recentred"]``). A held fix that is not confirmed is dropped.
 
 The particles carry the constant DR errors ``(k, b)`` and move by their calibrated increments
 as in every filter; a fix re-weights them by position only, so the calibration is learnt through
@@ -44,7 +44,7 @@ import functools
 
 import numpy as np
 
-from tangraph.filters.belief import Belief, weighted_moments
+from tangraph.filters.belief import Belief, calibration_moments, weighted_moments
 from tangraph.filters.config import ParticleConfig
 from tangraph.filters.fixes import attempt_fix, check_fix_search, decide_fix, fix_due, fix_window, waited
 from tangraph.filters.likelihood import effective_sample_size
@@ -168,6 +168,7 @@ def tercom_pf_step(
     fix, record = attempt_fix(
         survey, bathymetry, ping.index, prior_mean, prior_cov, config, window,
         initial_std=model.navigation.initial_position_std, model=model.navigation,
+        calibration=calibration_moments(moved),
     )  # fmt: skip
     counts = dict.fromkeys(COUNTS, 0)
     if fix is None or not fix.accepted:
@@ -198,13 +199,16 @@ def _judged(moved: Belief, fix, record: dict, mean: np.ndarray, cov: np.ndarray,
             updated, action = reweight(moved, log_factor, where=f"ping {index} (fix)"), "reweight"
         return updated.replace(n_fixes=moved.n_fixes + 1), action
     displacement = None if moved.held is None else _displacement(moved)
-    decision = decide_fix(fix, index, mean, cov, moved.held, displacement, config)
+    decision = decide_fix(fix, index, mean, cov, moved.held, displacement, config,
+                          half_width=record["half_width"])
     record.update(mahalanobis2=decision.nis, decision=decision.action)
     if decision.dropped is not None:
         record["dropped"] = decision.dropped.index
     if decision.action == "hold":
         held = dataclasses.replace(decision.held, anchor=moved.particles.copy())  # type: ignore[type-var]
         return moved.replace(held=held), "hold"
+    if decision.action == "wait":  # surprising and agreeing with the held fix, but too vague to confirm it
+        return moved.replace(held=decision.held), "wait"
     if decision.action == "confirm":
         record["confirms"] = moved.held.index  # type: ignore[union-attr]
         updated, action = _redrawn(moved, fix.position, fix.covariance, rng), "recentre"

@@ -18,8 +18,8 @@ from tangraph.geometry import gate_threshold
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, nis
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix, TerrainFix, tap_fix_patch, window_patch
-from tangraph.sensors import DeadReckoningModel, increment_covariance, rotation_matrix
+from tangraph.matching import MatchingError, TapFix, TerrainFix, shape_covariance, tap_fix_patch, window_patch
+from tangraph.sensors import DeadReckoningModel
 from tangraph.survey import Survey
 
 __all__ = [
@@ -168,21 +168,12 @@ def window_noise(fix: Fix, survey: Survey, white: DeadReckoningModel, shape_jaco
     TAP's covariance counts the information of its window's soundings; windows that share pings
     would count each sounding ``overlap`` times (the mean number of windows holding its pings,
     :func:`~tangraph.graph.keyposes.fix_windows`), so it is multiplied by ``overlap``. The patch
-    is laid with the calibrated DR of the current estimate:
-    what is still uncertain of it moves the window's middle ping relative to its reference ping,
-    the white DR noise from the middle ping to the end (:func:`~tangraph.sensors.increment_covariance`
-    of ``white``) and the calibration's remaining covariance ``calibration_cov (2, 2)`` through
-    ``shape_jacobian (2, 2)`` (the middle ping's world offset from the end against ``(k, b)``).
+    is laid with the calibrated DR of the current estimate, whose remaining uncertainty grows it
+    (:func:`tangraph.matching.shape_covariance` of ``white``, ``shape_jacobian`` and
+    ``calibration_cov``).
     """
-    first, end = int(fix.first), int(fix.index)
-    mid = (first + end) // 2
     grown = max(float(overlap), 1.0) * np.asarray(fix.covariance, float)
-    if mid < end:
-        w = slice(first, end + 1)
-        cov = increment_covariance(white, survey.time[w], survey.dr_pose[w], mid - first, end - first)[:2, :2]
-        rot = rotation_matrix(survey.dr_pose[mid, 2])
-        jac = np.asarray(shape_jacobian, float)
-        grown = grown + rot @ cov @ rot.T + jac @ np.asarray(calibration_cov, float) @ jac.T
+    grown = grown + shape_covariance(survey, white, fix.first, fix.index, shape_jacobian, calibration_cov)
     # both front ends' fixes are frozen dataclasses (the protocol cannot say so)
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))  # type: ignore[type-var]
 

@@ -49,7 +49,7 @@ from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
-from tangraph.geometry import gate_threshold
+from tangraph.geometry import gate_threshold, is_precise
 from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
 
 if TYPE_CHECKING:
@@ -258,8 +258,8 @@ class FixPolicy:
         half-width: an eighth by default, as a relocalisation candidate must be (two vague fixes
         agree with anything); a quarter for a window whose best match on the search's edge is
         evidence of being lost (a vague one there is a window of bad pings)."""
-        largest = float(np.sqrt(np.linalg.eigvalsh(cast("TerrainFix", outcome.fix).covariance).max()))
-        return largest <= share * outcome.record.half_width / self.half_width_sigmas
+        covariance = cast("TerrainFix", outcome.fix).covariance
+        return is_precise(covariance, outcome.record.half_width, self.half_width_sigmas, share)
 
     def decide(self, state: PolicyState, window: Window) -> tuple[PolicyState, tuple[Action, ...]]:
         """The next state and the actions for one window (neither input is changed).

@@ -1,6 +1,6 @@
 """Batch terrain matching: TAP fixes with confidence regions and covariances (no gtsam here)."""
 
-from tangraph.matching.patch import MatchingError, Patch, window_patch
+from tangraph.matching.patch import MatchingError, Patch, calibrated_window, shape_covariance, window_patch
 from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
 from tangraph.matching.tap import (
     Criterion,
@@ -29,10 +29,12 @@ __all__ = [
     "TapConfig",
     "TapFix",
     "TerrainFix",
+    "calibrated_window",
     "criterion_at",
     "criterion_sums",
     "nees",
     "region_thresholds",
+    "shape_covariance",
     "tap_fix",
     "tap_fix_patch",
     "window_patch",

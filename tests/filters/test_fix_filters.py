@@ -252,40 +252,51 @@ def _fix(position, std):
 
 DECIDE = MLEConfig()  # confirm_probability 0.9 (NIS 4.61), gate 13.8
 STILL = (np.zeros(2), np.zeros((2, 2)))  # no displacement since the held fix
+SEARCH = 30.0  # the search's half-width: a fix of std up to 5 m is precise (search_sigmas 3)
+
+
+def _decide(fix, index, prediction, covariance, held, displacement, *, config=DECIDE, half_width=SEARCH):
+    return decide_fix(fix, index, prediction, covariance, held, displacement, config, half_width=half_width)
 
 
 def test_decide_fix_uses_a_fix_near_the_prediction_and_holds_a_surprising_one():
     prediction, covariance = np.zeros(2), np.eye(2)
-    near = decide_fix(_fix([1.0, 1.0], 1.0), 9, prediction, covariance, None, None, DECIDE)
+    near = _decide(_fix([1.0, 1.0], 1.0), 9, prediction, covariance, None, None)
     assert (near.action, near.held, near.dropped) == ("use", None, None) and near.nis == pytest.approx(1.0)
-    surprising = decide_fix(_fix([4.0, 0.0], 1.0), 9, prediction, covariance, None, None, DECIDE)
+    surprising = _decide(_fix([4.0, 0.0], 1.0), 9, prediction, covariance, None, None)
     assert surprising.action == "hold" and surprising.held.index == 9 and surprising.nis == pytest.approx(8.0)
-    plain = decide_fix(_fix([40.0, 0.0], 1.0), 9, prediction, covariance, None, None,
-                       MLEConfig(confirm_probability=None))
+    plain = _decide(_fix([40.0, 0.0], 1.0), 9, prediction, covariance, None, None,
+                    config=MLEConfig(confirm_probability=None))
     assert plain.action == "use" and plain.held is None
 
 
 def test_decide_fix_confirms_a_held_fix_by_a_second_that_agrees_through_the_dead_reckoning():
-    held = decide_fix(_fix([10.0, 0.0], 1.0), 9, np.zeros(2), np.eye(2), None, None, DECIDE).held
+    held = _decide(_fix([10.0, 0.0], 1.0), 9, np.zeros(2), np.eye(2), None, None).held
     prediction = np.array([0.0, 8.0])  # the DR moved 8 m east since
     moved = (np.array([0.0, 8.0]), 0.5 * np.eye(2))
     # as surprising, and where the held fix has moved to: confirmed
-    confirm = decide_fix(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    confirm = _decide(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, moved)
     assert (confirm.action, confirm.held, confirm.dropped) == ("confirm", None, None)
     # as surprising, but elsewhere: the held fix is dropped and the new one held
-    other = decide_fix(_fix([-10.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    other = _decide(_fix([-10.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved)
     assert other.action == "hold" and other.dropped is held and other.held.index == 14
     # at the prediction, far from the held fix: used, the held fix dropped
-    refuted = decide_fix(_fix([0.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    refuted = _decide(_fix([0.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved)
     assert refuted.action == "use" and refuted.dropped is held and refuted.held is None
     # a vague fix agrees with both: used, the held fix waits one attempt more, then is dropped
-    vague = decide_fix(_fix([5.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved, DECIDE)
+    vague = _decide(_fix([5.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved)
     assert vague.action == "use" and vague.dropped is None and vague.held.attempts == 1
-    again = decide_fix(_fix([5.0, 8.0], 6.0), 19, prediction, np.eye(2), vague.held, moved, DECIDE)
+    again = _decide(_fix([5.0, 8.0], 6.0), 19, prediction, np.eye(2), vague.held, moved)
     assert again.action == "use" and again.held is None
     assert fixes.waited(held).attempts == 1 and fixes.waited(fixes.waited(held)) is None
+    # as surprising and agreeing, but too vague for its search: nothing used, the held fix waits;
+    # precise for a search twice as wide, the same fix confirms it
+    loose = _decide(_fix([14.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved)
+    assert loose.action == "wait" and loose.nis > 4.61 and loose.held.attempts == 1 and loose.dropped is None
+    wide = _decide(_fix([14.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved, half_width=60.0)
+    assert wide.action == "confirm"
     # the displacement's mean is the DR's: without it the two fixes would not agree
-    assert decide_fix(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, STILL, DECIDE).action == "hold"
+    assert _decide(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, STILL).action == "hold"
 
 
 def test_mle_fuses_a_fix_as_a_kalman_update_of_position_and_calibration():
@@ -330,3 +341,20 @@ def test_a_held_fixs_anchor_follows_the_particles_through_resampling():
     taken = belief.replace(held=held).take(index)
     np.testing.assert_array_equal(taken.held.anchor, belief.particles[index])
     assert taken.held.index == 9 and belief.take(index).held is None
+
+
+def test_a_filters_fix_is_laid_with_its_calibration_and_grown_by_what_is_uncertain_of_it():
+    """SURVEY's DR has a 3 deg heading bias: windows laid with the raw DR are turned by it and
+    their fixes miss the truth by 1-3 m, many stds; laid with the calibration that corrects it,
+    within 0.7 m, and the covariance grows by the calibration's spread."""
+    config, wide = MLEConfig(), np.eye(2) * 100.0
+    known = (np.array([0.0, np.radians(3.0)]), np.zeros((2, 2)))
+    unsure = (known[0], np.diag([0.02, np.radians(2.0)]) ** 2)
+    for end in (9, 14, 19, 24):
+        truth = SURVEY.true_pose[end, :2]
+        fix = functools.partial(fixes.attempt_fix, SURVEY, MAP, end, truth, wide, config, 10, model=MODEL)
+        (raw, _), (laid, record), (spread, _) = fix(), fix(calibration=known), fix(calibration=unsure)
+        assert np.linalg.norm(raw.position - truth) > 1.0
+        assert np.linalg.norm(laid.position - truth) < 0.7
+        np.testing.assert_allclose(record["covariance"], laid.covariance)
+        assert np.all(np.linalg.eigvalsh(spread.covariance - laid.covariance) > 0.01)
