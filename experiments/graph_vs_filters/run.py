@@ -120,10 +120,15 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
             from tangraph.graph import GraphConfig
 
             settings = GraphConfig(**config["graph"])
-        if method in FILTERS and method not in ("mle", "pmf"):  # deterministic: no particles
+        if method in FILTERS:
             from tangraph.filters import default_config
 
-            settings = dataclasses.replace(default_config(method), n_particles=config["n_particles"])
+            settings = default_config(method)
+            if method not in ("mle", "pmf"):  # deterministic: no particles
+                settings = dataclasses.replace(settings, n_particles=config["n_particles"])
+            names = {f.name for f in dataclasses.fields(settings)}
+            settings = dataclasses.replace(settings, **{k: v for k, v in config.get("filter", {}).items()
+                                                        if k in names})
         started = time.perf_counter()
         track = navigate(survey, bathymetry, method, settings, rng=rng, model=model)
         seconds = time.perf_counter() - started
@@ -259,6 +264,23 @@ def figure(table, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def _filter_settings(items, methods) -> dict:
+    """``--filter FIELD=VALUE`` items as a mapping; a field that no chosen filter's configuration
+    has is refused (it would change nothing)."""
+    import dataclasses
+
+    from tangraph.errors import TangraphError
+    from tangraph.experiments.study import field_values
+    from tangraph.filters import default_config
+
+    settings = field_values(items, "--filter")
+    names = {f.name for m in methods if m in FILTERS for f in dataclasses.fields(default_config(m))}
+    unknown = sorted(set(settings) - names)
+    if unknown:
+        raise TangraphError(f"--filter {', '.join(unknown)}: no chosen filter has such a setting")
+    return settings
+
+
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
     from tangraph.experiments.study import field_values, output_folder, study_parser
@@ -273,6 +295,9 @@ def main(argv=None) -> int:
                         help="methods to run (default: the graph and every filter)")
     parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="GraphConfig settings of the graph's runs (values as Python literals)")
+    parser.add_argument("--filter", nargs="+", default=[], metavar="FIELD=VALUE",
+                        help="settings of every filter whose configuration has the field (values as "
+                        "Python literals)")
     parser.add_argument("--dr", choices=["demo", "own"], default="demo",
                         help="the demo's drifting DR in every scenario, or each scenario's own")
     args = parser.parse_args(argv)
@@ -280,9 +305,10 @@ def main(argv=None) -> int:
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
     graph = field_values(args.graph)
+    filter_settings = _filter_settings(args.filter, methods)
     configs = [
         {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr,
-         "graph": graph}
+         "graph": graph, "filter": filter_settings}
         for s in args.scenarios
     ]
     table = run_many(one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers)
@@ -296,7 +322,8 @@ def main(argv=None) -> int:
     tag = f"seed{args.seed}_runs{runs}" + ("_quick" if args.quick else "") + \
         ("" if args.scenarios == default_scenarios else "_" + "-".join(args.scenarios)) + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \
-        "".join(f"_{item}".replace('"', "").replace("'", "") for item in args.graph)  # no quotes in names
+        "".join(f"_{item}".replace('"', "").replace("'", "")  # no quotes in names
+                for item in [*args.graph, *args.filter])
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table[~failed], args.out / f"rmse_{tag}.png")
     command = (
@@ -305,6 +332,7 @@ def main(argv=None) -> int:
         + f" --scenarios {' '.join(args.scenarios)} --dr {args.dr}"
         + ("" if args.methods is None else f" --methods {' '.join(args.methods)}")
         + ("" if not args.graph else f" --graph {' '.join(shlex.quote(item) for item in args.graph)}")
+        + ("" if not args.filter else f" --filter {' '.join(shlex.quote(item) for item in args.filter)}")
     )
     text = markdown(rows)
     (args.out / f"summary_{tag}.md").write_text(f"Command: `{command}`\n\n{text}\n")
