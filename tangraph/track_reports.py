@@ -27,10 +27,8 @@ def track_report(track: Track, survey: Survey) -> dict:
     meta = track.meta
     if "fixes" in meta:
         outcomes: dict[str, int] = {}
-        for fix in meta["fixes"]:  # the graph's FixRecords; the fix-based filters keep dicts
-            status = fix.status.value if hasattr(fix, "status") else \
-                ("accepted" if fix.get("accepted") else "refused")
-            outcomes[status] = outcomes.get(status, 0) + 1
+        for fix in meta["fixes"]:  # FixRecords, of the graph and the fix-based filters alike
+            outcomes[fix.status.value] = outcomes.get(fix.status.value, 0) + 1
         report["fixes"] = {"accepted": int(meta.get("n_fixes_accepted", 0)),
                            "rejected": int(meta.get("n_fixes_rejected", 0)),
                            "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}

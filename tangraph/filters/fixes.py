@@ -7,9 +7,9 @@ predicted covariance), clipped to ``[min_half_width, max_half_width]`` (``min_ha
 the larger of 3 map cells and the model's ``initial_position_std``), around the predicted position;
 the window is laid with the dead reckoning the filter's calibration estimate corrects, and the fix
 grown by what is still uncertain of it (``attempt_fix``'s ``calibration``). Each
-attempt is recorded as a dict (``index``, ``first``, ``prior``, ``half_width``, ``position``,
-``covariance``, ``accepted``, ``reason``: ``"accepted"``, the fix's quality reasons, or
-``"failed: ..."`` when no match could be made).
+attempt is recorded as a :class:`tangraph.fix_records.FixRecord`, as the graph's are: what
+became of it (used, held, confirmed, unconfirmed, too vague, or why TAP refused it), its NIS
+against the prediction and the search's half-width.
 
 What a filter does with an accepted fix is decided by :func:`decide_fix`, the rule the online
 graph's fix policy (:mod:`tangraph.graph.policy`) applies to its windows, without the graph: a fix
@@ -34,12 +34,13 @@ from __future__ import annotations
 import dataclasses
 import logging
 import weakref
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.config import check_count, check_number
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold, is_precise, mahalanobis2
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import (
@@ -63,6 +64,8 @@ __all__ = [
     "attempt_fix",
     "check_fix_search",
     "decide_fix",
+    "decided",
+    "expired",
     "fix_due",
     "fix_window",
     "waited",
@@ -146,9 +149,10 @@ def attempt_fix(
     initial_std: float = 0.0,
     model=None,
     calibration: tuple[np.ndarray, np.ndarray] | None = None,
-) -> tuple[TapFix | None, dict[str, Any]]:
-    """The fix of the window ending at ping ``index`` searched around ``prior``, and its record;
-    ``None`` (and a ``"failed: ..."`` reason) when no match can be made. ``initial_std`` (the
+) -> tuple[TapFix | None, FixRecord]:
+    """The fix of the window ending at ping ``index`` searched around ``prior``, and its record
+    (``ACCEPTED`` until the filter judges it, else why TAP refused it; ``None`` and
+    ``MATCH_FAILED`` when no match can be made). ``initial_std`` (the
     model's start std) is the smallest half-width when ``search.min_half_width`` is None (with
     3 map cells). ``model``: the run's navigation model, whose map error widens the fix by what
     its soundings share with the survey's others (:func:`tangraph.sensors.shared_map_variances`,
@@ -164,12 +168,6 @@ def attempt_fix(
     if low is None:
         low = max(3.0 * cell, float(initial_std))
     half_width = float(np.clip(search.search_sigmas * spread, low, max(low, search.max_half_width)))
-    record: dict[str, Any] = {
-        "index": int(index),
-        "first": int(index - window + 1),
-        "prior": [float(v) for v in prior],
-        "half_width": half_width,
-    }
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
         shared, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
@@ -180,15 +178,10 @@ def attempt_fix(
                                   calibration, model.dead_reckoning)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
-        record.update(accepted=False, reason=f"failed: {exc}")
-        return None, record
-    record.update(
-        position=[float(v) for v in fix.position],
-        covariance=fix.covariance.tolist(),
-        accepted=bool(fix.accepted),
-        reason="accepted" if fix.accepted else "; ".join(fix.quality.reasons),
-    )
-    return fix, record
+        return None, FixRecord.of(index, None, FixStatus.MATCH_FAILED, np.nan, half_width, str(exc))
+    status = FixStatus.ACCEPTED if fix.accepted else \
+        FixStatus.MULTIMODAL if fix.quality.multimodal else FixStatus.UNINFORMATIVE
+    return fix, FixRecord.of(index, fix, status, np.nan, half_width, "; ".join(fix.quality.reasons))
 
 
 def _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error, calibration,
@@ -208,12 +201,14 @@ class HeldFix:
     """A surprising fix waiting to be confirmed (:func:`decide_fix`): the ``fix``, the ping
     ``index`` it ends at, the fix ``attempts`` made since, and for a particle filter the
     ``anchor (N, 2)``: each particle's position then (its displacement since is the dead
-    reckoning's, whatever the weights did; resampling takes it along, :meth:`take`)."""
+    reckoning's, whatever the weights did; resampling takes it along, :meth:`take`), and its
+    ``record`` (:func:`decided` settles it)."""
 
     fix: TapFix
     index: int
     attempts: int = 0
     anchor: np.ndarray | None = None
+    record: FixRecord | None = None
 
     def take(self, index: np.ndarray) -> HeldFix:
         """The same held fix after the particles were resampled to ``index``."""
@@ -272,6 +267,46 @@ def decide_fix(
     if not surprising:
         return FixDecision("use", None, nis, dropped)
     return FixDecision("hold", HeldFix(fix, int(index)), nis, dropped)
+
+
+_STATUS = {"use": FixStatus.ACCEPTED, "confirm": FixStatus.ACCEPTED, "hold": FixStatus.HELD,
+           "wait": FixStatus.VAGUE}
+
+
+def decided(record: FixRecord, decision: FixDecision, held: HeldFix | None,
+            detail: str = "") -> tuple[tuple[FixRecord, ...], HeldFix | None]:
+    """The records that ``decision`` on the fix of ``record`` writes (the held fix's first, when it
+    settled it: ``CONFIRMED``, or ``UNCONFIRMED`` when dropped or out of attempts) and the held
+    fix after it, carrying its record; ``detail`` says what the filter did with a fix it used."""
+    if decision.action == "confirm":
+        assert held is not None and held.record is not None  # a confirmation needs a held fix
+        detail = f"confirms the fix at ping {held.index}" + (f"; {detail}" if detail else "")
+    elif decision.action == "hold":
+        detail = "surprising: held until a later fix agrees"
+    elif decision.action == "wait":
+        detail = f"as surprising as the held fix at ping {held.index if held else '?'}, too vague for it"
+    new = dataclasses.replace(record, status=_STATUS[decision.action], nis=decision.nis, detail=detail)
+    after = decision.held
+    if decision.action == "hold" and after is not None:
+        after = dataclasses.replace(after, record=new)
+    if decision.action == "confirm":
+        return (_settled(held, FixStatus.CONFIRMED, f"by the fix at ping {record.index}"), new), after
+    why = f"the fix at ping {record.index} did not agree with it" if decision.dropped is not None else None
+    return (*expired(held, after, why), new), after
+
+
+def expired(before: HeldFix | None, after: HeldFix | None, why: str | None = None) -> tuple[FixRecord, ...]:
+    """The held fix's record turned ``UNCONFIRMED`` when it is gone (``after`` is not it): ``why``,
+    else no fix confirmed it within :data:`HOLD_ATTEMPTS` attempts; nothing while it waits."""
+    if before is None or before.record is None or (after is not None and after.index == before.index):
+        return ()
+    why = why or f"no fix confirmed it in {HOLD_ATTEMPTS} attempts"
+    return (_settled(before, FixStatus.UNCONFIRMED, why),)
+
+
+def _settled(held: HeldFix | None, status: FixStatus, detail: str) -> FixRecord:
+    assert held is not None and held.record is not None
+    return dataclasses.replace(held.record, status=status, detail=detail)
 
 
 def waited(held: HeldFix | None) -> HeldFix | None:

@@ -16,10 +16,11 @@ prior.
 Only accepted fixes (informative and unimodal, ``TapFix.accepted``) are used by default, and a
 surprising one only once a later one confirms it (:func:`tangraph.filters.fixes.decide_fix`;
 the displacement between the two is the DR's, its covariance propagated as above from the
-calibration's alone); ``meta["fixes"]`` records each fix's ``nis`` against the prediction and
-the ``decision``. A fix that is used updates the state as a measurement of the position (a
-Kalman update, so a vague fix does not throw away a better prediction and the constant errors
-are learnt through their correlation with the position); a confirmed one, which says the
+calibration's alone); ``meta["fixes"]`` holds each fix's
+:class:`~tangraph.fix_records.FixRecord` (what became of it, its NIS against the prediction). A
+fix that is used updates the state as a measurement of the position (a Kalman update, so a vague
+fix does not throw away a better prediction and the constant errors are learnt through their
+correlation with the position); a confirmed one, which says the
 prediction is wrong, replaces the position and its covariance. ``fuse=False`` jumps to every fix
 used, ``require_accepted=False`` and ``confirm_probability=None`` take every fix as it comes:
 the three together are plain MLE (it can then jump to a wrong basin on flat terrain or where the
@@ -40,12 +41,15 @@ from tangraph.filters.fixes import (
     attempt_fix,
     check_fix_search,
     decide_fix,
+    decided,
+    expired,
     fix_due,
     fix_window,
     waited,
 )
 from tangraph.filters.model import MotionModel, survey_pings
 from tangraph.filters.runner import check_run_inputs, step_timings
+from tangraph.fix_records import FixRecord
 from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, survey_navigation_model
@@ -154,7 +158,8 @@ def mle_filter(
     mean = np.empty((k_total, 2))
     cov = np.full((k_total, 3, 3), np.nan)
     seconds = np.empty(k_total)
-    fixes: list[dict[str, Any]] = []
+    fixes: dict[int, FixRecord] = {}  # by ping: a held fix's record is settled later
+    accepted = 0  # fixes TAP accepted
     held: HeldFix | None = None
     # the DR displacement since the held fix: its mean, and its covariance with (k, b)
     shift, d = np.zeros(2), np.zeros((4, 4))
@@ -176,8 +181,9 @@ def mle_filter(
                 survey, bathymetry, k, x[:2], p[:2, :2], config, window,
                 initial_std=navigation.initial_position_std, model=navigation, calibration=(x[2:], p[2:, 2:]),
             )  # fmt: skip
-            action, held = _judge(fix, record, k, x, p, held, (shift, d[:2, :2]), config)
-            fixes.append(record)
+            accepted += fix is not None and fix.accepted
+            action, held, records = _judge(fix, record, k, x, p, held, (shift, d[:2, :2]), config)
+            fixes.update((r.index, r) for r in records)
             if action in ("use", "confirm"):  # a confirmed fix says the prediction is wrong: jump
                 x, p = _update(x, p, fix, config.fuse and action == "use")
             if held is not None and action == "hold":  # the displacement from here, with (k, b)'s spread
@@ -192,30 +198,28 @@ def mle_filter(
         covariance=cov,
         method="mle",
         timings=step_timings(elapsed, seconds),
-        meta=_meta(navigation, config, x, p, fixes, k_total),
+        meta=_meta(navigation, config, x, p, list(fixes.values()), accepted, k_total),
     )
 
 
-def _judge(fix, record: dict[str, Any], k: int, x: np.ndarray, p: np.ndarray, held: HeldFix | None,
-           displacement: tuple[np.ndarray, np.ndarray], config: MLEConfig) -> tuple[str, HeldFix | None]:
+def _judge(fix, record: FixRecord, k: int, x: np.ndarray, p: np.ndarray, held: HeldFix | None,
+           displacement: tuple[np.ndarray, np.ndarray],
+           config: MLEConfig) -> tuple[str, HeldFix | None, tuple[FixRecord, ...]]:
     """What to do with the fix attempted at ping ``k`` (``"use"``, ``"confirm"``, ``"hold"``,
-    ``"wait"`` or ``"skip"``) and the held fix after it (:func:`~tangraph.filters.fixes.decide_fix`); the
-    decision is written into its ``record``."""
+    ``"wait"`` or ``"skip"``), the held fix after it (:func:`~tangraph.filters.fixes.decide_fix`)
+    and the records it writes (the held fix's, when settled, then this one's)."""
     if fix is None or not (fix.accepted or not config.require_accepted):
-        record["used"] = False
-        return "skip", waited(held)
+        after = waited(held)
+        return "skip", after, (*expired(held, after), record)
     decision = decide_fix(fix, k, x[:2], p[:2, :2], held, displacement, config,
-                          half_width=record["half_width"])
-    record.update(nis=decision.nis, decision=decision.action, used=decision.action in ("use", "confirm"))
-    if decision.dropped is not None:
-        record["dropped"] = decision.dropped.index
-    if decision.action == "confirm" and held is not None:
-        record["confirms"] = held.index
-    return decision.action, decision.held
+                          half_width=record.half_width)
+    detail = "" if fix.accepted else "used as TAP flagged it: " + record.detail
+    records, after = decided(record, decision, held, detail)
+    return decision.action, after, records
 
 
 def _meta(navigation: NavigationModel, config: MLEConfig, x: np.ndarray, p: np.ndarray,
-          fixes: list[dict[str, Any]], k_total: int) -> dict[str, Any]:
+          fixes: list[FixRecord], accepted: int, k_total: int) -> dict[str, Any]:
     """The MLE track's ``meta``: the filters' keys (no particles: nothing resampled, never lost),
     the fixes and the calibration estimate ``x[2:]`` with the final covariance ``p``'s stds."""
     calibration = {
@@ -224,7 +228,6 @@ def _meta(navigation: NavigationModel, config: MLEConfig, x: np.ndarray, p: np.n
         "heading_error": float(x[3]),
         "heading_error_std": float(np.sqrt(p[3, 3])),
     }
-    accepted = sum(bool(f.get("accepted")) for f in fixes)
     return {
         "ess": [float("nan")] * k_total,
         "n_resampled": 0,
@@ -235,7 +238,7 @@ def _meta(navigation: NavigationModel, config: MLEConfig, x: np.ndarray, p: np.n
         "calibration": calibration,
         "n_fixes_accepted": accepted,
         "n_fixes_rejected": len(fixes) - accepted,
-        "n_fixes_used": sum(bool(f["used"]) for f in fixes),
+        "n_fixes_used": sum(f.accepted for f in fixes),
         "fixes": fixes,
         "navigation_model": navigation.as_dict(),
         "config": config.as_dict(),

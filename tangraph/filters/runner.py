@@ -46,6 +46,7 @@ from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import FilterDivergence, OffMap, effective_sample_size
 from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.steps import Step, StepResult, measure, predict
+from tangraph.fix_records import FixRecord
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, survey_navigation_model
 from tangraph.survey import Survey
@@ -216,7 +217,7 @@ class _Trace:
         self.ess = np.empty(n_pings)
         self.seconds = np.empty(n_pings)
         self.counts: dict[str, int] = dict.fromkeys(("n_tempered", "n_gated", *count_keys), 0)
-        self.fixes: list[dict[str, Any]] = []
+        self.fixes: dict[int, FixRecord] = {}  # by ping: a later step may settle a held fix's record
         self.n_resampled = 0
 
     def add(self, k: int, result: StepResult) -> None:
@@ -224,7 +225,7 @@ class _Trace:
         self.n_resampled += bool(result.resampled)
         for key, value in result.counts.items():
             self.counts[key] = self.counts.get(key, 0) + int(value)
-        self.fixes.extend(result.fixes)
+        self.fixes.update((record.index, record) for record in result.fixes)
 
 
 def _meta(trace: _Trace, recovery: _Recovery, belief: Belief, seed: dict[str, Any] | None,
@@ -251,7 +252,7 @@ def _meta(trace: _Trace, recovery: _Recovery, belief: Belief, seed: dict[str, An
         **trace.counts,
     }
     if trace.fixes or count_keys:
-        meta["fixes"] = trace.fixes
+        meta["fixes"] = list(trace.fixes.values())
     return meta
 
 

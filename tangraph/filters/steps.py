@@ -32,6 +32,7 @@ from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import OffMap, PingLikelihood, effective_sample_size, log_normalise
 from tangraph.filters.model import FilterModel, Ping, TerrainUpdate
 from tangraph.filters.resampling import Resampler, resample
+from tangraph.fix_records import FixRecord
 
 __all__ = [
     "Innovation",
@@ -66,7 +67,7 @@ class StepResult:
     ess: float
     resampled: bool = False
     counts: dict[str, int] = dataclasses.field(default_factory=dict)
-    fixes: tuple[dict[str, Any], ...] = ()
+    fixes: tuple[FixRecord, ...] = ()
     info: dict[str, Any] = dataclasses.field(default_factory=dict)
     innovation: Innovation | None = None
 

@@ -46,11 +46,21 @@ import numpy as np
 
 from tangraph.filters.belief import Belief, calibration_moments, weighted_moments
 from tangraph.filters.config import ParticleConfig
-from tangraph.filters.fixes import attempt_fix, check_fix_search, decide_fix, fix_due, fix_window, waited
+from tangraph.filters.fixes import (
+    attempt_fix,
+    check_fix_search,
+    decide_fix,
+    decided,
+    expired,
+    fix_due,
+    fix_window,
+    waited,
+)
 from tangraph.filters.likelihood import effective_sample_size
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.runner import run_particle_filter
 from tangraph.filters.steps import StepResult, predict, resample_if_needed, reweight
+from tangraph.fix_records import FixRecord
 from tangraph.geometry import mahalanobis2
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import Criterion
@@ -173,48 +183,49 @@ def tercom_pf_step(
     counts = dict.fromkeys(COUNTS, 0)
     if fix is None or not fix.accepted:
         counts["n_fixes_rejected"] = 1
-        updated, action = moved.replace(held=waited(moved.held)), "none"
+        after = waited(moved.held)
+        updated, action, records = moved.replace(held=after), "none", (*expired(moved.held, after), record)
     else:
         counts["n_fixes_accepted"] = 1
-        updated, action = _judged(moved, fix, record, prior_mean, prior_cov, config, ping.index, rng)
-    record["action"] = action
+        updated, action, records = _judged(moved, fix, record, prior_mean, prior_cov, config, ping.index, rng)
     counts["n_recentred"] = int(action == "recentre")
     counts["n_fixes_held"] = int(action == "hold")
     mean, cov = weighted_moments(updated)
     new, index, ess = resample_if_needed(updated, config, rng=rng, model=model)
-    return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=(record,))
+    return StepResult(new, mean, cov, ess, resampled=index is not None, counts=counts, fixes=records)
 
 
-def _judged(moved: Belief, fix, record: dict, mean: np.ndarray, cov: np.ndarray, config: TercomPFConfig,
-            index: int, rng: np.random.Generator) -> tuple[Belief, str]:
-    """The belief after the accepted ``fix`` of ping ``index`` and the action taken (see the
-    module docstring); the fix's NIS and the decision are written into its ``record``."""
+def _judged(moved: Belief, fix, record: FixRecord, mean: np.ndarray, cov: np.ndarray, config: TercomPFConfig,
+            index: int, rng: np.random.Generator) -> tuple[Belief, str, tuple[FixRecord, ...]]:
+    """The belief after the accepted ``fix`` of ping ``index``, the action taken (see the module
+    docstring; the ``detail`` of a fix used) and the records written (the held fix's, when
+    settled, then this one's)."""
     if config.confirm_probability is None:  # the plain TERCOM-PF
-        record["mahalanobis2"] = nis = float(mahalanobis2(fix.position - mean, cov + fix.covariance))
+        nis = float(mahalanobis2(fix.position - mean, cov + fix.covariance))
         if moved.n_fixes == 0 or nis > config.gate:
             action = "initialise" if moved.n_fixes == 0 else "recentre"
             updated = _redrawn(moved, fix.position, fix.covariance, rng)
         else:
             log_factor = -0.5 * mahalanobis2(moved.particles - fix.position, fix.covariance)
             updated, action = reweight(moved, log_factor, where=f"ping {index} (fix)"), "reweight"
-        return updated.replace(n_fixes=moved.n_fixes + 1), action
+        used = dataclasses.replace(record, nis=nis, detail=action)
+        return updated.replace(n_fixes=moved.n_fixes + 1), action, (used,)
     displacement = None if moved.held is None else _displacement(moved)
     decision = decide_fix(fix, index, mean, cov, moved.held, displacement, config,
-                          half_width=record["half_width"])
-    record.update(mahalanobis2=decision.nis, decision=decision.action)
-    if decision.dropped is not None:
-        record["dropped"] = decision.dropped.index
+                          half_width=record.half_width)
     if decision.action == "hold":
-        held = dataclasses.replace(decision.held, anchor=moved.particles.copy())  # type: ignore[type-var]
-        return moved.replace(held=held), "hold"
+        records, held = decided(record, decision, moved.held)
+        held = dataclasses.replace(held, anchor=moved.particles.copy())  # type: ignore[type-var]
+        return moved.replace(held=held), "hold", records
     if decision.action == "wait":  # surprising and agreeing with the held fix, but too vague to confirm it
-        return moved.replace(held=decision.held), "wait"
+        records, held = decided(record, decision, moved.held)
+        return moved.replace(held=held), "wait", records
     if decision.action == "confirm":
-        record["confirms"] = moved.held.index  # type: ignore[union-attr]
         updated, action = _redrawn(moved, fix.position, fix.covariance, rng), "recentre"
     else:
         updated, action = _use(moved, fix, mean, cov, f"ping {index} (fix)", rng)
-    return updated.replace(n_fixes=moved.n_fixes + 1, held=decision.held), action
+    records, held = decided(record, decision, moved.held, action)
+    return updated.replace(n_fixes=moved.n_fixes + 1, held=held), action, records
 
 
 def tercom_pf(

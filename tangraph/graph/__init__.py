@@ -5,6 +5,7 @@ The only package of tangraph that imports gtsam. Online: :class:`GraphNavigator`
 is pure; recorded surveys: :func:`smooth_survey` (batch smoother).
 """
 
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.graph.config import GraphConfig, load_graph_config
 from tangraph.graph.factors import (
     between_noise,
@@ -14,7 +15,7 @@ from tangraph.graph.factors import (
     tangent_to_world,
     world_to_tangent,
 )
-from tangraph.graph.fixes import FixRecord, FixStatus, LostEpisode, search_half_width
+from tangraph.graph.fixes import LostEpisode, search_half_width
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices, window_ends
 from tangraph.graph.online import GraphNavigator, navigate_online
 from tangraph.graph.policy import FixPolicy, PolicyState

@@ -9,11 +9,11 @@ its NIS against the predicted marginal exceeds the gate (``"gate"``).
 from __future__ import annotations
 
 import dataclasses
-import enum
 from typing import TypeVar
 
 import numpy as np
 
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, nis
@@ -24,8 +24,6 @@ from tangraph.survey import Survey
 
 __all__ = [
     "FixOutcome",
-    "FixRecord",
-    "FixStatus",
     "LostEpisode",
     "fix_name",
     "judge_fix",
@@ -42,72 +40,6 @@ Fix = TypeVar("Fix", bound=TerrainFix)
 
 def fix_name(fix: TerrainFix) -> str:
     return f"fix at ping {fix.index} (window {fix.first}..{fix.index})"
-
-
-class FixStatus(enum.StrEnum):
-    """What became of a TAP window: used by the graph, or why not (one meaning per value; what
-    the online navigator's fix policy does with a fix is :mod:`tangraph.graph.policy`)."""
-
-    ACCEPTED = "accepted"  #: used: its factor is in the graph
-    GATE = "gate"  #: its NIS against the prediction is above the gate
-    MULTIMODAL = "multimodal"  #: the calibrated region has several parts: two places fit
-    UNINFORMATIVE = "uninformative"  #: the region reaches the search's edge or is too large
-    MATCH_FAILED = "match failed"  #: no fix could be made (``detail`` says why)
-    INVALID_COVARIANCE = "invalid covariance"  #: not finite, symmetric, positive definite
-    MISFIT = "misfit"  #: the soundings fit the map nowhere in the search: bad data, not a position
-    OUTSIDE_SEARCH = "outside search"  #: the best match lies on the search's edge: the truth may lie beyond
-    HELD = "held"  #: within the gate but surprising: waiting for a later fix to agree (still so at the end)
-    UNCONFIRMED = "unconfirmed"  #: held, then dropped: no later fix agreed with it (``detail`` says why)
-    CANDIDATE = "candidate"  #: a lost navigator's relocalisation candidate that no relocalisation used
-    GIVEN_UP = "given up"  #: used, then removed: the navigator found the belief it was searched around wrong
-    LEFT_WINDOW = "left window"  #: to be used late, but its key pose had left iSAM2's window: not added
-    OUTLIER = "outlier"  #: the batch smoother's robust solve found it inconsistent with the rest
-
-    @property
-    def says_lost(self) -> bool:
-        """Whether a window with this outcome says the prediction it was searched around is
-        wrong (the evidence that makes a navigator lost)."""
-        return self in (FixStatus.GATE, FixStatus.OUTSIDE_SEARCH)
-
-
-@dataclasses.dataclass(frozen=True)
-class FixRecord:
-    """One TAP window's outcome, as kept in ``Track.meta["fixes"]``: the ping ``index`` it refers to,
-    the fix's position and the covariance given to the graph (NaN without a fix), its ``status``,
-    its ``nis`` against the prediction (NaN if not judged), the search ``half_width`` (m) and a
-    ``detail`` for people (never parsed)."""
-
-    index: int
-    north: float
-    east: float
-    cov_nn: float
-    cov_ne: float
-    cov_ee: float
-    status: FixStatus
-    nis: float
-    half_width: float
-    detail: str = ""
-
-    @property
-    def accepted(self) -> bool:
-        return self.status is FixStatus.ACCEPTED
-
-    @property
-    def position(self) -> np.ndarray:
-        return np.array([self.north, self.east])
-
-    @property
-    def covariance(self) -> np.ndarray:
-        return np.array([[self.cov_nn, self.cov_ne], [self.cov_ne, self.cov_ee]])
-
-    @property
-    def reason(self) -> str:
-        """The status and its detail, for people."""
-        return f"{self.status.value}: {self.detail}" if self.detail else self.status.value
-
-    def as_dict(self) -> dict:
-        """JSON-ready form."""
-        return {**dataclasses.asdict(self), "status": self.status.value}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -204,18 +136,10 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 
 
-def _record(index: int, fix: TerrainFix | None, status: FixStatus, nis_value: float, half_width: float,
-            detail: str = "") -> FixRecord:
-    pos = np.full(2, np.nan) if fix is None else np.asarray(fix.position, float)
-    cov = np.full((2, 2), np.nan) if fix is None else np.asarray(fix.covariance, float)
-    return FixRecord(int(index), float(pos[0]), float(pos[1]), float(cov[0, 0]), float(cov[0, 1]),
-                     float(cov[1, 1]), status, float(nis_value), float(half_width), detail)
-
-
 def failed(index: int, error: Exception, half_width: float,
            status: FixStatus = FixStatus.MATCH_FAILED) -> FixOutcome:
     """The record of a window whose match failed (or whose fix had an invalid covariance)."""
-    return FixOutcome(_record(index, None, status, np.nan, half_width, str(error)), None)
+    return FixOutcome(FixRecord.of(index, None, status, np.nan, half_width, str(error)), None)
 
 
 def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, half_width: float, *,
@@ -253,5 +177,5 @@ def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, ha
         status = FixStatus.GATE
     else:
         status = FixStatus.ACCEPTED
-    record = _record(fix.index, fix, status, value, half_width, detail)
+    record = FixRecord.of(fix.index, fix, status, value, half_width, detail)
     return FixOutcome(record, fix)

@@ -21,9 +21,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tangraph.fix_records import FixStatus
 from tangraph.graph.calibration import to_world, world_jacobian
 from tangraph.graph.factors import compose, nis
-from tangraph.graph.fixes import FixOutcome, FixStatus
+from tangraph.graph.fixes import FixOutcome
 from tangraph.graph.keyposes import increments
 from tangraph.graph.policy import (
     LEFT_WINDOW_DETAIL,

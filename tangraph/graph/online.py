@@ -32,12 +32,13 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import wrap_angle, wrap_near
 from tangraph.graph import online_fixes
 from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, propagate_joint
-from tangraph.graph.fixes import FixOutcome, FixRecord, FixStatus, LostEpisode
+from tangraph.graph.fixes import FixOutcome, LostEpisode
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import take_window
 from tangraph.graph.policy import FixPolicy, PolicyState

@@ -49,8 +49,9 @@ from typing import TYPE_CHECKING, NamedTuple, cast
 
 import numpy as np
 
+from tangraph.fix_records import FixStatus
 from tangraph.geometry import gate_threshold, is_precise
-from tangraph.graph.fixes import FixOutcome, FixStatus, LostEpisode
+from tangraph.graph.fixes import FixOutcome, LostEpisode
 
 if TYPE_CHECKING:
     from tangraph.graph.config import GraphConfig

@@ -23,6 +23,7 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import wrap_near
 from tangraph.graph.batch import (
     SmootherSolution,
@@ -34,7 +35,7 @@ from tangraph.graph.batch import (
 )
 from tangraph.graph.calibration import CALIBRATION, joint_in_frame
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.fixes import FixRecord, FixStatus, failed, judge_fix, make_fix, search_half_width
+from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph
 from tangraph.graph.online import GraphNavigator, _translate, calibration_summary
 from tangraph.graph.robust import gnc

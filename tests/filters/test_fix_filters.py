@@ -28,6 +28,7 @@ from tangraph.filters.belief import weighted_moments
 from tangraph.filters.fixes import decide_fix, fix_due, fix_window
 from tangraph.filters.mle import _update
 from tangraph.filters.steps import predict
+from tangraph.fix_records import FixStatus
 from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
@@ -54,13 +55,13 @@ def test_plain_tercom_pf_first_fix_initialises_the_cloud_then_fixes_reweight_it(
     fixes = [r.fixes for r in results]
     assert [i for i, f in enumerate(fixes) if f] == [4, 9, 14]  # non-overlapping windows of 5
     first = fixes[4][0]
-    assert first["accepted"] and first["action"] == "initialise"
+    assert first.status is FixStatus.ACCEPTED and first.detail == "initialise"
     cloud = results[4].belief.particles
     np.testing.assert_allclose(
-        cloud.mean(axis=0), first["position"], atol=4 * np.sqrt(np.max(first["covariance"]))
+        cloud.mean(axis=0), first.position, atol=4 * np.sqrt(np.max(first.covariance))
     )
     assert np.hypot(*(results[4].mean - SURVEY.true_pose[4, :2])) < 5.0
-    assert fixes[9][0]["action"] == "reweight" and fixes[14][0]["action"] == "reweight"
+    assert fixes[9][0].detail == "reweight" and fixes[14][0].detail == "reweight"
     assert results[0].belief.n_fixes == 0 and results[14].belief.n_fixes == 3
 
 
@@ -72,14 +73,13 @@ def test_tercom_pf_uses_a_fix_by_its_likelihood_redrawing_a_cloud_too_wide_for_i
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 15)
     first = results[4].fixes[0]
-    assert first["decision"] == "use" and first["action"] == "redraw"
+    assert first.status is FixStatus.ACCEPTED and first.detail == "redraw"
     prior = tercom_steps(config, belief, 4)[-1]  # the prediction the first fix was judged against
     moved = predict(prior.belief, survey_pings(SURVEY)[4], FilterModel.from_model(MODEL, MAP, config),
                     rng=np.random.default_rng(0))
     mean, cov = weighted_moments(moved)
-    r = np.array(first["covariance"])
-    gain = cov @ np.linalg.inv(cov + r)
-    expected_mean, expected_cov = mean + gain @ (np.array(first["position"]) - mean), cov - gain @ cov
+    gain = cov @ np.linalg.inv(cov + first.covariance)
+    expected_mean, expected_cov = mean + gain @ (first.position - mean), cov - gain @ cov
     got_mean, got_cov = weighted_moments(results[4].belief)
     se = np.sqrt(np.diag(expected_cov) / 500)  # Monte Carlo error of the drawn cloud's mean
     assert np.all(np.abs(got_mean - expected_mean) < 4 * se)
@@ -88,7 +88,8 @@ def test_tercom_pf_uses_a_fix_by_its_likelihood_redrawing_a_cloud_too_wide_for_i
 
 
 def _shifted_steps(config, upto):
-    """TERCOM-PF whose cloud is moved 40 m away after its first fix, run to ping ``upto``."""
+    """TERCOM-PF whose cloud is moved 40 m away after its first fix, run to ping ``upto``: the
+    records its steps wrote, in order, and the last step."""
     belief = initial_belief(SURVEY.dr_pose[0, :2], 20.0, 500, rng=np.random.default_rng(1))
     results = tercom_steps(config, belief, 5)
     belief = results[4].belief.replace(particles=results[4].belief.particles + np.array([40.0, 0.0]))
@@ -99,14 +100,14 @@ def _shifted_steps(config, upto):
     for ping in survey_pings(SURVEY)[5:upto]:
         results.append(step(belief, ping, model, config, rng=rng))
         belief = results[-1].belief
-    return [r.fixes[0] for r in results if r.fixes], results[-1]
+    return [f for r in results for f in r.fixes], results[-1]
 
 
 def test_plain_tercom_pf_recentres_on_a_fix_far_from_the_cloud():
     config = TercomPFConfig(n_particles=500, window=5, gate=13.8, min_half_width=100.0,
                             confirm_probability=None)
     (record,), result = _shifted_steps(config, 10)
-    assert record["accepted"] and record["action"] == "recentre" and record["mahalanobis2"] > 13.8
+    assert record.accepted and record.detail == "recentre" and record.nis > 13.8
     assert result.counts["n_recentred"] == 1
     assert np.hypot(*(result.mean - SURVEY.true_pose[9, :2])) < 5.0
 
@@ -116,10 +117,10 @@ def test_tercom_pf_holds_a_surprising_fix_until_a_second_one_confirms_it():
     agrees with it through the particles' own displacements and is as surprising: the cloud is
     re-centred on it."""
     config = TercomPFConfig(n_particles=500, window=5, min_half_width=100.0, confirm_probability=0.9)
-    (held, confirming), result = _shifted_steps(config, 15)
-    assert held["decision"] == "hold" and held["action"] == "hold" and held["mahalanobis2"] > 13.8
-    assert confirming["decision"] == "confirm" and confirming["action"] == "recentre"
-    assert confirming["confirms"] == held["index"] == 9
+    (held, settled, confirming), result = _shifted_steps(config, 15)
+    assert held.status is FixStatus.HELD and held.nis > 13.8 and held.index == settled.index == 9
+    assert settled.status is FixStatus.CONFIRMED and settled.detail == "by the fix at ping 14"
+    assert confirming.accepted and confirming.detail == "confirms the fix at ping 9; recentre"
     assert result.counts["n_recentred"] == 1 and result.belief.held is None
     assert np.hypot(*(result.mean - SURVEY.true_pose[14, :2])) < 5.0
 
@@ -144,11 +145,11 @@ def test_plain_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_betwee
     plain = MLEConfig(require_accepted=False, confirm_probability=None, fuse=False)
     track = run_filter("mle", SURVEY, MAP, plain, model=MODEL, rng=np.random.default_rng(0))
     fixes = track.meta["fixes"]
-    assert [f["index"] for f in fixes] == [4, 9, 14, 19, 24, 29]
+    assert [f.index for f in fixes] == [4, 9, 14, 19, 24, 29] and all(f.accepted for f in fixes)
     for f in fixes:
-        k = f["index"]
-        np.testing.assert_allclose(track.pose[k, :2], f["position"])
-        np.testing.assert_allclose(track.covariance[k, :2, :2], f["covariance"])
+        k = f.index
+        np.testing.assert_allclose(track.pose[k, :2], f.position)
+        np.testing.assert_allclose(track.covariance[k, :2, :2], f.covariance)
         if k + 1 < SURVEY.n_pings:  # then dead reckoning, with a growing covariance
             step = SURVEY.dr_pose[k + 1, :2] - SURVEY.dr_pose[k, :2]
             np.testing.assert_allclose(track.pose[k + 1, :2] - track.pose[k, :2], step)
@@ -327,9 +328,9 @@ def test_mle_relocalises_on_two_agreeing_fixes_and_refuses_one_alone():
     off = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([60.0, 0.0, 0.0]))
     config = MLEConfig(min_half_width=150.0)
     track = run_filter("mle", off, MAP, config, model=MODEL, rng=np.random.default_rng(0))
-    decisions = [f.get("decision") for f in track.meta["fixes"]]
-    assert decisions[:2] == ["hold", "confirm"]
-    assert track.meta["fixes"][1]["confirms"] == track.meta["fixes"][0]["index"] == 4
+    held, confirming = track.meta["fixes"][:2]
+    assert (held.index, held.status, held.detail) == (4, FixStatus.CONFIRMED, "by the fix at ping 9")
+    assert confirming.accepted and confirming.detail == "confirms the fix at ping 4"
     np.testing.assert_allclose(track.pose[4, :2], off.dr_pose[4, :2])  # not taken alone
     assert np.hypot(*(track.pose[-1, :2] - SURVEY.true_pose[-1, :2])) < 5.0
 
@@ -356,5 +357,32 @@ def test_a_filters_fix_is_laid_with_its_calibration_and_grown_by_what_is_uncerta
         (raw, _), (laid, record), (spread, _) = fix(), fix(calibration=known), fix(calibration=unsure)
         assert np.linalg.norm(raw.position - truth) > 1.0
         assert np.linalg.norm(laid.position - truth) < 0.7
-        np.testing.assert_allclose(record["covariance"], laid.covariance)
+        np.testing.assert_allclose(record.covariance, laid.covariance)
         assert np.all(np.linalg.eigvalsh(spread.covariance - laid.covariance) > 0.01)
+
+
+def test_the_records_a_decision_writes():
+    """A held fix's record is settled when its fate is: confirmed, dropped by a fix that does not
+    agree, or out of attempts; a vague fix that agrees is recorded as such and the held one waits."""
+    from tangraph.fix_records import FixRecord
+
+    def record(index):
+        return FixRecord.of(index, _fix([0.0, 0.0], 1.0), FixStatus.ACCEPTED, np.nan, SEARCH)
+
+    prediction, moved = np.array([0.0, 8.0]), (np.array([0.0, 8.0]), 0.5 * np.eye(2))
+    decision = _decide(_fix([10.0, 0.0], 1.0), 9, np.zeros(2), np.eye(2), None, None)
+    (holding,), held = fixes.decided(record(9), decision, None)
+    assert holding.status is FixStatus.HELD and held.record is holding and holding.nis == decision.nis
+    confirm = _decide(_fix([10.5, 8.0], 1.0), 14, prediction, np.eye(2), held, moved)
+    (settled, used), after = fixes.decided(record(14), confirm, held, "recentre")
+    assert (settled.index, settled.status, after) == (9, FixStatus.CONFIRMED, None)
+    assert used.accepted and used.detail == "confirms the fix at ping 9; recentre"
+    refuted = _decide(_fix([0.0, 8.0], 1.0), 14, prediction, np.eye(2), held, moved)
+    (dropped, used), _ = fixes.decided(record(14), refuted, held)
+    assert dropped.status is FixStatus.UNCONFIRMED and "did not agree" in dropped.detail and used.accepted
+    loose = _decide(_fix([14.0, 8.0], 6.0), 14, prediction, np.eye(2), held, moved)
+    (vague,), waiting = fixes.decided(record(14), loose, held)
+    assert vague.status is FixStatus.VAGUE and waiting.record is holding and waiting.attempts == 1
+    assert fixes.expired(held, fixes.waited(held)) == ()
+    (gone,) = fixes.expired(waiting, fixes.waited(waiting))
+    assert gone.status is FixStatus.UNCONFIRMED and gone.detail == "no fix confirmed it in 2 attempts"

@@ -134,7 +134,8 @@ def _flagged(fix, *reasons):
 
 
 def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
-    from tangraph.graph.fixes import FixStatus, judge_fix
+    from tangraph.fix_records import FixStatus
+    from tangraph.graph.fixes import judge_fix
     from tangraph.matching import tap_fix
 
     config = GraphConfig()

@@ -138,7 +138,7 @@ def test_rematch_converges(small_survey, rough_map):
 
 
 def test_a_rematch_has_moved_when_a_fix_moves_beyond_the_tolerance_or_changes_its_verdict():
-    from tangraph.graph.fixes import FixRecord, FixStatus
+    from tangraph.fix_records import FixRecord, FixStatus
     from tangraph.graph.smoother import _moved
 
     def record(north, status=FixStatus.ACCEPTED, index=10):
