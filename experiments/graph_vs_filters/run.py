@@ -78,7 +78,8 @@ def _map_errors(run, refined) -> dict[str, float]:
 
 
 def _fix_coverage(track, truth) -> tuple[int, int]:
-    """Fixes the graph used, and how many of them hold the truth in their 95 % ellipse."""
+    """Fixes the method used (the graph, TERCOM-PF, MLE), and how many of them hold the truth in
+    their 95 % ellipse."""
     used = covered = 0
     for fix in track.meta.get("fixes", []):
         if not fix.accepted:
@@ -137,7 +138,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         pcrb = bound[kind]
         calibration = track.meta.get("calibration") or {}
         heading_miss = np.angle(np.exp(1j * (calibration.get("heading_error", np.nan) - truth_heading)))
-        used, covered = _fix_coverage(track, survey.true_pose) if method in GRAPH else (0, 0)
+        used, covered = _fix_coverage(track, survey.true_pose)  # the graph's, TERCOM-PF's and MLE's
         rows.append(
             {
                 "method": method,
@@ -189,7 +190,7 @@ def summarise(table) -> list[dict]:
             m = means.loc[method]
             ratio = m.rmse / means.loc[best, "rmse"] if best else np.nan
             goal_pcrb = {"smoother": 1.25, "isam2": 2.0}.get(method)
-            fixes = int(sums.loc[method, "fixes_used"]) if method in GRAPH else 0
+            fixes = int(sums.loc[method, "fixes_used"])
             coverage = sums.loc[method, "fixes_covered"] / fixes if fixes else np.nan
             rows.append(
                 {
