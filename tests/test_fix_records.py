@@ -26,4 +26,3 @@ def test_a_record_holds_the_fix_and_what_became_of_it():
 
 def test_only_the_gate_and_a_best_match_on_the_edge_say_the_prediction_is_wrong():
     assert {s for s in FixStatus if s.says_lost} == {FixStatus.GATE, FixStatus.OUTSIDE_SEARCH}
-    assert len({s.value for s in FixStatus}) == len(FixStatus)  # one meaning per value

@@ -284,7 +284,8 @@ def decided(record: FixRecord, decision: FixDecision, held: HeldFix | None,
     elif decision.action == "hold":
         detail = "surprising: held until a later fix agrees"
     elif decision.action == "wait":
-        detail = f"as surprising as the held fix at ping {held.index if held else '?'}, too vague for it"
+        assert held is not None  # a fix waits for a held one
+        detail = f"as surprising as the held fix at ping {held.index}, too vague to confirm it"
     new = dataclasses.replace(record, status=_STATUS[decision.action], nis=decision.nis, detail=detail)
     after = decision.held
     if decision.action == "hold" and after is not None:

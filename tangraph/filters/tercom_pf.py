@@ -94,11 +94,11 @@ class TercomPFConfig(ParticleConfig):
     confirm_probability : float or None
         A fix whose NIS against the prediction exceeds the ``chi2(2)`` quantile of this
         probability is held until a later one confirms it (0.9: the online graph's rule); None
-        (default): the plain TERCOM-PF. On the realistic-map scenarios of
-        ``experiments/graph_vs_filters`` 0.9 brought the mean final NEES on ``demo-map-error``
-        from 37.5 to 6.4, but cost 2-9 % of RMSE there and on the other two, and on the
-        perfect-map ``wang2019`` a cloud that had drifted was once re-centred on a wrong fix
-        that a vague one confirmed; the default stays the plain method.
+        (default): the plain TERCOM-PF. On the scenarios of ``experiments/graph_vs_filters``
+        0.9 lowered the mean final NEES on ``demo-map-error`` and ``han2020-map-error`` but was
+        no more accurate anywhere, and on the perfect-map ``wang2019`` its cloud drifted after
+        a re-weighted first fix in more runs (mean RMSE 25.3 against the plain 19.5 m); the
+        default stays the plain method.
     gate : float
         The NIS within which a later fix confirms a held one; with ``confirm_probability=None``,
         the squared Mahalanobis distance beyond which an accepted fix re-centres the cloud.
