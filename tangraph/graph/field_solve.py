@@ -9,10 +9,13 @@ every ping over it the same way. Here the field is a set of unknowns instead, on
 ``d = S u``, ``S`` the node stds, ``u`` of Gaussian-Markov prior precision ``Q`` (the SPDE's,
 Matérn of the map's correlation length). A sounding then measures
 
-    ``z = t + h(f) + w(f)^T S u + e``,    ``var e = sounding_std^2 + nugget(f)``
+    ``z = t + h(f) + w(f)^T S u + e``,    ``var e = sounding_std^2 + nugget(f) * shared``
 
 (``w`` the bilinear weights of its footprint on the nodes, the nugget the variance the nodes
-miss between them), and the track, the calibration, the tide and ``u`` are solved together:
+miss between them; the soundings within one cell of nodes share it, so each is given it as
+many times as they share it, :func:`shared_nugget`: the bound of the same model takes it as
+independent, which claims more than it is, so the solve's covariance is at or above the
+bound's), and the track, the calibration, the tide and ``u`` are solved together:
 Gauss-Newton on the odometry and priors (GTSAM's linearisation), the soundings and
 ``1/2 u^T Q u``, assembled as one sparse system.
 
@@ -47,15 +50,15 @@ from tangraph.graph.terrain_factors import PingTerrain
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.terrain import MapError
 
-__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "solve",
-           "variance_components"]
+__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "shared_nugget",
+           "solve", "variance_components"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class FieldSoundings:
     """The soundings' hold on the field: per sounding ``(K, B)`` its nodes and weights
-    ``(K, B, m)`` (zero weight where it has no footprint on the map) and the field's nugget
-    there (m^2, NaN where none)."""
+    ``(K, B, m)`` (zero weight where it has no footprint on the map) and the variance its
+    nugget is given (:func:`shared_nugget` among the soundings seen; m^2, NaN where none)."""
 
     field: MapErrorField | CombinedField
     node: np.ndarray
@@ -70,7 +73,7 @@ class FieldSoundings:
         nodes = np.zeros((*seen.shape, m), dtype=np.int64)
         weights = np.zeros((*seen.shape, m))
         nugget = np.full(seen.shape, np.nan)
-        nodes[seen], weights[seen], nugget[seen] = node, weight, field.nugget(node, weight)
+        nodes[seen], weights[seen], nugget[seen] = node, weight, shared_nugget(field, node, weight)
         return cls(field, nodes, weights, nugget)
 
     def scaled(self, factor: float) -> FieldSoundings:
@@ -86,6 +89,28 @@ class FieldSoundings:
 
 
 Field = MapErrorField | CombinedField
+
+
+def shared_nugget(field: Field, index: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The variance (M,) each point's nugget is given: its own nugget ``n_b`` (the variance its
+    field's nodes miss, :meth:`~tangraph.eval.map_field.MapErrorField.nugget`) times what the
+    points in its cell of nodes share of it, ``sqrt(n_b) sum_j sqrt(n_j)`` over the points ``j``
+    in the same cell of each field's nodes (``index, weight`` their interpolation on the nodes).
+
+    The part of the map's error that its nodes miss varies within about a node spacing, so the
+    soundings of one cell share it (a multibeam's beams lie a fraction of a metre apart); taken
+    as independent, every sounding would count it once more and the solve would converge on the
+    map's noise. Within a cell this is the row-sum bound of :mod:`tangraph.sensors.terrain`:
+    never more information than if they shared it wholly."""
+    fields = field.fields if isinstance(field, CombinedField) else (field,)
+    offsets = np.cumsum([0, *(f.n_nodes for f in fields)])
+    out = np.zeros(index.shape[0])
+    for n, (f, start) in enumerate(zip(fields, offsets, strict=False)):
+        node, w = index[:, 4 * n:4 * n + 4] - start, weight[:, 4 * n:4 * n + 4]
+        root = np.sqrt(f.nugget(node, w))
+        cell = node[:, 0]  # a cell is named by its first corner
+        out += root * np.bincount(cell, weights=root, minlength=f.n_nodes)[cell]
+    return out
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

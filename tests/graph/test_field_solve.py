@@ -10,7 +10,7 @@ import pytest
 from scipy import sparse
 
 from tangraph.eval import bound_rmse, posterior_crb
-from tangraph.eval.map_field import map_error_field
+from tangraph.eval.map_field import CombinedField, map_error_field
 from tangraph.graph import GraphConfig, field_solve, smooth_survey, terrain_factors, terrain_solve
 from tangraph.graph.calibration import TIDE
 from tangraph.graph.online import GraphNavigator
@@ -80,8 +80,9 @@ def test_the_normal_equations_are_the_joint_costs_gradient():
 
 def test_the_covariance_is_the_bound_of_the_same_model():
     # noise-free soundings of a textured map stated to err by 0.3 m over 30 m, a DR 1 % / 1 deg
-    # off: the smoother with the field claims what the map-aware bound allows (the soundings
-    # alone, the map's error only widening their variances, claim far more)
+    # off: the smoother with the field claims about what the map-aware bound allows, a little
+    # more (the bound takes the nodes' nugget as independent, the solve as shared within a cell;
+    # the soundings alone, the map's error only widening their variances, claim far more)
     bathymetry = with_error(smooth_map(), 0.3, 30.0)
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     survey = noise_free(biased_dr(survey, truth), bathymetry)
@@ -89,7 +90,7 @@ def test_the_covariance_is_the_bound_of_the_same_model():
     config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
     track = smooth_survey(survey, bathymetry, config, model=MODEL)
     claimed = np.sqrt(np.mean(np.trace(track.covariance[:, :2, :2], axis1=1, axis2=2)))
-    assert claimed == pytest.approx(bound, rel=0.05)
+    assert bound <= claimed <= 1.15 * bound
     widened = smooth_survey(survey, bathymetry, dataclasses.replace(config, smoother_terrain="soundings"),
                             model=MODEL)
     assert np.sqrt(np.mean(np.trace(widened.covariance[:, :2, :2], axis1=1, axis2=2))) > 1.5 * bound
@@ -97,6 +98,33 @@ def test_the_covariance_is_the_bound_of_the_same_model():
     assert info["field_nodes"] > 0 and info["field_spacing"] == pytest.approx(10.0)
     error = track.pose[:, :2] - truth[:, :2]
     assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < bound
+
+
+def test_a_nugget_is_shared_by_the_points_of_one_cell_of_nodes():
+    # three points in one cell of nodes give each other's nuggets (row sums), a point alone keeps
+    # its own; in a combined field each field's cells count apart
+    bathymetry = with_error(smooth_map(), 0.3, 30.0)
+    field = map_error_field(np.array([100.0, 200.0]), np.array([100.0, 200.0]),
+                            field_solve_error(bathymetry))
+    h, (n0, e0) = field.spacing, field.origin
+    north = n0 + h * np.array([3.2, 3.5, 3.9, 6.5])
+    east = e0 + h * np.array([4.1, 4.5, 4.8, 2.5])
+    index, weight = field.weights(north, east)
+    own = field.nugget(index, weight)
+    shared = field_solve.shared_nugget(field, index, weight)
+    root = np.sqrt(own[:3])
+    np.testing.assert_allclose(shared[:3], root * root.sum())
+    np.testing.assert_allclose(shared[3], own[3])
+    assert np.all(shared[:3] > own[:3])
+    combined = CombinedField((field, field))
+    index2, weight2 = combined.weights(north, east)
+    np.testing.assert_allclose(field_solve.shared_nugget(combined, index2, weight2), 2 * shared)
+
+
+def field_solve_error(bathymetry):
+    from tangraph.sensors import map_error
+
+    return map_error(bathymetry, MODEL)
 
 
 def blob(north, east, centre=(140.0, 160.0), height=0.8, width=12.0):
@@ -131,7 +159,7 @@ def test_a_planted_map_error_is_recovered_with_its_std():
     # the std shrinks where the soundings are (to what the nodes leave between them) and is the
     # prior's far from them
     assert np.max(refined.depth_std[surveyed]) < 0.7 * 0.3
-    assert np.median(refined.depth_std[surveyed]) < 0.6 * 0.3
+    assert np.median(refined.depth_std[surveyed]) < 0.65 * 0.3
     np.testing.assert_allclose(refined.depth_std[0, 0], 0.3)
     np.testing.assert_allclose(refined.depth[0, 0], 50.0)
 
