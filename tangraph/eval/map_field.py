@@ -26,10 +26,17 @@ perfectly correlated), so each sounding is also given the variance it misses, it
 independent noise: its map error then has the model's variance ``s(p)^2`` (``s`` interpolated),
 and soundings in one cell share the interpolated part only.
 
-The node spacing is ``h = max(L / 3, map cell)`` (at ``L / 3`` the lattice's correlation at
-``L`` is 0.126 against Matérn's 0.140; finer than the map's cell the map says nothing of its
-error), made coarser (the nugget then takes more) where the grid would pass
-:data:`MAX_NODES` nodes.
+The node spacing is ``h = L / 3`` (at ``L / 3`` the lattice's correlation at ``L`` is 0.126
+against Matérn's 0.140), made coarser (the nugget then takes more) where the grid would pass
+``max_nodes`` nodes. The nugget is the error's variation within a node cell, which the
+soundings there share (a multibeam's beams lie a fraction of a metre apart): taken as
+independent it claims more than there is, and at ``h = L`` (a cell-scale error on the map's
+own cells) it is a third of the variance at a cell's centre, at ``L / 3`` a tenth. So the
+bound is solved at ``L / 3`` (:data:`BOUND_MAX_NODES`; at ``L / 5`` the simulated realistic
+maps' bounds move by 1 %), while a solve that estimates the field may keep its nodes no finer
+than the map's cell (``finer_than_cell=False``), where the map says nothing of its error, and
+share the nugget among the soundings of a cell instead
+(:func:`tangraph.graph.field_solve.shared_nugget`).
 """
 
 from __future__ import annotations
@@ -45,6 +52,7 @@ from tangraph.sensors.terrain import MapError
 __all__ = [
     "FILTER_PINGS",
     "MARGIN_LENGTHS",
+    "BOUND_MAX_NODES",
     "MAX_NODES",
     "ZERO_VARIANCE",
     "CombinedField",
@@ -57,12 +65,14 @@ __all__ = [
     "spde_precision",
 ]
 
-#: nodes per correlation length (at most: never finer than the map's cell)
+#: nodes per correlation length (at most)
 NODES_PER_LENGTH = 3
 #: the grid reaches this many correlation lengths beyond every footprint
 MARGIN_LENGTHS = 2.0
 #: most nodes of a grid (the spacing grows beyond it)
 MAX_NODES = 40_000
+#: most nodes of the bound's grid
+BOUND_MAX_NODES = 100_000
 #: the filter bound is solved at this many pings at most (interpolated in between)
 FILTER_PINGS = 60
 #: the variance (in units of the state's natural spread squared) given to a step of the error
@@ -177,13 +187,14 @@ def spde_precision(shape: tuple[int, int], c: float) -> sparse.csc_array:
     return sparse.csc_array(m @ m * variance)
 
 
-def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *,
-                    max_nodes: int = MAX_NODES) -> MapErrorField | CombinedField:
+def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *, max_nodes: int = MAX_NODES,
+                    finer_than_cell: bool = False) -> MapErrorField | CombinedField:
     """The map error's field on a grid of nodes over the points ``north, east`` (the soundings'
     true footprints), one grid per independent field of the error
     (:meth:`~tangraph.sensors.MapError.components`: the cell-scale error and the excess of the
     interpolated parts, each with its own range), each with a margin of
-    :data:`MARGIN_LENGTHS` ranges and at most ``max_nodes`` nodes.
+    :data:`MARGIN_LENGTHS` ranges and at most ``max_nodes`` nodes, its spacing a third of its
+    range, but never finer than the map's cell unless ``finer_than_cell`` (module docstring).
 
     Examples
     --------
@@ -196,14 +207,16 @@ def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *,
     >>> field.spacing, field.shape, float(field.std[0])
     (20.0, (18, 13), 0.3)
     """
-    fields = [_one_field(north, east, part, max_nodes) for part in error.components()]
+    fields = [_one_field(north, east, part, max_nodes, finer_than_cell) for part in error.components()]
     return fields[0] if len(fields) == 1 else CombinedField(tuple(fields))
 
 
-def _one_field(north: np.ndarray, east: np.ndarray, error: MapError, max_nodes: int) -> MapErrorField:
+def _one_field(north: np.ndarray, east: np.ndarray, error: MapError, max_nodes: int,
+               finer_than_cell: bool) -> MapErrorField:
     length = error.correlation_length
-    cell = float(max(error.bathymetry.cell_size))
-    spacing = max(length / NODES_PER_LENGTH, cell)
+    spacing = length / NODES_PER_LENGTH
+    if not finer_than_cell:
+        spacing = max(spacing, float(max(error.bathymetry.cell_size)))
     margin = MARGIN_LENGTHS * length
     low = np.array([np.min(north), np.min(east)]) - margin
     extent = np.array([np.max(north), np.max(east)]) + margin - low

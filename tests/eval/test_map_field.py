@@ -74,6 +74,8 @@ def test_the_grid_covers_the_footprints_with_a_margin_of_two_ranges():
     np.testing.assert_allclose(field.std, 0.2)
     coarse = map_error_field(north, east, map_error(_flat(), NavigationModel(map_std=0.2)))
     assert coarse.spacing == pytest.approx(10.0)  # a range of one cell: nodes a cell apart
+    fine = map_error_field(north, east, map_error(_flat(), NavigationModel(map_std=0.2)), finer_than_cell=True)
+    assert fine.spacing == pytest.approx(10.0 / 3)  # the bound's: a third of the range all the same
     capped = map_error_field(north, east, error, max_nodes=100)
     assert capped.n_nodes <= 100 and capped.spacing > field.spacing
 
