@@ -486,8 +486,9 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     # the smoother bound's field as fine as its range asks; the filter bound's, solved 60 times,
     # no finer than the map's cell (its nugget, independent, claims a little more)
     smoother = kind == "smoother"
+    most = map_field.BOUND_MAX_NODES if smoother else map_field.MAX_NODES
     field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=smoother,
-                                      max_nodes=map_field.BOUND_MAX_NODES if smoother else map_field.MAX_NODES)
+                                      max_nodes=most)
     node, weight = field.weights(north[used], east[used])
     std = np.ones(used.shape)  # each sounding's noise: its own and the field's nugget
     std[used] = np.sqrt(model.sounding_std**2 + field.nugget(node, weight))

@@ -50,9 +50,9 @@ from tangraph.eval import selected_inverse as si
 from tangraph.sensors.terrain import MapError
 
 __all__ = [
+    "BOUND_MAX_NODES",
     "FILTER_PINGS",
     "MARGIN_LENGTHS",
-    "BOUND_MAX_NODES",
     "MAX_NODES",
     "ZERO_VARIANCE",
     "CombinedField",

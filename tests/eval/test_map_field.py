@@ -72,9 +72,10 @@ def test_the_grid_covers_the_footprints_with_a_margin_of_two_ranges():
     assert node_n.min() <= north.min() - 90.0 and node_n.max() >= north.max() + 90.0
     assert node_e.min() <= east.min() - 90.0 and node_e.max() >= east.max() + 90.0
     np.testing.assert_allclose(field.std, 0.2)
-    coarse = map_error_field(north, east, map_error(_flat(), NavigationModel(map_std=0.2)))
+    one_cell = map_error(_flat(), NavigationModel(map_std=0.2))
+    coarse = map_error_field(north, east, one_cell)
     assert coarse.spacing == pytest.approx(10.0)  # a range of one cell: nodes a cell apart
-    fine = map_error_field(north, east, map_error(_flat(), NavigationModel(map_std=0.2)), finer_than_cell=True)
+    fine = map_error_field(north, east, one_cell, finer_than_cell=True)
     assert fine.spacing == pytest.approx(10.0 / 3)  # the bound's: a third of the range all the same
     capped = map_error_field(north, east, error, max_nodes=100)
     assert capped.n_nodes <= 100 and capped.spacing > field.spacing
