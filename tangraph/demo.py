@@ -141,8 +141,8 @@ def _fix_close_up(survey, bathymetry, smoother: Track, path: Path) -> None:
     from tangraph.matching import MatchingError, TapConfig, tap_fix_patch, window_patch
     from tangraph.plot import plot_fix
 
-    fixes = [f for f in smoother.meta.get("fixes", []) if f.accepted]
-    fixes = fixes or [f for f in smoother.meta.get("fixes", []) if np.isfinite(f.north)]
+    fixes = [f for f in smoother.fixes or () if f.accepted]
+    fixes = fixes or [f for f in smoother.fixes or () if np.isfinite(f.north)]
     if not fixes:
         raise TangraphError("the demo's smoother made no terrain fix to show")
     chosen = fixes[len(fixes) // 2]

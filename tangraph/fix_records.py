@@ -1,5 +1,5 @@
 """What became of each terrain fix a method attempted: one record type for the graph and the
-fix-based filters (TERCOM-PF, MLE), kept in ``Track.meta["fixes"]``."""
+fix-based filters (TERCOM-PF, MLE), kept in ``Track.fixes``."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ class FixStatus(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True)
 class FixRecord:
-    """One window's outcome, as kept in ``Track.meta["fixes"]``: the ping ``index`` it refers to,
+    """One window's outcome, as kept in ``Track.fixes``: the ping ``index`` it refers to,
     the fix's position and the covariance the estimator gave it (NaN without a fix), its
     ``status``, its ``nis`` against the prediction (NaN if not judged), the search ``half_width``
     (m) and a ``detail`` for people (never parsed).

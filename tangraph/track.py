@@ -16,6 +16,7 @@ from typing import Any, Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.fix_records import FixRecord
 
 __all__ = [
     "Track",
@@ -48,6 +49,10 @@ class Track:
         Run-time figures (seconds), e.g. ``{"total": 1.2, "per_step_p99": 0.004}``.
     meta : dict
         Anything else worth keeping (counts of rejected fixes, divergences, seeds).
+    fixes : tuple of FixRecord, optional
+        What became of every position fix the estimator tried (the graph, TERCOM-PF, MLE and
+        the particle filters that take fixes), one record per ping it refers to; None for an
+        estimator that takes none.
     """
 
     time: np.ndarray
@@ -56,6 +61,7 @@ class Track:
     method: str = "unknown"
     timings: dict[str, float] = dataclasses.field(default_factory=dict)
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
+    fixes: tuple[FixRecord, ...] | None = None
 
     def __post_init__(self) -> None:
         time = np.array(self.time, dtype=np.float64)
@@ -85,6 +91,13 @@ class Track:
         object.__setattr__(self, "covariance", cov)
         object.__setattr__(self, "timings", dict(self.timings))
         object.__setattr__(self, "meta", dict(self.meta))
+        if self.fixes is not None:
+            fixes = tuple(self.fixes)
+            wrong = next((f for f in fixes if not isinstance(f, FixRecord)), None)
+            if wrong is not None:
+                raise TangraphError(f"track {self.method!r}: fixes must be FixRecords, "
+                                    f"got {type(wrong).__name__}")
+            object.__setattr__(self, "fixes", fixes)
 
     @property
     def n_poses(self) -> int:

@@ -25,9 +25,9 @@ def track_report(track: Track, survey: Survey) -> dict:
     report: dict = {"method": track.method, "poses": track.n_poses,
                     "duration_s": float(track.time[-1] - track.time[0])}
     meta = track.meta
-    if "fixes" in meta:
+    if track.fixes is not None:
         outcomes: dict[str, int] = {}
-        for fix in meta["fixes"]:  # FixRecords, of the graph and the fix-based filters alike
+        for fix in track.fixes:  # FixRecords, of the graph and the fix-based filters alike
             outcomes[fix.status.value] = outcomes.get(fix.status.value, 0) + 1
         report["fixes"] = {"accepted": int(meta.get("n_fixes_accepted", 0)),
                            "rejected": int(meta.get("n_fixes_rejected", 0)),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
+from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.track import Track, position_errors, write_track_csv, write_track_tum
 
 
@@ -23,6 +24,16 @@ def test_validation_names_the_problem():
         Track(time=[0.0, 1.0], pose=np.zeros((2, 2)))
     t = Track(time=[0.0, 1.0], pose=np.zeros((2, 3)))
     assert np.all(np.isnan(t.covariance))
+
+
+def test_fixes_are_a_typed_field_none_for_an_estimator_without_fixes():
+    assert make_track().fixes is None
+    record = FixRecord.of(2, None, FixStatus.MATCH_FAILED, float("nan"), 50.0, "too few soundings")
+    t = Track(time=[0.0, 1.0, 2.0], pose=np.zeros((3, 3)), method="mle", fixes=[record])
+    assert t.fixes == (record,)
+    assert Track(time=[0.0], pose=np.zeros((1, 3)), fixes=[]).fixes == ()
+    with pytest.raises(TangraphError, match="track 'mle': fixes must be FixRecords, got dict"):
+        Track(time=[0.0], pose=np.zeros((1, 3)), method="mle", fixes=[{"index": 0}])
 
 
 def test_position_errors():

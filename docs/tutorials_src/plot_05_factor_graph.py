@@ -76,7 +76,7 @@ print(f"speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_sca
 # What became of every fix
 # ------------------------
 #
-# ``Track.meta["fixes"]`` holds one :class:`~tangraph.graph.FixRecord` per window: the ping it
+# ``Track.fixes`` holds one :class:`~tangraph.graph.FixRecord` per window: the ping it
 # ends at, the fix and the covariance given to the graph, its :class:`~tangraph.graph.FixStatus`
 # (accepted, or why not), its NIS (normalised innovation squared
 # against the prediction; the gate is its 0.999 quantile, 13.8) and the search half-width.
@@ -86,7 +86,7 @@ print(f"speed scale {calibration['speed_scale']:+.2%} +- {calibration['speed_sca
 
 truth = survey.true_pose
 print(" ping  accepted  reason          NIS   half-width  fix error")
-for record in online.meta["fixes"]:
+for record in online.fixes:
     k = record.index
     error = np.hypot(*(record.position - truth[k, :2]))
     print(f"{k:5d}  {record.accepted!s:>8}  {record.status.value:<13} {record.nis:7.1f}  "
@@ -97,7 +97,7 @@ for record in online.meta["fixes"]:
 # the dead reckoning grows steadily; the graph's falls at each accepted fix and grows with the
 # DR between them.
 
-fixes = online.meta["fixes"]
+fixes = online.fixes
 fig, ax = plt.subplots(figsize=(9, 4.5), layout="constrained")
 plot_errors({"dead reckoning": dead_reckoning_track(survey), "isam2": online}, truth, ax, bound="isam2")
 for accepted, marker, colour in ((True, "v", "tab:green"), (False, "x", "tab:red")):
@@ -160,7 +160,7 @@ results = {}
 after = slice(bad_ping, bad_ping + 20)
 for label, variant in variants.items():
     track = run_with(outlier, variant).track()
-    record = next(f for f in track.meta["fixes"] if f.index == bad_ping)
+    record = next(f for f in track.fixes if f.index == bad_ping)
     results[label] = track
     print(f"{label:<26} outlier {'accepted' if record.accepted else 'refused'} "
           f"({record.status.value}, NIS {record.nis:.0f}); largest error over the "

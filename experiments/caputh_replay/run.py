@@ -301,7 +301,7 @@ def scores(track, survey, gps_std: float) -> dict:
     nees = position_nees(Track(time=track.time, pose=track.pose, covariance=widened), survey.true_pose)
     k_gps, b_gps = gps_calibration(survey)
     cal = track.meta.get("calibration", {})
-    fixes = track.meta.get("fixes", [])
+    fixes = track.fixes or ()
     return {
         "median": m["median_error"], "rmse": m["rmse"], "final": m["final_error"], "max": m["max_error"],
         "final_nees": float(nees[-1]), "anees": float(np.nanmean(nees)),

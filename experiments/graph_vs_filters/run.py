@@ -81,7 +81,7 @@ def _fix_coverage(track, truth) -> tuple[int, int]:
     """Fixes the method used (the graph, TERCOM-PF, MLE), and how many of them hold the truth in
     their 95 % ellipse."""
     used = covered = 0
-    for fix in track.meta.get("fixes", []):
+    for fix in track.fixes or ():
         if not fix.accepted:
             continue
         error = fix.position - truth[fix.index, :2]

@@ -119,8 +119,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                 "rmse_off_map": float(np.sqrt(np.mean(errors[off] ** 2))) if off.any() else np.nan,
                 "anees_off_map": float(np.nanmean(nees[off])) if off.any() and method != "dr" else np.nan,
                 "fixes_accepted": int(meta.get("n_fixes_accepted", -1)),
-                "fixes_outlier": sum(getattr(f, "status", None) is not None and f.status.value == "outlier"
-                                     for f in meta.get("fixes", [])),
+                "fixes_outlier": sum(f.status.value == "outlier" for f in track.fixes or ()),
                 "lost_episodes": len(meta.get("lost_episodes", [])),
                 "start_prior": meta.get("start_prior", ""),
                 "n_off_map": int(meta.get("n_off_map", 0)),

@@ -58,7 +58,7 @@ def cmd_smooth(args: argparse.Namespace) -> None:
     if args.refined_map is not None and "refined_map" not in track.meta:
         raise unrefined
     _summary(args, track, survey)
-    for fix in track.meta.get("fixes", []):
+    for fix in track.fixes or ():
         if not fix.accepted:
             log.info("fix at ping %s refused: %s", fix.index, fix.reason)
     _write_track(args, track, survey, bathymetry)

@@ -16,7 +16,7 @@ prior.
 Only accepted fixes (informative and unimodal, ``TapFix.accepted``) are used by default, and a
 surprising one only once a later one confirms it (:func:`tangraph.filters.fixes.decide_fix`;
 the displacement between the two is the DR's, its covariance propagated as above from the
-calibration's alone); ``meta["fixes"]`` holds each fix's
+calibration's alone); ``Track.fixes`` holds each fix's
 :class:`~tangraph.fix_records.FixRecord` (what became of it, its NIS against the prediction). A
 fix that is used updates the state as a measurement of the position (a Kalman update, so a vague
 fix does not throw away a better prediction and the constant errors are learnt through their
@@ -144,7 +144,7 @@ def mle_filter(
 ) -> Track:
     """Run the MLE filter over a survey (deterministic: ``rng`` is not used); ``model`` is the
     navigation model (None: ``NavigationModel.from_survey(survey)``). See the module docstring.
-    ``meta["fixes"]`` records every fix attempted; ``meta["calibration"]`` the estimate of the
+    ``Track.fixes`` records every fix attempted; ``meta["calibration"]`` the estimate of the
     constant DR errors (the model's prior when ``fuse`` is False)."""
     from tqdm.auto import tqdm
 
@@ -199,6 +199,7 @@ def mle_filter(
         method="mle",
         timings=step_timings(elapsed, seconds),
         meta=_meta(navigation, config, x, p, list(fixes.values()), accepted, k_total),
+        fixes=tuple(fixes.values()),
     )
 
 
@@ -221,7 +222,7 @@ def _judge(fix, record: FixRecord, k: int, x: np.ndarray, p: np.ndarray, held: H
 def _meta(navigation: NavigationModel, config: MLEConfig, x: np.ndarray, p: np.ndarray,
           fixes: list[FixRecord], accepted: int, k_total: int) -> dict[str, Any]:
     """The MLE track's ``meta``: the filters' keys (no particles: nothing resampled, never lost),
-    the fixes and the calibration estimate ``x[2:]`` with the final covariance ``p``'s stds."""
+    the fixes' counts and the calibration estimate ``x[2:]`` with the final covariance ``p``'s stds."""
     calibration = {
         "speed_scale": float(x[2]),
         "speed_scale_std": float(np.sqrt(p[2, 2])),
@@ -239,7 +240,6 @@ def _meta(navigation: NavigationModel, config: MLEConfig, x: np.ndarray, p: np.n
         "n_fixes_accepted": accepted,
         "n_fixes_rejected": len(fixes) - accepted,
         "n_fixes_used": sum(f.accepted for f in fixes),
-        "fixes": fixes,
         "navigation_model": navigation.as_dict(),
         "config": config.as_dict(),
     }

@@ -251,8 +251,6 @@ def _meta(trace: _Trace, recovery: _Recovery, belief: Belief, seed: dict[str, An
         "seed": seed,
         **trace.counts,
     }
-    if trace.fixes or count_keys:
-        meta["fixes"] = list(trace.fixes.values())
     return meta
 
 
@@ -320,4 +318,5 @@ def run_particle_filter(
         method=method,
         timings=step_timings(elapsed, trace.seconds),
         meta=_meta(trace, recovery, belief, seed, count_keys),
+        fixes=tuple(trace.fixes.values()) if trace.fixes or count_keys else None,
     )

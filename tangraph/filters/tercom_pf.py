@@ -238,7 +238,7 @@ def tercom_pf(
     progress: bool = False,
 ) -> Track:
     """Run TERCOM-PF over a survey (``model``: the navigation model, None: from the survey); see
-    the module docstring. ``meta["fixes"]`` records every fix attempted."""
+    the module docstring. ``Track.fixes`` records every fix attempted."""
     config = config or TercomPFConfig()
     window = fix_window(config, survey)
     step = functools.partial(tercom_pf_step, survey=survey, bathymetry=bathymetry, window=window)

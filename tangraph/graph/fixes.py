@@ -65,7 +65,7 @@ class LostEpisode:
 
 @dataclasses.dataclass(frozen=True)
 class FixOutcome:
-    """What became of one fix: its record for ``Track.meta["fixes"]`` and the fix judged (with
+    """What became of one fix: its record for ``Track.fixes`` and the fix judged (with
     the covariance the graph gives it; None when no fix could be made)."""
 
     record: FixRecord

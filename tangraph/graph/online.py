@@ -354,13 +354,12 @@ class GraphNavigator:
         return calibration_summary(self.calibration, joint, pose, self.survey.dr_pose[k, 2])
 
     def meta(self) -> dict:
-        """``fixes``, their counts, the pings flagged lost (``n_lost``, ``lost_steps``) and the
+        """The counts of the fixes, the pings flagged lost (``n_lost``, ``lost_steps``) and the
         ``lost_episodes``, ``key_indices``, ``calibration``, the configuration and model, and
         with the point-mass front end's tide variable ``tide`` (its estimate and std, m)."""
         accepted = sum(f.accepted for f in self.fixes)
         lost = sorted({p for e in self.episodes for p in e.pings(self.index + 1)})
         return {
-            "fixes": list(self.fixes),
             "n_fixes_accepted": int(accepted),
             "n_fixes_rejected": len(self.fixes) - int(accepted),
             "n_lost": len(lost),
@@ -390,7 +389,7 @@ class GraphNavigator:
             "tap_total": float(np.sum(self.tap_times)),
         }
         return Track(time=self.survey.time[:done], pose=self.pose[:done], covariance=self.covariance[:done],
-                     method="isam2", timings=timings, meta=self.meta())
+                     method="isam2", timings=timings, meta=self.meta(), fixes=tuple(self.fixes))
 
 
 def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:

@@ -283,7 +283,6 @@ def _smoothed_meta(nav: GraphNavigator, solution: SmootherSolution, records, rou
         "lost_steps": lost,
         "lost_episodes": [e.as_dict() for e in tails],
         "forward_lost_episodes": meta["lost_episodes"],
-        "fixes": records,
         "n_fixes_accepted": int(n_accepted),
         "n_fixes_rejected": len(records) - int(n_accepted),
         "calibration": calibration_summary(solution.calibration, joint, solution.pose[-1],
@@ -370,4 +369,5 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     total = _time.perf_counter() - started
     timings = {"total": total, "per_step": total / survey.n_pings, "forward_pass": forward - started,
                **solution.timings}
-    return Track(time=survey.time, pose=pose, covariance=cov, method="smoother", timings=timings, meta=meta)
+    return Track(time=survey.time, pose=pose, covariance=cov, method="smoother", timings=timings, meta=meta,
+                 fixes=tuple(records))

@@ -136,7 +136,7 @@ def test_tercom_pf_records_its_fixes(criterion):
         rng=np.random.default_rng(3),
     )
     meta = track.meta
-    assert len(meta["fixes"]) == 6 == meta["n_fixes_accepted"] + meta["n_fixes_rejected"]
+    assert len(track.fixes) == 6 == meta["n_fixes_accepted"] + meta["n_fixes_rejected"]
     assert meta["n_fixes_accepted"] >= 4
     assert np.hypot(*(track.pose[-1, :2] - SURVEY.true_pose[-1, :2])) < 5.0
 
@@ -144,7 +144,7 @@ def test_tercom_pf_records_its_fixes(criterion):
 def test_plain_mle_jumps_to_each_fix_with_its_covariance_and_dead_reckons_between():
     plain = MLEConfig(require_accepted=False, confirm_probability=None, fuse=False)
     track = run_filter("mle", SURVEY, MAP, plain, model=MODEL, rng=np.random.default_rng(0))
-    fixes = track.meta["fixes"]
+    fixes = track.fixes
     assert [f.index for f in fixes] == [4, 9, 14, 19, 24, 29] and all(f.accepted for f in fixes)
     for f in fixes:
         k = f.index
@@ -328,7 +328,7 @@ def test_mle_relocalises_on_two_agreeing_fixes_and_refuses_one_alone():
     off = SURVEY.replace(dr_pose=SURVEY.dr_pose + np.array([60.0, 0.0, 0.0]))
     config = MLEConfig(min_half_width=150.0)
     track = run_filter("mle", off, MAP, config, model=MODEL, rng=np.random.default_rng(0))
-    held, confirming = track.meta["fixes"][:2]
+    held, confirming = track.fixes[:2]
     assert (held.index, held.status, held.detail) == (4, FixStatus.CONFIRMED, "by the fix at ping 9")
     assert confirming.accepted and confirming.detail == "confirms the fix at ping 4"
     np.testing.assert_allclose(track.pose[4, :2], off.dr_pose[4, :2])  # not taken alone

@@ -28,7 +28,7 @@ def test_a_wrong_start_is_found_lost_and_relocalised(wrong_start, rough_map):
     episodes = track.meta["lost_episodes"]
     assert len(episodes) >= 1 and episodes[0]["start"] == 0 and episodes[0]["end"] is not None
     assert episodes[0]["breaks"][0] >= 40.0  # the belief was widened by at least the first search
-    statuses = {f.status for f in track.meta["fixes"]}
+    statuses = {f.status for f in track.fixes}
     assert FixStatus.OUTSIDE_SEARCH in statuses
     after = episodes[-1]["end"] + 1
     errors = np.hypot(*(track.pose[after:, :2] - wrong_start.true_pose[after:, :2]).T)
@@ -151,7 +151,7 @@ def test_a_false_alarm_ends_when_a_fix_agrees_with_the_belief_held(small_survey,
     clean = navigate_online(small_survey, rough_map, config)
     episodes = track.meta["lost_episodes"]
     assert len(episodes) == 1 and episodes[0]["declared"] == 109 and episodes[0]["end"] is not None
-    assert any(f.detail == "the belief held" for f in track.meta["fixes"])
+    assert any(f.detail == "the belief held" for f in track.fixes)
     truth = small_survey.true_pose[:, :2]
     rmse = {name: float(np.sqrt(np.mean(np.sum((t.pose[:, :2] - truth) ** 2, axis=1))))
             for name, t in (("clean", clean), ("spoiled", track))}
@@ -236,7 +236,7 @@ def test_a_forward_pass_lost_to_the_end_leaves_only_the_smoothers_unfixed_tail_l
     online = navigate_online(wrong_start, rough_map, config)
     assert online.meta["lost_episodes"][-1]["end"] is None and online.lost[-1]
     track = smooth_survey(wrong_start, rough_map, config)
-    last = max(f.index for f in track.meta["fixes"] if f.accepted)
+    last = max(f.index for f in track.fixes if f.accepted)
     assert track.meta["lost_steps"] == list(range(last + 1, wrong_start.n_pings))
     assert track.meta["forward_lost_episodes"] == online.meta["lost_episodes"]
     assert len(track.meta["lost_episodes"]) == (1 if track.meta["lost_steps"] else 0)

@@ -61,7 +61,7 @@ def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
     nav = GraphNavigator(survey, rough_map, config, model=NavigationModel.from_dead_reckoning(
         model, initial_position_std=1e-3)).run()
     online = nav.track()
-    assert online.meta["fixes"] == [] and len(online.meta["key_indices"]) > 10
+    assert online.fixes == () and len(online.meta["key_indices"]) > 10
     np.testing.assert_allclose(online.pose, survey.dr_pose, atol=1e-6)
     cov0 = np.diag([1e-6, 1e-6, 1e-10])
     last = survey.n_pings - 1
@@ -104,10 +104,10 @@ def test_recovers_truth_better_than_dead_reckoning(small_survey, rough_map):
     for track, method in ((online, "isam2"), (smoothed, "smoother")):
         assert track.method == method and track.n_poses == small_survey.n_pings
         meta = track.meta
-        assert meta["n_fixes_accepted"] + meta["n_fixes_rejected"] == len(meta["fixes"]) > 10
-        assert meta["n_fixes_accepted"] >= 0.8 * len(meta["fixes"])
-        assert isinstance(meta["fixes"][0], FixRecord) and isinstance(meta["fixes"][0].status, FixStatus)
-        assert all(f.index in meta["key_indices"] for f in meta["fixes"])
+        assert meta["n_fixes_accepted"] + meta["n_fixes_rejected"] == len(track.fixes) > 10
+        assert meta["n_fixes_accepted"] >= 0.8 * len(track.fixes)
+        assert isinstance(track.fixes[0], FixRecord) and isinstance(track.fixes[0].status, FixStatus)
+        assert all(f.index in meta["key_indices"] for f in track.fixes)
         # one run's ANEES over its correlated poses has no chi-square band; the bounds cover
         # what 200 seeds of this set-up measured (1st-99th percentile: isam2 1.20-4.82, smoother
         # 0.85-2.50; extremes 1.17-5.17 and 0.74-2.52) with a margin. Their means over seeds are
@@ -131,7 +131,7 @@ def test_rematch_converges(small_survey, rough_map):
     assert 1 <= done < 10 and single.meta["rematch_iterations"] == 0
     # re-matched patches are laid with the smoothed poses: the fixes move, and the track does not get worse
     moved = [np.hypot(a.north - b.north, a.east - b.east)
-             for a, b in zip(smoothed.meta["fixes"], single.meta["fixes"], strict=True)
+             for a, b in zip(smoothed.fixes, single.fixes, strict=True)
              if a.accepted and b.accepted]
     assert max(moved) > 0
     assert rmse(smoothed, small_survey.true_pose) <= 1.05 * rmse(single, small_survey.true_pose) < 1.5
@@ -191,7 +191,7 @@ def test_outlier_fixes_do_not_pull_the_track(small_survey, rough_map, rate):
     for k in range(small_survey.n_pings):
         nav.step(fix=bad.get(k))
     polluted = nav.track()
-    refused = [f for f in polluted.meta["fixes"] if f.index in bad]
+    refused = [f for f in polluted.fixes if f.index in bad]
     assert all(not f.accepted for f in refused)
     assert rmse(polluted, truth) <= 1.5 * rmse(clean.track(), truth)
     solve = {n: smooth_pose_graph(x.graph, config) for n, x in (("clean", clean), ("polluted", nav))}
@@ -288,7 +288,7 @@ def test_covariances_over_seeds_match_the_measured_anees(rough_map):
 def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
     config = GraphConfig(n_pings=1, fix_spacing=50, key_interval=20.0)
     track = navigate_online(small_survey, rough_map, config)
-    assert [f.index for f in track.meta["fixes"]] == [0, 50, 100, 150, 200]
+    assert [f.index for f in track.fixes] == [0, 50, 100, 150, 200]
 
 
 def test_a_map_error_shared_by_the_soundings_widens_every_fix(small_survey, rough_map):
@@ -296,11 +296,11 @@ def test_a_map_error_shared_by_the_soundings_widens_every_fix(small_survey, roug
     survey's others (the terrain model's row-sum bound), the more so the longer its range."""
     config = GraphConfig(key_interval=20.0)
     model = NavigationModel.from_survey(small_survey)
-    plain = navigate_online(small_survey, rough_map, config, model=model).meta["fixes"][0]
+    plain = navigate_online(small_survey, rough_map, config, model=model).fixes[0]
     sizes = []
     for length in (5.0, 20.0):
         wrong = model.replace(map_std=0.2, map_correlation_length=length)
-        first = navigate_online(small_survey, rough_map, config, model=wrong).meta["fixes"][0]
+        first = navigate_online(small_survey, rough_map, config, model=wrong).fixes[0]
         assert first.index == plain.index
         sizes.append(np.trace(first.covariance))
     assert np.trace(plain.covariance) < sizes[0] < sizes[1], (np.trace(plain.covariance), sizes)
