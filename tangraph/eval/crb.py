@@ -50,14 +50,12 @@ With a map error, ``d`` is a zero-mean Gaussian random field correlated in space
 share it do not average it away, and a second pass over the same ground meets the same errors.
 The bound treats ``d`` as nuisance unknowns with their prior (:mod:`tangraph.eval.map_field`):
 ``d = S u`` on a regular grid of nodes over the soundings' true footprints (a margin of two
-ranges, spacing ``L / 3``, finer than the map's cell where ``L`` is a cell, coarser when it
-would pass 100 000 nodes a field; the filter bound's no finer than the map's cell, coarser beyond 40 000
-nodes, for time), ``u`` of
-the sparse SPDE precision of Lindgren, Rue & Lindström (2011) scaled to unit variance, ``S`` the
-map's error std at the nodes. A sounding sees ``w^T S u`` (``w`` its bilinear weights on the 4
-nodes around ``q``) and, as independent noise besides ``sounding_std^2``, the variance of the
-field that the interpolation misses (its nugget), so each sounding's map error has the model's
-variance ``s(q)^2``.
+ranges, spacing ``L / 3``, coarser beyond 100 000 nodes a field; the filter bound's, for time,
+no finer than the map's cell and 40 000 nodes), ``u`` of the sparse SPDE precision of Lindgren,
+Rue & Lindström (2011) scaled to unit variance, ``S`` the map's error std at the nodes. A
+sounding sees ``w^T S u`` (``w`` its bilinear weights on the 4 nodes around ``q``) and, as
+independent noise besides ``sounding_std^2``, the variance of the field that the interpolation
+misses (its nugget), so each sounding's map error has the model's variance ``s(q)^2``.
 
 The unknowns (the states held per ping, the constants ``s, b, tide`` once, and the nodes) have a
 sparse joint information: the prior, every step, every sounding and the field's precision. It is
@@ -73,10 +71,10 @@ was within 1.5 % of the bound solved at every ping in RMS, 17 % at worst, 0.3 % 
 
 Approximations, beyond the linearisation: the field lives on the nodes (the lattice's
 correlation at ``L`` is 0.126 against Matérn's 0.140 at ``L / 3``) and the nugget is independent
-between soundings (claiming a little more than there is: at ``L / 5`` the bounds of the simulated
-realistic maps move by 1 %); a step whose variance is zero (a DR without speed noise) gets the variance
-``1e-8`` in units of its state's natural spread (an information matrix cannot hold a constraint:
-the bound moves by about that much times the pings, relatively); the gradient of ``d`` is not
+between soundings (at ``L / 5`` the simulated realistic maps' bounds move by 1 %); a step whose
+variance is zero (a DR without speed noise) gets the variance ``1e-8`` in units of its state's
+natural spread (an information matrix cannot hold a constraint: the bound moves by about that
+much times the pings, relatively); the gradient of ``d`` is not
 counted as information on the position (the estimators know only the map's).
 
 Not modelled: DVL dropouts (a survey does not record when they happened).
@@ -483,12 +481,9 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     assert truth is not None
     north, east = survey.footprints(truth)
     used = features[..., 3] > 0
-    # the smoother bound's field as fine as its range asks; the filter bound's, solved 60 times,
-    # no finer than the map's cell (its nugget, independent, claims a little more)
-    smoother = kind == "smoother"
-    most = map_field.BOUND_MAX_NODES if smoother else map_field.MAX_NODES
-    field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=smoother,
-                                      max_nodes=most)
+    fine = kind == "smoother"  # the filter bound's, solved 60 times, no finer than the map's cell
+    most = map_field.BOUND_MAX_NODES if fine else map_field.MAX_NODES
+    field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=fine, max_nodes=most)
     node, weight = field.weights(north[used], east[used])
     std = np.ones(used.shape)  # each sounding's noise: its own and the field's nugget
     std[used] = np.sqrt(model.sounding_std**2 + field.nugget(node, weight))

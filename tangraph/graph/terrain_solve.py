@@ -132,11 +132,10 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
                  config: GraphConfig, started: float) -> tuple[SmootherSolution, dict, BathymetryMap | None]:
     """The terrain solve with the map's error as a field of unknowns
     (:mod:`tangraph.graph.field_solve`) over the footprints of the fixes' solution. Each
-    sounding's variance is its noise and the nugget it shares with the soundings near it
-    (:func:`~tangraph.graph.field_solve.shared_nugget`); the gate judges the soundings against
-    the map's stated error (its std under each, and its mean under a ping as an offset the
-    ping's soundings share). After each converged solve the soundings' noise and the
-    field's std are grown by their a posteriori variance factors
+    sounding's variance is its noise and its shared nugget (:func:`.field_solve.shared_nugget`);
+    the gate judges the soundings against the map's stated error (its std under each, and its
+    mean under a ping as an offset the ping's soundings share). After each converged solve the
+    soundings' noise and the field's std are grown by their a posteriori variance factors
     (:func:`~tangraph.graph.field_solve.variance_components`; never shrunk below the model's)
     while these move. Returns the solution, what it used and the refined map."""
     bathymetry, error = nav.bathymetry, nav.map_error
