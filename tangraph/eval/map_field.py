@@ -31,7 +31,7 @@ against Matérn's 0.140), made coarser (the nugget then takes more) where the gr
 ``max_nodes`` nodes. The nugget is the error's variation within a node cell, which the
 soundings there share (a multibeam's beams lie a fraction of a metre apart): taken as
 independent it claims more than there is, and at ``h = L`` (a cell-scale error on the map's
-own cells) it is a third of the variance at a cell's centre, at ``L / 3`` a tenth. So the
+own cells) it is two thirds of the variance at a node cell's centre, at ``L / 3`` a third. So the
 bound is solved at ``L / 3`` (:data:`BOUND_MAX_NODES`; at ``L / 5`` the simulated realistic
 maps' bounds move by 1 %), while a solve that estimates the field may keep its nodes no finer
 than the map's cell (``finer_than_cell=False``), where the map says nothing of its error, and
