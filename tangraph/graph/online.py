@@ -446,12 +446,12 @@ def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConf
     Track
         ``method="isam2"``, one causal pose per ping with its covariance; ``timings`` has
         ``total``, ``per_step``, ``per_step_p99`` (whole steps, TAP included), ``update_mean``,
-        ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``meta`` has
-        ``fixes`` (one :class:`~tangraph.fix_records.FixRecord` per window: ``index``, ``north``,
+        ``update_p99`` (iSAM2 update and marginal of a key pose) and ``tap_total``; ``fixes``
+        has one :class:`~tangraph.fix_records.FixRecord` per window (``index``, ``north``,
         ``east``, ``cov_nn``, ``cov_ne``, ``cov_ee`` (the covariance given to the graph: TAP's,
         counted once per ping where windows overlap, grown by what is uncertain of the
         calibrated patch), its :class:`~tangraph.fix_records.FixStatus` and ``detail``, ``nis`` and
-        ``half_width``), ``n_fixes_accepted``, ``n_fixes_rejected``, ``n_lost``,
+        ``half_width``); ``meta`` has ``n_fixes_accepted``, ``n_fixes_rejected``, ``n_lost``,
         ``lost_steps`` and ``lost_episodes`` (:mod:`tangraph.graph.policy`), ``key_indices`` and
         ``calibration`` (:func:`calibration_summary` at the last ping).
     """

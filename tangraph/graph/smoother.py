@@ -322,9 +322,10 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     Returns
     -------
     Track
-        ``method="smoother"``; ``meta`` has ``fixes``, ``n_fixes_accepted``, ``n_fixes_rejected``,
-        ``key_indices``, ``calibration`` (smoothed: ``speed_scale``, ``heading_bias``,
-        ``heading_error`` at the last ping, with stds), ``rematch_iterations`` (re-matches run),
+        ``method="smoother"``; ``fixes`` the records of the fixes the solve judged; ``meta`` has
+        ``n_fixes_accepted``, ``n_fixes_rejected``, ``key_indices``, ``calibration`` (smoothed:
+        ``speed_scale``, ``heading_bias``, ``heading_error`` at the last ping, with stds),
+        ``rematch_iterations`` (re-matches run),
         ``optimizer_iterations``, ``start_prior`` (``"kept"``, or ``"outlier"`` when the robust
         solve found the start wrong), ``lost_steps`` (the pings after the last fix kept, when the
         forward pass was lost to the end), ``lost_episodes`` (the forward pass's episodes those

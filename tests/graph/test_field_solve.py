@@ -15,7 +15,7 @@ from tangraph.graph import GraphConfig, field_solve, smooth_survey, terrain_fact
 from tangraph.graph.calibration import TIDE
 from tangraph.graph.online import GraphNavigator
 from tangraph.maps import BathymetryMap
-from tangraph.sensors import NavigationModel, rotation_matrix
+from tangraph.sensors import NavigationModel, map_error, rotation_matrix
 from tests.graph.terrain_cases import AXIS, lawnmower, noise_free, smooth_map
 
 MODEL = NavigationModel(sounding_std=0.2, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
@@ -104,8 +104,7 @@ def test_a_nugget_is_shared_by_the_points_of_one_cell_of_nodes():
     # three points in one cell of nodes give each other's nuggets (row sums), a point alone keeps
     # its own; in a combined field each field's cells count apart
     bathymetry = with_error(smooth_map(), 0.3, 30.0)
-    field = map_error_field(np.array([100.0, 200.0]), np.array([100.0, 200.0]),
-                            field_solve_error(bathymetry))
+    field = map_error_field(np.array([100.0, 200.0]), np.array([100.0, 200.0]), map_error(bathymetry, MODEL))
     h, (n0, e0) = field.spacing, field.origin
     north = n0 + h * np.array([3.2, 3.5, 3.9, 6.5])
     east = e0 + h * np.array([4.1, 4.5, 4.8, 2.5])
@@ -119,12 +118,6 @@ def test_a_nugget_is_shared_by_the_points_of_one_cell_of_nodes():
     combined = CombinedField((field, field))
     index2, weight2 = combined.weights(north, east)
     np.testing.assert_allclose(field_solve.shared_nugget(combined, index2, weight2), 2 * shared)
-
-
-def field_solve_error(bathymetry):
-    from tangraph.sensors import map_error
-
-    return map_error(bathymetry, MODEL)
 
 
 def blob(north, east, centre=(140.0, 160.0), height=0.8, width=12.0):
