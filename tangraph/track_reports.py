@@ -74,7 +74,8 @@ def track_summary(track: Track, survey: Survey) -> str:
                      f"{snd['variance_factor']:.2f}^2")
         if "field_factor" in snd:
             lines.append(f"map error    estimated with the track on {snd['field_nodes']} nodes "
-                         f"{snd['field_spacing']:.0f} m apart, its stated std x {snd['field_factor']:.2f}, "
+                         f"{snd['field_spacing']:.0f} m apart, its stated std x {snd['field_factor']:.2f} "
+                         f"(in patches up to x {snd.get('field_factor_max', snd['field_factor']):.2f}), "
                          f"correction RMS {snd['field_rms']:.2f} m")
     if "divergences" in r:
         lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")

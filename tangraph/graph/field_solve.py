@@ -27,6 +27,12 @@ its correlation length (tens of metres); and an estimated field's texture, fitte
 soundings, would otherwise be taken for terrain (measured: on a simulated survey trapped 13 m off
 the truth, the field's slope made it claim 0.6 m).
 
+A map's error is heavy-tailed in patches: check lines find most of a map erring as it says and
+patches of it off by several times that. After each converged solve the field's std is grown,
+a patch of a few correlation ranges at a time, by the variance factor that patch's part of the
+field shows, weighed against the survey's (:func:`patch_factors`), so a patch that is far off
+is given the error it shows instead of pulling the track to where the wrong map fits.
+
 The marginal covariances of the key poses, the calibration and the nodes come from the selected
 inverse of the system at the solution (:mod:`tangraph.eval.selected_inverse`), and the refined
 map (:func:`refined_map`) is the map plus the field, with its posterior std.
@@ -50,8 +56,9 @@ from tangraph.graph.terrain_factors import PingTerrain
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.terrain import MapError
 
-__all__ = ["FieldSolution", "FieldSoundings", "field_variance", "marginals", "refined_map", "shared_nugget",
-           "solve", "variance_components"]
+__all__ = ["PATCH_LENGTHS", "PATCH_PRIOR_DOF", "FieldSolution", "FieldSoundings", "field_variance",
+           "marginals", "patch_factors", "patches", "refined_map", "scaled_error", "shared_nugget", "solve",
+           "variance_components", "variance_ratio"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -76,12 +83,27 @@ class FieldSoundings:
         nodes[seen], weights[seen], nugget[seen] = node, weight, shared_nugget(field, node, weight)
         return cls(field, nodes, weights, nugget)
 
-    def scaled(self, factor: float) -> FieldSoundings:
-        """The hold of the field whose stds are ``factor`` times these (the nugget with them)."""
+    def scaled(self, factor) -> FieldSoundings:
+        """The hold of the field whose stds are ``factor`` (a number, or one per node) times
+        these, the nugget shared with them."""
+        factor = np.broadcast_to(np.asarray(factor, float), (self.field.n_nodes,))
         fields = self.field.fields if isinstance(self.field, CombinedField) else (self.field,)
-        scaled = tuple(dataclasses.replace(f, std=f.std * factor) for f in fields)
+        offsets = np.cumsum([0, *(f.n_nodes for f in fields)])
+        scaled = tuple(dataclasses.replace(f, std=f.std * factor[start:start + f.n_nodes])
+                       for f, start in zip(fields, offsets, strict=False))
         field = CombinedField(scaled) if isinstance(self.field, CombinedField) else scaled[0]
-        return dataclasses.replace(self, field=field, nugget=self.nugget * factor**2)
+        seen = np.isfinite(self.nugget)
+        nugget = np.full(self.nugget.shape, np.nan)
+        nugget[seen] = shared_nugget(field, self.node[seen], self.weight[seen])
+        return dataclasses.replace(self, field=field, nugget=nugget)
+
+    def variance_ratio(self, factor: np.ndarray) -> np.ndarray:
+        """``(K, B)``: the map error's variance under each sounding with the node stds times
+        ``factor`` over that as held (:func:`variance_ratio`; 1 where it has no footprint)."""
+        out = np.ones(self.nugget.shape)
+        seen = np.isfinite(self.nugget)
+        out[seen] = variance_ratio(self.field, self.node[seen], self.weight[seen], factor)
+        return out
 
     def offset(self, u: np.ndarray) -> np.ndarray:
         """The field ``S u`` under every sounding ``(K, B)`` (0 where it has no footprint)."""
@@ -89,6 +111,59 @@ class FieldSoundings:
 
 
 Field = MapErrorField | CombinedField
+
+#: A patch of map whose error's scale is estimated on its own (:func:`patch_factors`) is this many
+#: of its field's correlation ranges wide.
+PATCH_LENGTHS = 4.0
+#: The weight, in degrees of freedom, of the scale the whole survey shows in a patch's own
+#: (the scaled inverse chi-square prior of its variance, a Student-t patch error: Lange, Little &
+#: Taylor 1989 take 4 as the robust default).
+PATCH_PRIOR_DOF = 4.0
+
+
+def variance_ratio(field: Field, index: np.ndarray, weight: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """(M,) the map error's variance at points (``index, weight`` their interpolation on the
+    nodes) with the node stds times ``factor`` over that as stated: the nodes' variances blended
+    with the interpolation weights."""
+    variance = weight * field.std[index] ** 2
+    total = np.sum(variance, axis=-1)
+    return np.divide(np.sum(variance * np.asarray(factor)[index] ** 2, axis=-1), total,
+                     out=np.ones(total.shape), where=total > 0)
+
+
+def patches(field: Field) -> np.ndarray:
+    """(n_nodes,) the patch of every node: squares of :data:`PATCH_LENGTHS` ranges of each field,
+    numbered across the fields."""
+    fields = field.fields if isinstance(field, CombinedField) else (field,)
+    out, first = [], 0
+    for f in fields:
+        side = max(1, round(float(PATCH_LENGTHS * f.correlation_length / f.spacing)))
+        i, j = np.divmod(np.arange(f.n_nodes), f.shape[1])
+        across = -(-f.shape[1] // side)
+        out.append(first + (i // side) * across + j // side)
+        first += across * -(-f.shape[0] // side)
+    return np.concatenate(out)
+
+
+def patch_factors(found: dict, factor: np.ndarray, patch: np.ndarray) -> np.ndarray:
+    """The node stds' factors (over the stated) that the solution's field shows, a patch at a
+    time: with ``factor`` the current ones (constant within a patch) and ``found`` the solve's
+    :func:`variance_components`, a patch ``P``'s variance factor is
+
+        ``f_P^2 = (nu g^2 + f_P^2 s_P) / (nu + r_P)``,   ``g^2 = sum_P f_P^2 s_P / sum_P r_P``,
+
+    ``s_P`` the sum of ``u_k (Q u)_k`` over its nodes, ``r_P`` their redundancy, ``nu``
+    :data:`PATCH_PRIOR_DOF`: each patch's own evidence weighed against the survey's. A map's
+    error is heavy-tailed in patches (check lines find patches off by several times the stated
+    std where the bulk fits it), and a patch off by metres then gives its soundings the variance
+    it shows instead of pulling the track to where the wrong map fits. Never below 1: the map is
+    never taken as better than stated."""
+    n = int(patch.max()) + 1
+    square = np.bincount(patch, found["field_nodes"] * factor**2, minlength=n)
+    redundancy = np.bincount(patch, found["field_node_redundancy"], minlength=n)
+    overall = float(square.sum() / redundancy.sum()) if redundancy.sum() > 0 else 1.0
+    own = (PATCH_PRIOR_DOF * overall + square) / (PATCH_PRIOR_DOF + redundancy)
+    return np.sqrt(np.maximum(own, 1.0))[patch]
 
 
 def shared_nugget(field: Field, index: np.ndarray, weight: np.ndarray) -> np.ndarray:
@@ -304,19 +379,23 @@ def variance_components(solution: FieldSolution, terrain: PingTerrain, bathymetr
 
     ``H_e`` the soundings' information, ``Q`` the field's prior precision, ``Sigma`` the inverse
     of the whole system (on its pattern, ``inverse`` from :func:`marginals`); each 1 when the
-    data scatter as the model says. Returns both (squared), with the redundancies."""
+    data scatter as the model says. Returns both (squared), with the redundancies, and the
+    field's per node: ``u_k (Q u)_k`` and ``1 - (Q Sigma_uu)_kk`` (``"field_nodes"``,
+    ``"field_node_redundancy"``, for :func:`patch_factors`)."""
     layout, factor, z = solution.layout, inverse["factor"], inverse["z"]
     a, b = _sounding_rows(solution.values, solution.u, terrain, bathymetry, hold, used, unpack, layout)
     h = sparse.coo_array(a.T @ a)
     redundancy = float(b.size - np.sum(h.data * si.inverse_entries(factor, z, h.row, h.col)))
     q = sparse.coo_array(hold.field.precision)
     at = layout.n_gtsam
-    field_redundancy = float(hold.field.n_nodes - np.sum(q.data * si.inverse_entries(factor, z, q.row + at,
-                                                                                       q.col + at)))
+    entries = si.inverse_entries(factor, z, q.row + at, q.col + at)
+    field_redundancy = float(hold.field.n_nodes - np.sum(q.data * entries))
     u = solution.u
     return {"noise": float(b @ b) / redundancy if redundancy > 0 else 1.0,
             "field": float(u @ (q.tocsr() @ u)) / field_redundancy if field_redundancy > 0 else 1.0,
-            "noise_redundancy": redundancy, "field_redundancy": field_redundancy}
+            "noise_redundancy": redundancy, "field_redundancy": field_redundancy,
+            "field_nodes": u * (q.tocsr() @ u),
+            "field_node_redundancy": 1.0 - np.bincount(q.row, q.data * entries, minlength=hold.field.n_nodes)}
 
 
 def field_variance(field: Field, inverse: dict, layout: _Layout, north, east) -> np.ndarray:
@@ -352,6 +431,17 @@ def refined_map(error: MapError, field: Field, solution: FieldSolution, inverse:
     std[inside] = np.minimum(np.sqrt(np.maximum(variance, 0.0) + nugget), std[inside])
     return bathymetry.replace(depth=depth, depth_std=std, correlation_length=error.correlation_length,
                               name=f"{bathymetry.name} refined")
+
+
+def scaled_error(error: MapError, field: Field, factor: np.ndarray) -> MapError:
+    """``error`` with its std grown over ``field``'s grid as the node factors ``factor`` (of
+    the field as stated) say, as it was beyond the grid."""
+    north, east = np.meshgrid(error.bathymetry.north, error.bathymetry.east, indexing="ij")
+    inside = np.isfinite(error.std) & _inside(field, north, east)
+    std = np.array(error.std, float)
+    node, weight = field.weights(north[inside], east[inside])
+    std[inside] *= np.sqrt(variance_ratio(field, node, weight, factor))
+    return MapError(error.bathymetry, std, error.correlation_length)
 
 
 def _inside(field: Field, north, east) -> np.ndarray:

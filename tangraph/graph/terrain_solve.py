@@ -11,8 +11,8 @@ after each converged solve; their variances grown by the scatter of the solution
 With ``"field"`` the map's error is a field of unknowns solved with the track
 (:mod:`tangraph.graph.field_solve`) instead of a variance each sounding is widened by: the
 soundings are judged against the map's stated error (each sounding's own, and an offset a
-ping's soundings share), the soundings' noise and the field's std grown by their a
-posteriori variance factors, and the solution carries the refined map.
+ping's soundings share), the soundings' noise grown by its a posteriori variance factor and the
+field's std by the factor each patch of it shows, and the solution carries the refined map.
 """
 
 from __future__ import annotations
@@ -34,7 +34,6 @@ from tangraph.graph.config import GraphConfig
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors.terrain import MapError
 
 __all__ = ["SOUNDING_GATE", "WINDOW", "terrain_solve"]
 
@@ -135,9 +134,9 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     sounding's variance is its noise and its shared nugget (:func:`.field_solve.shared_nugget`);
     the gate judges the soundings against the map's stated error (its std under each, and its
     mean under a ping as an offset the ping's soundings share). After each converged solve the
-    soundings' noise and the field's std are grown by their a posteriori variance factors
-    (:func:`~tangraph.graph.field_solve.variance_components`; never shrunk below the model's)
-    while these move. Returns the solution, what it used and the refined map."""
+    soundings' noise is grown by its a posteriori variance factor (:func:`.field_solve.variance_components`)
+    and the field's std by each patch's (:func:`.field_solve.patch_factors`), never shrunk below
+    the model's, while these move. Returns the solution, what it used and the refined map."""
     bathymetry, error = nav.bathymetry, nav.map_error
     assert error is not None  # the caller's condition
     pose, calibration, _ = _unpack(values, terrain, reference)
@@ -148,33 +147,31 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], error), north, east, seen)
     noise = float(nav.model.sounding_std) ** 2
     s2 = np.where(seen, error.std_at(north, east) ** 2, np.nan)
-    s2 = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2)
-    counts = seen.sum(axis=1)
-    shared = np.divide(np.nansum(np.where(seen, s2, 0.0), axis=1), counts, out=np.zeros(counts.size),
-                       where=counts > 0)
+    s2, counts = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2), seen.sum(axis=1)
 
-    def unpack(v):
+    def unpack(v) -> tuple[np.ndarray, np.ndarray, float]:
         return _unpack(v, terrain, reference)
 
-    def judged(v, noise_factor: float, field_factor: float) -> np.ndarray:
-        judging = dataclasses.replace(terrain, variance=np.where(seen, (noise * noise_factor**2
-                                                                        + s2 * field_factor**2), np.nan))
-        pose, calibration, tide = unpack(v)
-        return terrain_factors.gate(judging, bathymetry, pose, calibration, tide, SOUNDING_GATE, prior,
-                                    shared * field_factor**2)
+    def judged(v, noise_factor: float, ratio) -> np.ndarray:
+        grown = s2 * ratio
+        judging = dataclasses.replace(terrain, variance=np.where(seen, noise * noise_factor**2 + grown,
+                                                                 np.nan))
+        shared = np.divide(np.nansum(np.where(seen, grown, 0.0), axis=1), counts, out=np.zeros(counts.size),
+                           where=counts > 0)
+        return terrain_factors.gate(judging, bathymetry, *unpack(v), SOUNDING_GATE, prior, shared)
 
     used = judged(values, 1.0, 1.0)
     if not used.any():
         return _nothing_fits(fixes_solution, terrain)
-    keys = np.asarray(terrain.keys, np.int64)
-    u, iterations, noise_factor, field_factor, scaled = None, 0, 1.0, 1.0, hold
+    keys, patch = np.asarray(terrain.keys, np.int64), field_solve.patches(hold.field)
+    u, iterations, noise_factor, field_factor, scaled = None, 0, 1.0, np.ones(hold.field.n_nodes), hold
     for rounds in range(1, _FACTOR_ROUNDS + 1):
         solving = dataclasses.replace(terrain, variance=noise * noise_factor**2 + scaled.nugget)
         for attempt in range(_GATE_ROUNDS):
             solved = field_solve.solve(factors, values, solving, bathymetry, scaled, used, unpack, u=u,
                                        max_iterations=config.max_iterations)
             values, u, iterations = solved.values, solved.u, iterations + solved.iterations
-            regated = judged(values, noise_factor, field_factor)
+            regated = judged(values, noise_factor, hold.variance_ratio(field_factor))
             # ``used`` stays the last solve's: its system holds those soundings and no others
             if np.array_equal(regated, used) or not regated.any() or attempt == _GATE_ROUNDS - 1:
                 break
@@ -182,18 +179,19 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
         cov, calib_cov, inverse = field_solve.marginals(solved, keys, terrain.calibrated)
         found = field_solve.variance_components(solved, solving, bathymetry, scaled, used, unpack, inverse)
         new_noise = max(1.0, noise_factor * np.sqrt(found["noise"]))
-        new_field = max(1.0, field_factor * np.sqrt(found["field"]))
+        new_field = field_solve.patch_factors(found, field_factor, patch)
         if rounds == _FACTOR_ROUNDS or (abs(new_noise - noise_factor) <= 0.05 * noise_factor
-                                        and abs(new_field - field_factor) <= 0.05 * field_factor):
+                                        and np.all(np.abs(new_field - field_factor) <= 0.05 * field_factor)):
             break
-        log.info("terrain solve: the soundings scatter %.2f and the map's error %.2f times what the "
-                 "model says: grown by that", new_noise, new_field)
+        log.info("terrain solve: the soundings scatter %.2f and the map's error %.2f (in patches up to "
+                 "%.2f) times what the model says: grown by that", new_noise, np.median(new_field),
+                 new_field.max())
         noise_factor, field_factor = new_noise, new_field
         scaled = hold.scaled(field_factor)
     done = _time.perf_counter()
     pose, calibration, tide = unpack(values)
     cov = joint_in_frame(pose[:, 2], cov)
-    found_error = MapError(error.bathymetry, error.std * field_factor, error.correlation_length)
+    found_error = field_solve.scaled_error(error, hold.field, field_factor)
     refined = field_solve.refined_map(found_error, scaled.field, solved, inverse)
     if config.smoother_covariance != "all":
         cov, calib_cov = np.full_like(cov, np.nan), np.zeros((2, 2))
@@ -202,7 +200,8 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     cost = factors.error(values) + 0.5 * float(u @ (scaled.field.precision @ u)) + \
         terrain_factors.terrain_cost(solving, bathymetry, pose, calibration, tide, used, offset)
     info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
-            "tide": float(tide), "variance_factor": float(noise_factor), "field_factor": float(field_factor),
+            "tide": float(tide), "variance_factor": float(noise_factor),
+            "field_factor": float(np.median(field_factor)), "field_factor_max": float(field_factor.max()),
             "field_nodes": int(scaled.field.n_nodes), "field_spacing": float(scaled.field.spacing),
             "field_rms": float(np.sqrt(np.mean(offset[used] ** 2)))}
     timings = {"solve": done - started, "marginals": _time.perf_counter() - done}

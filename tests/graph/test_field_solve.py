@@ -16,6 +16,7 @@ from tangraph.graph.calibration import TIDE
 from tangraph.graph.online import GraphNavigator
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel, map_error, rotation_matrix
+from tangraph.sensors.matern import matern_field
 from tests.graph.terrain_cases import AXIS, lawnmower, noise_free, smooth_map
 
 MODEL = NavigationModel(sounding_std=0.2, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
@@ -200,3 +201,85 @@ def test_smooth_writes_the_refined_map(tmp_path, capsys):
     np.testing.assert_allclose(written.depth, bathymetry.depth, atol=0.05)
     assert np.nanmin(written.depth_std) < 0.5 * 0.2 and np.nanmax(written.depth_std) == pytest.approx(0.2)
     assert out.exists()
+
+
+def test_patches_are_squares_of_a_few_ranges_per_field():
+    bathymetry = with_error(smooth_map(), 0.3, 30.0)
+    field = map_error_field(np.array([100.0, 300.0]), np.array([100.0, 300.0]), map_error(bathymetry, MODEL))
+    patch = field_solve.patches(field)
+    north, east = field.nodes()
+    side = field_solve.PATCH_LENGTHS * 30.0
+    for p in np.unique(patch):
+        at = patch == p
+        assert np.ptp(north[at]) < side and np.ptp(east[at]) < side
+    assert np.unique(patch).size >= (np.ptp(north) // side) * (np.ptp(east) // side)
+    combined = CombinedField((field, field))
+    both = field_solve.patches(combined)
+    assert set(both[:field.n_nodes]).isdisjoint(both[field.n_nodes:])
+
+
+def test_patch_factors_weigh_a_patch_against_the_survey():
+    patch = np.repeat(np.arange(4), 50)
+    ones = np.ones(patch.size)
+
+    def found(square_per_patch, redundancy=0.4):
+        return {"field_nodes": np.asarray(square_per_patch, float)[patch] * redundancy,
+                "field_node_redundancy": np.full(patch.size, redundancy)}
+
+    # as the model says: 1; the whole map twice as wrong: 2 everywhere (prior and data agree)
+    np.testing.assert_allclose(field_solve.patch_factors(found([1, 1, 1, 1]), ones, patch), 1.0)
+    np.testing.assert_allclose(field_solve.patch_factors(found([4, 4, 4, 4]), ones, patch), 2.0)
+    # never below the stated std
+    np.testing.assert_allclose(field_solve.patch_factors(found([0.2, 0.2, 0.2, 0.2]), ones, patch), 1.0)
+    # one patch five times as wrong as stated: it alone is grown by about that
+    one = field_solve.patch_factors(found([25, 1, 1, 1]), ones, patch)
+    assert one[0] > 4.0 and np.all(one[patch > 0] < 1.0 + 0.5 * (one[0] - 1.0) / 4.0)
+    # a patch no sounding sees (no redundancy) takes the survey's scale
+    empty = found([9, 9, 9, 0])
+    empty["field_node_redundancy"][patch == 3] = 0.0
+    np.testing.assert_allclose(field_solve.patch_factors(empty, ones, patch), 3.0)
+    # the factors found are of the field as currently scaled: twice the stated std and as wrong as
+    # that says, they stay
+    np.testing.assert_allclose(field_solve.patch_factors(found([1, 1, 1, 1]), 2 * ones, patch), 2.0)
+
+
+def test_a_hold_scaled_per_node_is_the_scalar_scaling_when_uniform():
+    bathymetry = with_error(smooth_map(), 0.3, 30.0)
+    _, survey = lawnmower()
+    north, east = survey.footprints(survey.true_pose)
+    seen = np.ones(north.shape, bool)
+    seen[::7, 3] = False
+    field = map_error_field(north[seen], east[seen], map_error(bathymetry, MODEL))
+    hold = field_solve.FieldSoundings.at(field, north, east, seen)
+    twice = hold.scaled(np.full(hold.field.n_nodes, 2.0))
+    np.testing.assert_allclose(twice.field.std, 2 * hold.field.std)
+    np.testing.assert_allclose(twice.nugget, 4 * hold.nugget)
+    assert np.all(np.isnan(twice.nugget[~seen]))
+    ratio = hold.variance_ratio(np.full(hold.field.n_nodes, 2.0))
+    np.testing.assert_allclose(ratio[seen], 4.0)
+    np.testing.assert_allclose(ratio[~seen], 1.0)
+
+
+def test_a_patch_far_off_its_stated_error_is_given_its_own():
+    # a flat map stated to err by 0.1 m over 10 m: so it does in the west, three times that in the
+    # east. The solve grows the error of the eastern patches by about three and leaves the western
+    # ones at what is stated, and the refined map is honest on both sides
+    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.1, 10.0)
+    model = NavigationModel(sounding_std=0.05, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    truth, survey = lawnmower(start_error=(0.0, 0.0))
+    north, east = survey.footprints(truth)
+    rng = np.random.default_rng(8)
+    cell_n, cell_e = np.meshgrid(AXIS, AXIS, indexing="ij")
+    error = matern_field(AXIS, AXIS, 1.0, 10.0, rng=rng) * np.where(cell_e > 160.0, 0.3, 0.1)
+    seafloor = BathymetryMap(AXIS, AXIS, 50.0 + error)
+    noise = 0.05 * rng.standard_normal(north.shape)
+    survey = survey.replace(beam_depth=seafloor.depth_at(north, east) + noise)
+    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
+    track = smooth_survey(survey, flat, config, model=model)
+    assert 2.0 < track.meta["soundings"]["field_factor_max"] < 4.0
+    refined = track.meta["refined_map"]
+    z = (refined.depth - 50.0 - error) / refined.depth_std
+    surveyed = (np.abs(cell_n - 140.0) <= 40.0) & (np.abs(cell_e - 160.0) <= 80.0)
+    east_side, west_side = surveyed & (cell_e > 170.0), surveyed & (cell_e < 150.0)
+    assert np.sqrt(np.mean(z[east_side] ** 2)) < 1.3 and np.sqrt(np.mean(z[west_side] ** 2)) < 1.3
+    assert np.median(refined.depth_std[east_side]) > 1.5 * np.median(refined.depth_std[west_side])
