@@ -202,6 +202,70 @@ def check_lines(cfg: dict, data: Path, bathymetry, march: dict, window: float = 
     return {"window_m": window, "prior_runs_held_out": figures(held_out), "march_against_map": figures(later)}
 
 
+def _robust(r: np.ndarray) -> float:
+    """1.4826 x the median absolute deviation from the median, or NaN below 200 values."""
+    r = r[np.isfinite(r)]
+    return float(1.4826 * np.median(np.abs(r - np.median(r)))) if r.size >= 200 else np.nan
+
+
+def _best_shift(survey, bathymetry, rows, shifts) -> tuple[np.ndarray, float]:
+    """The shift of the track ``(dn, de)`` among ``shifts`` at which the soundings of pings
+    ``rows`` fit ``bathymetry`` with the least robust spread, and that spread."""
+    north, east = survey.footprints(survey.true_pose)
+    depth = survey.beam_depth[rows]
+    spread = np.array([_robust(depth - bathymetry.depth_at(north[rows] + dn, east[rows] + de))
+                       for dn, de in shifts])
+    if np.all(np.isnan(spread)):
+        return np.full(2, np.nan), np.nan
+    best = int(np.nanargmin(spread))
+    return shifts[best], float(spread[best])
+
+
+def run_offsets(cfg: dict, data: Path, bathymetry, march: dict, step: float = 2.5,
+                reach: float = 15.0) -> dict:
+    """Where does each run fit the map best? Each January run against a map of the other January
+    runs (the study's gridding) and each March run against the study's map: the whole track
+    shifted by ``(dn, de)`` on a grid of ``step`` m within ``reach`` m, the shift at which the
+    soundings of each half of the run (by time) fit with the least robust spread, and the other
+    half's spread at that shift against its spread at the GPS track. A shift found by chance on
+    flat ground does not carry over to the other half; a position error of the surveys shared
+    over a run does."""
+    from tangraph.gridding_surveys import grid_surveys
+
+    m = cfg["map"]
+    axis = np.arange(-reach, reach + step / 2, step)
+    shifts = np.array([(dn, de) for dn in axis for de in axis])
+    prior = [p for month in m["months"] for p in run_files(data, month)]
+    surveys = {p.stem: _import(cfg, data, p) for p in prior}
+    out = {}
+    for name, survey in [*surveys.items(), *march.items()]:
+        if name in surveys:
+            others = [s for n, s in surveys.items() if n != name]
+            held_map = grid_surveys(others, cell=m["cell"], statistic=m["statistic"], fill=m["fill"],
+                                    name="held-out", position_std=m.get("position_std", 0.0)).depth
+        else:
+            held_map = bathymetry
+        survey = in_map(survey, held_map)
+        late = survey.time >= np.median(survey.time)
+        halves = (~late, late)
+        north, east = survey.footprints(survey.true_pose)
+        row: dict = {"pings": int(survey.n_pings), "halves": []}
+        for (fit, test), label in zip((halves, halves[::-1]), ("first", "second"), strict=True):
+            shift, _ = _best_shift(survey, held_map, fit, shifts)
+            if np.isnan(shift).any():  # too few soundings on the map
+                continue
+            row["halves"].append({
+                "fitted_on": label, "shift_m": [float(shift[0]), float(shift[1])],
+                "other_spread_at_gps_m": _robust(survey.beam_depth[test]
+                                                 - held_map.depth_at(north[test], east[test])),
+                "other_spread_at_shift_m": _robust(survey.beam_depth[test]
+                                                   - held_map.depth_at(north[test] + shift[0],
+                                                                       east[test] + shift[1])),
+            })
+        out[name] = row
+    return {"step_m": step, "reach_m": reach, "runs": out}
+
+
 def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str = "boat") -> list[dict]:
     """Does the map the smoother refines (``smoother_terrain = "field"``) fit another day better?
     Each March run is smoothed with the case's DR, and every other March run's soundings, at
@@ -472,6 +536,7 @@ def main(argv=None) -> int:
         "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["n_pings"])
                     for name, s in march.items()},
         "check_lines": check_lines(cfg, args.data, bathymetry, march),
+        "run_offsets": run_offsets(cfg, args.data, bathymetry, march),
     }
     if cfg["graph"].get("smoother_terrain") == "field" and "smoother" in args.methods:
         checks["refined_map"] = refined_map_check(cfg, args.data, bathymetry, march)
