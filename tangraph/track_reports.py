@@ -77,6 +77,10 @@ def track_summary(track: Track, survey: Survey) -> str:
                          f"{snd['field_spacing']:.0f} m apart, its stated std x {snd['field_factor']:.2f} "
                          f"(in patches up to x {snd.get('field_factor_max', snd['field_factor']):.2f}), "
                          f"correction RMS {snd['field_rms']:.2f} m")
+        if "map_offset" in snd:
+            (n, e), (sn, se) = snd["map_offset"], snd["map_offset_std"]
+            lines.append(f"map offset   the map lies {n:+.2f} +- {sn:.2f} m north, {e:+.2f} +- {se:.2f} m "
+                         "east of where its coordinates say")
     if "divergences" in r:
         lines.append(f"divergences  {r['divergences']} (re-initialised from dead reckoning)")
     if r.get("lost", {}).get("pings"):

@@ -35,6 +35,7 @@ from tangraph.graph.factors import robust_noise
 
 __all__ = [
     "CALIBRATION",
+    "MAP_OFFSET",
     "TIDE",
     "calibration_prior_factor",
     "joint_in_frame",
@@ -48,6 +49,9 @@ __all__ = [
 
 CALIBRATION = int(gtsam.symbol("c", 0))  #: GTSAM key of the calibration ``(k, b)``
 TIDE = int(gtsam.symbol("t", 0))  #: GTSAM key of the tide (a 1-vector), when the online graph holds it
+#: GTSAM key of the map's horizontal offset ``(north, east)`` against the survey's frame, when the
+#: smoother's field solve holds it (``NavigationModel.map_offset_std``)
+MAP_OFFSET = int(gtsam.symbol("o", 0))
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 

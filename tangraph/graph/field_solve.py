@@ -51,14 +51,14 @@ from tangraph.errors import TangraphError
 from tangraph.eval import selected_inverse as si
 from tangraph.eval.map_field import CombinedField, MapErrorField, sparse_sum
 from tangraph.graph import terrain_factors
-from tangraph.graph.calibration import CALIBRATION, TIDE
+from tangraph.graph.calibration import CALIBRATION, MAP_OFFSET, TIDE
 from tangraph.graph.terrain_factors import PingTerrain
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.terrain import MapError
 
 __all__ = ["PATCH_LENGTHS", "PATCH_PRIOR_DOF", "FieldSolution", "FieldSoundings", "field_variance",
-           "marginals", "patch_factors", "patches", "refined_map", "scaled_error", "shared_nugget", "solve",
-           "variance_components", "variance_ratio"]
+           "marginals", "offset_estimate", "patch_factors", "patches", "refined_map", "scaled_error",
+           "shared_nugget", "solve", "variance_components", "variance_ratio"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -188,6 +188,9 @@ def shared_nugget(field: Field, index: np.ndarray, weight: np.ndarray) -> np.nda
     return out
 
 
+_VECTORS = (CALIBRATION, TIDE, MAP_OFFSET)  # the solve's variables that are vectors, not poses
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class _Layout:
     """Columns of the joint unknowns: GTSAM's variables in key order (its sparse Jacobian's),
@@ -202,7 +205,7 @@ class _Layout:
     @classmethod
     def of(cls, values, n_field: int) -> _Layout:
         keys = np.array(sorted(int(k) for k in values.keys()), dtype=np.uint64)
-        dims = np.array([values.atVector(int(k)).size if int(k) in (CALIBRATION, TIDE) else 3 for k in keys])
+        dims = np.array([values.atVector(int(k)).size if int(k) in _VECTORS else 3 for k in keys])
         start = np.concatenate([[0], np.cumsum(dims)[:-1]])
         return cls(keys, start, dims, int(dims.sum()), int(n_field))
 
@@ -215,7 +218,7 @@ class _Layout:
         and the tide (the entries the marginals read, which an exact zero of a Jacobian would
         leave out of the factor's pattern)."""
         blocks = [np.arange(d) + s for s, d, k in zip(self.start, self.dims, self.keys, strict=True)
-                  if int(k) in (CALIBRATION, TIDE)]
+                  if int(k) in _VECTORS]
         shared = np.concatenate([*blocks, np.zeros(0, np.int64)]).astype(np.int64)
         own = self.start[:, None] + np.arange(3)  # a pose's columns (a shorter vector: its own, repeated)
         own = np.minimum(own, (self.start + self.dims - 1)[:, None])
@@ -250,17 +253,18 @@ def solve(factors, values, terrain: PingTerrain, bathymetry: BathymetryMap, hold
     """Gauss-Newton with step halving on the odometry and priors ``factors`` (a GTSAM nonlinear
     graph), the soundings ``used`` of ``terrain`` (their variances the noise and nugget alone)
     holding the field as ``hold`` says, and the field's prior, from ``values`` and ``u``
-    (default zero). ``unpack(values)`` gives the key poses, ``c`` and the tide."""
+    (default zero). ``unpack(values)`` gives the key poses, ``c``, the tide and the map's
+    offset (None when it is not a variable)."""
     field = hold.field
     layout = _Layout.of(values, field.n_nodes)
     prior = sparse.csc_array(field.precision)
     u = np.zeros(field.n_nodes) if u is None else np.asarray(u, float)
 
     def cost(v, x) -> float:
-        pose, calibration, tide = unpack(v)
+        pose, calibration, tide, shift = unpack(v)
         return (factors.error(v) + 0.5 * float(x @ (prior @ x))
                 + terrain_factors.terrain_cost(terrain, bathymetry, pose, calibration, tide, used,
-                                               hold.offset(x)))
+                                               hold.offset(x), shift))
 
     def system(v, x):
         return _normal_equations(factors, v, x, terrain, bathymetry, hold, used, unpack, layout, prior)
@@ -314,9 +318,9 @@ def _normal_equations(factors, values, u, terrain, bathymetry, hold: FieldSoundi
 def _sounding_rows(values, u, terrain: PingTerrain, bathymetry, hold: FieldSoundings, used, unpack,
                    layout: _Layout):
     """The whitened rows ``(A, b)`` of the soundings ``used``: key pose, ``c``, tide, nodes."""
-    pose, calibration, tide = unpack(values)
+    pose, calibration, tide, shift = unpack(values)
     residual, jac, dr_variance = terrain_factors.sounding_jacobians(terrain, bathymetry, pose, calibration,
-                                                                    tide, hold.offset(u))
+                                                                    tide, hold.offset(u), shift)
     ok = used & np.isfinite(residual) & np.all(np.isfinite(jac), axis=-1)
     ping = np.nonzero(ok)[0]
     sigma = np.sqrt(terrain.variance[ok] + dr_variance[ok])
@@ -332,6 +336,10 @@ def _sounding_rows(values, u, terrain: PingTerrain, bathymetry, hold: FieldSound
     if terrain.estimates_tide:
         columns.append(np.full((m, 1), layout.column(TIDE)))
         blocks.append(j[:, at:at + 1])
+        at += 1
+    if terrain.estimates_offset:
+        columns.append(np.broadcast_to(layout.column(MAP_OFFSET) + np.arange(2), (m, 2)))
+        blocks.append(j[:, at:at + 2])
     node = hold.node[ok]
     columns.append(layout.n_gtsam + node)
     blocks.append(-hold.weight[ok] * hold.field.std[node] / sigma[:, None])
@@ -367,6 +375,17 @@ def marginals(solution: FieldSolution, keys, calibrated: bool) -> tuple[np.ndarr
         out[:, 3:, :3] = np.swapaxes(cross, 1, 2)
         out[:, 3:, 3:] = calib_cov
     return out, calib_cov, {"factor": factor, "z": z}
+
+
+def offset_estimate(solution: FieldSolution, inverse: dict, estimated: bool) -> dict:
+    """The map's horizontal offset at the solution and its std (m, north and east;
+    ``"map_offset"``, ``"map_offset_std"``), or nothing when it is not a variable."""
+    if not estimated:
+        return {}
+    c = solution.layout.column(MAP_OFFSET) + np.arange(2)
+    cov = si.inverse_entries(inverse["factor"], inverse["z"], c[:, None], c[None, :])
+    return {"map_offset": [float(x) for x in solution.values.atVector(MAP_OFFSET)],
+            "map_offset_std": [float(x) for x in np.sqrt(np.diag(cov))]}
 
 
 def variance_components(solution: FieldSolution, terrain: PingTerrain, bathymetry: BathymetryMap,

@@ -54,7 +54,9 @@ class PingTerrain:
     body offsets ``offsets (K, B, 2)`` (forward, starboard), measured ``depth (K, B)`` and the
     terrain model's ``variance (K, B)`` (NaN: no sounding). ``origin`` is the calibration's,
     ``calibrated`` whether the graph holds ``c``, ``tide`` and ``tide_std`` the tide's prior
-    (a tide variable when ``tide_std > 0``)."""
+    (a tide variable when ``tide_std > 0``), ``map_offset_std`` that of the map's horizontal
+    offset ``o`` (m per axis; a variable when above zero: a footprint ``f`` lies on the map at
+    ``f + o``)."""
 
     keys: np.ndarray
     key_index: np.ndarray
@@ -67,6 +69,7 @@ class PingTerrain:
     calibrated: bool
     tide: float
     tide_std: float
+    map_offset_std: float = 0.0
 
     @property
     def estimates_tide(self) -> bool:
@@ -74,9 +77,15 @@ class PingTerrain:
         return self.tide_std > 0
 
     @property
+    def estimates_offset(self) -> bool:
+        """Whether the map's horizontal offset is a variable (a prior std above zero)."""
+        return self.map_offset_std > 0
+
+    @property
     def n_parameters(self) -> int:
-        """Columns of a key's block: the pose, then ``c`` and the tide when they are variables."""
-        return 3 + 2 * self.calibrated + int(self.estimates_tide)
+        """Columns of a sounding's Jacobian: the pose, then ``c``, the tide and the map's offset
+        when they are variables."""
+        return 3 + 2 * self.calibrated + int(self.estimates_tide) + 2 * self.estimates_offset
 
 
 def ping_terrain(survey, bathymetry: BathymetryMap, model, keys, white, origin,
@@ -95,34 +104,40 @@ def ping_terrain(survey, bathymetry: BathymetryMap, model, keys, white, origin,
 
 
 def sounding_jacobians(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-                       offset: np.ndarray | None = None):  # fmt: skip
-    """Residuals ``r = z - t - h(f) (K, B)``, their Jacobians ``(K, B, P)`` with respect to the
-    key pose (GTSAM's tangent: x, y in the key's frame, then the heading), ``c`` and the tide
-    (:attr:`PingTerrain.n_parameters` columns), and the variance the white DR noise between
-    the key and the ping adds to each ``(K, B)``. NaN where there is no sounding or no map.
+                       offset: np.ndarray | None = None, map_offset=None):  # fmt: skip
+    """Residuals ``r = z - t - h(f + o) (K, B)``, their Jacobians ``(K, B, P)`` with respect to
+    the key pose (GTSAM's tangent: x, y in the key's frame, then the heading), ``c``, the tide
+    and the map's offset ``o`` (:attr:`PingTerrain.n_parameters` columns), and the variance the
+    white DR noise between the key and the ping adds to each ``(K, B)``. NaN where there is no
+    sounding or no map.
 
     ``offset (K, B)`` is added to the map's depth under each sounding where given (the map's
-    error as estimated there: :mod:`tangraph.graph.field_solve`)."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, offset=offset)[:3]
+    error as estimated there: :mod:`tangraph.graph.field_solve`); ``map_offset`` is ``o``
+    ``(north, east)`` (None: zero)."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, offset=offset,
+                     map_offset=map_offset)[:3]
 
 
 def terrain_residuals(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
-                      tide: float) -> np.ndarray:  # fmt: skip
-    """The residuals ``r = z - t - h(f) (K, B)`` alone (NaN where no sounding or no map)."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False)[0]
+                      tide: float, map_offset=None) -> np.ndarray:  # fmt: skip
+    """The residuals ``r = z - t - h(f + o) (K, B)`` alone (NaN where no sounding or no map)."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False,
+                     map_offset=map_offset)[0]
 
 
-def footprints(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration) -> tuple[np.ndarray,
-                                                                                                 np.ndarray]:
-    """World ``(north, east)`` of every footprint ``(K, B)`` at the given key poses and ``c``."""
-    return _evaluate(terrain, bathymetry, key_pose, calibration, 0.0, jacobian=False)[4:6]
+def footprints(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
+               map_offset=None) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """``(north, east)`` of every footprint ``(K, B)`` on the map at the given key poses, ``c``
+    and map offset (world positions when that is None)."""
+    return _evaluate(terrain, bathymetry, key_pose, calibration, 0.0, jacobian=False,
+                     map_offset=map_offset)[4:6]
 
 
 def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float, *,
-              jacobian: bool = True, offset: np.ndarray | None = None):
+              jacobian: bool = True, offset: np.ndarray | None = None, map_offset=None):
     """:func:`sounding_jacobians`, the map's gradient ``(K, B, 2)`` under every footprint and the
-    footprints ``north, east (K, B)``; the Jacobians None unless ``jacobian`` (the cost and the
-    gate need none)."""
+    footprints on the map ``north, east (K, B)``; the Jacobians None unless ``jacobian`` (the
+    cost and the gate need none)."""
     key_pose = np.asarray(key_pose, float)[terrain.key_index]
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
@@ -134,7 +149,8 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     world = terrain.origin + rel @ scale.T
     rot_w = rotation_matrix(heading)
     lever = np.einsum("kij,kbj->kbi", rot_w, terrain.offsets)  # (K, B, 2)
-    north, east = world[:, None, 0] + lever[..., 0], world[:, None, 1] + lever[..., 1]
+    shift = np.zeros(2) if map_offset is None else np.asarray(map_offset, float)
+    north, east = world[:, None, 0] + lever[..., 0] + shift[0], world[:, None, 1] + lever[..., 1] + shift[1]
     residual = terrain.depth - tide - bathymetry.depth_at(north, east)
     grad = bathymetry.gradient_at(north, east)  # (K, B, 2)
     if offset is not None:
@@ -162,11 +178,14 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
         column += 2
     if terrain.estimates_tide:
         jac[..., column] = -1.0
+        column += 1
+    if terrain.estimates_offset:
+        jac[..., column:column + 2] = -grad
     return residual, jac, dr_variance, grad, north, east
 
 
 def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-         threshold: float, prior=None, offset_variance=None) -> np.ndarray:  # fmt: skip
+         threshold: float, prior=None, offset_variance=None, map_offset=None) -> np.ndarray:  # fmt: skip
     """The soundings used at the given solution, judged as innovations against ``prior (K, 2,
     2)``, the covariance of each ping's world position the solution is uncertain by (None: 0),
     and ``offset_variance (K,)``, that of an error all of a ping's soundings share (None: 0; the
@@ -181,7 +200,7 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
       some of its soundings may each pass: the ping test leaves it out.
     """
     residual, _, dr_variance, grad, _, _ = _evaluate(terrain, bathymetry, key_pose, calibration, tide,
-                                                     jacobian=False)
+                                                     jacobian=False, map_offset=map_offset)
     variance = terrain.variance + dr_variance
     n = residual.shape[0]
     cov = np.zeros((n, 3, 3))
@@ -210,11 +229,11 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
 
 
 def terrain_cost(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
-                 used: np.ndarray, offset: np.ndarray | None = None) -> float:  # fmt: skip
+                 used: np.ndarray, offset: np.ndarray | None = None, map_offset=None) -> float:  # fmt: skip
     """``1/2 sum r^2 / v`` over the soundings ``used`` (the least-squares cost the factors add;
     a sounding that has lost its map since it was gated counts as at its gate)."""
     residual, _, dr_variance, *_ = _evaluate(terrain, bathymetry, key_pose, calibration, tide, jacobian=False,
-                                             offset=offset)
+                                             offset=offset, map_offset=map_offset)
     z2 = residual[used] ** 2 / (terrain.variance + dr_variance)[used]
     return 0.5 * float(np.sum(np.where(np.isfinite(z2), z2, np.nanmax(z2, initial=0.0))))
 

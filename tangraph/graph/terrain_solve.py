@@ -29,7 +29,7 @@ from tangraph.eval.windows import window_scores
 from tangraph.geometry import wrap_near
 from tangraph.graph import batch, field_solve, terrain_factors
 from tangraph.graph.batch import SmootherSolution
-from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world
+from tangraph.graph.calibration import CALIBRATION, MAP_OFFSET, TIDE, joint_in_frame, to_world
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator
@@ -82,6 +82,11 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
     if config.smoother_terrain == "field" and nav.map_error is not None:
+        if nav.model.map_offset_std > 0:  # the map's horizontal offset, solved with the rest
+            terrain = dataclasses.replace(terrain, map_offset_std=float(nav.model.map_offset_std))
+            factors.add(gtsam.PriorFactorVector(MAP_OFFSET, np.zeros(2),
+                                                gtsam.noiseModel.Isotropic.Sigma(2, terrain.map_offset_std)))
+            values.insert(MAP_OFFSET, np.zeros(2))
         return _field_solve(nav, factors, values, terrain, prior, solution.pose, fixes_solution, config,
                             started)
     used = terrain_factors.gate(terrain, nav.bathymetry, *state, SOUNDING_GATE, prior)
@@ -129,9 +134,8 @@ def _nothing_fits(fixes_solution: SmootherSolution, terrain) -> tuple[SmootherSo
 
 def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference, fixes_solution,
                  config: GraphConfig, started: float) -> tuple[SmootherSolution, dict, BathymetryMap | None]:
-    """The terrain solve with the map's error as a field of unknowns
-    (:mod:`tangraph.graph.field_solve`) over the footprints of the fixes' solution. Each
-    sounding's variance is its noise and its shared nugget (:func:`.field_solve.shared_nugget`);
+    """The terrain solve with the map's error as a field of unknowns (:mod:`.field_solve`) over
+    the footprints of the fixes' solution. A sounding's variance is its noise and shared nugget;
     the gate judges the soundings against the map's stated error (its std under each, and its
     mean under a ping as an offset the ping's soundings share). After each converged solve the
     soundings' noise is grown by its a posteriori variance factor (:func:`.field_solve.variance_components`)
@@ -139,8 +143,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     the model's, while these move. Returns the solution, what it used and the refined map."""
     bathymetry, error = nav.bathymetry, nav.map_error
     assert error is not None  # the caller's condition
-    pose, calibration, _ = _unpack(values, terrain, reference)
-    north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
+    north, east = terrain_factors.footprints(terrain, bathymetry, *_unpack(values, terrain, reference)[:2])
     seen = np.isfinite(terrain.depth) & np.isfinite(bathymetry.depth_at(north, east))
     if not seen.any():
         return _nothing_fits(fixes_solution, terrain)
@@ -149,8 +152,8 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     s2 = np.where(seen, error.std_at(north, east) ** 2, np.nan)
     s2, counts = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2), seen.sum(axis=1)
 
-    def unpack(v) -> tuple[np.ndarray, np.ndarray, float]:
-        return _unpack(v, terrain, reference)
+    def unpack(v) -> tuple[np.ndarray, np.ndarray, float, np.ndarray | None]:
+        return *_unpack(v, terrain, reference), _map_offset(v, terrain)
 
     def judged(v, noise_factor: float, ratio) -> np.ndarray:
         grown = s2 * ratio
@@ -158,7 +161,8 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
                                                                  np.nan))
         shared = np.divide(np.nansum(np.where(seen, grown, 0.0), axis=1), counts, out=np.zeros(counts.size),
                            where=counts > 0)
-        return terrain_factors.gate(judging, bathymetry, *unpack(v), SOUNDING_GATE, prior, shared)
+        p, c, t, o = unpack(v)  # key poses, calibration, tide, map offset
+        return terrain_factors.gate(judging, bathymetry, p, c, t, SOUNDING_GATE, prior, shared, o)
 
     used = judged(values, 1.0, 1.0)
     if not used.any():
@@ -189,7 +193,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
         noise_factor, field_factor = new_noise, new_field
         scaled = hold.scaled(field_factor)
     done = _time.perf_counter()
-    pose, calibration, tide = unpack(values)
+    pose, calibration, tide, shift = unpack(values)
     cov = joint_in_frame(pose[:, 2], cov)
     found_error = field_solve.scaled_error(error, hold.field, field_factor)
     refined = field_solve.refined_map(found_error, scaled.field, solved, inverse)
@@ -198,15 +202,21 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     assert u is not None  # solved at least once
     offset = scaled.offset(u)
     cost = factors.error(values) + 0.5 * float(u @ (scaled.field.precision @ u)) + \
-        terrain_factors.terrain_cost(solving, bathymetry, pose, calibration, tide, used, offset)
+        terrain_factors.terrain_cost(solving, bathymetry, pose, calibration, tide, used, offset, shift)
     info = {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": int(used.sum()),
             "tide": float(tide), "variance_factor": float(noise_factor),
             "field_factor": float(np.median(field_factor)), "field_factor_max": float(field_factor.max()),
             "field_nodes": int(scaled.field.n_nodes), "field_spacing": float(scaled.field.spacing),
-            "field_rms": float(np.sqrt(np.mean(offset[used] ** 2)))}
+            "field_rms": float(np.sqrt(np.mean(offset[used] ** 2))),
+            **field_solve.offset_estimate(solved, inverse, terrain.estimates_offset)}
     timings = {"solve": done - started, "marginals": _time.perf_counter() - done}
     return SmootherSolution(keys, pose, cov, calibration if terrain.calibrated else np.zeros(2), calib_cov,
                             iterations, float(cost), timings), info, refined
+
+
+def _map_offset(values, terrain) -> np.ndarray | None:
+    """The map's horizontal offset in ``values`` (None when it is not a variable)."""
+    return np.asarray(values.atVector(MAP_OFFSET), float) if terrain.estimates_offset else None
 
 
 def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig, reference, prior):

@@ -68,6 +68,13 @@ class NavigationModel:
         fewer independent ones (:func:`~tangraph.sensors.terrain.sounding_variances`).
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
+    map_offset_std : float
+        Std (m, per axis) of the map's horizontal offset against the survey's frame, one for the
+        whole survey: the earlier surveys' position error that their runs share (a DGPS of a
+        few metres wanders slowly), which moves the map as a whole where a correlated depth
+        error cannot say it. 0 (default): the map lies where its coordinates say. Solved for by
+        the batch smoother with ``smoother_terrain = "field"``, whose track then stays in the
+        survey's frame while the soundings are matched to the map at the offset.
 
     Examples
     --------
@@ -95,10 +102,11 @@ class NavigationModel:
     map_correlation_length: float = 0.0
     tide: float = 0.0
     tide_std: float = 3.0
+    map_offset_std: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
-                     "map_std", "map_correlation_length", "tide_std"):
+                     "map_std", "map_correlation_length", "tide_std", "map_offset_std"):
             _number(self, name, low=0.0)
         for name in ("speed_scale_std", "heading_bias_std", "initial_position_std", "sounding_std"):
             _number(self, name, low=0.0, open_low=True)

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 from scipy import sparse
 
+from tangraph.errors import TangraphError
 from tangraph.eval import bound_rmse, posterior_crb
 from tangraph.eval.map_field import CombinedField, map_error_field
 from tangraph.graph import GraphConfig, field_solve, smooth_survey, terrain_factors, terrain_solve
-from tangraph.graph.calibration import TIDE
+from tangraph.graph.calibration import MAP_OFFSET, TIDE
 from tangraph.graph.online import GraphNavigator
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel, map_error, rotation_matrix
@@ -47,12 +48,15 @@ def test_the_normal_equations_are_the_joint_costs_gradient():
     graph = terrain_solve._ping_graph(nav)
     terrain = terrain_factors.ping_terrain(survey, bathymetry, MODEL, graph.keys, nav.white, nav.origin,
                                            graph.calibrated)
+    terrain = dataclasses.replace(terrain, map_offset_std=2.0)  # the map's offset a variable too
     factors = graph.with_fixes([], start=True).factor_graph()
     factors.add(gtsam.PriorFactorVector(TIDE, np.array([0.0]), gtsam.noiseModel.Isotropic.Sigma(1, 1.0)))
+    factors.add(gtsam.PriorFactorVector(MAP_OFFSET, np.zeros(2), gtsam.noiseModel.Isotropic.Sigma(2, 2.0)))
     pose = survey.dr_pose + rng.normal(0.0, [0.5, 0.5, 0.01], survey.dr_pose.shape)
     calibration = np.array([0.01, 0.02])
     values = graph.values(pose, calibration)
     values.insert(TIDE, np.array([0.1]))
+    values.insert(MAP_OFFSET, np.array([0.7, -0.4]))
     north, east = terrain_factors.footprints(terrain, bathymetry, pose, calibration)
     seen = np.isfinite(terrain.depth)
     hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], nav.map_error), north, east,
@@ -63,11 +67,12 @@ def test_the_normal_equations_are_the_joint_costs_gradient():
     u = 0.3 * rng.standard_normal(hold.field.n_nodes)
 
     def unpack(v):
-        return terrain_solve._unpack(v, terrain, pose)
+        return *terrain_solve._unpack(v, terrain, pose), np.asarray(v.atVector(MAP_OFFSET))
 
     def cost(v, x):
+        p, c, t, o = unpack(v)
         return (factors.error(v) + 0.5 * float(x @ (prior @ x))
-                + terrain_factors.terrain_cost(terrain, bathymetry, *unpack(v), seen, hold.offset(x)))
+                + terrain_factors.terrain_cost(terrain, bathymetry, p, c, t, seen, hold.offset(x), o))
 
     _, gradient = field_solve._normal_equations(factors, values, u, terrain, bathymetry, hold, seen, unpack,
                                                 layout, prior)
@@ -283,3 +288,45 @@ def test_a_patch_far_off_its_stated_error_is_given_its_own():
     east_side, west_side = surveyed & (cell_e > 170.0), surveyed & (cell_e < 150.0)
     assert np.sqrt(np.mean(z[east_side] ** 2)) < 1.3 and np.sqrt(np.mean(z[west_side] ** 2)) < 1.3
     assert np.median(refined.depth_std[east_side]) > 1.5 * np.median(refined.depth_std[west_side])
+
+
+def test_the_map_offset_is_recovered_and_the_track_kept():
+    # the map lies 3 m south and 2 m east of where its coordinates say (the seafloor at p is the
+    # map's depth at p + (3, -2)), the DR is exact: with the offset a variable the solve finds it
+    # and keeps the track; without, the track is pulled towards where the map fits
+    bathymetry = with_error(smooth_map(), 0.05, 30.0)
+    truth, survey = lawnmower(start_error=(0.0, 0.0))
+    north, east = survey.footprints(truth)
+    rng = np.random.default_rng(4)
+    depth = bathymetry.depth_at(north + 3.0, east - 2.0) + 0.05 * rng.standard_normal(north.shape)
+    survey = survey.replace(beam_depth=depth)
+    model = NavigationModel(sounding_std=0.05, tide_std=0.5, speed_noise=0.02, initial_position_std=2.0,
+                            speed_scale_std=0.02, heading_bias_std=0.03, map_offset_std=5.0)
+    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    track = smooth_survey(survey, bathymetry, config, model=model)
+    info = track.meta["soundings"]
+    found, std = np.array(info["map_offset"]), np.array(info["map_offset_std"])
+    # the offset is known as well as the track's absolute position (the start's 2 m), the track
+    # on the map (the track plus the offset) far better
+    assert np.all(std < 2.0) and np.all(np.abs(found - [3.0, -2.0]) < 3 * std)
+    on_map = track.pose[:, :2] - truth[:, :2] + found
+    assert np.all(np.abs(np.mean(on_map, axis=0) - [3.0, -2.0]) < 0.2)
+    kept = np.sqrt(np.mean(np.sum((track.pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    pulled = smooth_survey(survey, bathymetry, config, model=model.replace(map_offset_std=0.0))
+    assert "map_offset" not in pulled.meta["soundings"]
+    moved = np.sqrt(np.mean(np.sum((pulled.pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
+    assert kept < 1.0 < moved
+
+
+def test_a_flat_map_says_nothing_of_its_offset():
+    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.1, 30.0)
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
+                            map_offset_std=5.0)
+    _, survey = lawnmower(start_error=(0.0, 0.0))
+    survey = noise_free(survey, flat)
+    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
+    track = smooth_survey(survey, flat, config, model=model)
+    np.testing.assert_allclose(track.meta["soundings"]["map_offset_std"], 5.0, rtol=1e-3)
+    np.testing.assert_allclose(track.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
+    with pytest.raises(TangraphError, match="map_offset_std"):
+        NavigationModel(map_offset_std=-1.0)
