@@ -208,17 +208,11 @@ def _robust(r: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(r - np.median(r)))) if r.size >= 200 else np.nan
 
 
-def _best_shift(survey, bathymetry, rows, shifts) -> tuple[np.ndarray, float]:
-    """The shift of the track ``(dn, de)`` among ``shifts`` at which the soundings of pings
-    ``rows`` fit ``bathymetry`` with the least robust spread, and that spread."""
-    north, east = survey.footprints(survey.true_pose)
-    depth = survey.beam_depth[rows]
-    spread = np.array([_robust(depth - bathymetry.depth_at(north[rows] + dn, east[rows] + de))
-                       for dn, de in shifts])
-    if np.all(np.isnan(spread)):
-        return np.full(2, np.nan), np.nan
-    best = int(np.nanargmin(spread))
-    return shifts[best], float(spread[best])
+def _best_shift(depth, north, east, bathymetry, shifts) -> np.ndarray:
+    """The shift ``(dn, de)`` among ``shifts`` at which soundings ``depth`` at footprints
+    ``north, east`` fit ``bathymetry`` with the least robust spread (NaN: too few on the map)."""
+    spread = np.array([_robust(depth - bathymetry.depth_at(north + dn, east + de)) for dn, de in shifts])
+    return np.full(2, np.nan) if np.all(np.isnan(spread)) else shifts[int(np.nanargmin(spread))]
 
 
 def run_offsets(cfg: dict, data: Path, bathymetry, march: dict, step: float = 2.5,
@@ -251,7 +245,7 @@ def run_offsets(cfg: dict, data: Path, bathymetry, march: dict, step: float = 2.
         north, east = survey.footprints(survey.true_pose)
         row: dict = {"pings": int(survey.n_pings), "halves": []}
         for (fit, test), label in zip((halves, halves[::-1]), ("first", "second"), strict=True):
-            shift, _ = _best_shift(survey, held_map, fit, shifts)
+            shift = _best_shift(survey.beam_depth[fit], north[fit], east[fit], held_map, shifts)
             if np.isnan(shift).any():  # too few soundings on the map
                 continue
             row["halves"].append({

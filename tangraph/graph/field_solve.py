@@ -410,10 +410,11 @@ def variance_components(solution: FieldSolution, terrain: PingTerrain, bathymetr
     entries = si.inverse_entries(factor, z, q.row + at, q.col + at)
     field_redundancy = float(hold.field.n_nodes - np.sum(q.data * entries))
     u = solution.u
+    qu = q.tocsr() @ u
     return {"noise": float(b @ b) / redundancy if redundancy > 0 else 1.0,
-            "field": float(u @ (q.tocsr() @ u)) / field_redundancy if field_redundancy > 0 else 1.0,
+            "field": float(u @ qu) / field_redundancy if field_redundancy > 0 else 1.0,
             "noise_redundancy": redundancy, "field_redundancy": field_redundancy,
-            "field_nodes": u * (q.tocsr() @ u),
+            "field_nodes": u * qu,
             "field_node_redundancy": 1.0 - np.bincount(q.row, q.data * entries, minlength=hold.field.n_nodes)}
 
 

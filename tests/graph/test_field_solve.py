@@ -28,6 +28,15 @@ def with_error(bathymetry: BathymetryMap, std: float, length: float) -> Bathymet
     return bathymetry.replace(depth_std=np.full(bathymetry.shape, std), correlation_length=length)
 
 
+def flat_map(std: float, length: float) -> BathymetryMap:
+    """A flat map at 50 m stated to err by ``std`` over ``length``."""
+    return with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), std, length)
+
+
+#: the field smoother on a flat map: nothing tells the calibration, nothing to re-match
+FIELD_ON_FLAT = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
+
+
 def biased_dr(survey, truth, scale=0.01, bias_deg=1.0):
     """The survey with a DR of speed scale ``scale`` and heading bias ``bias_deg`` about the start."""
     origin, bias = truth[0, :2], np.radians(bias_deg)
@@ -133,14 +142,13 @@ def blob(north, east, centre=(140.0, 160.0), height=0.8, width=12.0):
 def test_a_planted_map_error_is_recovered_with_its_std():
     # a flat map, a seafloor with a bump the map never had: the refined map has it, within its
     # stated std, and the track stays the DR's (a flat map tells nothing of where it lies)
-    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.3, 30.0)
+    flat = flat_map(0.3, 30.0)
     model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     north, east = survey.footprints(truth)
     rng = np.random.default_rng(5)
     survey = survey.replace(beam_depth=50.0 + blob(north, east) + 0.1 * rng.standard_normal(north.shape))
-    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
-    track = smooth_survey(survey, flat, config, model=model)
+    track = smooth_survey(survey, flat, FIELD_ON_FLAT, model=model)
     np.testing.assert_allclose(track.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
     refined = track.meta["refined_map"]
     assert refined.shape == flat.shape and refined.correlation_length == 30.0
@@ -269,7 +277,7 @@ def test_a_patch_far_off_its_stated_error_is_given_its_own():
     # a flat map stated to err by 0.1 m over 10 m: so it does in the west, three times that in the
     # east. The solve grows the error of the eastern patches by about three and leaves the western
     # ones at what is stated, and the refined map is honest on both sides
-    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.1, 10.0)
+    flat = flat_map(0.1, 10.0)
     model = NavigationModel(sounding_std=0.05, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     north, east = survey.footprints(truth)
@@ -279,8 +287,7 @@ def test_a_patch_far_off_its_stated_error_is_given_its_own():
     seafloor = BathymetryMap(AXIS, AXIS, 50.0 + error)
     noise = 0.05 * rng.standard_normal(north.shape)
     survey = survey.replace(beam_depth=seafloor.depth_at(north, east) + noise)
-    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
-    track = smooth_survey(survey, flat, config, model=model)
+    track = smooth_survey(survey, flat, FIELD_ON_FLAT, model=model)
     assert 2.0 < track.meta["soundings"]["field_factor_max"] < 4.0
     refined = track.meta["refined_map"]
     z = (refined.depth - 50.0 - error) / refined.depth_std
@@ -319,13 +326,12 @@ def test_the_map_offset_is_recovered_and_the_track_kept():
 
 
 def test_a_flat_map_says_nothing_of_its_offset():
-    flat = with_error(BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 50.0)), 0.1, 30.0)
+    flat = flat_map(0.1, 30.0)
     model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
                             map_offset_std=5.0)
     _, survey = lawnmower(start_error=(0.0, 0.0))
     survey = noise_free(survey, flat)
-    config = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
-    track = smooth_survey(survey, flat, config, model=model)
+    track = smooth_survey(survey, flat, FIELD_ON_FLAT, model=model)
     np.testing.assert_allclose(track.meta["soundings"]["map_offset_std"], 5.0, rtol=1e-3)
     np.testing.assert_allclose(track.pose[:, :2], survey.dr_pose[:, :2], atol=1e-6)
     with pytest.raises(TangraphError, match="map_offset_std"):
