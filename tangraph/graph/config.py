@@ -12,6 +12,14 @@ from tangraph.matching import TapConfig
 
 __all__ = ["GraphConfig", "load_graph_config"]
 
+_TAP_DEFAULT = TapConfig()
+_STEP_CELLS = 0.5  # GraphConfig.tap_step_cells' default
+# Settings that were removed, with where their job went (an old config naming one is refused).
+_REMOVED = {
+    "optimizer": "the batch solve is Gauss-Newton with step halving for every graph "
+                 "(tangraph.graph.batch.gauss_newton): remove the key",
+}
+
 
 def _number(config, name: str, *, positive: bool = True, allow_zero: bool = False) -> None:
     value = getattr(config, name)
@@ -72,8 +80,10 @@ class GraphConfig:
         A further factor (>= 1) on every fix's TAP covariance, for errors that neighbouring fixes
         share beyond their common pings (map error, patch shape); 1 by default.
     tap : TapConfig
-        Settings of each fix; ``half_width`` is replaced per fix when ``half_width_rule`` is
-        ``"marginal"``.
+        Settings of each fix. Its ``half_width`` is used only with ``half_width_rule =
+        "fixed"`` (a ``half_width`` other than TapConfig's default with the ``"marginal"`` rule
+        is refused: it would not be used); its ``step``, when given, is the search step in
+        metres (then ``tap_step_cells`` must keep its default).
     tap_step_cells : float
         Without ``tap.step``, the search step in map cells (default half a cell: on whole-cell
         steps a fix is quantised to the grid around its prior and follows the prior by up to
@@ -116,10 +126,9 @@ class GraphConfig:
         information stays as a linear marginal factor), so the time per update does not grow
         with the mission; None keeps all (the update then slows as the chain grows, since every
         new fix moves the whole past). The batch smoother always uses every key pose.
-    optimizer : {"lm", "gn", "dogleg"}
-        Batch optimiser (Levenberg-Marquardt, Gauss-Newton, Powell's dogleg), METIS ordering.
     max_iterations : int
-        Of the batch optimiser.
+        Of the batch solve (Gauss-Newton with step halving on a METIS ordering,
+        :func:`tangraph.graph.batch.gauss_newton`, for every graph).
     smoother_covariance : {"all", "none"}
         Marginal covariances of every key pose after the batch solve (about 3 s per 100 000
         key poses), or none (the track's covariance is NaN).
@@ -208,7 +217,7 @@ class GraphConfig:
     ramp_pings: int | None = 5
     fix_inflation: float = 1.0
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
-    tap_step_cells: float = 0.5
+    tap_step_cells: float = _STEP_CELLS
     robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
     robust_parameter: float = 2.45
     accept_multimodal: bool = True
@@ -224,7 +233,6 @@ class GraphConfig:
     relinearize_position: float = 1.0
     relinearize_skip: int = 1
     isam_window: int | None = 100
-    optimizer: Literal["lm", "gn", "dogleg"] = "lm"
     max_iterations: int = 100
     smoother_covariance: Literal["all", "none"] = "all"
     rematch_iterations: int = 2
@@ -251,6 +259,8 @@ class GraphConfig:
         tangraph.errors.TangraphError: --graph: unknown GraphConfig field 'n_ping'
         """
         fields = dict(fields)
+        for name in sorted(set(fields) & set(_REMOVED)):
+            raise TangraphError(f"{where}: GraphConfig.{name} is no longer a setting: {_REMOVED[name]}")
         for name, kind in (("tap", TapConfig), (None, cls)):
             table = fields.get(name, {}) if name else fields
             known = {f.name for f in dataclasses.fields(kind)}
@@ -319,10 +329,20 @@ class GraphConfig:
             )
         if not isinstance(self.tap, TapConfig):
             raise TangraphError(f"GraphConfig.tap must be a TapConfig, got {type(self.tap).__name__}")
+        if self.half_width_rule == "marginal" and self.tap.half_width != _TAP_DEFAULT.half_width:
+            raise TangraphError(
+                f"GraphConfig: tap.half_width = {self.tap.half_width!r} is not used with half_width_rule "
+                "= 'marginal' (the half-width comes from the predicted covariance): set half_width_rule "
+                "= 'fixed' to use it, or leave it out"
+            )
+        if self.tap.step is not None and self.tap_step_cells != _STEP_CELLS:
+            raise TangraphError(
+                f"GraphConfig: tap.step ({self.tap.step!r} m) and tap_step_cells ({self.tap_step_cells!r} "
+                "cells) both set the search step: give one"
+            )
         for name, allowed in (("front_end", ("tap", "pmf")),
                               ("robust_kernel", ("huber", "cauchy", "none")),
                               ("half_width_rule", ("marginal", "fixed")),
-                              ("optimizer", ("lm", "gn", "dogleg")),
                               ("smoother_covariance", ("all", "none")),
                               ("robust_solve", ("gnc", "none")),
                               ("smoother_terrain", ("fixes", "soundings", "field"))):

@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time as _time
-from typing import Any
 
 import gtsam
 import numpy as np
@@ -50,23 +49,6 @@ __all__ = ["SmootherSolution", "dense_track", "smooth_pose_graph", "smooth_surve
 
 log = logging.getLogger(__name__)
 
-def _optimizer(graph, values, config: GraphConfig, ordering):
-    params: gtsam.NonlinearOptimizerParams
-    cls: Any  # each optimiser takes its own kind of params
-    if config.optimizer == "lm":
-        params = gtsam.LevenbergMarquardtParams()
-        cls = gtsam.LevenbergMarquardtOptimizer
-    elif config.optimizer == "gn":
-        params = gtsam.GaussNewtonParams()
-        cls = gtsam.GaussNewtonOptimizer
-    else:
-        params = gtsam.DoglegParams()
-        cls = gtsam.DoglegOptimizer
-    params.setOrdering(ordering)  # METIS, computed once for every iteration
-    params.setMaxIterations(config.max_iterations)
-    return cls(graph, values, params)
-
-
 def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
                       initial=None, calibration=None) -> SmootherSolution:
     """Solve a whole :class:`~tangraph.graph.keyposes.PoseGraph` (METIS ordering).
@@ -75,7 +57,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     ----------
     graph : PoseGraph
     config : GraphConfig, optional
-        ``optimizer``, ``max_iterations`` and ``smoother_covariance`` are used.
+        ``max_iterations`` and ``smoother_covariance`` are used.
     initial : array_like (n_keys, 3), optional
         Initial key poses (default: those stored in the graph).
     calibration : array_like (2,), optional
@@ -105,12 +87,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     started = _time.perf_counter()
     try:
         ordering = metis_ordering(factors, graph.calibrated)
-        if graph.calibrated:
-            result, iterations = gauss_newton(factors, values, ordering, config.max_iterations)
-        else:
-            optimizer = _optimizer(factors, values, config, ordering)
-            result = optimizer.optimize()
-            iterations = int(optimizer.iterations())
+        result, iterations = gauss_newton(factors, values, ordering, config.max_iterations)
     except (RuntimeError, IndexError) as exc:  # GTSAM's indeterminant system; METIS on odd graphs
         raise _translate(exc, graph) from None
     solved = _time.perf_counter()
@@ -234,10 +211,7 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
     ordering = metis_ordering(full.factor_graph(), graph.calibrated)
 
     def solve(factors, values):
-        if graph.calibrated:
-            return gauss_newton(factors, values, ordering, config.max_iterations)[0]
-        optimizer = _optimizer(factors, values, config, ordering)
-        return optimizer.optimize()
+        return gauss_newton(factors, values, ordering, config.max_iterations)[0]
 
     as_candidate = start and len(keys) >= 2  # with fewer fixes the start is all there is
     if not as_candidate and start:

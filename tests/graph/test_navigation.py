@@ -19,7 +19,9 @@ from tangraph.graph import (
     smooth_pose_graph,
     smooth_survey,
 )
-from tangraph.matching import tap_fix
+from tangraph.graph.fixes import search_half_width, search_step
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching import TapConfig, tap_fix
 from tangraph.sensors import (
     DeadReckoningModel,
     NavigationModel,
@@ -240,11 +242,26 @@ def test_a_model_is_required_when_the_survey_has_none(small_survey, rough_map):
 @pytest.mark.parametrize("changes", [{"robust_kernel": "tukey"}, {"key_interval": 0.0}, {"n_pings": 0},
                                      {"gate_probability": 1.5}, {"isam_window": 1},
                                      {"min_half_width_cells": 10.0, "max_half_width_cells": 5.0},
-                                     {"relinearize_threshold": float("nan")}, {"optimizer": "adam"},
-                                     {"fix_inflation": 0.5}, {"ramp_pings": 0}])
+                                     {"relinearize_threshold": float("nan")},
+                                     {"fix_inflation": 0.5}, {"ramp_pings": 0},
+                                     {"tap": TapConfig(half_width=30.0)},
+                                     {"tap": TapConfig(step=2.0), "tap_step_cells": 1.0}])
 def test_config_is_validated(changes):
     with pytest.raises(TangraphError, match="GraphConfig"):
         GraphConfig(**changes)
+
+
+def test_config_honours_what_it_is_given():
+    """A fixed half-width and a step in metres are used as given; a removed key is refused by
+    name, with where its job went."""
+    config = GraphConfig(half_width_rule="fixed", tap=TapConfig(half_width=30.0, step=2.0))
+    bathy = BathymetryMap(np.arange(5) * 5.0, np.arange(5) * 5.0, np.zeros((5, 5)))
+    assert search_half_width(config, bathy, np.eye(2) * 1e4) == 30.0
+    assert search_step(config, bathy) == 2.0
+    assert search_step(GraphConfig(tap_step_cells=1.0), bathy) == 5.0
+    removed = r"cfg.toml: GraphConfig.optimizer is no longer a setting: .*gauss_newton"
+    with pytest.raises(TangraphError, match=removed):
+        GraphConfig.from_mapping({"optimizer": "lm"}, "cfg.toml")
 
 
 @pytest.mark.slow
