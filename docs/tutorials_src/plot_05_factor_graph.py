@@ -34,6 +34,7 @@ from tangraph.graph.fixes import make_fix
 from tangraph.maps import load
 from tangraph.navigation import dead_reckoning_track, track_summary
 from tangraph.plot import plot_errors, plot_tracks
+from tangraph.sensors import NavigationModel
 from tangraph.sim import load_scenario, simulate
 from tangraph.track import position_errors
 
@@ -43,9 +44,10 @@ survey = simulate(scenario, rng=np.random.default_rng(7), bathymetry=bathymetry,
 print(survey.summary())
 
 config = GraphConfig()
+model = NavigationModel.from_survey(survey)  # the fixes' error model is the navigation model's
 print(f"fix every {config.spacing} pings ({config.n_pings}-ping windows), key pose every "
       f"{config.key_interval:.0f} s at least; gate at p = {config.gate_probability}; "
-      f"robust kernel {config.robust_kernel} at {config.robust_parameter}")
+      f"robust kernel {model.robust_kernel} at {model.robust_parameter}")
 
 # %%
 # Online navigation
@@ -138,9 +140,9 @@ print(f"outlier at ping {bad_ping} (t = {survey.time[bad_ping]:.0f} s): "
       f"claimed std {std[0]:.1f} m north, {std[1]:.1f} m east; accepted by the flags: {outlier.accepted}")
 
 
-def run_with(fix, config: GraphConfig) -> GraphNavigator:
+def run_with(fix, config: GraphConfig, model: NavigationModel) -> GraphNavigator:
     """The whole survey, with ``fix`` used at its ping instead of the fix the navigator makes."""
-    nav = GraphNavigator(survey, bathymetry, config)
+    nav = GraphNavigator(survey, bathymetry, config, model=model)
     for k in range(survey.n_pings):
         nav.step(fix=fix if k == fix.index else None)
     return nav
@@ -152,14 +154,14 @@ def run_with(fix, config: GraphConfig) -> GraphNavigator:
 
 alone = {"gate_probability": None, "confirm_probability": None, "lost_windows": None}
 variants = {
-    "default": config,
-    "huber only": dataclasses.replace(config, **alone),
-    "no defence": dataclasses.replace(config, **alone, robust_kernel="none"),
+    "default": (config, model),
+    "huber only": (dataclasses.replace(config, **alone), model),
+    "no defence": (dataclasses.replace(config, **alone), model.replace(robust_kernel="none")),
 }
 results = {}
 after = slice(bad_ping, bad_ping + 20)
-for label, variant in variants.items():
-    track = run_with(outlier, variant).track()
+for label, (variant, variant_model) in variants.items():
+    track = run_with(outlier, variant, variant_model).track()
     record = next(f for f in track.fixes if f.index == bad_ping)
     results[label] = track
     print(f"{label:<26} outlier {'accepted' if record.accepted else 'refused'} "

@@ -101,7 +101,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
 
     run = _survey(config, rng)
     survey, bathymetry = run.survey, run.bathymetry
-    model = NavigationModel.from_survey(survey)
+    model = NavigationModel.from_survey(survey, **config.get("model", {}))
     bound = {kind: bound_rmse(posterior_crb(survey, bathymetry, model, kind=kind))
              for kind in ("smoother", "filter")}
     # the physical limit: the same bound with the soundings' simulated noise (the model's
@@ -120,7 +120,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         if method in GRAPH and config.get("graph"):
             from tangraph.graph import GraphConfig
 
-            settings = GraphConfig(**config["graph"])
+            settings = GraphConfig.from_mapping(config["graph"], "--graph")
         if method in FILTERS:
             from tangraph.filters import default_config
 
@@ -282,6 +282,16 @@ def _filter_settings(items, methods) -> dict:
     return settings
 
 
+def _check_settings(graph: dict, model: dict) -> None:
+    """Refuse ``--graph`` and ``--model`` settings that are not fields (or were moved) before any
+    run starts."""
+    from tangraph.graph import GraphConfig
+    from tangraph.sensors import NavigationModel
+
+    GraphConfig.from_mapping(graph, "--graph")
+    NavigationModel.from_mapping(model, "--model")
+
+
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
     from tangraph.experiments.study import field_values, output_folder, study_parser
@@ -296,6 +306,8 @@ def main(argv=None) -> int:
                         help="methods to run (default: the graph and every filter)")
     parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="GraphConfig settings of the graph's runs (values as Python literals)")
+    parser.add_argument("--model", nargs="+", default=[], metavar="FIELD=VALUE",
+                        help="NavigationModel settings of every method (values as Python literals)")
     parser.add_argument("--filter", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="settings of every filter whose configuration has the field (values as "
                         "Python literals)")
@@ -306,10 +318,12 @@ def main(argv=None) -> int:
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
     graph = field_values(args.graph)
+    model = field_values(args.model, "--model")
+    _check_settings(graph, model)
     filter_settings = _filter_settings(args.filter, methods)
     configs = [
         {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr,
-         "graph": graph, "filter": filter_settings}
+         "graph": graph, "filter": filter_settings, "model": model}
         for s in args.scenarios
     ]
     table = run_many(one_run, configs, runs, args.seed, scheduler=args.scheduler, workers=args.workers)
@@ -324,7 +338,7 @@ def main(argv=None) -> int:
         ("" if args.scenarios == default_scenarios else "_" + "-".join(args.scenarios)) + \
         ("" if args.methods is None else "_" + "-".join(args.methods)) + \
         "".join(f"_{item}".replace('"', "").replace("'", "")  # no quotes in names
-                for item in [*args.graph, *args.filter])
+                for item in [*args.graph, *args.model, *args.filter])
     table.to_csv(args.out / f"runs_{tag}.csv", index=False)
     figure(table[~failed], args.out / f"rmse_{tag}.png")
     command = (

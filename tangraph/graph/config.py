@@ -1,4 +1,6 @@
-"""`GraphConfig`: every setting of the factor-graph navigators (online iSAM2 and batch smoother)."""
+"""`GraphConfig`: the algorithm settings of the factor-graph navigators (online iSAM2 and batch
+smoother). Their model (the tail of the fixes' errors, the odometry's floors) is the navigation
+model's (:class:`~tangraph.sensors.NavigationModel`)."""
 
 from __future__ import annotations
 
@@ -15,7 +17,10 @@ __all__ = ["GraphConfig", "load_graph_config"]
 _TAP_DEFAULT = TapConfig()
 _STEP_CELLS = 0.5  # GraphConfig.tap_step_cells' default
 # Settings that were removed, with where their job went (an old config naming one is refused).
+_MOVED = "moved to NavigationModel.{0} (a model file's [navigation] table)"
 _REMOVED = {
+    **{name: _MOVED.format(name) for name in ("robust_kernel", "robust_parameter", "fix_inflation",
+                                                "odometry_min_std", "odometry_min_heading_std")},
     "optimizer": "the batch solve is Gauss-Newton with step halving for every graph "
                  "(tangraph.graph.batch.gauss_newton): remove the key",
 }
@@ -76,9 +81,6 @@ class GraphConfig:
         window. A window's TAP covariance is multiplied by how many windows hold its pings on
         average (:func:`~tangraph.graph.keyposes.fix_windows`), so overlapping windows count
         every sounding once.
-    fix_inflation : float
-        A further factor (>= 1) on every fix's TAP covariance, for errors that neighbouring fixes
-        share beyond their common pings (map error, patch shape); 1 by default.
     tap : TapConfig
         Settings of each fix. Its ``half_width`` is used only with ``half_width_rule =
         "fixed"`` (a ``half_width`` other than TapConfig's default with the ``"marginal"`` rule
@@ -88,11 +90,6 @@ class GraphConfig:
         Without ``tap.step``, the search step in map cells (default half a cell: on whole-cell
         steps a fix is quantised to the grid around its prior and follows the prior by up to
         half a cell, which the graph would then count twice).
-    robust_kernel : {"huber", "cauchy", "none"}
-        M-estimator on the whitened error of each position fix.
-    robust_parameter : float
-        Its threshold on the whitened error norm (default 2.45, the 95 % point of a 2-D
-        Gaussian's norm).
     accept_multimodal : bool
         Use a fix whose calibrated region has several parts (two places fit), with the
         covariance of its normalised likelihood over the whole search (``TapConfig.covariance
@@ -108,9 +105,6 @@ class GraphConfig:
         joined to the poses (default; see :mod:`tangraph.graph.calibration`). False keeps them
         at their prior mean with no uncertainty: the graph then trusts the raw DR's shape, as a
         graph without the calibration would.
-    odometry_min_std, odometry_min_heading_std : float
-        Floors (m, rad) added as variances to every odometry covariance, so it stays positive
-        definite (a model without heading noise gives a singular one).
     half_width_rule : {"marginal", "fixed"}
         ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
         square root of the largest eigenvalue of the predicted position covariance, clipped to
@@ -179,7 +173,7 @@ class GraphConfig:
         graduated non-convexity with a truncated least-squares loss (Yang et al. 2020, the rules
         of GTSAM's ``GncOptimizer``; see :mod:`tangraph.graph.robust`), then solves with the
         inliers only, so the covariances are those of the fixes kept; ``"none"``: the fixes the
-        online pass accepted, under ``robust_kernel``.
+        online pass accepted, under ``NavigationModel.robust_kernel``.
     gnc_probability : float
         A GNC candidate is an inlier while its whitened squared error is below the
         ``chi2(dim)`` quantile of this probability (default 0.99).
@@ -200,13 +194,13 @@ class GraphConfig:
 
     Examples
     --------
-    >>> config = GraphConfig(n_pings=20, fix_spacing=None, robust_kernel="cauchy")
+    >>> config = GraphConfig(n_pings=20, fix_spacing=None)
     >>> config.spacing, config.gate_probability
     (20, 0.999)
-    >>> GraphConfig(robust_kernel="tukey")
+    >>> GraphConfig(front_end="ekf")
     Traceback (most recent call last):
     ...
-    tangraph.errors.TangraphError: GraphConfig.robust_kernel must be one of huber, cauchy, none, got 'tukey'
+    tangraph.errors.TangraphError: GraphConfig.front_end must be one of tap, pmf, got 'ekf'
     """
 
     key_interval: float = 60.0
@@ -215,16 +209,11 @@ class GraphConfig:
     n_pings: int = 20
     fix_spacing: int | None = 10
     ramp_pings: int | None = 5
-    fix_inflation: float = 1.0
     tap: TapConfig = dataclasses.field(default_factory=TapConfig)
     tap_step_cells: float = _STEP_CELLS
-    robust_kernel: Literal["huber", "cauchy", "none"] = "huber"
-    robust_parameter: float = 2.45
     accept_multimodal: bool = True
     gate_probability: float | None = 0.999
     estimate_calibration: bool = True
-    odometry_min_std: float = 0.01
-    odometry_min_heading_std: float = 1e-4
     half_width_rule: Literal["marginal", "fixed"] = "marginal"
     half_width_sigmas: float = 4.0
     min_half_width_cells: float = 5.0
@@ -253,6 +242,10 @@ class GraphConfig:
 
         >>> GraphConfig.from_mapping({"n_pings": 60, "tap": {"criterion": "msd"}}).tap.criterion.value
         'msd'
+        >>> GraphConfig.from_mapping({"fix_inflation": 2.0}, "a.toml")  # doctest: +ELLIPSIS
+        Traceback (most recent call last):
+        ...
+        tangraph.errors.TangraphError: a.toml: GraphConfig.fix_inflation is no longer a setting: moved to ...
         >>> GraphConfig.from_mapping({"n_ping": 60}, "--graph")
         Traceback (most recent call last):
         ...
@@ -272,14 +265,11 @@ class GraphConfig:
         return cls(**fields)
 
     def __post_init__(self) -> None:
-        for name in ("key_interval", "tap_step_cells", "robust_parameter", "fix_inflation",
-                     "odometry_min_std", "odometry_min_heading_std", "half_width_sigmas",
+        for name in ("key_interval", "tap_step_cells", "half_width_sigmas",
                      "min_half_width_cells", "max_half_width_cells", "relinearize_threshold",
                      "relinearize_position"):
             _number(self, name)
         _number(self, "rematch_tolerance", allow_zero=True)
-        if self.fix_inflation < 1.0:
-            raise TangraphError(f"GraphConfig.fix_inflation must be >= 1, got {self.fix_inflation!r}")
         if self.max_half_width_cells < self.min_half_width_cells:
             raise TangraphError(
                 f"GraphConfig: max_half_width_cells ({self.max_half_width_cells}) is below "
@@ -341,7 +331,6 @@ class GraphConfig:
                 "cells) both set the search step: give one"
             )
         for name, allowed in (("front_end", ("tap", "pmf")),
-                              ("robust_kernel", ("huber", "cauchy", "none")),
                               ("half_width_rule", ("marginal", "fixed")),
                               ("smoother_covariance", ("all", "none")),
                               ("robust_solve", ("gnc", "none")),

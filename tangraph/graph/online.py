@@ -114,8 +114,9 @@ class GraphNavigator:
         self._delta, self._delta_cov = increments(self.white, survey.time, survey.dr_pose,
                                                   self._prev_key, np.arange(n))
         std = self.model.calibration_std if c.estimate_calibration else None
-        self.graph = PoseGraph(std, self.model.calibration_prior, self.origin, c.robust_kernel,
-                               c.robust_parameter, c.odometry_min_std, c.odometry_min_heading_std)
+        m = self.model
+        self.graph = PoseGraph(std, m.calibration_prior, self.origin, m.robust_kernel,
+                               m.robust_parameter, m.odometry_min_std, m.odometry_min_heading_std)
         params = gtsam.ISAM2Params()
         threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the pose keys are plain integers
         threshold.insert(("\x00", np.array([c.relinearize_position, c.relinearize_position,
@@ -205,7 +206,7 @@ class GraphNavigator:
     def _start(self, fix: TerrainFix | None) -> None:
         dr = self.survey.dr_pose[0]
         m = self.model
-        heading_std = max(m.heading_noise, self.config.odometry_min_heading_std)
+        heading_std = max(m.heading_noise, m.odometry_min_heading_std)
         self.graph.add_pose(0, self.survey.time[0], dr)
         for factor in self.graph.add_start(0, dr, m.initial_position_std, heading_std):
             self._new_factors.add(factor)

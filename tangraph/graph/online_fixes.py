@@ -119,7 +119,7 @@ def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | No
     if not (nav.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
         return None
     return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, nav.origin,
-                                nav.config.robust_kernel, nav.config.robust_parameter)
+                                nav.model.robust_kernel, nav.model.robust_parameter)
 
 
 def misfit_noise(nav: GraphNavigator, k: int, sigma: float) -> float:
@@ -160,7 +160,7 @@ def grown(nav: GraphNavigator, fix: TerrainFix, laid, joint) -> TerrainFix:
         jac = world_jacobian(laid[[mid - first, -1]], nav.calibration, nav.origin)
         shape = jac[0, :2, 3:] - jac[1, :2, 3:]
     shared = nav.window_overlap.get(end, nav.config.window / nav.config.spacing)
-    overlap = nav.config.fix_inflation * shared
+    overlap = nav.model.fix_inflation * shared
     return window_noise(fix, nav.survey, nav.white, shape, joint[3:, 3:], overlap)
 
 

@@ -259,14 +259,15 @@ def _ping_graph(nav: GraphNavigator) -> PoseGraph:
     the model's uncertainty), its calibration prior, and the DR increments between consecutive
     pings as odometry; no fix, no break. The odometry's noise floors (added to every increment)
     are shrunk so that over the forward pass's key interval they add up to the same."""
-    survey, model, c = nav.survey, nav.model, nav.config
+    survey, model = nav.survey, nav.model
     shrink = np.sqrt(max(len(nav.graph.keys) - 1, 1) / max(survey.n_pings - 1, 1))
-    graph = PoseGraph(nav.graph.calibration_std, nav.graph.calibration_mean, nav.origin, c.robust_kernel,
-                      c.robust_parameter, c.odometry_min_std * shrink, c.odometry_min_heading_std * shrink)
+    graph = PoseGraph(nav.graph.calibration_std, nav.graph.calibration_mean, nav.origin, model.robust_kernel,
+                      model.robust_parameter, model.odometry_min_std * shrink,
+                      model.odometry_min_heading_std * shrink)
     for k in range(survey.n_pings):
         graph.add_pose(k, survey.time[k], survey.dr_pose[k])
     graph.add_start(0, survey.dr_pose[0], model.initial_position_std,
-                    max(model.heading_noise, c.odometry_min_heading_std))  # as the forward pass's
+                    max(model.heading_noise, model.odometry_min_heading_std))  # as the forward pass's
     ping = np.arange(survey.n_pings)
     delta, cov = increments(nav.white, survey.time, survey.dr_pose, ping[:-1], ping[1:])
     for k in range(survey.n_pings - 1):

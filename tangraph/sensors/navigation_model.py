@@ -12,7 +12,9 @@ configs hold only algorithm settings). It holds
 - the initial uncertainty of the start position, the same for every estimator;
 - the terrain measurement model: sounding noise, map error and the tide prior, with one sign
   convention everywhere: a residual is ``measured - map``, and the tide is what a measured depth
-  has on top of the map's (``measured = map + tide + noise``).
+  has on top of the map's (``measured = map + tide + noise``);
+- the factor graph's model of its terrain fixes' errors (their tail and what neighbouring fixes
+  share) and the floors of its odometry noise.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from tangraph.tomlfile import read_table
 
 __all__ = ["NavigationModel", "load_navigation_model", "survey_navigation_model"]
 
+_KERNELS = ("huber", "cauchy", "none")
 _ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk")
 
 
@@ -75,6 +78,19 @@ class NavigationModel:
         error cannot say it. 0 (default): the map lies where its coordinates say. Solved for by
         the batch smoother with ``smoother_terrain = "field"``, whose track then stays in the
         survey's frame while the soundings are matched to the map at the offset.
+    robust_kernel : {"huber", "cauchy", "none"}
+        The tail of a terrain fix's error in the factor graph: the M-estimator on each position
+        fix's whitened error (a fix from a window whose map or pings err beyond their model is
+        down-weighted instead of trusted).
+    robust_parameter : float
+        Its threshold on the whitened error norm (default 2.45, the 95 % point of a 2-D
+        Gaussian's norm).
+    fix_inflation : float
+        A further factor (>= 1) on every fix's TAP covariance, for errors that neighbouring fixes
+        share beyond their common pings (map error, patch shape); 1 by default.
+    odometry_min_std, odometry_min_heading_std : float
+        Floors (m, rad) added as variances to every odometry covariance of the factor graph, so
+        it stays positive definite (a model without heading noise gives a singular one).
 
     Examples
     --------
@@ -103,6 +119,11 @@ class NavigationModel:
     tide: float = 0.0
     tide_std: float = 3.0
     map_offset_std: float = 0.0
+    robust_kernel: str = "huber"
+    robust_parameter: float = 2.45
+    fix_inflation: float = 1.0
+    odometry_min_std: float = 0.01
+    odometry_min_heading_std: float = 1e-4
 
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
@@ -113,6 +134,12 @@ class NavigationModel:
         _number(self, "speed_scale", low=-0.5, high=0.5)
         _number(self, "heading_bias", low=-math.pi, high=math.pi)
         _number(self, "tide", low=None)
+        for name in ("robust_parameter", "odometry_min_std", "odometry_min_heading_std"):
+            _number(self, name, low=0.0, open_low=True)
+        _number(self, "fix_inflation", low=1.0)
+        if self.robust_kernel not in _KERNELS:
+            raise TangraphError(f"NavigationModel.robust_kernel must be one of {', '.join(_KERNELS)}, "
+                                f"got {self.robust_kernel!r}")
 
     # -- parts ---------------------------------------------------------------------------------
     @property
@@ -142,9 +169,9 @@ class NavigationModel:
         """A copy with some fields changed (checked again)."""
         return dataclasses.replace(self, **changes)
 
-    def as_dict(self) -> dict[str, float]:
+    def as_dict(self) -> dict[str, float | str]:
         """JSON-ready form, kept in a track's metadata."""
-        return {k: float(v) for k, v in dataclasses.asdict(self).items()}
+        return {k: v if isinstance(v, str) else float(v) for k, v in dataclasses.asdict(self).items()}
 
     # -- construction --------------------------------------------------------------------------
     @classmethod

@@ -27,13 +27,13 @@ sounding_std = 0.1
 map_std = 0.2
 tide_std = 0.1
 map_correlation_length = 10.0
+robust_kernel = "cauchy"
 """
 GRAPH = """[graph]
 n_pings = 120
 fix_spacing = 60
 accept_multimodal = false
 gate_probability = 0.99
-robust_kernel = "cauchy"
 
 [graph.tap]
 criterion = "msd"

@@ -58,10 +58,9 @@ def dr_only_survey(model: DeadReckoningModel, n: int = 300) -> Survey:
 def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
     model = DeadReckoningModel(speed_noise=0.05, heading_walk=2e-4)
     survey = dr_only_survey(model)
-    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0, odometry_min_std=1e-7,
-                         odometry_min_heading_std=1e-5, estimate_calibration=False)
+    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0, estimate_calibration=False)
     nav = GraphNavigator(survey, rough_map, config, model=NavigationModel.from_dead_reckoning(
-        model, initial_position_std=1e-3)).run()
+        model, initial_position_std=1e-3, odometry_min_std=1e-7, odometry_min_heading_std=1e-5)).run()
     online = nav.track()
     assert online.fixes == () and len(online.meta["key_indices"]) > 10
     np.testing.assert_allclose(online.pose, survey.dr_pose, atol=1e-6)
@@ -211,7 +210,8 @@ def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
     bad = outlier_fixes(small_survey, rough_map, config, 0.1, np.random.default_rng(5))
     tracks = {}
     for kernel in ("huber", "cauchy", "none"):
-        nav = GraphNavigator(small_survey, rough_map, dataclasses.replace(config, robust_kernel=kernel))
+        model = NavigationModel.from_survey(small_survey, robust_kernel=kernel)
+        nav = GraphNavigator(small_survey, rough_map, config, model=model)
         for k in range(small_survey.n_pings):
             nav.step(fix=bad.get(k))
         tracks[kernel] = rmse(nav.track(), truth)
@@ -239,11 +239,11 @@ def test_a_model_is_required_when_the_survey_has_none(small_survey, rough_map):
     assert track.meta["n_fixes_accepted"] > 0
 
 
-@pytest.mark.parametrize("changes", [{"robust_kernel": "tukey"}, {"key_interval": 0.0}, {"n_pings": 0},
+@pytest.mark.parametrize("changes", [{"front_end": "ekf"}, {"key_interval": 0.0}, {"n_pings": 0},
                                      {"gate_probability": 1.5}, {"isam_window": 1},
                                      {"min_half_width_cells": 10.0, "max_half_width_cells": 5.0},
                                      {"relinearize_threshold": float("nan")},
-                                     {"fix_inflation": 0.5}, {"ramp_pings": 0},
+                                     {"ramp_pings": 0},
                                      {"tap": TapConfig(half_width=30.0)},
                                      {"tap": TapConfig(step=2.0), "tap_step_cells": 1.0}])
 def test_config_is_validated(changes):
@@ -327,9 +327,13 @@ def test_graph_config_from_a_toml_file(tmp_path):
     from tangraph.graph import load_graph_config
 
     path = tmp_path / "graph.toml"
-    path.write_text('[graph]\nn_pings = 60\nrobust_kernel = "cauchy"\n[graph.tap]\ncriterion = "msd"\n')
+    path.write_text('[graph]\nn_pings = 60\nsmoother_terrain = "field"\n[graph.tap]\ncriterion = "msd"\n')
     config = load_graph_config(path)
-    assert (config.n_pings, config.robust_kernel, config.tap.criterion.value) == (60, "cauchy", "msd")
+    assert (config.n_pings, config.smoother_terrain, config.tap.criterion.value) == (60, "field", "msd")
+    path.write_text('[graph]\nrobust_kernel = "cauchy"\n')
+    moved = r"graph.toml: GraphConfig.robust_kernel .* NavigationModel.robust_kernel"
+    with pytest.raises(TangraphError, match=moved):
+        load_graph_config(path)
     path.write_text('[graph.tap]\ncriterio = "msd"\n')
     with pytest.raises(TangraphError, match="unknown TapConfig field 'criterio'"):
         load_graph_config(path)

@@ -11,7 +11,10 @@ from tangraph.sensors import DeadReckoningModel, NavigationModel, load_navigatio
 
 @pytest.mark.parametrize("field, value", [("speed_noise", -0.1), ("sounding_std", 0.0), ("tide_std", np.nan),
                                           ("speed_scale_std", np.inf), ("initial_position_std", "ten"),
-                                          ("heading_bias", 4.0), ("map_std", True)])
+                                          ("heading_bias", 4.0), ("map_std", True),
+                                          ("robust_kernel", "tukey"), ("robust_parameter", 0.0),
+                                          ("fix_inflation", 0.5), ("odometry_min_std", -1.0),
+                                          ("odometry_min_heading_std", np.nan)])
 def test_bad_values_are_refused_naming_the_field(field, value):
     with pytest.raises(TangraphError, match=f"NavigationModel.{field}"):
         NavigationModel(**{field: value})
@@ -70,3 +73,16 @@ def test_the_map_error_from_toml_and_the_old_switch_refused(tmp_path):
     path.write_text("[navigation]\nmap_error_shared = true\n")
     with pytest.raises(TangraphError, match="map_error_shared is no longer a setting.*correlation_length"):
         load_navigation_model(path)
+
+
+def test_the_fix_error_model_from_toml(tmp_path):
+    """The graph's fix error model (kernel, threshold, inflation) and odometry floors are model
+    fields: read from a model file, kept in the track's metadata as they were given."""
+    path = tmp_path / "model.toml"
+    path.write_text('[navigation]\nrobust_kernel = "cauchy"\nrobust_parameter = 3.0\nfix_inflation = 2.0\n'
+                    "odometry_min_std = 0.02\n")
+    model = load_navigation_model(path)
+    assert (model.robust_kernel, model.robust_parameter, model.fix_inflation, model.odometry_min_std) == \
+        ("cauchy", 3.0, 2.0, 0.02)
+    assert model.as_dict()["robust_kernel"] == "cauchy"
+    assert NavigationModel(**model.as_dict()) == model
