@@ -16,8 +16,8 @@ import numba
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.filters.config import check_count, check_number
 from tangraph.filters.model import FilterModel
+from tangraph.validation import check_count, check_number
 
 if TYPE_CHECKING:
     from tangraph.filters.fixes import HeldFix
@@ -72,30 +72,30 @@ class Belief:
             object.__setattr__(self, name, _frozen(getattr(self, name)))
         particles, history = self.particles, self.history
         if particles.ndim != 2 or particles.shape[1] != 2:
-            raise TangraphError(f"Belief: particles must have shape (N, 2), got {particles.shape}")
+            raise TangraphError(f"Belief.particles must have shape (N, 2), got {particles.shape}")
         n = particles.shape[0]
         if n < 1:
-            raise TangraphError("Belief: particles must hold at least one particle, got shape (0, 2)")
+            raise TangraphError("Belief.particles must hold at least one particle, got shape (0, 2)")
         for name in ("log_weights", "tide"):
             shape = getattr(self, name).shape
             if shape != (n,):
-                raise TangraphError(f"Belief: {name} must have shape ({n},) as particles, got {shape}")
+                raise TangraphError(f"Belief.{name} must have shape ({n},) as particles, got {shape}")
         if history.ndim != 2 or history.shape[0] != n:
-            raise TangraphError(f"Belief: history must have shape ({n}, L) as particles, got {history.shape}")
+            raise TangraphError(f"Belief.history must have shape ({n}, L) as particles, got {history.shape}")
         assert self.calibration is not None  # filled above
         if self.calibration.shape != (n, 2):
             raise TangraphError(
-                f"Belief: calibration must have shape ({n}, 2) as particles, got {self.calibration.shape}"
+                f"Belief.calibration must have shape ({n}, 2) as particles, got {self.calibration.shape}"
             )
         length = history.shape[1]
         if self.measured.shape != (length,):
             raise TangraphError(
-                f"Belief: measured must have shape ({length},) as history's (N, L), got {self.measured.shape}"
+                f"Belief.measured must have shape ({length},) as history's (N, L), got {self.measured.shape}"
             )
         check_number(self, "tide_var")
         check_count(self, "n_history", low=0)
         if self.n_history > length:
-            raise TangraphError(f"Belief: n_history must be <= L = {length}, got {self.n_history!r}")
+            raise TangraphError(f"Belief.n_history must be <= L = {length}, got {self.n_history!r}")
         check_count(self, "n_fixes", low=0)
 
     @property

@@ -7,52 +7,13 @@ Configs are frozen dataclasses validated in ``__post_init__``: a bad value raise
 from __future__ import annotations
 
 import dataclasses
-import operator
 from typing import Any
-
-import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.resampling import Resampler
+from tangraph.validation import check_count, check_number
 
-__all__ = ["ParticleConfig", "check_count", "check_number"]
-
-
-def check_number(
-    obj, name: str, *, low: float | None = 0.0, open_low: bool = False, high: float | None = None
-):
-    """``obj.name`` as a finite float in ``[low, high]`` (``(low, high]`` if ``open_low``), else a
-    :class:`TangraphError` naming the class, field and value."""
-    value = getattr(obj, name)
-    where = f"{type(obj).__name__}: {name}"
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TangraphError(f"{where} must be a number, got {value!r}") from None
-    if not np.isfinite(v):
-        raise TangraphError(f"{where} must be finite, got {value!r}")
-    if low is not None and (v < low or (open_low and v == low)):
-        raise TangraphError(f"{where} must be {'>' if open_low else '>='} {low:g}, got {value!r}")
-    if high is not None and v > high:
-        raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
-    object.__setattr__(obj, name, v)
-    return v
-
-
-def check_count(obj, name: str, *, low: int = 1) -> int:
-    """``obj.name`` as an int ``>= low``, else a :class:`TangraphError` naming it."""
-    value = getattr(obj, name)
-    where = f"{type(obj).__name__}: {name}"
-    if isinstance(value, bool):
-        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}")
-    try:
-        v = operator.index(value)
-    except TypeError:
-        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}") from None
-    if v < low:
-        raise TangraphError(f"{where} must be an integer >= {low}, got {value!r}")
-    object.__setattr__(obj, name, int(v))
-    return int(v)
+__all__ = ["ParticleConfig"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -163,7 +124,7 @@ class ParticleConfig:
         except ValueError:
             known = ", ".join(r.value for r in Resampler)
             raise TangraphError(
-                f"{type(self).__name__}: resampler must be one of {known}, got {self.resampler!r}"
+                f"{type(self).__name__}.resampler must be one of {known}, got {self.resampler!r}"
             ) from None
 
     def reinit_spread(self, initial_position_std: float) -> float:

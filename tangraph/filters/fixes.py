@@ -39,7 +39,6 @@ from typing import NamedTuple
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.filters.config import check_count, check_number
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold, is_precise, mahalanobis2
 from tangraph.maps.grid import BathymetryMap
@@ -56,6 +55,7 @@ from tangraph.matching import (
 )
 from tangraph.sensors import survey_map_error
 from tangraph.survey import Survey
+from tangraph.validation import check_count, check_number
 
 __all__ = [
     "HOLD_ATTEMPTS",
@@ -97,7 +97,7 @@ def check_fix_search(config) -> None:
         config, "confirm_probability", open_low=True, high=1.0
     ) == 1.0:
         raise TangraphError(
-            f"{type(config).__name__}: confirm_probability must be None or lie in (0, 1), got 1.0"
+            f"{type(config).__name__}.confirm_probability must be None or lie in (0, 1), got 1.0"
         )
     if not hasattr(config, "criterion"):
         return
@@ -107,7 +107,7 @@ def check_fix_search(config) -> None:
         criterion = None
     if criterion not in (Criterion.MLE, Criterion.MSD):
         raise TangraphError(
-            f"{type(config).__name__}: criterion must be mle or msd, got {config.criterion!r}"
+            f"{type(config).__name__}.criterion must be mle or msd, got {config.criterion!r}"
         )
     object.__setattr__(config, "criterion", criterion)
 

@@ -14,7 +14,7 @@ import dataclasses
 import numpy as np
 
 from tangraph.filters.belief import Belief
-from tangraph.filters.config import ParticleConfig, check_number
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.pf import pf_step
 from tangraph.filters.runner import run_particle_filter
@@ -23,6 +23,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
+from tangraph.validation import check_number
 
 __all__ = ["JBPFConfig", "jbpf", "jbpf_step"]
 

@@ -39,7 +39,7 @@ class PFConfig(ParticleConfig):
     >>> PFConfig(n_particles=0)
     Traceback (most recent call last):
     ...
-    tangraph.errors.TangraphError: PFConfig: n_particles must be an integer >= 1, got 0
+    tangraph.errors.TangraphError: PFConfig.n_particles must be an integer >= 1, got 0
     """
 
 

@@ -66,7 +66,6 @@ from typing import Any
 import numpy as np
 
 from tangraph.filters.belief import Belief
-from tangraph.filters.config import check_count, check_number
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
@@ -78,6 +77,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
+from tangraph.validation import check_count, check_number
 
 __all__ = ["PMFConfig", "point_mass_filter"]
 
@@ -122,7 +122,7 @@ class PMFConfig:
     >>> PMFConfig(grid_points=4)
     Traceback (most recent call last):
     ...
-    tangraph.errors.TangraphError: PMFConfig: grid_points must be an odd integer >= 5, got 4
+    tangraph.errors.TangraphError: PMFConfig.grid_points must be an odd integer >= 5, got 4
     """
 
     grid_points: int = 31
@@ -140,21 +140,21 @@ class PMFConfig:
 
         n = self.grid_points
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
-            raise TangraphError(f"PMFConfig: grid_points must be an odd integer >= 5, got {n!r}")
+            raise TangraphError(f"PMFConfig.grid_points must be an odd integer >= 5, got {n!r}")
         object.__setattr__(self, "grid_points", int(n))
         check_number(self, "grid_sigmas", low=1.0)
         check_number(self, "min_spacing", low=0.0, open_low=True)
         points = self.calibration_points
         if (not isinstance(points, (tuple, list)) or len(points) != 2
                 or any(isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1 for p in points)):
-            raise TangraphError(f"PMFConfig: calibration_points must be two integers >= 1, got {points!r}")
+            raise TangraphError(f"PMFConfig.calibration_points must be two integers >= 1, got {points!r}")
         object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
         check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
         check_count(self, "lost_pings", low=1)
         object.__setattr__(self, "relocalise", bool(self.relocalise))
         n = self.relocalise_points
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
-            raise TangraphError(f"PMFConfig: relocalise_points must be an odd integer >= 5, got {n!r}")
+            raise TangraphError(f"PMFConfig.relocalise_points must be an odd integer >= 5, got {n!r}")
         object.__setattr__(self, "relocalise_points", int(n))
         if self.relocalise_radius is not None:
             check_number(self, "relocalise_radius", low=0.0, open_low=True)

@@ -37,7 +37,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.belief import Belief, weighted_moments
-from tangraph.filters.config import ParticleConfig, check_count, check_number
+from tangraph.filters.config import ParticleConfig
 from tangraph.filters.correlation import Correlation, correlate_rows
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.runner import run_particle_filter
@@ -46,6 +46,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
 from tangraph.track import Track
+from tangraph.validation import check_count, check_number
 
 __all__ = ["SJCPFConfig", "correlation_log_weight", "sjcpf", "sjcpf_step"]
 
@@ -88,12 +89,12 @@ class SJCPFConfig(ParticleConfig):
         check_number(self, "kernel_constant")
         check_count(self, "window", low=3)
         if self.kernel not in ("exponential", "power"):
-            raise TangraphError(f"SJCPFConfig: kernel must be exponential or power, got {self.kernel!r}")
+            raise TangraphError(f"SJCPFConfig.kernel must be exponential or power, got {self.kernel!r}")
         try:
             object.__setattr__(self, "correlation", Correlation(self.correlation))
         except ValueError:
             raise TangraphError(
-                f"SJCPFConfig: correlation must be pearson, spearman or kendall, got {self.correlation!r}"
+                f"SJCPFConfig.correlation must be pearson, spearman or kendall, got {self.correlation!r}"
             ) from None
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.matching import TapConfig
+from tangraph.validation import check_number
 
 __all__ = ["GraphConfig", "load_graph_config"]
 
@@ -26,16 +27,8 @@ _REMOVED = {
 }
 
 
-def _number(config, name: str, *, positive: bool = True, allow_zero: bool = False) -> None:
-    value = getattr(config, name)
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TangraphError(f"GraphConfig.{name} must be a number, got {value!r}") from None
-    if not np.isfinite(v) or (positive and (v < 0 or (v == 0 and not allow_zero))):
-        bound = "finite and non-negative" if allow_zero else "finite and positive"
-        raise TangraphError(f"GraphConfig.{name} must be {bound}, got {value!r}")
-    object.__setattr__(config, name, v)
+def _number(config, name: str, *, allow_zero: bool = False) -> None:
+    check_number(config, name, open_low=not allow_zero)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -19,6 +19,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
+from tangraph.validation import number
 
 __all__ = [
     "HAN2020_AREAS",
@@ -42,14 +43,7 @@ HAN2020_AREAS: tuple[tuple[tuple[float, float], tuple[float, float]], ...] = tup
 # -- shared pieces ---------------------------------------------------------------------------
 def _positive(value: float | np.ndarray, name: str, where: str, *, allow_zero: bool = False) -> float:
     """``value`` as a float, or raise naming it if it is not finite and positive."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TangraphError(f"{where}: {name} must be a number, got {value!r}") from None
-    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        bound = "non-negative" if allow_zero else "positive"
-        raise TangraphError(f"{where}: {name} must be finite and {bound}, got {value!r}")
-    return v
+    return number(value, f"{where}: {name}", open_low=not allow_zero)
 
 
 def _axes(shape: Sequence[int], cell: float, where: str) -> tuple[np.ndarray, np.ndarray]:

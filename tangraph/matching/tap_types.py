@@ -49,18 +49,18 @@ class TapConfig:
 
     def __post_init__(self) -> None:
         if not 0.0 < self.alpha < 1.0:
-            raise TangraphError(f"TapConfig: alpha must lie in (0, 1), got {self.alpha!r}")
+            raise TangraphError(f"TapConfig.alpha must lie in (0, 1), got {self.alpha!r}")
         if not (np.isfinite(self.half_width) and self.half_width > 0):
-            raise TangraphError(f"TapConfig: half_width must be positive, got {self.half_width!r}")
+            raise TangraphError(f"TapConfig.half_width must be positive, got {self.half_width!r}")
         if self.step is not None and not (np.isfinite(self.step) and self.step > 0):
-            raise TangraphError(f"TapConfig: step must be positive, got {self.step!r}")
+            raise TangraphError(f"TapConfig.step must be positive, got {self.step!r}")
         if self.covariance not in ("region", "curvature", "crlb"):
             raise TangraphError(
-                f"TapConfig: covariance must be region, curvature or crlb, got {self.covariance!r}"
+                f"TapConfig.covariance must be region, curvature or crlb, got {self.covariance!r}"
             )
         if self.search_method not in ("auto", "direct", "fft"):
             raise TangraphError(
-                f"TapConfig: search_method must be auto, direct or fft, got {self.search_method!r}"
+                f"TapConfig.search_method must be auto, direct or fft, got {self.search_method!r}"
             )
         object.__setattr__(self, "criterion", Criterion(self.criterion))
         object.__setattr__(self, "headings", tuple(float(h) for h in self.headings))

@@ -19,6 +19,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.geometry import between, rotate, rotation_matrix, wrap_angle  # rotation_matrix: re-exported
+from tangraph.validation import check_number
 
 __all__ = [
     "DeadReckoning",
@@ -28,27 +29,6 @@ __all__ = [
     "rotation_matrix",
     "simulate_dead_reckoning",
 ]
-
-
-def _check_number(obj, name: str, *, low: float | None = 0.0, open_low: bool = False,
-                  high: float | None = None, allow_inf: bool = False) -> float:
-    """``obj.name`` as a float within ``[low, high]``, else raise naming the field and value."""
-    value = getattr(obj, name)
-    where = f"{type(obj).__name__}.{name}"
-    if isinstance(value, bool):
-        raise TangraphError(f"{where} must be a number, got {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise TangraphError(f"{where} must be a number, got {value!r}") from None
-    if np.isnan(v) or (np.isinf(v) and not allow_inf):
-        raise TangraphError(f"{where} must be finite, got {value!r}")
-    if low is not None and (v < low or (open_low and v == low)):
-        raise TangraphError(f"{where} must be {'>' if open_low else '>='} {low:g}, got {value!r}")
-    if high is not None and v > high:
-        raise TangraphError(f"{where} must be <= {high:g}, got {value!r}")
-    object.__setattr__(obj, name, v)
-    return v
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,11 +81,11 @@ class DeadReckoningModel:
     start_position_std: float = 0.0
 
     def __post_init__(self) -> None:
-        _check_number(self, "heading_bias", low=None)
-        _check_number(self, "speed_scale", low=-1.0, open_low=True)
+        check_number(self, "heading_bias", low=None)
+        check_number(self, "speed_scale", low=-1.0, open_low=True)
         for name in ("heading_walk", "heading_noise", "speed_noise", "dropout_rate",
                      "dropout_duration", "dropout_speed_noise", "start_position_std"):
-            _check_number(self, name)
+            check_number(self, name)
         if self.dropout_rate > 0 and self.dropout_duration <= 0:
             raise TangraphError(
                 f"DeadReckoningModel.dropout_duration must be > 0 when dropout_rate > 0, "

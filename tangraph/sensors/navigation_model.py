@@ -28,8 +28,8 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.sensors.dead_reckoning import DeadReckoningModel
-from tangraph.sensors.dead_reckoning import _check_number as _number
 from tangraph.tomlfile import read_table
+from tangraph.validation import check_number as _number
 
 __all__ = ["NavigationModel", "load_navigation_model", "survey_navigation_model"]
 

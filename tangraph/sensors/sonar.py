@@ -23,7 +23,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.geometry import rotate
 from tangraph.maps.mesh import TerrainScene, cast_rays
-from tangraph.sensors.dead_reckoning import _check_number
+from tangraph.validation import check_number
 
 __all__ = [
     "MultibeamConfig",
@@ -90,15 +90,15 @@ class MultibeamConfig:
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 2:
             raise TangraphError(f"MultibeamConfig.n_beams must be an integer >= 2, got {self.n_beams!r}")
         object.__setattr__(self, "n_beams", int(self.n_beams))
-        if _check_number(self, "swath", open_low=True) >= np.pi:
+        if check_number(self, "swath", open_low=True) >= np.pi:
             raise TangraphError(f"MultibeamConfig.swath must be < pi rad, got {self.swath!r}")
-        _check_number(self, "ping_rate", open_low=True)
-        _check_number(self, "max_range", open_low=True, allow_inf=True)
-        _check_number(self, "tide", low=None)
+        check_number(self, "ping_rate", open_low=True)
+        check_number(self, "max_range", open_low=True, allow_inf=True)
+        check_number(self, "tide", low=None)
         for name in ("range_noise", "depth_noise", "outlier_std", "attitude_noise"):
-            _check_number(self, name)
+            check_number(self, name)
         for name in ("outlier_rate", "missing_rate"):
-            _check_number(self, name, high=1.0)
+            check_number(self, name, high=1.0)
 
     @classmethod
     def wang2019(cls) -> MultibeamConfig:
@@ -132,10 +132,10 @@ class SingleBeamConfig:
     max_range: float = np.inf
 
     def __post_init__(self) -> None:
-        _check_number(self, "ping_rate", open_low=True)
-        _check_number(self, "depth_noise")
-        _check_number(self, "tide", low=None)
-        _check_number(self, "max_range", open_low=True, allow_inf=True)
+        check_number(self, "ping_rate", open_low=True)
+        check_number(self, "depth_noise")
+        check_number(self, "tide", low=None)
+        check_number(self, "max_range", open_low=True, allow_inf=True)
 
     @classmethod
     def chen2022(cls) -> SingleBeamConfig:

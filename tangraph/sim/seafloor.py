@@ -31,6 +31,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.geometry import rotation_matrix
 from tangraph.maps.grid import BathymetryMap
+from tangraph.validation import number
 
 __all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "simulate_world"]
 
@@ -47,13 +48,7 @@ def _known_keys(cls, table: dict, where: str) -> None:
 
 
 def _positive(table: dict, key: str, where: str, *, zero: bool = False) -> float:
-    value = table[key]
-    if isinstance(value, bool) or not isinstance(value, int | float) or not np.isfinite(value) or (
-        value < 0 if zero else value <= 0
-    ):
-        bound = ">= 0" if zero else "> 0"
-        raise TangraphError(f"{where}: {key} must be a number {bound}, got {value!r}")
-    return float(value)
+    return number(table[key], f"{where}: {key}", open_low=not zero)
 
 
 @dataclasses.dataclass(frozen=True)

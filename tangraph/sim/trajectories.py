@@ -13,15 +13,13 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.geometry import rotation_matrix
+from tangraph.validation import number
 
 __all__ = ["lawnmower", "straight_line", "waypoint_route"]
 
 
 def _positive(value: float, name: str) -> float:
-    value = float(value)
-    if not (np.isfinite(value) and value > 0):
-        raise TangraphError(f"trajectory: {name} must be positive and finite, got {value!r}")
-    return value
+    return number(value, f"trajectory: {name}", open_low=True)
 
 
 def straight_line(

@@ -147,7 +147,7 @@ def test_a_cloud_off_the_map_keeps_the_dead_reckoning_and_its_growing_covariance
 @pytest.mark.parametrize("value", [0, -5, 2.5, True, "10"])
 def test_bad_particle_count_is_named(value):
     for cls in (PFConfig, IPFConfig, SJCPFConfig, JBPFConfig, TercomPFConfig):
-        with pytest.raises(TangraphError, match=f"{cls.__name__}: n_particles"):
+        with pytest.raises(TangraphError, match=f"{cls.__name__}.n_particles"):
             cls(n_particles=value)
 
 
@@ -179,7 +179,7 @@ def test_bad_particle_count_is_named(value):
     ],
 )
 def test_bad_configuration_is_named(cls, field, value):
-    with pytest.raises(TangraphError, match=f"{cls.__name__}: {field}"):
+    with pytest.raises(TangraphError, match=f"{cls.__name__}.{field}"):
         cls(**{field: value})
 
 
@@ -224,7 +224,7 @@ def belief_arrays(n=5, length=0, **changes):
 def test_a_belief_of_mismatched_arrays_is_refused(changes, message):
     """Particles (3, 2) with five weights used to give garbage moments (the compiled loop read
     past the particles); every per-particle array must have the particles' N."""
-    with pytest.raises(TangraphError, match=f"Belief: {message}"):
+    with pytest.raises(TangraphError, match=f"Belief.{message}"):
         Belief(**belief_arrays(**changes))
 
 
