@@ -34,15 +34,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 from _timing import best_cpu, best_time
 
-from tangraph.filters import (
-    FilterMethod,
-    Ping,
-    SJCPFConfig,
-    TerrainLikelihood,
-    TerrainModel,
-    default_config,
-    run_filter,
-)
+from tangraph.filters import FilterMethod, SJCPFConfig, default_config, run_filter
+from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.filters.model import Ping, TerrainModel
 from tangraph.maps import BathymetryMap, fractal
 from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
 from tangraph.sim import trajectories

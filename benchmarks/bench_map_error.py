@@ -39,9 +39,9 @@ def main(argv=None) -> None:
     parser.add_argument("--repeat", type=int, default=20)
     args = parser.parse_args(argv)
 
-    from tangraph.filters import FilterModel, survey_pings
     from tangraph.filters.belief import model_belief
     from tangraph.filters.likelihood import TerrainLikelihood
+    from tangraph.filters.model import FilterModel, survey_pings
     from tangraph.matching import TapConfig, tap_fix, window_patch
     from tangraph.sensors import NavigationModel, map_error, shared_map_variances, sounding_variances
     from tangraph.sim.scenario import load_scenario, simulate_run

@@ -16,7 +16,7 @@ the ping's likelihood (Han et al. eq. 2). When the effective sample size (eq. 6)
    SEEDS.md), and the weights are renormalised.
 
 At ping 0 there is no transition to redraw from (the first ping does not move the particles,
-:meth:`~tangraph.filters.MotionModel.predict`): children would be copies of their parents with
+:meth:`~tangraph.filters.model.MotionModel.predict`): children would be copies of their parents with
 ratio 1, so a resampling there is plain (copies, equal weights; ``info["auxiliary"]`` False), as
 in the bootstrap PF: the estimate and ``ess`` are those of the weighted cloud before it. The copies
 separate at the next ping's prediction.
@@ -27,9 +27,9 @@ Monte Carlo error depends on). If no child can be weighted (every child off the 
 falls back to plain copies.
 
 The children's calibrations ``(k, b)`` are their parents' moved by the shrinkage kernel
-(:func:`~tangraph.filters.shrink_calibration`) before they are redrawn. A ping whose
+(:func:`~tangraph.filters.steps.shrink_calibration`) before they are redrawn. A ping whose
 likelihood is too peaked for the cloud (the ESS after it below ``tempering_ess`` times the ESS
-before, ``tempering`` on) is a tempered bootstrap update instead (:func:`~tangraph.filters.measure`,
+before, ``tempering`` on) is a tempered bootstrap update instead (:func:`~tangraph.filters.steps.measure`,
 then resampling if needed as the bootstrap PF; ``info["tempered"]`` True): the auxiliary redraw
 has no single transition to redraw from once the cloud has been moved between stages.
 """

@@ -1,6 +1,6 @@
 """The jittered bootstrap particle filter (JBPF): roughening after resampling only.
 
-A bootstrap PF (:func:`~tangraph.filters.pf_step`) that, on the pings where it resamples,
+A bootstrap PF (:func:`~tangraph.filters.pf.pf_step`) that, on the pings where it resamples,
 moves every resampled particle by an independent Gaussian jitter of std ``jitter_std`` (m, per
 axis) so that copies of one parent separate; pings without resampling are plain bootstrap steps.
 The estimate is taken before resampling and jitter, as in the bootstrap PF. It is the control
@@ -43,7 +43,7 @@ class JBPFConfig(ParticleConfig):
 def jbpf_step(
     belief: Belief, ping: Ping, model: FilterModel, config: JBPFConfig, *, rng: np.random.Generator
 ) -> StepResult:
-    """One JBPF step: a bootstrap step (:func:`~tangraph.filters.pf_step`) whose resampled
+    """One JBPF step: a bootstrap step (:func:`~tangraph.filters.pf.pf_step`) whose resampled
     particles are then jittered."""
     result = pf_step(belief, ping, model, config, rng=rng)
     if not result.resampled:

@@ -7,7 +7,7 @@ removed: the maximum of the Gaussian likelihood over the search grid), searched 
 current estimate over ``search_sigmas`` times its std (see :mod:`tangraph.filters.fixes`).
 The state is ``(north, east, k, b)``: between fixes it moves by the dead-reckoned increments
 calibrated by its ``(k, b)``, and its covariance is propagated to first order: the white DR
-errors (:class:`~tangraph.filters.MotionModel`), the heading walk, and the uncertainty of the
+errors (:class:`~tangraph.filters.model.MotionModel`), the heading walk, and the uncertainty of the
 constant errors, which turns and stretches every step alike (so the position error it causes
 grows with the distance run, not its square root). Before the first fix it is dead reckoning
 from ``N(DR_0, s^2 I)``, ``s`` the model's ``initial_position_std``, and the model's calibration

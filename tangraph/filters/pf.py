@@ -1,11 +1,11 @@
 """The bootstrap particle filter on the shared model.
 
 Each ping: move every particle by its calibrated dead-reckoned increment plus the white DR
-noise (:class:`~tangraph.filters.MotionModel`), multiply its weight by the terrain likelihood of
-the ping's soundings turned by its heading error (:class:`~tangraph.filters.TerrainModel`;
-tempered when too peaked, :func:`~tangraph.filters.measure`), take the weighted mean and
+noise (:class:`~tangraph.filters.model.MotionModel`), multiply its weight by the terrain likelihood of
+the ping's soundings turned by its heading error (:class:`~tangraph.filters.model.TerrainModel`;
+tempered when too peaked, :func:`~tangraph.filters.steps.measure`), take the weighted mean and
 covariance, and resample when the effective sample size falls below ``ess_threshold * N`` (the
-calibrations then moved by the shrinkage kernel, :func:`~tangraph.filters.shrink_calibration`).
+calibrations then moved by the shrinkage kernel, :func:`~tangraph.filters.steps.shrink_calibration`).
 The loop runs over time only; every step is vectorised over particles and soundings.
 """
 
@@ -75,7 +75,7 @@ def bootstrap_pf(
     ``model`` is the run's navigation model (None: ``NavigationModel.from_survey(survey)``). The
     heading is the dead-reckoned one (its variance is NaN in the track). A step where every
     particle has zero likelihood is a divergence: the cloud is re-drawn around dead reckoning
-    (see :func:`~tangraph.filters.run_particle_filter`).
+    (see :func:`~tangraph.filters.runner.run_particle_filter`).
     """
     return run_particle_filter(
         survey, bathymetry, config or PFConfig(), pf_step, method="pf", rng=rng, model=model,

@@ -41,7 +41,7 @@ sharp likelihood it cannot resolve (negligible once the grid is finer than the l
 The track is the density's mean and covariance (with the white noise not yet convolved in), the
 heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
 A ping whose mean sounding's innovation is inconsistent with the density's predictive spread
-(:class:`~tangraph.filters.Innovation`'s ``nis``) for ``lost_pings`` pings in a row is
+(:class:`~tangraph.filters.steps.Innovation`'s ``nis``) for ``lost_pings`` pings in a row is
 flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise`` set, the filter starts
 afresh from a uniform density on a global grid over the map's data (or ``relocalise_radius``
 around its estimate; ``relocalise_points`` per axis), with one calibration node at the
@@ -259,7 +259,7 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
 
 def _inconsistent(check, alpha: float) -> bool:
     """The lost test of one ping: its mean sounding's innovation against the density's own
-    predictive spread (:class:`~tangraph.filters.Innovation`'s ``nis``, chi-square(1)).
+    predictive spread (:class:`~tangraph.filters.steps.Innovation`'s ``nis``, chi-square(1)).
     The best point's chi-square is not used: the calibration's few nodes need not hold a point
     that fits every sounding of a wide swath while the heading error is still uncertain."""
     return bool(check.nis > _chi2_quantile(alpha, 1))

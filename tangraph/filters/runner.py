@@ -6,10 +6,10 @@ resampling count, and the calibration estimate at the last ping (``meta["calibra
 
 The model of the run is a :class:`~tangraph.sensors.NavigationModel` (None:
 ``NavigationModel.from_survey(survey)``), turned into a
-:class:`~tangraph.filters.FilterModel` (motion and terrain likelihood,
+:class:`~tangraph.filters.model.FilterModel` (motion and terrain likelihood,
 :mod:`tangraph.filters.model`).
 
-Lost and diverged. Every ping with soundings gives an :class:`~tangraph.filters.Innovation`:
+Lost and diverged. Every ping with soundings gives an :class:`~tangraph.filters.steps.Innovation`:
 the normalised innovation of its mean sounding against the weighted cloud's predictive spread
 (chi-square(1)) and the best particle's ``-2 log p`` (chi-square(B) at the true state). A ping
 where either is beyond its ``1 - lost_alpha`` quantile is inconsistent; ``lost_pings``

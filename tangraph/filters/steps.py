@@ -1,7 +1,7 @@
 """The pieces of a particle filter's step: prediction, terrain update, resampling, kernels.
 
 A filter is a pure step ``step(belief, ping, model, config, *, rng) -> StepResult`` (:data:`Step`)
-built from these: it returns a new :class:`~tangraph.filters.Belief` and never writes into
+built from these: it returns a new :class:`~tangraph.filters.belief.Belief` and never writes into
 its inputs.
 
 Honest covariances. The terrain update :func:`measure` tempers a ping whose likelihood is far

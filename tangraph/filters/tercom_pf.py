@@ -32,8 +32,8 @@ its correlation with the position (a re-drawn cloud keeps its particles' calibra
 per-ping terrain likelihood is not used by the step (the soundings enter through the fixes
 only, and the fix estimates the tide itself), so the model's sounding std and tide prior do not
 affect it; they are used only by the divergence recovery of
-:func:`~tangraph.filters.run_particle_filter`, which weights a re-drawn cloud by the ping's
-terrain likelihood. No terrain update, no :class:`~tangraph.filters.Innovation`: TERCOM-PF
+:func:`~tangraph.filters.runner.run_particle_filter`, which weights a re-drawn cloud by the ping's
+terrain likelihood. No terrain update, no :class:`~tangraph.filters.steps.Innovation`: TERCOM-PF
 never reports itself lost (a rejected fix is counted instead).
 """
 

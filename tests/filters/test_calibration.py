@@ -6,18 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tangraph.filters import (
-    FilterModel,
-    PFConfig,
-    Ping,
-    calibration_estimate,
-    config_type,
-    initial_belief,
-    measure,
-    run_filter,
-    shrink_calibration,
-    state_moments,
-)
+from tangraph.filters import PFConfig, config_type, run_filter
+from tangraph.filters.belief import calibration_estimate, initial_belief, state_moments
+from tangraph.filters.model import FilterModel, Ping
+from tangraph.filters.steps import measure, shrink_calibration
 from tangraph.sensors import DeadReckoningModel
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 

@@ -10,29 +10,24 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.filters import (
-    Belief,
-    FilterModel,
     IPFConfig,
     JBPFConfig,
     MLEConfig,
     PFConfig,
-    Ping,
     SJCPFConfig,
     TercomPFConfig,
-    initial_belief,
-    ipf_step,
-    jbpf_step,
-    model_belief,
-    pf_step,
-    resample,
     run_filter,
-    run_particle_filter,
-    sjcpf_step,
-    survey_pings,
-    tercom_pf_step,
-    weighted_moments,
 )
+from tangraph.filters.belief import Belief, initial_belief, model_belief, weighted_moments
+from tangraph.filters.ipf import ipf_step
+from tangraph.filters.jbpf import jbpf_step
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.filters.model import FilterModel, Ping, survey_pings
+from tangraph.filters.pf import pf_step
+from tangraph.filters.resampling import resample
+from tangraph.filters.runner import run_particle_filter
+from tangraph.filters.sjcpf import sjcpf_step
+from tangraph.filters.tercom_pf import tercom_pf_step
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)

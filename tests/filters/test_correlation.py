@@ -7,7 +7,13 @@ import pytest
 from scipy import stats
 
 from tangraph.errors import TangraphError
-from tangraph.filters import Correlation, correlate_rows, kendall_rows, pearson_rows, spearman_rows
+from tangraph.filters.correlation import (
+    Correlation,
+    correlate_rows,
+    kendall_rows,
+    pearson_rows,
+    spearman_rows,
+)
 
 SCIPY = {
     "pearson": lambda a, b: stats.pearsonr(a, b)[0],

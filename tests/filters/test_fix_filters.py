@@ -9,25 +9,16 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters import (
-    FilterModel,
-    JBPFConfig,
-    MLEConfig,
-    PFConfig,
-    TercomPFConfig,
-    fixes,
-    initial_belief,
-    jbpf_step,
-    pf_step,
-    run_filter,
-    run_particle_filter,
-    survey_pings,
-    tercom_pf_step,
-)
-from tangraph.filters.belief import weighted_moments
+from tangraph.filters import JBPFConfig, MLEConfig, PFConfig, TercomPFConfig, fixes, run_filter
+from tangraph.filters.belief import initial_belief, weighted_moments
 from tangraph.filters.fixes import decide_fix, fix_due, fix_window
+from tangraph.filters.jbpf import jbpf_step
 from tangraph.filters.mle import _update
+from tangraph.filters.model import FilterModel, survey_pings
+from tangraph.filters.pf import pf_step
+from tangraph.filters.runner import run_particle_filter
 from tangraph.filters.steps import predict
+from tangraph.filters.tercom_pf import tercom_pf_step
 from tangraph.fix_records import FixStatus
 from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map

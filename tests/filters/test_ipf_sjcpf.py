@@ -5,23 +5,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tangraph.filters import (
-    Belief,
-    FilterModel,
-    IPFConfig,
-    MotionModel,
-    SJCPFConfig,
-    TerrainModel,
-    initial_belief,
-    ipf_step,
-    pearson_rows,
-    resample,
-    shrink_calibration,
-    sjcpf_step,
-    state_moments,
-    survey_pings,
-)
-from tangraph.filters.steps import evaluate, predict
+from tangraph.filters import IPFConfig, SJCPFConfig
+from tangraph.filters.belief import Belief, initial_belief, state_moments
+from tangraph.filters.correlation import pearson_rows
+from tangraph.filters.ipf import ipf_step
+from tangraph.filters.model import FilterModel, MotionModel, TerrainModel, survey_pings
+from tangraph.filters.resampling import resample
+from tangraph.filters.sjcpf import sjcpf_step
+from tangraph.filters.steps import evaluate, predict, shrink_calibration
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)

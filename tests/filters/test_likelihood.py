@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters import FilterDivergence, Resampler, TerrainLikelihood, log_normalise, resample
+from tangraph.filters import FilterDivergence
+from tangraph.filters.likelihood import TerrainLikelihood, log_normalise
+from tangraph.filters.resampling import Resampler, resample
 from tangraph.maps import BathymetryMap
 from tests.maps.reference import interpolate
 

@@ -8,7 +8,9 @@ import dataclasses
 import numpy as np
 import pytest
 
-from tangraph.filters import FilterModel, PFConfig, default_config, model_belief, run_filter, survey_pings
+from tangraph.filters import PFConfig, default_config, run_filter
+from tangraph.filters.belief import model_belief
+from tangraph.filters.model import FilterModel, survey_pings
 from tangraph.filters.steps import evaluate, measure, reweight
 from tangraph.sensors import sounding_variances
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from tangraph.filters import MotionModel, Ping, TerrainLikelihood, TerrainModel, survey_pings
+from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.filters.model import MotionModel, Ping, TerrainModel, survey_pings
 from tangraph.sensors import NavigationModel
 from tests.filters.synthetic import multibeam_survey, rough_map
 from tests.maps.reference import interpolate

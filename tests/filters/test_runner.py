@@ -6,7 +6,9 @@ import re
 
 import numpy as np
 
-from tangraph.filters import FilterDivergence, OffMap, PFConfig, pf_step, run_particle_filter
+from tangraph.filters import FilterDivergence, OffMap, PFConfig
+from tangraph.filters.pf import pf_step
+from tangraph.filters.runner import run_particle_filter
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0, shape=(100, 100))
