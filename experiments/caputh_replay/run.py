@@ -116,33 +116,53 @@ def gps_calibration(survey) -> tuple[float, float]:
 
 
 def beam_offsets(pairs, *, min_slope: float = 0.03) -> list[dict]:
-    """Each slant beam's body-frame footprint as the data see it, from (survey, map) pairs where
-    the map was made without the survey: the least-squares ``(f, s) / h`` of
+    """Each slant beam's body-frame footprint as the data see it, from (survey, map, day) triples
+    where the map was made without the survey: the least-squares ``(f, s) / h`` of
     ``depth(beam) - depth(vertical) = grad(map) . R(psi) (f, s)`` with ``(f, s)`` proportional to
     the height ``h`` over the seafloor (the 25 deg slant), at the GPS positions where the map's
     slope exceeds ``min_slope`` (residuals beyond 3 median deviations trimmed, three rounds).
-    For a 25 deg beam ``|(f, s)| / h = tan 25 deg = 0.466``."""
+    For a 25 deg beam ``|(f, s)| / h = tan 25 deg = 0.466``.
+
+    ``offset_m``: what the slope does not explain, the median over every sample (flat ground
+    too) of ``depth(beam) - depth(vertical) - grad . R(psi) (f, s)``, overall and per day
+    (``offset_by_day_m``), with its robust spread (``spread_m``): a depth error of the beam
+    that every ping repeats (a beam-angle or refraction error reads ``h tan(theta) d theta``).
+    ``slope_equivalent`` is the offset over the nominal distance between the footprints
+    (``h tan 25 deg``, ``h`` the median height), the seafloor slope it would fake between them."""
     rows = []
     for beam in range(1, 5):
-        a_all, y_all = [], []
-        for survey, bathymetry in pairs:
+        a_all, y_all, every = [], [], []
+        for survey, bathymetry, day in pairs:
             pose = survey.true_pose
             g = bathymetry.gradient_at(pose[:, 0], pose[:, 1])
             c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
             h = survey.beam_depth[:, beam] - survey.vehicle_depth  # transducer to seafloor
             g_fwd, g_stb = (c * g[:, 0] + s * g[:, 1]) * h, (-s * g[:, 0] + c * g[:, 1]) * h
             y = survey.beam_depth[:, beam] - survey.beam_depth[:, 0]
-            ok = np.isfinite(y) & np.isfinite(g_fwd) & (np.hypot(g[:, 0], g[:, 1]) > min_slope)
+            finite = np.isfinite(y) & np.isfinite(g_fwd)
+            ok = finite & (np.hypot(g[:, 0], g[:, 1]) > min_slope)
             a_all.append(np.column_stack([g_fwd[ok], g_stb[ok]]))
             y_all.append(y[ok])
+            every.append((day, np.column_stack([g_fwd[finite], g_stb[finite]]), y[finite], h[finite]))
         a, y = np.concatenate(a_all), np.concatenate(y_all)
         keep = np.ones(y.size, bool)
         for _ in range(3):
             x = np.linalg.lstsq(a[keep], y[keep], rcond=None)[0]
             r = np.abs(y - a @ x)
             keep = r <= 3.0 * np.median(r) + 1e-12
+        rest = [(day, yy - aa @ x, hh) for day, aa, yy, hh in every]
+        r_all = np.concatenate([r for _, r, _ in rest])
+        offset = float(np.median(r_all))
+        by_day: dict[str, list[np.ndarray]] = {}
+        for day, r, _ in rest:
+            by_day.setdefault(day, []).append(r)
+        height = float(np.median(np.concatenate([hh for _, _, hh in rest])))
         rows.append({"beam": beam, "azimuth_deg": float(np.degrees(np.arctan2(x[1], x[0])) % 360),
-                     "tan_slant": float(np.hypot(*x)), "n": int(keep.sum())})
+                     "tan_slant": float(np.hypot(*x)), "n": int(keep.sum()),
+                     "offset_m": offset, "spread_m": _robust(r_all - offset), "n_offset": int(r_all.size),
+                     "offset_by_day_m": {d: float(np.median(np.concatenate(r)))
+                                         for d, r in sorted(by_day.items())},
+                     "slope_equivalent": offset / (np.tan(np.radians(25.0)) * height)})
     return rows
 
 
@@ -159,7 +179,7 @@ def beam_check(cfg: dict, data: Path) -> list[dict]:
         others = [s.replace(beam_depth=np.where(np.arange(s.n_beams) == 0, s.beam_depth, np.nan))
                   for p, s in runs.items() if p.stem[:8] != day]
         bathymetry = grid_surveys(others, cell=m["cell"], statistic=m["statistic"], fill=m["fill"]).depth
-        pairs += [(in_map(s, bathymetry), bathymetry) for p, s in runs.items() if p.stem[:8] == day]
+        pairs += [(in_map(s, bathymetry), bathymetry, day) for p, s in runs.items() if p.stem[:8] == day]
     return beam_offsets(pairs)
 
 
