@@ -122,14 +122,15 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
 
             settings = GraphConfig.from_mapping(config["graph"], "--graph")
         if method in FILTERS:
-            from tangraph.filters import default_config
+            from tangraph.filters import ParticleConfig, default_config
 
             settings = default_config(method)
             if method not in ("mle", "pmf"):  # deterministic: no particles
                 settings = dataclasses.replace(settings, n_particles=config["n_particles"])
-            names = {f.name for f in dataclasses.fields(settings)}
-            settings = dataclasses.replace(settings, **{k: v for k, v in config.get("filter", {}).items()
-                                                        if k in names})
+            names = {f.name for f in _setting_fields(settings)}
+            changes = {k: v for k, v in config.get("filter", {}).items() if k in names}
+            settings = settings.replace(**changes) if isinstance(settings, ParticleConfig) else \
+                dataclasses.replace(settings, **changes)
         started = time.perf_counter()
         track = navigate(survey, bathymetry, method, settings, rng=rng, model=model)
         seconds = time.perf_counter() - started
@@ -265,17 +266,27 @@ def figure(table, path: Path) -> None:
     fig.savefig(path, dpi=120)
 
 
+def _setting_fields(config) -> tuple:
+    """The fields a ``--filter`` item may name: the config's own, and its ``health``'s (a
+    particle filter's lost test, gate and recovery)."""
+    import dataclasses
+
+    from tangraph.filters import FilterHealth, ParticleConfig
+
+    extra = dataclasses.fields(FilterHealth) if isinstance(config, ParticleConfig) else ()
+    return (*dataclasses.fields(config), *extra)
+
+
 def _filter_settings(items, methods) -> dict:
     """``--filter FIELD=VALUE`` items as a mapping; a field that no chosen filter's configuration
     has is refused (it would change nothing)."""
-    import dataclasses
 
     from tangraph.errors import TangraphError
     from tangraph.experiments.study import field_values
     from tangraph.filters import default_config
 
     settings = field_values(items, "--filter")
-    names = {f.name for m in methods if m in FILTERS for f in dataclasses.fields(default_config(m))}
+    names = {f.name for m in methods if m in FILTERS for f in _setting_fields(default_config(m))}
     unknown = sorted(set(settings) - names)
     if unknown:
         raise TangraphError(f"--filter {', '.join(unknown)}: no chosen filter has such a setting")

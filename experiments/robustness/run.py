@@ -72,7 +72,6 @@ def _case(name: str, survey, bathymetry, rng):
 def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     """One survey, every case and method: a row per (case, method), and the dead reckoning's.
     The particle filters run with ``ping_gate=True``, their defence against bad pings."""
-    import dataclasses
 
     from tangraph.eval import position_nees, track_metrics
     from tangraph.maps import load_any
@@ -103,7 +102,7 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
             if method in ("pf", "ipf", "sjcpf"):  # with its defence against bad pings
                 from tangraph.filters import default_config
 
-                settings = dataclasses.replace(default_config(method), ping_gate=True)
+                settings = default_config(method).replace(ping_gate=True)
             started = time.perf_counter()
             tracks[method] = navigate(spoiled, chart, method, rng=streams[2 + 2 * n], model=model,
                                       config=settings, other_map=case in ("half-map", "off-map"))

@@ -17,7 +17,7 @@ resampling (:mod:`tangraph.filters.resampling`) and the SJCPF's correlations
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
-from tangraph.filters.config import ParticleConfig
+from tangraph.filters.config import FilterHealth, ParticleConfig
 from tangraph.filters.ipf import IPFConfig, ipf
 from tangraph.filters.jbpf import JBPFConfig, jbpf
 from tangraph.filters.likelihood import FilterDivergence, OffMap
@@ -29,6 +29,7 @@ from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
 
 __all__ = [
     "FilterDivergence",
+    "FilterHealth",
     "FilterMethod",
     "IPFConfig",
     "JBPFConfig",

@@ -13,7 +13,70 @@ from tangraph.errors import TangraphError
 from tangraph.filters.resampling import Resampler
 from tangraph.validation import check_count, check_number
 
-__all__ = ["ParticleConfig"]
+__all__ = ["FilterHealth", "ParticleConfig"]
+
+
+@dataclasses.dataclass(frozen=True)
+class FilterHealth:
+    """How a particle filter tells that it is lost, and what it does then (part of every
+    :class:`ParticleConfig`: ``PFConfig(health=FilterHealth(ping_gate=True))``).
+
+    Parameters
+    ----------
+    lost_alpha : float
+        Tail probability of the lost test: a ping is inconsistent when the normalised innovation
+        of its mean sounding (against the weighted cloud's predictive spread) exceeds the
+        chi-square(1) quantile ``1 - lost_alpha``, or the best particle's ``-2 log p`` exceeds the
+        chi-square(B) one.
+    lost_pings : int
+        A ping is *lost* (``Track.meta["lost_steps"]``) when it and the ``lost_pings - 1``
+        previous pings with soundings are all inconsistent.
+    ping_gate : bool
+        An inconsistent ping (the lost test's, above) does not weigh the cloud: the soundings
+        no particle can explain are bad data or a sign of being lost, and in both cases
+        weighing by them drags the cloud to a wrong place with a small spread. The cloud then
+        moves with the dead reckoning, its spread grows, and a run of such pings is flagged
+        lost (``meta["n_gated"]`` counts them). Off by default (every ping weighs the cloud):
+        where the dead reckoning's constant errors are still unknown, many good pings look
+        inconsistent and a gated filter learns those errors late (on the ``han2020`` survey
+        with the demo's drifting DR its RMSE was several times the ungated one); on for data
+        with blocks of bad pings (the robustness study measures both).
+    gate_pings : int
+        The gate's way out: after this many consecutive gated pings (longer than a block of bad
+        pings should last) the cloud, not the pings, is taken to be wrong: it is drawn afresh
+        around its mean with the first re-initialisation spread (``reinit_std``), calibration
+        from the model's prior, and weighed by the ping (``meta["redraw_steps"]``). The spread
+        does not grow with further redraws: a wide cloud on a gentle seabed settles on a wrong
+        match more often than it finds the right one.
+    reinit_std : float or None
+        Spread (m) of the cloud drawn after a divergence; None: ``3 * max(s, 1)``, ``s`` the
+        model's ``initial_position_std``.
+    reinit_growth : float
+        Factor on that spread for each further consecutive divergence.
+    """
+
+    lost_alpha: float = 1e-3
+    lost_pings: int = 3
+    ping_gate: bool = False
+    gate_pings: int = 30
+    reinit_std: float | None = None
+    reinit_growth: float = 2.0
+
+    def __post_init__(self) -> None:
+        check_number(self, "lost_alpha", open_low=True, high=1.0)
+        check_count(self, "lost_pings")
+        check_count(self, "gate_pings")
+        object.__setattr__(self, "ping_gate", bool(self.ping_gate))
+        check_number(self, "reinit_growth", low=1.0)
+        if self.reinit_std is not None:
+            check_number(self, "reinit_std", open_low=True)
+
+    def reinit_spread(self, initial_position_std: float) -> float:
+        """Spread (m) of the first re-initialisation after a divergence, for a model whose start
+        uncertainty is ``initial_position_std``."""
+        if self.reinit_std is not None:
+            return float(self.reinit_std)
+        return 3.0 * max(float(initial_position_std), 1.0)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -55,36 +118,8 @@ class ParticleConfig:
         The stages' ESS threshold, a fraction of ``n_particles``.
     max_stages : int
         At most this many stages per ping (the last takes what remains of the exponent).
-    lost_alpha : float
-        Tail probability of the lost test: a ping is inconsistent when the normalised innovation
-        of its mean sounding (against the weighted cloud's predictive spread) exceeds the
-        chi-square(1) quantile ``1 - lost_alpha``, or the best particle's ``-2 log p`` exceeds the
-        chi-square(B) one.
-    lost_pings : int
-        A ping is *lost* (``Track.meta["lost_steps"]``) when it and the ``lost_pings - 1``
-        previous pings with soundings are all inconsistent.
-    ping_gate : bool
-        An inconsistent ping (the lost test's, above) does not weigh the cloud: the soundings
-        no particle can explain are bad data or a sign of being lost, and in both cases
-        weighing by them drags the cloud to a wrong place with a small spread. The cloud then
-        moves with the dead reckoning, its spread grows, and a run of such pings is flagged
-        lost (``meta["n_gated"]`` counts them). Off by default (every ping weighs the cloud):
-        where the dead reckoning's constant errors are still unknown, many good pings look
-        inconsistent and a gated filter learns those errors late (on the ``han2020`` survey
-        with the demo's drifting DR its RMSE was several times the ungated one); on for data
-        with blocks of bad pings (the robustness study measures both).
-    gate_pings : int
-        The gate's way out: after this many consecutive gated pings (longer than a block of bad
-        pings should last) the cloud, not the pings, is taken to be wrong: it is drawn afresh
-        around its mean with the first re-initialisation spread (``reinit_std``), calibration
-        from the model's prior, and weighed by the ping (``meta["redraw_steps"]``). The spread
-        does not grow with further redraws: a wide cloud on a gentle seabed settles on a wrong
-        match more often than it finds the right one.
-    reinit_std : float or None
-        Spread (m) of the cloud drawn after a divergence; None: ``3 * max(s, 1)``, ``s`` the
-        model's ``initial_position_std``.
-    reinit_growth : float
-        Factor on that spread for each further consecutive divergence.
+    health : FilterHealth
+        The lost test, the ping gate and recovery (:class:`FilterHealth`).
     """
 
     n_particles: int = 1000
@@ -96,12 +131,7 @@ class ParticleConfig:
     tempering: bool = True
     tempering_ess: float = 0.5
     max_stages: int = 20
-    lost_alpha: float = 1e-3
-    lost_pings: int = 3
-    ping_gate: bool = False
-    gate_pings: int = 30
-    reinit_std: float | None = None
-    reinit_growth: float = 2.0
+    health: FilterHealth = dataclasses.field(default_factory=FilterHealth)
 
     def __post_init__(self) -> None:
         check_count(self, "n_particles")
@@ -112,13 +142,11 @@ class ParticleConfig:
         object.__setattr__(self, "tempering", bool(self.tempering))
         check_number(self, "tempering_ess", open_low=True, high=1.0)
         check_count(self, "max_stages")
-        check_number(self, "lost_alpha", open_low=True, high=1.0)
-        check_count(self, "lost_pings")
-        check_count(self, "gate_pings")
-        object.__setattr__(self, "ping_gate", bool(self.ping_gate))
-        check_number(self, "reinit_growth", low=1.0)
-        if self.reinit_std is not None:
-            check_number(self, "reinit_std", open_low=True)
+        if isinstance(self.health, dict):  # a table of its fields (JSON, TOML)
+            object.__setattr__(self, "health", FilterHealth(**self.health))
+        if not isinstance(self.health, FilterHealth):
+            raise TangraphError(f"{type(self).__name__}.health must be a FilterHealth, got "
+                                f"{type(self.health).__name__}")
         try:
             object.__setattr__(self, "resampler", Resampler(self.resampler))
         except ValueError:
@@ -127,13 +155,16 @@ class ParticleConfig:
                 f"{type(self).__name__}.resampler must be one of {known}, got {self.resampler!r}"
             ) from None
 
-    def reinit_spread(self, initial_position_std: float) -> float:
-        """Spread (m) of the first re-initialisation after a divergence, for a model whose start
-        uncertainty is ``initial_position_std``."""
-        if self.reinit_std is not None:
-            return float(self.reinit_std)
-        return 3.0 * max(float(initial_position_std), 1.0)
-
     def as_dict(self) -> dict[str, Any]:
-        """JSON-ready form (enums as their values), as stored in ``Track.meta["config"]``."""
+        """JSON-ready form (enums as their values, ``health`` a table), as stored in
+        ``Track.meta["config"]``."""
         return {k: (v.value if hasattr(v, "value") else v) for k, v in dataclasses.asdict(self).items()}
+
+    def replace(self, **changes) -> ParticleConfig:
+        """A copy with some fields changed; a :class:`FilterHealth` field (``ping_gate=True``)
+        changes ``health``. Checked again."""
+        names = {f.name for f in dataclasses.fields(FilterHealth)}
+        health = {k: changes.pop(k) for k in list(changes) if k in names}
+        if health:
+            changes["health"] = dataclasses.replace(changes.get("health", self.health), **health)
+        return dataclasses.replace(self, **changes)

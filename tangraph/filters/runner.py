@@ -25,7 +25,7 @@ off the map: every particle has a sounding without a map depth) is no evidence a
 is the prediction alone (the cloud moves with the dead reckoning and its covariance grows by the
 DR model's), recorded in ``meta["n_off_map"]`` and ``meta["off_map_steps"]``, and never a
 divergence. An inconsistent ping (soundings no particle explains: a block of bad pings, or a
-cloud that has lost the vehicle) does not weigh the cloud with ``ParticleConfig.ping_gate`` (off
+cloud that has lost the vehicle) does not weigh the cloud with ``FilterHealth.ping_gate`` (off
 by default); a run of them is flagged lost, and after ``gate_pings`` of them the cloud is taken
 to be the wrong one and drawn afresh around its mean with the first re-initialisation spread
 (``meta["n_redraws"]``, ``meta["redraw_steps"]``).
@@ -152,7 +152,7 @@ class _Recovery:
     @classmethod
     def of(cls, survey: Survey, bathymetry: BathymetryMap, model: FilterModel, config: ParticleConfig,
            history_length: int, method: str) -> _Recovery:  # fmt: skip
-        first_spread = config.reinit_spread(model.navigation.initial_position_std)
+        first_spread = config.health.reinit_spread(model.navigation.initial_position_std)
         n_min, n_max, e_min, e_max = bathymetry.extent
         largest = max(float(np.hypot(n_max - n_min, e_max - e_min)), first_spread)  # cap on the spread
         return cls(survey, model, config, history_length, method, first_spread, largest)
@@ -170,7 +170,7 @@ class _Recovery:
             result = StepResult(moved, mean_k, cov_k, effective_sample_size(moved.weights))
         except FilterDivergence as exc:
             self.consecutive += 1
-            growth = self.config.reinit_growth ** (self.consecutive - 1)
+            growth = self.config.health.reinit_growth ** (self.consecutive - 1)
             spread = min(self.first_spread * growth, self.largest)
             self.divergence_steps.append(k)
             _log.warning("%s: %s; re-initialised around dead reckoning, spread %.1f m", self.method, exc,
@@ -184,11 +184,11 @@ class _Recovery:
         if result.innovation is None:
             return result
         config = self.config
-        self.streak = self.streak + 1 if result.innovation.inconsistent(config.lost_alpha) else 0
-        if self.streak >= config.lost_pings:
+        self.streak = self.streak + 1 if result.innovation.inconsistent(config.health.lost_alpha) else 0
+        if self.streak >= config.health.lost_pings:
             self.lost_steps.append(k)
         self.gated_run = self.gated_run + 1 if result.counts.get("n_gated") else 0
-        if self.gated_run >= config.gate_pings:  # the gate's way out: the cloud is the wrong one
+        if self.gated_run >= config.health.gate_pings:  # the gate's way out: the cloud is the wrong one
             self.redraw_steps.append(k)
             _log.info("%s: %d pings in a row gated at ping %d; cloud drawn afresh around its mean",
                       self.method, self.gated_run, k)
@@ -276,7 +276,7 @@ def run_particle_filter(
     ``n_off_map``, ``off_map_steps``, ``n_redraws``, ``redraw_steps`` (see the module
     docstring), ``n_tempered`` (pings whose
     update took more than one stage), ``n_gated`` (pings the ping gate refused,
-    ``ParticleConfig.ping_gate``), ``calibration`` (:func:`calibration_estimate` at the last
+    ``FilterHealth.ping_gate``), ``calibration`` (:func:`calibration_estimate` at the last
     ping), ``n_particles``,
     ``sounding_std`` (the likelihood's, map error included), ``navigation_model``
     (``model.as_dict()``), ``config``, ``seed`` (the seed of ``rng`` at the start,

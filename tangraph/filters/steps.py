@@ -13,7 +13,7 @@ position (:func:`shrink_calibration`), which keeps the cloud's mean and covarian
 constant errors take new values (they have no process noise, ``b`` at most its walk).
 
 Every ping with soundings gives an :class:`Innovation` (the runner's lost test,
-:mod:`tangraph.filters.runner`); with ``ParticleConfig.ping_gate`` an inconsistent ping does
+:mod:`tangraph.filters.runner`); with ``FilterHealth.ping_gate`` an inconsistent ping does
 not weigh the cloud (:func:`gated`).
 """
 
@@ -269,10 +269,10 @@ def measure(
 
 
 def gated(check: Innovation | None, config: ParticleConfig | None) -> bool:
-    """Whether a ping whose :class:`Innovation` is ``check`` is refused by ``config.ping_gate``
-    (inconsistent at ``config.lost_alpha``)."""
-    return bool(config is not None and getattr(config, "ping_gate", False) and check is not None
-                and check.inconsistent(config.lost_alpha))
+    """Whether a ping whose :class:`Innovation` is ``check`` is refused by the gate
+    (``config.health.ping_gate``: inconsistent at ``config.health.lost_alpha``)."""
+    return bool(config is not None and config.health.ping_gate and check is not None
+                and check.inconsistent(config.health.lost_alpha))
 
 
 def resample_belief(

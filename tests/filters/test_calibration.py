@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tangraph.filters import PFConfig, config_type, run_filter
+from tangraph.filters import FilterHealth, PFConfig, config_type, run_filter
 from tangraph.filters.belief import calibration_estimate, initial_belief, state_moments
 from tangraph.filters.model import FilterModel, Ping
 from tangraph.filters.steps import measure, shrink_calibration
@@ -58,7 +58,8 @@ def test_tempering_keeps_the_ess_above_its_threshold_on_a_very_peaked_likelihood
     belief = initial_belief(truth, 50.0, n, rng=np.random.default_rng(3))
     plain = measure(belief, ping, model)
     assert plain.stage_ess[0] < 10
-    config = PFConfig(n_particles=n, tempering_ess=0.5, max_stages=100, ping_gate=False)  # tempering alone
+    config = PFConfig(n_particles=n, tempering_ess=0.5, max_stages=100,  # tempering alone
+                      health=FilterHealth(ping_gate=False))
     tempered = measure(belief, ping, model, config, rng=np.random.default_rng(4))
     assert len(tempered.exponents) > 3 and tempered.tempered
     assert sum(tempered.exponents) == pytest.approx(1.0)
@@ -82,7 +83,7 @@ def test_a_dead_reckoning_500_m_off_the_truth_reports_itself_lost():
     assert lost.meta["n_divergences"] == 0
     steps = lost.meta["lost_steps"]
     assert lost.meta["n_lost"] == len(steps) >= survey.n_pings - 5
-    assert steps[0] == config.lost_pings - 1  # the third inconsistent ping in a row
+    assert steps[0] == config.health.lost_pings - 1  # the third inconsistent ping in a row
     assert steps == sorted(steps)
 
 

@@ -10,6 +10,7 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.filters import (
+    FilterHealth,
     IPFConfig,
     JBPFConfig,
     MLEConfig,
@@ -155,12 +156,12 @@ def test_bad_particle_count_is_named(value):
         (PFConfig, "kernel_bandwidth", 1.5),
         (PFConfig, "kernel_floor", -1.0),
         (PFConfig, "max_stages", 0),
-        (PFConfig, "lost_alpha", 0.0),
-        (PFConfig, "lost_pings", 0),
+        (FilterHealth, "lost_alpha", 0.0),
+        (FilterHealth, "lost_pings", 0),
         (PFConfig, "ess_threshold", 1.5),
         (PFConfig, "resampler", "bogus"),
-        (PFConfig, "reinit_std", 0.0),
-        (PFConfig, "reinit_growth", 0.5),
+        (FilterHealth, "reinit_std", 0.0),
+        (FilterHealth, "reinit_growth", 0.5),
         (SJCPFConfig, "window", 2),
         (SJCPFConfig, "kernel", "gaussian"),
         (SJCPFConfig, "correlation", "cosine"),
@@ -176,6 +177,20 @@ def test_bad_particle_count_is_named(value):
 def test_bad_configuration_is_named(cls, field, value):
     with pytest.raises(TangraphError, match=f"{cls.__name__}.{field}"):
         cls(**{field: value})
+
+
+def test_the_health_settings_are_their_own_part():
+    """A filter's lost test, gate and recovery settings live in its ``health``; ``replace``
+    takes them by name, a table is read as one, anything else is refused naming the field."""
+    config = PFConfig(n_particles=300).replace(ping_gate=True, lost_pings=4, n_particles=200)
+    assert (config.n_particles, config.health.ping_gate, config.health.lost_pings) == (200, True, 4)
+    assert config.health.gate_pings == FilterHealth().gate_pings
+    assert PFConfig(health={"ping_gate": True}).health == FilterHealth(ping_gate=True)
+    assert config.as_dict()["health"]["lost_pings"] == 4
+    with pytest.raises(TangraphError, match="PFConfig.health must be a FilterHealth, got int"):
+        PFConfig(health=3)
+    with pytest.raises(TypeError):
+        PFConfig(ping_gate=True)  # type: ignore[call-arg]
 
 
 def test_a_vehicle_never_on_the_map_follows_dead_reckoning_and_says_so(caplog):
@@ -388,8 +403,8 @@ def test_pings_no_particle_explains_do_not_drag_the_cloud(method):
     cls = {"pf": PFConfig, "ipf": IPFConfig, "sjcpf": SJCPFConfig}[method]
     errors = {}
     for gate in (True, False):
-        track = run_filter(method, spoiled, MAP, cls(n_particles=500, ping_gate=gate), model=model,
-                           rng=np.random.default_rng(3))
+        config = cls(n_particles=500, health=FilterHealth(ping_gate=gate))
+        track = run_filter(method, spoiled, MAP, config, model=model, rng=np.random.default_rng(3))
         errors[gate] = float(np.sqrt(np.mean(np.sum((track.pose[:, :2] - survey.true_pose[:, :2]) ** 2,
                                                     axis=1))))
         if gate:
@@ -413,7 +428,8 @@ def test_a_cloud_every_ping_disagrees_with_is_drawn_afresh(method):
     cls = {"pf": PFConfig, "ipf": IPFConfig}[method]
     final = {}
     for gate_pings in (10, 10_000):
-        config = cls(n_particles=500, ping_gate=True, gate_pings=gate_pings, reinit_std=40.0)
+        health = FilterHealth(ping_gate=True, gate_pings=gate_pings, reinit_std=40.0)
+        config = cls(n_particles=500, health=health)
         track = run_filter(method, wrong, MAP, config, model=model, rng=np.random.default_rng(6))
         final[gate_pings] = float(np.hypot(*(track.pose[-1, :2] - survey.true_pose[-1, :2])))
         assert (track.meta["n_redraws"] >= 1) == (gate_pings == 10)

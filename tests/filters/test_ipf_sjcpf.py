@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tangraph.filters import IPFConfig, SJCPFConfig
+from tangraph.filters import FilterHealth, IPFConfig, SJCPFConfig
 from tangraph.filters.belief import Belief, initial_belief, state_moments
 from tangraph.filters.correlation import pearson_rows
 from tangraph.filters.ipf import ipf_step
@@ -122,7 +122,7 @@ def test_sjcpf_does_not_correct_before_the_window_is_full():
 
 def test_sjcpf_history_follows_the_particles_through_resampling():
     config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=1.0, tempering=False,
-                         ping_gate=False)
+                         health=FilterHealth(ping_gate=False))
     model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 0.5, 0.0))
     belief = sjcpf_belief()
     ping = survey_pings(SURVEY)[1]

@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 
-from tangraph.filters import FilterDivergence, OffMap, PFConfig
+from tangraph.filters import FilterDivergence, FilterHealth, OffMap, PFConfig
 from tangraph.filters.pf import pf_step
 from tangraph.filters.runner import run_particle_filter
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
@@ -28,7 +28,7 @@ def failing_at(diverged, off_map):
 
 
 def test_divergences_in_a_row_widen_the_fresh_cloud_up_to_the_map_and_off_map_pings_only_predict(caplog):
-    config = PFConfig(n_particles=200, reinit_std=40.0, reinit_growth=4.0)
+    config = PFConfig(n_particles=200, health=FilterHealth(reinit_std=40.0, reinit_growth=4.0))
     step = failing_at(diverged=(2, 3, 4, 5, 8), off_map=(6, 10))
     with caplog.at_level("WARNING", logger="tangraph.filters.runner"):
         track = run_particle_filter(SURVEY, MAP, config, step, method="pf", model=MODEL,
