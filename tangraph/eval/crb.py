@@ -360,8 +360,8 @@ class _Layout:
         return v
 
     def scale(self, model: NavigationModel, time: np.ndarray) -> np.ndarray:
-        """A natural unit of every state (its prior std, or the walk's std at the end)."""
-        s = np.sqrt(self.prior_variance(model))
+        """A natural unit of every state (its prior std, 1 if that is 0; the walk's std at the end)."""
+        s = np.sqrt(v := self.prior_variance(model)) + (v == 0)
         if self.walk is not None:
             s[self.walk] = model.heading_walk * np.sqrt(max(float(time[-1] - time[0]), 1e-9))
         return s

@@ -22,6 +22,8 @@ _MOVED = "moved to NavigationModel.{0} (a model file's [navigation] table)"
 _REMOVED = {
     **{name: _MOVED.format(name) for name in ("robust_kernel", "robust_parameter", "fix_inflation",
                                                 "odometry_min_std", "odometry_min_heading_std")},
+    "estimate_calibration": "a model whose speed_scale_std and heading_bias_std are 0 keeps the DR's "
+                            "constant errors at their prior mean (NavigationModel)",
     "optimizer": "the batch solve is Gauss-Newton with step halving for every graph "
                  "(tangraph.graph.batch.gauss_newton): remove the key",
 }
@@ -93,11 +95,6 @@ class GraphConfig:
     gate_probability : float or None
         A fix is refused when its NIS ``e^T (P_fix + P_pred)^-1 e`` against the predicted
         marginal exceeds the ``chi2(2)`` quantile of this probability; None: no gate.
-    estimate_calibration : bool
-        Estimate the DR's constant errors (speed scale, heading bias) as a calibration variable
-        joined to the poses (default; see :mod:`tangraph.graph.calibration`). False keeps them
-        at their prior mean with no uncertainty: the graph then trusts the raw DR's shape, as a
-        graph without the calibration would.
     half_width_rule : {"marginal", "fixed"}
         ``"marginal"``: the search half-width of each fix is ``half_width_sigmas`` times the
         square root of the largest eigenvalue of the predicted position covariance, clipped to
@@ -206,7 +203,6 @@ class GraphConfig:
     tap_step_cells: float = _STEP_CELLS
     accept_multimodal: bool = True
     gate_probability: float | None = 0.999
-    estimate_calibration: bool = True
     half_width_rule: Literal["marginal", "fixed"] = "marginal"
     half_width_sigmas: float = 4.0
     min_half_width_cells: float = 5.0

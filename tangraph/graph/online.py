@@ -35,7 +35,14 @@ from tangraph.errors import TangraphError
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import wrap_angle, wrap_near
 from tangraph.graph import online_fixes
-from tangraph.graph.calibration import CALIBRATION, TIDE, joint_in_frame, to_world, world_covariance
+from tangraph.graph.calibration import (
+    CALIBRATION,
+    TIDE,
+    graph_calibration_std,
+    joint_in_frame,
+    to_world,
+    world_covariance,
+)
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.fixes import FixOutcome, LostEpisode
@@ -100,7 +107,8 @@ class GraphNavigator:
             self._window_start = 0  # the first ping of the front end's next window
         # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
         # never marginalised), so what one window learnt of it sharpens the next
-        self.tide = c.front_end == "pmf" and c.estimate_calibration and self.model.tide_std > 0
+        calibration_std = graph_calibration_std(self.model)
+        self.tide = c.front_end == "pmf" and calibration_std is not None and self.model.tide_std > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
         self._tide_mean = float(self.model.tide)
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
@@ -113,9 +121,8 @@ class GraphNavigator:
         self._prev_key[self.keys[1:]] = self.keys[:-1]
         self._delta, self._delta_cov = increments(self.white, survey.time, survey.dr_pose,
                                                   self._prev_key, np.arange(n))
-        std = self.model.calibration_std if c.estimate_calibration else None
         m = self.model
-        self.graph = PoseGraph(std, m.calibration_prior, self.origin, m.robust_kernel,
+        self.graph = PoseGraph(calibration_std, m.calibration_prior, self.origin, m.robust_kernel,
                                m.robust_parameter, m.odometry_min_std, m.odometry_min_heading_std)
         params = gtsam.ISAM2Params()
         threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the pose keys are plain integers
@@ -222,8 +229,8 @@ class GraphNavigator:
         joint = np.zeros((5, 5))
         joint[:2, :2] = np.eye(2) * m.initial_position_std**2
         joint[2, 2] = heading_std**2
-        if self.graph.calibrated:
-            joint[3:, 3:] = np.diag(m.calibration_std**2)
+        if self.graph.calibration_std is not None:
+            joint[3:, 3:] = np.diag(self.graph.calibration_std**2)
         take_window(self, 0, dr, joint, fix)
         self._update(0)
         self._rebase(0)

@@ -53,9 +53,11 @@ class NavigationModel:
         INS velocity random walk while the DVL has lost bottom lock, m/s/sqrt(s).
     speed_scale, speed_scale_std : float
         Prior mean and std of the constant DVL scale-factor error ``k`` (0.01: reads 1 % fast).
+        A std of 0: ``k`` is known, its prior mean (the graph does not estimate it; with both
+        stds 0 and both means 0 it holds no calibration variable and trusts the DR's shape).
     heading_bias, heading_bias_std : float
         Prior mean and std of the constant heading error ``b`` (DR minus true), rad; it includes
-        the INS alignment error of the start heading.
+        the INS alignment error of the start heading. A std of 0: ``b`` is known.
     initial_position_std : float
         Std (m, per axis) of the start position around the first DR position: every estimator
         starts from this uncertainty.
@@ -127,9 +129,10 @@ class NavigationModel:
 
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
-                     "map_std", "map_correlation_length", "tide_std", "map_offset_std"):
+                     "map_std", "map_correlation_length", "tide_std", "map_offset_std", "speed_scale_std",
+                     "heading_bias_std"):
             _number(self, name, low=0.0)
-        for name in ("speed_scale_std", "heading_bias_std", "initial_position_std", "sounding_std"):
+        for name in ("initial_position_std", "sounding_std"):
             _number(self, name, low=0.0, open_low=True)
         _number(self, "speed_scale", low=-0.5, high=0.5)
         _number(self, "heading_bias", low=-math.pi, high=math.pi)

@@ -159,9 +159,13 @@ def test_bound_equals_a_dense_batch_solve_on_a_planar_seabed(model):
     _close(got_smoother.position_cov, smooth)
 
 
-def test_filter_bound_equals_a_hand_built_scalar_kalman_filter():
-    # State (dp_n, dp_e, s, b, tide); one scalar update per sounding in the covariance form.
+@pytest.mark.parametrize("known", [False, True], ids=["calibration-uncertain", "calibration-known"])
+def test_filter_bound_equals_a_hand_built_scalar_kalman_filter(known):
+    # State (dp_n, dp_e, s, b, tide); one scalar update per sounding in the covariance form. A
+    # known calibration (prior std 0) stays known.
     model = MODEL.replace(heading_noise=0.0, heading_walk=0.0)
+    if known:
+        model = model.replace(speed_scale_std=0.0, heading_bias_std=0.0)
     survey, seabed = _survey(), _seabed()
     used, turn = _soundings(survey, seabed)
     d = np.diff(survey.true_pose[:, :2], axis=0)

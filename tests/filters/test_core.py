@@ -17,6 +17,7 @@ from tangraph.filters import (
     PFConfig,
     SJCPFConfig,
     TercomPFConfig,
+    config_type,
     run_filter,
 )
 from tangraph.filters.belief import Belief, initial_belief, model_belief, weighted_moments
@@ -434,3 +435,15 @@ def test_a_cloud_every_ping_disagrees_with_is_drawn_afresh(method):
         final[gate_pings] = float(np.hypot(*(track.pose[-1, :2] - survey.true_pose[-1, :2])))
         assert (track.meta["n_redraws"] >= 1) == (gate_pings == 10)
     assert final[10] < 5.0 < 15.0 < final[10_000]
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle", "pmf"])
+def test_a_known_calibration_stays_as_given(method):
+    """A model whose speed scale and heading bias are known (stds 0) keeps them at their prior
+    mean: the filter reports them with no uncertainty."""
+    model = MODEL.replace(speed_scale=0.01, heading_bias=0.02, speed_scale_std=0.0, heading_bias_std=0.0)
+    config = config_type(method)(n_particles=200) if method not in ("mle", "pmf") else None
+    track = run_filter(method, SURVEY, MAP, config, model=model, rng=np.random.default_rng(2))
+    c = track.meta["calibration"]
+    assert c["speed_scale"] == pytest.approx(0.01) and c["speed_scale_std"] == pytest.approx(0.0, abs=1e-12)
+    assert np.all(np.isfinite(track.pose[:, :2])) and np.all(np.isfinite(track.covariance[:, :2, :2]))

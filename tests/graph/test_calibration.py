@@ -89,8 +89,29 @@ def test_recovers_a_known_scale_and_heading_bias(biased_survey, rough_map, run):
     assert np.sqrt(np.mean(error**2)) < (4.0 if run is navigate_online else 2.0)
 
 
+def test_a_known_calibration_is_used_as_given_and_not_estimated(biased_survey, rough_map):
+    """A model that knows the DR's constant errors (stds 0) holds the calibration at them: the
+    smoothed track is as good as the one that estimates them, its reported calibration is the
+    given one with no uncertainty; an old config asking not to estimate it is refused, naming
+    the model's way to say so."""
+    from tangraph.errors import TangraphError
+
+    heading = float(np.deg2rad(3.0))
+    known = NavigationModel.from_survey(biased_survey, speed_scale=0.03, heading_bias=heading,
+                                        speed_scale_std=0.0, heading_bias_std=0.0)
+    track = smooth_survey(biased_survey, rough_map, GraphConfig(key_interval=20.0), model=known)
+    c = track.meta["calibration"]
+    assert c["speed_scale"] == pytest.approx(0.03, abs=1e-5) and c["speed_scale_std"] < 1e-5
+    assert c["heading_bias"] == pytest.approx(heading, abs=1e-5) and c["heading_bias_std"] < 1e-5
+    error = np.hypot(*(track.pose[:, :2] - biased_survey.true_pose[:, :2]).T)
+    assert np.sqrt(np.mean(error**2)) < 2.0
+    with pytest.raises(TangraphError, match="estimate_calibration is no longer a setting: .*bias_std"):
+        GraphConfig.from_mapping({"estimate_calibration": False})
+
+
 def test_without_the_calibration_the_same_survey_is_lost(biased_survey, rough_map):
-    raw = smooth_survey(biased_survey, rough_map, GraphConfig(key_interval=20.0, estimate_calibration=False))
+    known = NavigationModel.from_survey(biased_survey, speed_scale_std=0.0, heading_bias_std=0.0)
+    raw = smooth_survey(biased_survey, rough_map, GraphConfig(key_interval=20.0), model=known)
     error = np.hypot(*(raw.pose[:, :2] - biased_survey.true_pose[:, :2]).T)
     assert np.sqrt(np.mean(error**2)) > 5.0
 

@@ -34,7 +34,8 @@ def flat_map(std: float, length: float) -> BathymetryMap:
 
 
 #: the field smoother on a flat map: nothing tells the calibration, nothing to re-match
-FIELD_ON_FLAT = GraphConfig(smoother_terrain="field", estimate_calibration=False, rematch_iterations=0)
+FIELD_ON_FLAT = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+KNOWN_DR = {"speed_scale_std": 0.0, "heading_bias_std": 0.0}  # no calibration variable: the DR as it is
 
 
 def biased_dr(survey, truth, scale=0.01, bias_deg=1.0):
@@ -143,7 +144,8 @@ def test_a_planted_map_error_is_recovered_with_its_std():
     # a flat map, a seafloor with a bump the map never had: the refined map has it, within its
     # stated std, and the track stays the DR's (a flat map tells nothing of where it lies)
     flat = flat_map(0.3, 30.0)
-    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
+                            **KNOWN_DR)
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     north, east = survey.footprints(truth)
     rng = np.random.default_rng(5)
@@ -278,7 +280,8 @@ def test_a_patch_far_off_its_stated_error_is_given_its_own():
     # east. The solve grows the error of the eastern patches by about three and leaves the western
     # ones at what is stated, and the refined map is honest on both sides
     flat = flat_map(0.1, 10.0)
-    model = NavigationModel(sounding_std=0.05, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    model = NavigationModel(sounding_std=0.05, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
+                            **KNOWN_DR)
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     north, east = survey.footprints(truth)
     rng = np.random.default_rng(8)
@@ -328,7 +331,7 @@ def test_the_map_offset_is_recovered_and_the_track_kept():
 def test_a_flat_map_says_nothing_of_its_offset():
     flat = flat_map(0.1, 30.0)
     model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0,
-                            map_offset_std=5.0)
+                            map_offset_std=5.0, **KNOWN_DR)
     _, survey = lawnmower(start_error=(0.0, 0.0))
     survey = noise_free(survey, flat)
     track = smooth_survey(survey, flat, FIELD_ON_FLAT, model=model)

@@ -58,9 +58,10 @@ def dr_only_survey(model: DeadReckoningModel, n: int = 300) -> Survey:
 def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
     model = DeadReckoningModel(speed_noise=0.05, heading_walk=2e-4)
     survey = dr_only_survey(model)
-    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0, estimate_calibration=False)
+    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0)
     nav = GraphNavigator(survey, rough_map, config, model=NavigationModel.from_dead_reckoning(
-        model, initial_position_std=1e-3, odometry_min_std=1e-7, odometry_min_heading_std=1e-5)).run()
+        model, initial_position_std=1e-3, odometry_min_std=1e-7, odometry_min_heading_std=1e-5,
+        speed_scale_std=0.0, heading_bias_std=0.0)).run()
     online = nav.track()
     assert online.fixes == () and len(online.meta["key_indices"]) > 10
     np.testing.assert_allclose(online.pose, survey.dr_pose, atol=1e-6)

@@ -20,6 +20,13 @@ def test_bad_values_are_refused_naming_the_field(field, value):
         NavigationModel(**{field: value})
 
 
+def test_a_known_constant_error_has_a_std_of_zero():
+    model = NavigationModel(speed_scale=0.01, speed_scale_std=0.0, heading_bias_std=0.0)
+    assert model.calibration_std.tolist() == [0.0, 0.0] and model.calibration_prior[0] == 0.01
+    with pytest.raises(TangraphError, match="NavigationModel.heading_bias_std must be >= 0"):
+        NavigationModel(heading_bias_std=-0.1)
+
+
 def test_from_dead_reckoning_takes_white_errors_and_turns_constants_into_priors():
     dr = DeadReckoningModel(heading_bias=np.deg2rad(3.5), speed_scale=0.03, speed_noise=0.05,
                             heading_walk=1e-4, start_position_std=7.0)
