@@ -142,8 +142,8 @@ def batch(sizes: list[int]) -> None:
                 parts = solution.timings
                 print(f"batch {n:>7} poses, calibration {'yes' if calibrated else 'no ':<3}, covariance "
                       f"{covariance:<4}: {total:6.1f} s (solve {parts['solve']:.1f} s, marginals "
-                      f"{parts['marginals']:.1f} s, {solution.iterations} LM iterations; graph built in "
-                      f"{built:.1f} s)")
+                      f"{parts['marginals']:.1f} s, {solution.iterations} Gauss-Newton steps; graph "
+                      f"built in {built:.1f} s)")
         for covariance in ("none", "all"):
             print(f"batch {n:>7} poses, covariance {covariance:<4}: with / without calibration = "
                   f"{totals[True, covariance] / totals[False, covariance]:.2f}")

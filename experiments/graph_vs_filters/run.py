@@ -293,6 +293,14 @@ def _filter_settings(items, methods) -> dict:
     return settings
 
 
+def _model_settings(items: dict) -> dict:
+    """``--model`` settings with an angle given in degrees (``NAME_deg``) in radians."""
+    import math
+
+    return {k.removesuffix("_deg"): math.radians(float(v)) if k.endswith("_deg") else v
+            for k, v in items.items()}
+
+
 def _check_settings(graph: dict, model: dict) -> None:
     """Refuse ``--graph`` and ``--model`` settings that are not fields (or were moved) before any
     run starts."""
@@ -329,7 +337,7 @@ def main(argv=None) -> int:
     runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
     graph = field_values(args.graph)
-    model = field_values(args.model, "--model")
+    model = _model_settings(field_values(args.model, "--model"))
     _check_settings(graph, model)
     filter_settings = _filter_settings(args.filter, methods)
     configs = [

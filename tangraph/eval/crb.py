@@ -90,7 +90,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors.navigation_model import NavigationModel
+from tangraph.sensors.navigation_model import KNOWN_STD, NavigationModel
 from tangraph.sensors.terrain import MapError, map_error
 from tangraph.survey import Survey
 
@@ -353,15 +353,15 @@ class _Layout:
         v[:2] = model.initial_position_std**2
         if self.white is not None:
             v[self.white] = model.heading_noise**2
-        v[self.speed_scale] = model.speed_scale_std**2
-        v[self.heading_bias] = model.heading_bias_std**2
+        v[self.speed_scale] = max(model.speed_scale_std, KNOWN_STD) ** 2  # a known one: as the graph holds it
+        v[self.heading_bias] = max(model.heading_bias_std, KNOWN_STD) ** 2
         if self.tide is not None:
             v[self.tide] = model.tide_std**2
         return v
 
     def scale(self, model: NavigationModel, time: np.ndarray) -> np.ndarray:
-        """A natural unit of every state (its prior std, 1 if that is 0; the walk's std at the end)."""
-        s = np.sqrt(v := self.prior_variance(model)) + (v == 0)
+        """A natural unit of every state (its prior std, or the walk's std at the end)."""
+        s = np.sqrt(self.prior_variance(model))
         if self.walk is not None:
             s[self.walk] = model.heading_walk * np.sqrt(max(float(time[-1] - time[0]), 1e-9))
         return s

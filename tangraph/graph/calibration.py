@@ -56,15 +56,11 @@ MAP_OFFSET = int(gtsam.symbol("o", 0))
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 
-#: The prior std (k, b) a known constant error (std 0) is held at: the calibration variable stays
-#: at its prior mean to a millionth (a std of exactly 0 has no Gaussian noise model).
-KNOWN_STD = 1e-6
-
-
 def graph_calibration_std(model) -> np.ndarray | None:
     """The prior std of the graph's calibration variable for a navigation ``model``: None (no
     variable: the graph trusts the DR's shape) when both constant errors are known to be zero
-    (stds and means 0), else the model's stds with a known one (std 0) held at ``KNOWN_STD``.
+    (stds and means 0), else the model's stds with a known one (std 0) held at
+    :data:`tangraph.sensors.KNOWN_STD` (a std of exactly 0 has no Gaussian noise model).
 
     >>> from tangraph.sensors import NavigationModel
     >>> graph_calibration_std(NavigationModel(speed_scale_std=0.0, heading_bias_std=0.0)) is None
@@ -72,6 +68,8 @@ def graph_calibration_std(model) -> np.ndarray | None:
     >>> graph_calibration_std(NavigationModel(speed_scale_std=0.0, heading_bias_std=0.05)).tolist()
     [1e-06, 0.05]
     """
+    from tangraph.sensors import KNOWN_STD
+
     std = np.asarray(model.calibration_std, float)
     if not np.any(std > 0) and not np.any(np.asarray(model.calibration_prior) != 0):
         return None

@@ -1,9 +1,10 @@
 """Batch smoother: every key pose and factor of a recorded survey solved at once.
 
 The factors come from a forward pass of :class:`~tangraph.graph.GraphNavigator` (its fixes were
-searched and gated online). Levenberg-Marquardt (or Gauss-Newton, dogleg) solves the whole
-graph with METIS ordering: the default COLAMD ordering makes an elimination tree as deep as the
-chain, which overflows the stack on chains of about 10^5 poses. The marginal covariance of every
+searched and gated online). Gauss-Newton with step halving
+(:func:`~tangraph.graph.batch.gauss_newton`) solves the whole graph with METIS ordering: the
+default COLAMD ordering makes an elimination tree as deep as the chain, which overflows the
+stack on chains of about 10^5 poses. The marginal covariance of every
 key pose comes from one multifrontal elimination of the linearised graph, also ordered by METIS
 (``gtsam.Marginals`` cannot be given an ordering from Python and crashes on such chains).
 

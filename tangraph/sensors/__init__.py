@@ -10,6 +10,7 @@ from tangraph.sensors.dead_reckoning import (
 )
 from tangraph.sensors.matern import matern_correlation, matern_field
 from tangraph.sensors.navigation_model import (
+    KNOWN_STD,
     NavigationModel,
     load_navigation_model,
     survey_navigation_model,
@@ -35,6 +36,7 @@ from tangraph.sensors.terrain import (
 )
 
 __all__ = [
+    "KNOWN_STD",
     "DeadReckoning",
     "DeadReckoningModel",
     "MapError",

@@ -31,7 +31,12 @@ from tangraph.sensors.dead_reckoning import DeadReckoningModel
 from tangraph.tomlfile import read_table
 from tangraph.validation import check_number as _number
 
-__all__ = ["NavigationModel", "load_navigation_model", "survey_navigation_model"]
+__all__ = ["KNOWN_STD", "NavigationModel", "load_navigation_model", "survey_navigation_model"]
+
+#: The prior std at which an estimator (or the bound) that needs a Gaussian holds a constant
+#: error the model knows exactly (``speed_scale_std`` or ``heading_bias_std`` of 0): it then
+#: stays at its prior mean to a millionth.
+KNOWN_STD = 1e-6
 
 _KERNELS = ("huber", "cauchy", "none")
 _ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk")

@@ -12,6 +12,7 @@ from tangraph.errors import TangraphError
 from tangraph.eval import CramerRaoBound, bound_rmse, metrics_with_bound, posterior_crb
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import (
+    KNOWN_STD,
     DeadReckoningModel,
     NavigationModel,
     increment_covariance,
@@ -162,7 +163,7 @@ def test_bound_equals_a_dense_batch_solve_on_a_planar_seabed(model):
 @pytest.mark.parametrize("known", [False, True], ids=["calibration-uncertain", "calibration-known"])
 def test_filter_bound_equals_a_hand_built_scalar_kalman_filter(known):
     # State (dp_n, dp_e, s, b, tide); one scalar update per sounding in the covariance form. A
-    # known calibration (prior std 0) stays known.
+    # known calibration (prior std 0) is held at KNOWN_STD, as the graph holds it.
     model = MODEL.replace(heading_noise=0.0, heading_walk=0.0)
     if known:
         model = model.replace(speed_scale_std=0.0, heading_bias_std=0.0)
@@ -170,7 +171,8 @@ def test_filter_bound_equals_a_hand_built_scalar_kalman_filter(known):
     used, turn = _soundings(survey, seabed)
     d = np.diff(survey.true_pose[:, :2], axis=0)
     dt = np.diff(survey.time)
-    p = np.diag([25.0, 25.0, model.speed_scale_std**2, model.heading_bias_std**2, model.tide_std**2])
+    calibration = np.maximum(model.calibration_std, KNOWN_STD) ** 2
+    p = np.diag([25.0, 25.0, *calibration, model.tide_std**2])
     want = []
     for i in range(survey.n_pings):
         if i:
@@ -188,6 +190,21 @@ def test_filter_bound_equals_a_hand_built_scalar_kalman_filter(known):
     _close(got.position_cov, want[:, :2, :2])
     _close(got.calibration_cov, want[-1, 2:4, 2:4])
     assert got.tide_std == pytest.approx(np.sqrt(want[-1, 4, 4]), rel=1e-8)
+
+
+@pytest.mark.parametrize("map_std", [0.0, 0.2])
+def test_a_known_calibration_gives_a_finite_bound_below_the_uncertain_one(map_std):
+    """Both bounds of a model that knows its DR's constant errors (stds 0), with a perfect map
+    and with a map error field: finite, no larger than with the errors uncertain, and the
+    calibration known."""
+    survey, seabed = _survey(), _seabed()
+    uncertain = MODEL.replace(map_std=map_std, map_correlation_length=10.0)
+    known = uncertain.replace(speed_scale_std=0.0, heading_bias_std=0.0)
+    for kind in ("filter", "smoother"):
+        a = posterior_crb(survey, seabed, known, kind=kind)
+        b = posterior_crb(survey, seabed, uncertain, kind=kind)
+        assert np.all(np.isfinite(a.position_cov)) and bound_rmse(a) <= bound_rmse(b) * (1 + 1e-9)
+        assert np.all(np.abs(a.calibration_cov) <= KNOWN_STD**2 * (1 + 1e-6))
 
 
 def test_filter_bound_is_above_the_smoother_bound_and_equal_at_the_last_ping():
