@@ -11,6 +11,7 @@ every estimator must beat; :func:`track_summary` is the text the CLI and the dem
 from __future__ import annotations
 
 import enum
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -27,6 +28,9 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.survey import Survey
 from tangraph.track import Track
 from tangraph.track_reports import dead_reckoning_track, track_report, track_summary
+
+if TYPE_CHECKING:
+    from tangraph.sensors import NavigationModel
 
 __all__ = [
     "MIN_MAP_OVERLAP",
@@ -78,10 +82,10 @@ def navigate(
     survey: Survey,
     bathymetry: BathymetryMap,
     method: Method | str,
-    config=None,
+    config: Any = None,
     *,
     rng: np.random.Generator | None = None,
-    model=None,
+    model: NavigationModel | None = None,
     progress: bool = False,
     other_map: bool = False,
 ) -> Track:
@@ -146,7 +150,7 @@ def navigate(
     return _estimate(method, survey, bathymetry, config, model, rng, progress)
 
 
-def _estimate(method: Method, survey: Survey, bathymetry: BathymetryMap, config, model,
+def _estimate(method: Method, survey: Survey, bathymetry: BathymetryMap, config: Any, model: Any,
               rng: np.random.Generator | None, progress: bool) -> Track:
     """Run ``method`` (the graph's or a filter) on a survey already on the map, with its model."""
     if method is Method.ISAM2 or method is Method.SMOOTHER:

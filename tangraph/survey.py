@@ -98,7 +98,7 @@ class Survey:
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        def arr(name, ndim):
+        def arr(name: str, ndim: int) -> np.ndarray:
             a = np.array(getattr(self, name), dtype=np.float64)
             if a.ndim != ndim:
                 raise SurveyError(f"survey: {name} must be {ndim}-D, got shape {a.shape}")
@@ -171,7 +171,7 @@ class Survey:
         """World ``(north, east)`` (K, B) of every beam seen from ``pose`` (default: DR)."""
         return footprints(self.dr_pose if pose is None else pose, self.beam_forward, self.beam_starboard)
 
-    def replace(self, **changes) -> Survey:
+    def replace(self, **changes: Any) -> Survey:
         return dataclasses.replace(self, **changes)
 
     def pings(self, start: int, stop: int) -> Survey:
@@ -257,7 +257,7 @@ _SECONDS_PER = {"s": 1.0, "sec": 1.0, "secs": 1.0, "second": 1.0, "seconds": 1.0
                 "days": 86400.0}
 
 
-def _utc(text) -> datetime.datetime | None:
+def _utc(text: Any) -> datetime.datetime | None:
     """An ISO 8601 time as a naive UTC datetime (a time without zone is taken as UTC)."""
     try:
         t = datetime.datetime.fromisoformat(str(text))
@@ -402,7 +402,7 @@ def write_survey(survey: Survey, path: str | os.PathLike, *, overwrite: bool = F
     return p
 
 
-def _seconds_from_start(p: Path, time, meta: dict) -> np.ndarray:
+def _seconds_from_start(p: Path, time: Any, meta: dict) -> np.ndarray:
     """``Survey.time`` from the ``time`` variable: plain seconds (version 1, or no start time),
     or ``<unit> since <epoch>`` taken relative to ``meta["start_time"]`` (set to the first ping
     when missing)."""

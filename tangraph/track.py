@@ -122,7 +122,7 @@ def position_errors(track: Track, true_pose: np.ndarray) -> np.ndarray:
     return np.hypot(*(track.pose[:, :2] - true_pose[:, :2]).T)
 
 
-def _lonlat(track: Track, crs: str, origin) -> tuple[np.ndarray, np.ndarray]:
+def _lonlat(track: Track, crs: str, origin: Any) -> tuple[np.ndarray, np.ndarray]:
     """WGS84 longitude, latitude (degrees) of the track's poses in the map frame (``crs``, ``origin``)."""
     import pyproj
 
@@ -154,7 +154,7 @@ def utc_times(time: np.ndarray, start_time: str) -> list[str]:
     return [s + "Z" for s in np.datetime_as_string(us, unit="us")]
 
 
-def _reference(track: Track, reference) -> np.ndarray | None:
+def _reference(track: Track, reference: Any) -> np.ndarray | None:
     if reference is None:
         return None
     reference = np.asarray(reference, float)
@@ -163,7 +163,8 @@ def _reference(track: Track, reference) -> np.ndarray | None:
     return reference
 
 
-def _columns(track: Track, crs: str | None, origin, reference=None) -> tuple[list[str], np.ndarray]:
+def _columns(track: Track, crs: str | None, origin: Any,
+             reference: Any = None) -> tuple[list[str], np.ndarray]:
     names = ["time", "north", "east", "heading_deg", "var_north", "cov_north_east", "var_east", "var_heading"]
     c = track.covariance
     assert c is not None  # __post_init__ fills it
@@ -200,7 +201,7 @@ def write_track_csv(
     path: str | os.PathLike,
     *,
     crs: str | None = None,
-    origin=(0.0, 0.0),
+    origin: Any = (0.0, 0.0),
     reference: np.ndarray | None = None,
     start_time: str | None = None,
     overwrite: bool = False,
@@ -263,7 +264,7 @@ def error_ellipse(covariance: np.ndarray, *, chi2: float = _CHI2_2DOF_95) -> tup
     return major, minor, azimuth
 
 
-def _pose_properties(track: Track, reference, start_time) -> dict[str, np.ndarray]:
+def _pose_properties(track: Track, reference: Any, start_time: str | None) -> dict[str, np.ndarray]:
     """Per-pose attribute columns of the GIS files (float64, NaN where unknown; ``utc`` strings)."""
     c = track.covariance
     assert c is not None  # __post_init__ fills it
@@ -292,7 +293,7 @@ def _pose_properties(track: Track, reference, start_time) -> dict[str, np.ndarra
     return {"time": numbers.pop("time"), "utc": utc, **numbers}
 
 
-def _placed(track: Track, crs: str | None, origin, what: str) -> tuple[np.ndarray, np.ndarray]:
+def _placed(track: Track, crs: str | None, origin: Any, what: str) -> tuple[np.ndarray, np.ndarray]:
     if crs is None:
         raise TangraphError(
             f"track {track.method!r}: {what} needs the map's CRS to place the track on the Earth; "
@@ -301,7 +302,7 @@ def _placed(track: Track, crs: str | None, origin, what: str) -> tuple[np.ndarra
     return _lonlat(track, crs, origin)
 
 
-def _track_properties(track: Track, crs: str | None, start_time) -> dict[str, Any]:
+def _track_properties(track: Track, crs: str | None, start_time: str | None) -> dict[str, Any]:
     props: dict[str, Any] = {"method": track.method, "n_poses": track.n_poses, "map_crs": str(crs),
                              "duration": float(track.time[-1] - track.time[0])}
     if start_time is not None:
@@ -315,7 +316,7 @@ def write_track_geojson(
     path: str | os.PathLike,
     *,
     crs: str | None,
-    origin=(0.0, 0.0),
+    origin: Any = (0.0, 0.0),
     reference: np.ndarray | None = None,
     start_time: str | None = None,
     overwrite: bool = False,
@@ -380,7 +381,7 @@ def write_track_gpkg(
     path: str | os.PathLike,
     *,
     crs: str | None,
-    origin=(0.0, 0.0),
+    origin: Any = (0.0, 0.0),
     reference: np.ndarray | None = None,
     start_time: str | None = None,
     overwrite: bool = False,

@@ -22,14 +22,15 @@ from __future__ import annotations
 
 import math
 import operator
+from typing import Any
 
 from tangraph.errors import TangraphError
 
 __all__ = ["check_count", "check_number", "number"]
 
 
-def number(value, where: str, *, low: float | None = 0.0, open_low: bool = False, high: float | None = None,
-           allow_inf: bool = False) -> float:
+def number(value: Any, where: str, *, low: float | None = 0.0, open_low: bool = False,
+           high: float | None = None, allow_inf: bool = False) -> float:
     """``value`` as a float within ``[low, high]`` (``(low, high]`` if ``open_low``; no bound
     when None), finite unless ``allow_inf``; else a TangraphError ``"{where} must be ..."``. A
     bool is not a number."""
@@ -48,7 +49,7 @@ def number(value, where: str, *, low: float | None = 0.0, open_low: bool = False
     return v
 
 
-def check_number(obj, name: str, *, low: float | None = 0.0, open_low: bool = False,
+def check_number(obj: Any, name: str, *, low: float | None = 0.0, open_low: bool = False,
                  high: float | None = None, allow_inf: bool = False) -> float:
     """The field ``obj.name`` checked by :func:`number` (named ``Class.name``) and stored as a
     float (``obj`` may be frozen)."""
@@ -58,7 +59,7 @@ def check_number(obj, name: str, *, low: float | None = 0.0, open_low: bool = Fa
     return v
 
 
-def check_count(obj, name: str, *, low: int = 1) -> int:
+def check_count(obj: Any, name: str, *, low: int = 1) -> int:
     """The field ``obj.name`` as an int ``>= low`` (not a bool), stored; else a TangraphError
     naming ``Class.name`` and the value."""
     value = getattr(obj, name)

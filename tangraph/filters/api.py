@@ -60,7 +60,7 @@ def config_type(method: FilterMethod | str) -> type:
     return _RUNNERS[_method(method)][0]
 
 
-def default_config(method: FilterMethod | str):
+def default_config(method: FilterMethod | str) -> Any:
     """The default configuration of a method.
 
     Examples
@@ -75,7 +75,7 @@ def run_filter(
     method: FilterMethod | str,
     survey: Survey,
     bathymetry: BathymetryMap,
-    config=None,
+    config: Any = None,
     *,
     model: NavigationModel | None = None,
     rng: np.random.Generator | None,

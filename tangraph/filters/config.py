@@ -160,7 +160,7 @@ class ParticleConfig:
         ``Track.meta["config"]``."""
         return {k: (v.value if hasattr(v, "value") else v) for k, v in dataclasses.asdict(self).items()}
 
-    def replace(self, **changes) -> ParticleConfig:
+    def replace(self, **changes: Any) -> ParticleConfig:
         """A copy with some fields changed; a :class:`FilterHealth` field (``ping_gate=True``)
         changes ``health``. Checked again."""
         names = {f.name for f in dataclasses.fields(FilterHealth)}

@@ -5,7 +5,9 @@ model's (:class:`~tangraph.sensors.NavigationModel`)."""
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+import os
+from collections.abc import Mapping
+from typing import Any, Literal
 
 import numpy as np
 
@@ -29,7 +31,7 @@ _REMOVED = {
 }
 
 
-def _number(config, name: str, *, allow_zero: bool = False) -> None:
+def _number(config: GraphConfig, name: str, *, allow_zero: bool = False) -> None:
     check_number(config, name, open_low=not allow_zero)
 
 
@@ -224,7 +226,7 @@ class GraphConfig:
     smoother_terrain: Literal["fixes", "soundings", "field"] = "fixes"
 
     @classmethod
-    def from_mapping(cls, fields, where: str = "GraphConfig") -> GraphConfig:
+    def from_mapping(cls, fields: Mapping[str, Any], where: str = "GraphConfig") -> GraphConfig:
         """A config from a mapping of its fields (a TOML table, ``--graph`` options); ``tap``
         may be a mapping of :class:`~tangraph.matching.TapConfig` fields. Unknown names are
         refused, naming ``where``.
@@ -243,8 +245,9 @@ class GraphConfig:
         fields = dict(fields)
         for name in sorted(set(fields) & set(_REMOVED)):
             raise TangraphError(f"{where}: GraphConfig.{name} is no longer a setting: {_REMOVED[name]}")
-        for name, kind in (("tap", TapConfig), (None, cls)):
-            table = fields.get(name, {}) if name else fields
+        kinds: tuple[tuple[str | None, type], ...] = (("tap", TapConfig), (None, cls))
+        for part, kind in kinds:
+            table = fields.get(part, {}) if part else fields
             known = {f.name for f in dataclasses.fields(kind)}
             unknown = sorted(set(table) - known) if isinstance(table, dict) else []
             if unknown:
@@ -349,7 +352,7 @@ class GraphConfig:
         return out
 
 
-def load_graph_config(path) -> GraphConfig:
+def load_graph_config(path: str | os.PathLike) -> GraphConfig:
     """A :class:`GraphConfig` from a TOML file: its fields at the top level or in a ``[graph]``
     table, TapConfig fields in ``[graph.tap]`` (or ``[tap]``); fields not given keep their
     defaults (CLI: ``--graph-config``)."""

@@ -173,7 +173,7 @@ class NavigationModel:
         """Std (m) of one sounding's residual against the map: sounding and map errors."""
         return float(np.hypot(self.sounding_std, self.map_std))
 
-    def replace(self, **changes) -> NavigationModel:
+    def replace(self, **changes: Any) -> NavigationModel:
         """A copy with some fields changed (checked again)."""
         return dataclasses.replace(self, **changes)
 
@@ -183,7 +183,7 @@ class NavigationModel:
 
     # -- construction --------------------------------------------------------------------------
     @classmethod
-    def from_dead_reckoning(cls, dr: DeadReckoningModel, **overrides) -> NavigationModel:
+    def from_dead_reckoning(cls, dr: DeadReckoningModel, **overrides: Any) -> NavigationModel:
         """The model of a :class:`DeadReckoningModel` (a simulated DR's settings): its white errors
         as they are, its constant errors as priors of mean zero whose std is the larger of the
         stated default and the magnitude of the simulated error (the simulated values are the
@@ -202,7 +202,7 @@ class NavigationModel:
         return cls(**(fields | overrides))
 
     @classmethod
-    def from_survey(cls, survey, **overrides) -> NavigationModel:
+    def from_survey(cls, survey: Any, **overrides: Any) -> NavigationModel:
         """The model of a simulated survey, from the settings it records (``meta["settings"]``):
         the DR as :meth:`from_dead_reckoning`; ``sounding_std`` 1.5 times the sonar's
         ``depth_noise`` (the margin covers map interpolation and attitude errors), at least 0.2 m;
@@ -269,7 +269,8 @@ class NavigationModel:
             raise TangraphError(f"{where}: {exc}") from None
 
 
-def survey_navigation_model(survey, model: NavigationModel | None, *, where: str = "") -> NavigationModel:
+def survey_navigation_model(survey: Any, model: NavigationModel | None, *,
+                            where: str = "") -> NavigationModel:
     """``model``, or if None the model of a simulated survey (:meth:`NavigationModel.from_survey`):
     the one place every estimator resolves its model.
 
