@@ -161,8 +161,8 @@ def _position_tide_error(origin, measured, factor, values, jacobians):
 
 
 def position_tide_factor(pose_key: int, measured, cov, origin, kernel: str = "none",
-                         parameter: float = 1.0) -> gtsam.CustomFactor:
-    """A factor on a DR-frame pose, the calibration and the tide (:data:`TIDE`): the pose's world
+                         parameter: float = 1.0, tide_key: int = TIDE) -> gtsam.CustomFactor:
+    """A factor on a DR-frame pose, the calibration and the tide (``tide_key``): the pose's world
     position and the tide are ``measured (3,)`` with covariance ``cov (3, 3)``, optionally under
     a robust kernel whose ``parameter`` is given for a 2-D error (it is moved to the same
     probability of a 3-D one)."""
@@ -172,7 +172,7 @@ def position_tide_factor(pose_key: int, measured, cov, origin, kernel: str = "no
     if kernel != "none":
         parameter = float(np.sqrt(stats.chi2.ppf(stats.chi2.cdf(parameter**2, 2), 3)))
     noise = robust_noise(np.asarray(cov, float), kernel, parameter)
-    return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION, TIDE],
+    return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION, int(tide_key)],
                               partial(_position_tide_error, np.asarray(origin, float).copy(), measured))
 
 

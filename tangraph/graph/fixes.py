@@ -163,7 +163,9 @@ def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, ha
     value = nis(np.asarray(fix.position, float) - np.asarray(predicted, float)[:2],
                 cov + np.asarray(predicted_cov, float)[:2, :2])
     detail = "; ".join(fix.quality.reasons)
-    if noise is not None and config.misfit_ratio is not None and fix.sigma > config.misfit_ratio * noise:
+    if fix.quality.depth_fault:  # its depths are wrong, not the place: no evidence of being lost
+        status = FixStatus.MISFIT
+    elif noise is not None and config.misfit_ratio is not None and fix.sigma > config.misfit_ratio * noise:
         status = FixStatus.MISFIT
         detail = f"residual std {fix.sigma:.3g} m at the best match, {fix.sigma / noise:.1f} x the model's"
     elif fix.quality.outside:

@@ -111,6 +111,10 @@ class GraphNavigator:
         self.tide = c.front_end == "pmf" and calibration_std is not None and self.model.tide_std > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
         self._tide_mean = float(self.model.tide)
+        self.tide_key = TIDE  # the tide's GTSAM key: a new one after each step of the tide
+        self._faults: list[tuple[int, float]] = []  # the depth faults since the last ordinary window
+        self.tide_steps: list[int] = []
+        self._last_outcome: FixOutcome | None = None
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
         self._is_end[self.fix_ends] = True
@@ -246,6 +250,8 @@ class GraphNavigator:
         extra = take_window(self, k, pose, joint, fix)
         if grows:
             self._grow_window(k)
+            if self.tide:
+                online_fixes.tide_step(self, k)
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
                                                       break_std=extra))
         self._update(k)
@@ -277,7 +283,8 @@ class GraphNavigator:
 
     # the window's fix: made, grown and judged in tangraph.graph.online_fixes
     def _judge(self, k: int, pose, joint, fix: TerrainFix | None, strict: bool = False) -> FixOutcome:
-        return online_fixes.judge(self, k, pose, joint, fix, strict)
+        self._last_outcome = online_fixes.judge(self, k, pose, joint, fix, strict)
+        return self._last_outcome
 
     def _fix_factor(self, key: int, fix) -> gtsam.NonlinearFactor | None:
         return online_fixes.fix_factor(self, key, fix)
@@ -298,8 +305,8 @@ class GraphNavigator:
             stamps.insert((key, float(self.survey.time[k])))
         if self.graph.calibrated:  # the calibration is never old: it is never marginalised
             stamps.insert((CALIBRATION, float(self.survey.time[k])))
-        if self.tide:  # nor is the tide
-            stamps.insert((TIDE, float(self.survey.time[k])))
+        if self.tide:  # nor is the tide (the one held now: an earlier one after a step may go)
+            stamps.insert((self.tide_key, float(self.survey.time[k])))
         self.smoother.setSmootherLag(self._lag())
         try:
             self.smoother.update(self._new_factors, self._new_values, stamps, self._remove)
@@ -315,12 +322,12 @@ class GraphNavigator:
         if self.graph.calibrated:
             self.calibration = np.asarray(self.isam.calculateEstimateVector(CALIBRATION), float)
             # the key pose with the calibration (and the tide when held), one joint marginal
-            keys = (k, CALIBRATION, TIDE) if self.tide else (k, CALIBRATION)
+            keys = (k, CALIBRATION, self.tide_key) if self.tide else (k, CALIBRATION)
             marginal = self.isam.jointMarginalCovariance(gtsam.KeyVector(list(keys)))
             full = np.block([[marginal.at(a, b) for b in keys] for a in keys])
             joint = full[:5, :5]
             if self.tide:
-                self._tide_mean = float(self.isam.calculateEstimateVector(TIDE)[0])
+                self._tide_mean = float(self.isam.calculateEstimateVector(self.tide_key)[0])
                 self._tide_joint = joint_in_frame(pose[2], full)
         else:
             joint = np.zeros((5, 5))
@@ -375,7 +382,8 @@ class GraphNavigator:
             "lost_episodes": [e.as_dict() for e in self.episodes],
             "key_indices": [int(k) for k in self.graph.keys],
             "calibration": self.calibration_report(),
-            **({"tide": {"tide": self._tide_mean, "tide_std": float(np.sqrt(self._tide_joint[5, 5]))}}
+            **({"tide": {"tide": self._tide_mean, "tide_std": float(np.sqrt(self._tide_joint[5, 5])),
+                         "steps": list(self.tide_steps)}}
                if self.tide else {}),
             "config": self.config.as_dict(),
             "model": self.model.as_dict(),

@@ -43,10 +43,15 @@ if TYPE_CHECKING:
     from tangraph.sensors import NavigationModel
     from tangraph.survey import Survey
 
-__all__ = ["MISFIT_WINDOWS", "fix_factor", "grown", "judge", "laid_poses", "misfit_noise",
-           "posterior_window_fix", "window_terrain"]
+__all__ = ["MISFIT_WINDOWS", "TIDE_STEP_AGREE", "TIDE_STEP_PINGS", "fix_factor", "grown", "judge",
+           "laid_poses", "misfit_noise", "posterior_window_fix", "tide_step", "window_terrain"]
 
 log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, one logger for them
+#: The tide steps when the point-mass front end's windows find one depth fault (offsets within
+#: ``TIDE_STEP_AGREE`` m of each other) over ``TIDE_STEP_PINGS`` pings in a row: longer than a
+#: block of bad pings should last (the robustness study's are 20 pings).
+TIDE_STEP_PINGS = 40
+TIDE_STEP_AGREE = 1.0
 
 MISFIT_WINDOWS = 10  #: windows whose median residual std the misfit test may compare to
 
@@ -119,7 +124,7 @@ def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | No
     if not (nav.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
         return None
     return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, nav.origin,
-                                nav.model.robust_kernel, nav.model.robust_parameter)
+                                nav.model.robust_kernel, nav.model.robust_parameter, nav.tide_key)
 
 
 def misfit_noise(nav: GraphNavigator, k: int, sigma: float) -> float:
@@ -171,3 +176,36 @@ def window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationM
     return (TerrainLikelihood(bathymetry, model.measurement_std),
             sounding_variances(survey, bathymetry, model),
             sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
+
+
+def tide_step(nav: GraphNavigator, k: int) -> None:
+    """After the window ending at ``k``: when the point-mass front end's windows have found
+    the same depth fault (within ``TIDE_STEP_AGREE``) over ``TIDE_STEP_PINGS`` pings in a row, it is the
+    held tide that is wrong (a step of the water level or the datum, or a start on a bad
+    block), not their depths: the graph holds a new tide from here, its prior the old
+    estimate moved by their offset with the model's tide std."""
+    outcome = nav._last_outcome if nav._last_outcome and nav._last_outcome.record.index == k else None
+    fix = None if outcome is None else outcome.fix
+    offset = getattr(fix, "depth_offset", float("nan"))
+    if not np.isfinite(offset):
+        if outcome is not None and outcome.record.status is not FixStatus.MATCH_FAILED:
+            nav._faults = []
+        return
+    nav._faults.append((k, float(offset)))
+    offsets = np.array([o for _, o in nav._faults])
+    if k - nav._faults[0][0] < TIDE_STEP_PINGS or np.ptp(offsets) > TIDE_STEP_AGREE:
+        if np.ptp(offsets) > TIDE_STEP_AGREE:  # not one offset: faults of their own
+            nav._faults = nav._faults[-1:]
+        return
+    tide = nav._tide_mean + float(np.median(offsets))
+    nav.tide_key = int(gtsam.symbol("t", len(nav.tide_steps) + 1))
+    nav.tide_steps.append(k)
+    nav._new_factors.add(gtsam.PriorFactorVector(
+        nav.tide_key, np.array([tide]), gtsam.noiseModel.Isotropic.Sigma(1, nav.model.tide_std)))
+    nav._new_values.insert(nav.tide_key, np.array([tide]))
+    nav._tide_mean = tide
+    nav._tide_joint[5, :] = nav._tide_joint[:, 5] = 0.0
+    nav._tide_joint[5, 5] = nav.model.tide_std**2
+    log.info("graph: the tide stepped at ping %d: windows over %d pings %.2f m off the held tide",
+             k, k - nav._faults[0][0] + 1, float(np.median(offsets)))
+    nav._faults = []

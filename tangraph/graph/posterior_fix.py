@@ -78,6 +78,10 @@ EDGE_MASS = 1e-3  #: share of the posterior in the grid's outer ring that says t
 MIN_GAIN = 1e-3
 #: an axis along which the posterior is wider than the prior by more than this share refuses it
 MAX_LOSS = 0.1
+#: A window's depths may carry a fault the tide does not (a draft or a tide step, a bad block):
+#: its offset's prior std (m) and the prior probability of a window with one (see ``_depth_fault``)
+FAULT_STD = 10.0
+FAULT_PRIOR = 1e-3
 #: information given along an axis the window adds less than MIN_GAIN to, as a share of the prior's
 MIN_AXIS_GAIN = 1e-4
 
@@ -91,7 +95,8 @@ class WindowFix:
     the posterior's mean and covariance, the prior's (north, east, tide), and the grid
     (``points (n*n, 2)`` and the normalised ``log_density``) it was last weighed on, the
     ``n_grids``-th; ``joint_mean (3,)`` and ``joint_covariance (3, 3)``: the likelihood factor
-    on (north, east, tide) when the tide was uncertain (NaN otherwise, or when refused)."""
+    on (north, east, tide) when the tide was uncertain (NaN otherwise, or when refused);
+    ``depth_offset``: a depth fault's offset from the held tide (m; NaN without one)."""
 
     index: int
     first: int
@@ -110,6 +115,7 @@ class WindowFix:
     n_grids: int
     joint_mean: np.ndarray
     joint_covariance: np.ndarray
+    depth_offset: float = float("nan")
 
     @property
     def accepted(self) -> bool:
@@ -220,6 +226,31 @@ def _remove_prior(mean, cov, m, p, reasons: list[str]) -> tuple[np.ndarray, np.n
     return m + root @ vectors @ z, 0.5 * (covariance + covariance.T)
 
 
+def _depth_fault(likelihood: TerrainLikelihood, patch: Patch, variance, map_variance, points: np.ndarray,
+                 log_prior: np.ndarray, tide: np.ndarray, tide_var: float) -> tuple[str, float] | None:
+    """Whether the window's depths carry an offset of their own: the evidence of its soundings
+    over the prior's grid with a free offset on top of the held tide (``N(0, FAULT_STD^2)``,
+    marginalised) against the evidence with the held tide alone. A depth-biased block of pings
+    fits the held tide nowhere, and weighed as if it did it moves the position to where the map
+    is as deep (or says the prediction is wrong); its offset is told apart by the Bayes factor,
+    at the prior odds ``FAULT_PRIOR``. None, or the reason (``"depth fault: ..."``) and the
+    offset (the free offset's posterior mean)."""
+    def evidence(var):
+        update = likelihood.ping_update(points, patch.offsets, patch.depths, tide, var,
+                                        weights=np.exp(log_prior - log_prior.max()), variance=variance,
+                                        map_variance=map_variance)
+        return special.logsumexp(log_prior + update.log_likelihood), update
+
+    held, _ = evidence(tide_var)
+    free, update = evidence(tide_var + FAULT_STD**2)
+    if not (np.isfinite(free) and free - held > np.log((1.0 - FAULT_PRIOR) / FAULT_PRIOR)):
+        return None
+    log_w = log_prior + update.log_likelihood
+    offset = float(np.exp(log_w - special.logsumexp(log_w)) @ (update.tide - tide))
+    return f"depth fault: the soundings sit {offset:+.2f} m off the held tide (log Bayes factor " \
+        f"{free - held:.0f})", offset
+
+
 def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
                   map_variance: np.ndarray | None, slope: np.ndarray, prior_mean, prior_cov, *,
                   tide_factor: bool = False) -> WindowFix:
@@ -270,6 +301,9 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         return points, log_post, update, mass, mean, _floored(cov, axes)
 
     points, log_post, update, mass, mean, cov = weigh(m, p, True)
+    tide_prior = m3[2] + (points - m) @ gain_t
+    fault = None if not joint else _depth_fault(likelihood, patch, variance, map_variance, points,
+                                                log_post - update.log_likelihood, tide_prior, tide_var)
     n_parts, other = _parts(log_post, mass)
     # the soundings alone over the prior's reach: a second place they fit as well is a
     # prediction's word against theirs, which a window that follows a wrong one would lose
@@ -277,7 +311,9 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
     n_fits, elsewhere = _parts(log_lik, _moments(points, log_lik)[0])
     edge = _edge(mass)
     reasons = []
-    if other >= MODE_MASS:
+    if fault:
+        reasons.append(fault[0])
+    elif other >= MODE_MASS:
         reasons.append(f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one")
     elif elsewhere >= MODE_MASS:
         reasons.append(f"multimodal: the soundings fit {n_fits} places within the prediction's reach, "
@@ -330,4 +366,4 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
     log_density = log_post - special.logsumexp(log_post)
     return WindowFix(int(patch.reference), int(patch.first), position, covariance, tide_best, sigma,
                      patch.n_soundings, quality, mean, cov, m3, p3, points, log_density, grids,
-                     joint_mean, joint_cov)
+                     joint_mean, joint_cov, fault[1] if fault else float("nan"))

@@ -102,6 +102,12 @@ class FixQuality:
     def multimodal(self) -> bool:
         return any(r.startswith("multimodal") for r in self.reasons)
 
+    @property
+    def depth_fault(self) -> bool:
+        """The window's depths are off the tide the graph holds by more than a position could
+        explain (the point-mass front end's test): a depth error of its pings, not a place."""
+        return any(r.startswith("depth fault") for r in self.reasons)
+
 
 class TerrainFix(Protocol):
     """What a window's terrain fix gives the graph, whichever front end made it (a TAP search,

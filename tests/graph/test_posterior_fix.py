@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.fix_records import FixStatus
 from tangraph.graph import GraphConfig, GraphNavigator, navigate_online
 from tangraph.graph.posterior_fix import posterior_fix
 from tangraph.maps.grid import BathymetryMap
@@ -122,6 +123,26 @@ def test_with_the_tide_in_the_graph_the_factor_is_the_exact_one_on_position_and_
     plain = posterior_fix(patch, TerrainLikelihood(chart, noise), np.full(120, noise**2), None,
                           slope_moment(chart), prior_mean, prior_cov)
     assert np.all(np.isnan(plain.joint_mean)) and plain.accepted
+
+
+def test_a_window_whose_depths_are_off_the_held_tide_is_a_depth_fault():
+    """With the tide held by the graph (0.05 m), a window whose depths are all 5 m off is a depth
+    fault, judged MISFIT (no evidence of a wrong position); the same window at the held tide,
+    or 0.1 m off it, is an ordinary fix."""
+    from tangraph.graph.fixes import judge_fix
+
+    chart = _kinked_plane()
+    prior_mean, prior_cov = _prior([1.0, 1.0], np.array([[25.0, 5.0], [5.0, 16.0]]), 1.5, 0.05)
+    for offset, fault in ((0.0, False), (0.1, False), (5.0, True), (-5.0, True)):
+        patch = _patch(chart, np.array([4.0, -3.0]), np.random.default_rng(3), 0.3, tide=1.5 + offset)
+        fix = posterior_fix(patch, TerrainLikelihood(chart, 0.3), np.full(80, 0.09), None,
+                            slope_moment(chart), prior_mean, prior_cov, tide_factor=True)
+        assert fix.quality.depth_fault is fault, (offset, fix.quality.reasons)
+        outcome = judge_fix(fix, prior_mean[:2], prior_cov[:2, :2], GraphConfig(), 50.0, strict=True)
+        assert (outcome.record.status is FixStatus.MISFIT) is fault, (offset, outcome.record.status)
+        if fault:  # the offset it reports: the free offset's posterior mean, the position free too
+            said = float(outcome.record.detail.split("sit ")[1].split(" m")[0])
+            assert abs(said - offset) < 0.5, outcome.record.detail
 
 
 def test_a_window_that_sees_one_axis_keeps_the_prior_along_the_other():
@@ -262,3 +283,34 @@ def test_front_end_is_validated():
 
     with pytest.raises(TangraphError, match="GraphConfig.front_end must be one of tap, pmf, got 'grid'"):
         GraphConfig(front_end="grid")
+
+
+def test_a_step_of_the_depths_is_a_tide_step_a_block_of_them_a_fault(rough_map):
+    """The front end holds one tide. A block of 20 pings 6 m deep is a depth fault (its windows
+    are no evidence, the track keeps to the truth); the depths stepping by 1.5 m for good is a
+    step of the tide: the graph holds a new one and learns it."""
+    import dataclasses
+
+    from conftest import small_scenario
+
+    from tangraph.sim.scenario import simulate
+
+    scenario = small_scenario()
+    scenario = dataclasses.replace(scenario, sonar=dataclasses.replace(scenario.sonar, tide=1.5))
+    survey = simulate(scenario, rng=np.random.default_rng(62), bathymetry=rough_map, seed=62)
+    clean = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"))
+    n = survey.n_pings
+    ping = np.arange(n)[:, None]
+    block = survey.replace(beam_depth=survey.beam_depth + np.where(ping // 20 == n // 40, 6.0, 0.0))
+    faulty = navigate_online(block, rough_map, GraphConfig(front_end="pmf"))
+    assert any(f.status is FixStatus.MISFIT and f.detail.startswith("depth fault") for f in faulty.fixes)
+    assert faulty.meta["tide"]["steps"] == [] and abs(faulty.meta["tide"]["tide"] - 1.5) < 0.1
+    rmse = {name: np.sqrt(np.mean(position_errors(t, survey.true_pose) ** 2))
+            for name, t in (("clean", clean), ("faulty", faulty))}
+    assert rmse["faulty"] < 1.5 * rmse["clean"] + 0.5, rmse
+    stepped = survey.replace(beam_depth=survey.beam_depth + np.where(ping >= n // 2, 1.5, 0.0))
+    track = navigate_online(stepped, rough_map, GraphConfig(front_end="pmf"))
+    assert len(track.meta["tide"]["steps"]) == 1 and n // 2 < track.meta["tide"]["steps"][0] < n // 2 + 80
+    assert abs(track.meta["tide"]["tide"] - 3.0) < 0.1
+    errors = position_errors(track, survey.true_pose)
+    assert np.sqrt(np.mean(errors[-n // 4:] ** 2)) < 2.0 * rmse["clean"] + 0.5
