@@ -251,6 +251,20 @@ def _depth_fault(likelihood: TerrainLikelihood, patch: Patch, variance, map_vari
         f"{free - held:.0f})", offset
 
 
+def _first_reasons(fault: tuple[str, float] | None, n_parts: int, other: float, n_fits: int,
+                   elsewhere: float) -> list[str]:
+    """Why a window is refused on the prior-wide grid: a depth fault, a second part of the
+    posterior, or a second place its soundings fit as well (none: an empty list)."""
+    if fault:
+        return [fault[0]]
+    if other >= MODE_MASS:
+        return [f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one"]
+    if elsewhere >= MODE_MASS:
+        return [f"multimodal: the soundings fit {n_fits} places within the prediction's reach, "
+                f"{elsewhere:.0%} of their likelihood away from the best"]
+    return []
+
+
 def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
                   map_variance: np.ndarray | None, slope: np.ndarray, prior_mean, prior_cov, *,
                   tide_factor: bool = False) -> WindowFix:
@@ -301,23 +315,15 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         return points, log_post, update, mass, mean, _floored(cov, axes)
 
     points, log_post, update, mass, mean, cov = weigh(m, p, True)
-    tide_prior = m3[2] + (points - m) @ gain_t
-    fault = None if not joint else _depth_fault(likelihood, patch, variance, map_variance, points,
-                                                log_post - update.log_likelihood, tide_prior, tide_var)
+    log_lik = update.log_likelihood
+    fault = _depth_fault(likelihood, patch, variance, map_variance, points, log_post - log_lik,
+                         m3[2] + (points - m) @ gain_t, tide_var) if joint else None
     n_parts, other = _parts(log_post, mass)
     # the soundings alone over the prior's reach: a second place they fit as well is a
     # prediction's word against theirs, which a window that follows a wrong one would lose
-    log_lik = update.log_likelihood
     n_fits, elsewhere = _parts(log_lik, _moments(points, log_lik)[0])
     edge = _edge(mass)
-    reasons = []
-    if fault:
-        reasons.append(fault[0])
-    elif other >= MODE_MASS:
-        reasons.append(f"multimodal: {n_parts} parts, {other:.0%} of the mass away from the main one")
-    elif elsewhere >= MODE_MASS:
-        reasons.append(f"multimodal: the soundings fit {n_fits} places within the prediction's reach, "
-                       f"{elsewhere:.0%} of their likelihood away from the best")
+    reasons = _first_reasons(fault, n_parts, other, n_fits, elsewhere)
     grids, centre, lay, blurred = 1, m, p, True
     while not reasons:
         axes = _axes(lay)
