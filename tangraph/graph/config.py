@@ -59,9 +59,12 @@ class GraphConfig:
         position and the tide (``Track.meta["tide"]``). It is the online graph's only: the batch
         smoother always weighs TAP fixes (it re-matches its windows around the smoothed track
         with TAP, and on the front end's short windows it was 1.5-2.2 x less accurate in the
-        graph_vs_filters study). It is for clean simulated data: blocks of depth-biased pings
-        and a wrong start make it fail where TAP holds (the robustness study), and on a recorded
-        lake survey it converged on the map's noise (the caputh_replay study).
+        graph_vs_filters study). A window whose depths fit a depth offset of their own far
+        better than the held tide is a depth fault (``MISFIT``), and when the windows find one
+        offset over 40 pings the tide steps (:mod:`tangraph.graph.posterior_fix`,
+        :func:`tangraph.graph.online_fixes.tide_step`). It is for clean simulated data: shifted
+        footprints and a wrong start make it fail where TAP holds (the robustness study), and
+        on a recorded lake survey it converged on the map's noise (the caputh_replay study).
     front_end_pings : int
         Pings per window of the point-mass front end (default 3: on three seeds each of
         ``demo``, ``wang2019`` and ``han2020`` windows of 2 and 3 pings gave the lowest online

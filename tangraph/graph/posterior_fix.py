@@ -51,6 +51,14 @@ adds less than ``MIN_GAIN`` of the prior's information along its best axis (``un
 and when more than ``EDGE_MASS`` of the posterior lies in the grid's outer ring
 (``best_on_edge``: the truth may lie beyond, which is evidence that the prediction is wrong).
 The windows of this front end share no ping (:class:`~tangraph.graph.GraphNavigator`).
+
+**A depth fault** (when the graph holds the tide): the window's soundings are weighed over the
+prior's grid once with the held tide and once with a free depth offset on top of it (prior std
+``FAULT_STD``, marginalised); when the free offset's evidence wins at the prior odds
+``FAULT_PRIOR``, the window's depths are wrong, not the place (a draft, a tide step, a block of
+bad pings). It is refused as ``"depth fault"`` with its offset (``WindowFix.depth_offset``),
+which the graph judges ``MISFIT``: no evidence that the prediction is wrong. Weighed with the
+held tide it would move the position to where the map is as deep, or say the vehicle is lost.
 """
 
 from __future__ import annotations
