@@ -234,23 +234,24 @@ def _remove_prior(mean, cov, m, p, reasons: list[str]) -> tuple[np.ndarray, np.n
     return m + root @ vectors @ z, 0.5 * (covariance + covariance.T)
 
 
-def _depth_fault(likelihood: TerrainLikelihood, patch: Patch, variance, map_variance, points: np.ndarray,
-                 log_prior: np.ndarray, tide: np.ndarray, tide_var: float) -> tuple[str, float] | None:
+def _depth_fault(likelihood: TerrainLikelihood, patch: Patch, variance, map_variance, variance_extra,
+                 points: np.ndarray, log_post: np.ndarray, log_lik: np.ndarray, tide: np.ndarray,
+                 tide_var: float) -> tuple[str, float] | None:
     """Whether the window's depths carry an offset of their own: the evidence of its soundings
     over the prior's grid with a free offset on top of the held tide (``N(0, FAULT_STD^2)``,
     marginalised) against the evidence with the held tide alone. A depth-biased block of pings
     fits the held tide nowhere, and weighed as if it did it moves the position to where the map
     is as deep (or says the prediction is wrong); its offset is told apart by the Bayes factor,
     at the prior odds ``FAULT_PRIOR``. None, or the reason (``"depth fault: ..."``) and the
-    offset (the free offset's posterior mean)."""
-    def evidence(var):
-        update = likelihood.ping_update(points, patch.offsets, patch.depths, tide, var,
-                                        weights=np.exp(log_prior - log_prior.max()), variance=variance,
-                                        map_variance=map_variance)
-        return special.logsumexp(log_prior + update.log_likelihood), update
-
-    held, _ = evidence(tide_var)
-    free, update = evidence(tide_var + FAULT_STD**2)
+    offset (the free offset's posterior mean). The held tide's evidence is the prior-wide grid's
+    (``log_post``, ``log_lik``: weighed with the soundings' variances plus ``variance_extra``, the
+    grid's resolution term); the free one is weighed on the same grid with the same variances."""
+    log_prior = log_post - log_lik
+    held = special.logsumexp(log_post)
+    update = likelihood.ping_update(points, patch.offsets, patch.depths, tide, tide_var + FAULT_STD**2,
+                                    weights=np.exp(log_prior - log_prior.max()),
+                                    variance=variance + variance_extra, map_variance=map_variance)
+    free = special.logsumexp(log_prior + update.log_likelihood)
     if not (np.isfinite(free) and free - held > np.log((1.0 - FAULT_PRIOR) / FAULT_PRIOR)):
         return None
     log_w = log_prior + update.log_likelihood
@@ -324,8 +325,9 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
 
     points, log_post, update, mass, mean, cov = weigh(m, p, True)
     log_lik = update.log_likelihood
-    fault = _depth_fault(likelihood, patch, variance, map_variance, points, log_post - log_lik,
-                         m3[2] + (points - m) @ gain_t, tide_var) if joint else None
+    fault = _depth_fault(likelihood, patch, variance, map_variance, _resolution(
+        likelihood.bathymetry, patch.offsets + m, _axes(p), slope), points, log_post, log_lik,
+        m3[2] + (points - m) @ gain_t, tide_var) if joint else None
     n_parts, other = _parts(log_post, mass)
     # the soundings alone over the prior's reach: a second place they fit as well is a
     # prediction's word against theirs, which a window that follows a wrong one would lose
