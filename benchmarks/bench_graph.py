@@ -39,7 +39,7 @@ def online() -> None:
                       seed=scenario.seed)
     print(f"chen2022: {survey.n_pings} pings over {survey.time[-1]:.0f} s, simulated in "
           f"{time.perf_counter() - t0:.1f} s")
-    config = GraphConfig(n_pings=10, key_interval=60.0)
+    config = GraphConfig().replace(n_pings=10, key_interval=60.0)
     nav = GraphNavigator(survey, bathymetry, config).run()
     track = nav.track()
     updates = np.asarray(nav.update_times) * 1e3
@@ -87,7 +87,7 @@ def long_online(n: int) -> None:
                    beam_forward=0 * beams[window], beam_starboard=beams[window], beam_depth=measured)
     template = tap_fix(first, bathymetry, 9, 10, TapConfig(half_width=20.0), prior=truth[9, :2])
     assert template.accepted, template.quality.reasons
-    config = GraphConfig(key_interval=1.0, n_pings=10)
+    config = GraphConfig().replace(key_interval=1.0, n_pings=10)
     nav = GraphNavigator(survey, bathymetry, config, model=NavigationModel.from_dead_reckoning(model))
     cov = np.diag([4.0, 4.0])
     t0 = time.perf_counter()
@@ -137,7 +137,7 @@ def batch(sizes: list[int]) -> None:
             built = time.perf_counter() - t0
             for covariance in ("none", "all"):
                 t0 = time.perf_counter()
-                solution = smooth_pose_graph(graph, GraphConfig(smoother_covariance=covariance))
+                solution = smooth_pose_graph(graph, GraphConfig().replace(smoother_covariance=covariance))
                 total = totals[calibrated, covariance] = time.perf_counter() - t0
                 parts = solution.timings
                 print(f"batch {n:>7} poses, calibration {'yes' if calibrated else 'no ':<3}, covariance "

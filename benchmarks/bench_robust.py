@@ -52,7 +52,7 @@ def main(argv=None) -> int:
     firsts, ends, _ = fix_windows(survey.n_pings, 20, 10, None)
 
     def fixes(jackknife: bool) -> int:
-        config = GraphConfig(tap=TapConfig(jackknife=jackknife))
+        config = GraphConfig().replace(tap=TapConfig(jackknife=jackknife))
         made = 0
         for first, end in zip(firsts, ends, strict=True):
             try:
@@ -69,8 +69,8 @@ def main(argv=None) -> int:
           f"({jack / plain:.2f} x)")
     rows = {}
     for solve in ("none", "gnc"):
-        seconds, track = best(lambda s=solve: smooth_survey(survey, bathymetry, GraphConfig(robust_solve=s),
-                                                            model=model), args.repeat)
+        config = GraphConfig().replace(robust_solve=solve)
+        seconds, track = best(lambda c=config: smooth_survey(survey, bathymetry, c, model=model), args.repeat)
         rows[solve] = seconds
         forward = track.timings["forward_pass"]
         rmse = track_metrics(track, survey.true_pose)["rmse"]

@@ -72,7 +72,8 @@ def main() -> None:
         out = {}
         for terrain in ("fixes", "soundings", *(("field",) if args.field else ())):
             t0 = time.perf_counter()
-            track = smooth_survey(survey, bathymetry, GraphConfig(smoother_terrain=terrain), model=model)
+            config = GraphConfig().replace(smoother_terrain=terrain)
+            track = smooth_survey(survey, bathymetry, config, model=model)
             out[terrain] = (time.perf_counter() - t0, rmse(track, survey.true_pose), track)
         fixes, soundings = out["fixes"], out["soundings"]
         solve = soundings[2].timings.get("solve", float("nan"))

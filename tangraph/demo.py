@@ -147,7 +147,7 @@ def _fix_close_up(survey, bathymetry, smoother: Track, path: Path) -> None:
         raise TangraphError("the demo's smoother made no terrain fix to show")
     chosen = fixes[len(fixes) // 2]
     end = int(chosen.index)
-    n_pings = int(smoother.meta["config"]["n_pings"])
+    n_pings = int(smoother.meta["config"]["fixes"]["n_pings"])
     centre = chosen.position
     try:  # a finer grid than the navigator's, centred on its fix, to show the regions' shapes
         patch = window_patch(survey, end, n_pings, poses=smoother.pose[end - n_pings + 1 : end + 1])

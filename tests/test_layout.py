@@ -108,7 +108,6 @@ LONG_FUNCTIONS: dict[str, int] = {
     "tangraph.formats.csv_xyz.import_csv_xyz": 186,
     "tangraph.formats.sontek.import_sontek_sum": 169,
     "tangraph.formats.xtf.import_xtf": 104,
-    "tangraph.graph.posterior_fix.posterior_fix": 111,
 }
 
 

@@ -132,16 +132,19 @@ def test_a_recorded_survey_is_smoothed_in_the_map_frame_with_its_dr_model(wang_s
 
 def test_graph_config_option(survey_file, tmp_path, capsys):
     graph = tmp_path / "graph.toml"
-    graph.write_text("[graph]\nn_pings = 30\nfix_spacing = 15\n")
+    graph.write_text("[graph.fixes]\nn_pings = 30\nfix_spacing = 15\n")
     out = tmp_path / "s.csv"
     assert main(["smooth", str(survey_file), "-q", "--graph-config", str(graph), "-o", str(out)]) == 0
     assert main(["navigate", str(survey_file), "--method", "pf", "-q", "--graph-config", str(graph),
                  "-o", str(tmp_path / "pf.csv")]) == 2
     assert "--graph-config does not apply to method 'pf'" in capsys.readouterr().err
-    graph.write_text("[graph]\nn_ping = 30\n")
+    graph.write_text("[graph.fixes]\nn_ping = 30\n")
     args = ["smooth", str(survey_file), "-q", "--graph-config", str(graph), "-o", str(out), "--force"]
     assert main(args) == 2
-    assert "unknown GraphConfig field 'n_ping'" in capsys.readouterr().err
+    assert "unknown FixConfig field 'n_ping'" in capsys.readouterr().err
+    graph.write_text("[graph]\nn_pings = 30\n")  # a file of the flat layout: where the key went
+    assert main(args) == 2
+    assert "GraphConfig.n_pings is now in the fixes part ([graph.fixes] in a file)" in capsys.readouterr().err
 
 
 def test_a_survey_simulated_on_a_map_file_finds_it_again(tmp_path, capsys):

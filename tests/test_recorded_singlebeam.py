@@ -41,7 +41,7 @@ ping_rate = 2.0
 depth_noise = 0.1
 """
 #: the guide's single-beam settings: windows of 100 pings (100 m of profile, ten 10 m cells)
-GRAPH = """[graph]
+GRAPH = """[graph.fixes]
 n_pings = 100
 fix_spacing = 50
 ramp_pings = 20

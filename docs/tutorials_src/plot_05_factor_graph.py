@@ -45,8 +45,8 @@ print(survey.summary())
 
 config = GraphConfig()
 model = NavigationModel.from_survey(survey)  # the fixes' error model is the navigation model's
-print(f"fix every {config.spacing} pings ({config.n_pings}-ping windows), key pose every "
-      f"{config.key_interval:.0f} s at least; gate at p = {config.gate_probability}; "
+print(f"fix every {config.spacing} pings ({config.fixes.n_pings}-ping windows), key pose every "
+      f"{config.key_interval:.0f} s at least; gate at p = {config.fixes.gate_probability}; "
       f"robust kernel {model.robust_kernel} at {model.robust_parameter}")
 
 # %%
@@ -155,8 +155,8 @@ def run_with(fix, config: GraphConfig, model: NavigationModel) -> GraphNavigator
 alone = {"gate_probability": None, "confirm_probability": None, "lost_windows": None}
 variants = {
     "default": (config, model),
-    "huber only": (dataclasses.replace(config, **alone), model),
-    "no defence": (dataclasses.replace(config, **alone), model.replace(robust_kernel="none")),
+    "huber only": (config.replace(**alone), model),
+    "no defence": (config.replace(**alone), model.replace(robust_kernel="none")),
 }
 results = {}
 after = slice(bad_ping, bad_ping + 20)

@@ -121,7 +121,7 @@ from tangraph.graph import GraphConfig  # noqa: E402
 from tangraph.sensors import NavigationModel  # noqa: E402
 
 model = NavigationModel.from_dead_reckoning(scenario.dead_reckoning)
-config = GraphConfig(rematch_iterations=2)
+config = GraphConfig().replace(rematch_iterations=2)
 smoothed = smooth_survey(recorded, bathymetry, config, model=model)
 print(track_summary(smoothed, recorded))
 calibration = smoothed.meta["calibration"]

@@ -547,12 +547,12 @@ def main(argv=None) -> int:
         "dr_drift_300s_m": {p.stem: _import(cfg, args.data, p).meta["dr_drift_300s_m"]
                             for p in sorted(args.data.glob("*.sum"))},
         "slant_beams": beam_check(cfg, args.data),
-        "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["n_pings"])
+        "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["fixes"]["n_pings"])
                     for name, s in march.items()},
         "check_lines": check_lines(cfg, args.data, bathymetry, march),
         "run_offsets": run_offsets(cfg, args.data, bathymetry, march),
     }
-    if cfg["graph"].get("smoother_terrain") == "field" and "smoother" in args.methods:
+    if cfg["graph"].get("batch", {}).get("smoother_terrain") == "field" and "smoother" in args.methods:
         checks["refined_map"] = refined_map_check(cfg, args.data, bathymetry, march)
     seeds = 1 if args.quick else int(args.runs or cfg["filters"]["seeds"])
     configs = [

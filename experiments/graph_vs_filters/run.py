@@ -118,9 +118,9 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     for method in config["methods"]:
         settings = None
         if method in GRAPH and config.get("graph"):
-            from tangraph.graph import GraphConfig
+            from tangraph.experiments.study import graph_settings
 
-            settings = GraphConfig.from_mapping(config["graph"], "--graph")
+            settings = graph_settings(config["graph"])
         if method in FILTERS:
             from tangraph.filters import ParticleConfig, default_config
 
@@ -304,10 +304,10 @@ def _model_settings(items: dict) -> dict:
 def _check_settings(graph: dict, model: dict) -> None:
     """Refuse ``--graph`` and ``--model`` settings that are not fields (or were moved) before any
     run starts."""
-    from tangraph.graph import GraphConfig
+    from tangraph.experiments.study import graph_settings
     from tangraph.sensors import NavigationModel
 
-    GraphConfig.from_mapping(graph, "--graph")
+    graph_settings(graph)
     NavigationModel.from_mapping(model, "--model")
 
 

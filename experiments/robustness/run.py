@@ -96,9 +96,9 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
         for method in config["methods"]:
             settings = None
             if method in ("isam2", "smoother") and config.get("graph"):
-                from tangraph.graph import GraphConfig
+                from tangraph.experiments.study import graph_settings
 
-                settings = GraphConfig.from_mapping(config["graph"], where="--graph")
+                settings = graph_settings(config["graph"])
             if method in ("pf", "ipf", "sjcpf"):  # with its defence against bad pings
                 from tangraph.filters import default_config
 
@@ -210,7 +210,7 @@ def figure(table, path: Path) -> None:
 
 def main(argv=None) -> int:
     from tangraph.experiments import run_many
-    from tangraph.experiments.study import field_values, output_folder, study_parser
+    from tangraph.experiments.study import field_values, graph_settings, output_folder, study_parser
 
     parser = study_parser(HERE, __doc__.splitlines()[0], runs=12, seed=13,
                           quick="3 runs of the graph on clean, shift-30 and start-200")
@@ -225,6 +225,7 @@ def main(argv=None) -> int:
     cases = ["clean", "shift-30", "start-200"] if args.quick else args.cases
     methods = ["isam2", "smoother"] if args.quick else args.methods
     graph = field_values(args.graph)
+    graph_settings(graph)  # a bad field refused before any run
     config = {"cases": cases, "methods": methods, "graph": graph}
     table = run_many(one_run, [config], runs, args.seed, scheduler=args.scheduler, workers=args.workers)
     failed = table["error"].notna()

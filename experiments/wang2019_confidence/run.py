@@ -68,7 +68,7 @@ def calibrated_dr(survey, bathymetry):
     from tangraph.graph.calibration import to_world
     from tangraph.sensors import NavigationModel
 
-    track = smooth_survey(survey, bathymetry, GraphConfig(rematch_iterations=0),
+    track = smooth_survey(survey, bathymetry, GraphConfig().replace(rematch_iterations=0),
                           model=NavigationModel.from_survey(survey))
     c = track.meta["calibration"]
     corrected = to_world(survey.dr_pose, (c["speed_scale"], c["heading_bias"]), survey.dr_pose[0, :2])

@@ -88,8 +88,8 @@ def _smoother_config(args: argparse.Namespace):
     from tangraph.maps.io import map_format
 
     map_format(args.refined_map)  # a map format, before any work
-    config = dataclasses.replace(config or GraphConfig(), smoother_terrain="field")
-    if config.smoother_covariance != "all":
+    config = (config or GraphConfig()).replace(smoother_terrain="field")
+    if config.batch.smoother_covariance != "all":
         raise TangraphError("--refined-map: the refined map's std needs the covariances; the graph "
                             "config sets smoother_covariance = 'none'")
     return config
@@ -231,6 +231,7 @@ def _track_options(p: argparse.ArgumentParser) -> None:
         "--graph-config",
         type=Path,
         metavar="FILE.toml",
-        help="settings of the factor graph (GraphConfig fields, TapConfig ones in [tap]): "
-        "window length, fix criterion, gate, robust kernel...",
+        help="settings of the factor graph (GraphConfig): key_interval, and its parts' fields in "
+        "[graph.fixes] (window, gate, search; TapConfig in [graph.fixes.tap]), [graph.online] "
+        "(iSAM2, front end, lost test) and [graph.batch] (solve, terrain)",
     )

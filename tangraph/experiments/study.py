@@ -16,7 +16,7 @@ from pathlib import Path
 from tangraph.cli import DefaultsHelpFormatter
 from tangraph.errors import TangraphError
 
-__all__ = ["field_values", "output_folder", "per_process", "study_parser"]
+__all__ = ["field_values", "graph_settings", "output_folder", "per_process", "study_parser"]
 
 _CACHE: dict = {}  # per process, here in the package: see per_process
 
@@ -86,6 +86,25 @@ def field_values(items, option: str = "--graph") -> dict:
         except (ValueError, SyntaxError):
             fields[name] = value
     return fields
+
+
+def graph_settings(fields: dict, option: str = "--graph"):
+    """The :class:`~tangraph.graph.GraphConfig` of a study's ``--graph FIELD=VALUE`` options (the
+    fields of any of its parts, by name), a bad one refused naming ``option``.
+
+    >>> graph_settings({"n_pings": 30, "smoother_terrain": "soundings"}).fixes.n_pings
+    30
+    >>> graph_settings({"n_ping": 30})
+    Traceback (most recent call last):
+    ...
+    tangraph.errors.TangraphError: --graph: unknown GraphConfig field 'n_ping'
+    """
+    from tangraph.graph import GraphConfig
+
+    try:
+        return GraphConfig().replace(**fields)
+    except TangraphError as exc:
+        raise TangraphError(f"{option}: {exc}") from None
 
 
 def output_folder(args: argparse.Namespace, here: Path) -> Path:

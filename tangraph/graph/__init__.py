@@ -6,7 +6,7 @@ is pure; recorded surveys: :func:`smooth_survey` (batch smoother).
 """
 
 from tangraph.fix_records import FixRecord, FixStatus
-from tangraph.graph.config import GraphConfig, load_graph_config
+from tangraph.graph.config import BatchConfig, FixConfig, GraphConfig, OnlineConfig, load_graph_config
 from tangraph.graph.factors import (
     between_noise,
     check_fix_covariance,
@@ -22,12 +22,15 @@ from tangraph.graph.policy import FixPolicy, PolicyState
 from tangraph.graph.smoother import SmootherSolution, dense_track, smooth_pose_graph, smooth_survey
 
 __all__ = [
+    "BatchConfig",
+    "FixConfig",
     "FixPolicy",
     "FixRecord",
     "FixStatus",
     "GraphConfig",
     "GraphNavigator",
     "LostEpisode",
+    "OnlineConfig",
     "PolicyState",
     "PoseGraph",
     "SmootherSolution",

@@ -78,19 +78,20 @@ class FixOutcome:
 
 def search_step(config: GraphConfig, bathymetry: BathymetryMap) -> float:
     """Step (m) of the TAP candidate grid: ``tap.step``, else ``tap_step_cells`` map cells."""
-    if config.tap.step is not None:
-        return float(config.tap.step)
-    return float(config.tap_step_cells * min(bathymetry.cell_size))
+    if config.fixes.tap.step is not None:
+        return float(config.fixes.tap.step)
+    return float(config.fixes.tap_step_cells * min(bathymetry.cell_size))
 
 
 def search_half_width(config: GraphConfig, bathymetry: BathymetryMap, position_cov) -> float:
-    """Half-width (m) of the TAP search around the predicted position (``GraphConfig.half_width_rule``)."""
-    if config.half_width_rule == "fixed":
-        return float(config.tap.half_width)
+    """Half-width (m) of the TAP search around the predicted position
+    (``GraphConfig.fixes.half_width_rule``)."""
+    if config.fixes.half_width_rule == "fixed":
+        return float(config.fixes.tap.half_width)
     cell = float(min(bathymetry.cell_size))
     sigma = float(np.sqrt(max(np.linalg.eigvalsh(np.asarray(position_cov, float)).max(), 0.0)))
-    return float(np.clip(config.half_width_sigmas * sigma, config.min_half_width_cells * cell,
-                         config.max_half_width_cells * cell))
+    return float(np.clip(config.fixes.half_width_sigmas * sigma, config.fixes.min_half_width_cells * cell,
+                         config.fixes.max_half_width_cells * cell))
 
 
 def window_noise(fix: Fix, survey: Survey, white: DeadReckoningModel, shape_jacobian,
@@ -113,7 +114,7 @@ def window_noise(fix: Fix, survey: Survey, white: DeadReckoningModel, shape_jaco
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
              half_width: float, *, poses=None, first: int | None = None, shared=None,
              error=None) -> TapFix:
-    """The TAP fix of the window of pings ``first`` (default ``end - config.n_pings + 1``) to
+    """The TAP fix of the window of pings ``first`` (default ``end - config.fixes.n_pings + 1``) to
     ``end``, searched within ``half_width`` of ``prior``; the patch is laid with ``poses``, the
     poses of the window's pings (default: their DR poses); ``shared (K, B)``: the survey's
     shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
@@ -125,14 +126,15 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     MatchingError
         As :func:`tangraph.matching.tap_fix`.
     """
-    first = end - config.n_pings + 1 if first is None else int(first)
+    first = end - config.fixes.n_pings + 1 if first is None else int(first)
     if first < 0:
         raise MatchingError(f"the window ending at ping {end} starts before the survey ({first})")
     if not np.isfinite(survey.beam_depth[first : end + 1]).any():
         raise MatchingError(f"window of pings {first}..{end} has no sounding")
-    patch = window_patch(survey, end, end - first + 1, min_soundings=config.tap.min_soundings, poses=poses,
-                         shared=shared, error=error)
-    tap = dataclasses.replace(config.tap, half_width=float(half_width), step=search_step(config, bathymetry))
+    patch = window_patch(survey, end, end - first + 1, min_soundings=config.fixes.tap.min_soundings,
+                         poses=poses, shared=shared, error=error)
+    tap = dataclasses.replace(config.fixes.tap, half_width=float(half_width),
+                              step=search_step(config, bathymetry))
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))
 
 
@@ -146,13 +148,13 @@ def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, ha
               strict: bool = False, noise: float | None = None) -> FixOutcome:
     """Accept or refuse ``fix`` against the predicted position ``(2,)`` and its covariance ``(2, 2)``.
 
-    A fix whose residual std at its best match exceeds ``config.misfit_ratio`` times ``noise``
+    A fix whose residual std at its best match exceeds ``config.fixes.misfit_ratio`` times ``noise``
     (the residual std it is held against: the navigation model's ``measurement_std``, or the
     online navigator's median of recent windows when larger) is ``MISFIT``: the window's
     soundings fit the map nowhere (a depth bias on part of its pings), which says nothing of
     where the vehicle is. A fix whose best match lies on the edge of the search is
     ``OUTSIDE_SEARCH``; ``strict`` (a lost navigator's relocalisation candidates) refuses a
-    multimodal fix whatever ``config.accept_multimodal`` says.
+    multimodal fix whatever ``config.fixes.accept_multimodal`` says.
 
     Raises
     ------
@@ -165,17 +167,18 @@ def judge_fix(fix: TerrainFix, predicted, predicted_cov, config: GraphConfig, ha
     detail = "; ".join(fix.quality.reasons)
     if fix.quality.depth_fault:  # its depths are wrong, not the place: no evidence of being lost
         status = FixStatus.MISFIT
-    elif noise is not None and config.misfit_ratio is not None and fix.sigma > config.misfit_ratio * noise:
+    elif (noise is not None and config.fixes.misfit_ratio is not None
+          and fix.sigma > config.fixes.misfit_ratio * noise):
         status = FixStatus.MISFIT
         detail = f"residual std {fix.sigma:.3g} m at the best match, {fix.sigma / noise:.1f} x the model's"
     elif fix.quality.outside:
         status = FixStatus.OUTSIDE_SEARCH
-    elif fix.quality.multimodal and (strict or not (config.accept_multimodal
-                                                    and config.tap.covariance == "region")):
+    elif fix.quality.multimodal and (strict or not (config.fixes.accept_multimodal
+                                                    and config.fixes.tap.covariance == "region")):
         status = FixStatus.MULTIMODAL
     elif not fix.quality.informative:
         status = FixStatus.UNINFORMATIVE
-    elif value > gate_threshold(config.gate_probability):
+    elif value > gate_threshold(config.fixes.gate_probability):
         status = FixStatus.GATE
     else:
         status = FixStatus.ACCEPTED

@@ -119,7 +119,7 @@ class PoseGraph:
     it (None) poses are world poses and a fix is a plain translation prior.
 
     ``breaks`` maps a key to the extra position std (m) of the odometry into it: where an online
-    navigator that found itself lost widened its belief (see ``GraphConfig.lost_windows``);
+    navigator that found itself lost widened its belief (see ``GraphConfig.online.lost_windows``);
     ``start`` is the start's position prior ``(key, pose, covariance)`` (:meth:`add_start`), which
     a robust batch solve may find wrong; ``start_break`` the extra position std (m) a lost
     navigator gave it (:meth:`widen_start`).

@@ -8,7 +8,7 @@ an accepted one becomes a robust translation prior (the window's fix is made, we
 graph and judged in :mod:`tangraph.graph.online_fixes`). iSAM2 is then updated with only these new
 factors and values (the containers are emptied after each update), and the marginal covariance
 of the latest key (jointly with the DR's calibration) only is read. iSAM2 runs inside GTSAM's
-incremental fixed-lag smoother, which keeps the newest ``GraphConfig.isam_window`` key poses and
+incremental fixed-lag smoother, which keeps the newest ``GraphConfig.online.isam_window`` key poses and
 the calibration and marginalises the older poses, so the work per update stays bounded as the
 mission grows: without it each new fix moves the whole past and the update time grows with the
 chain. Between key poses the output
@@ -18,7 +18,7 @@ and how it finds out that it is lost and relocalises, is decided by the pure fix
 (:mod:`tangraph.graph.policy`); :mod:`tangraph.graph.lost` puts each window to it and executes
 its actions on the graph and iSAM2.
 
-With ``GraphConfig.front_end = "pmf"`` a window's factor comes from the point-mass front end
+With ``GraphConfig.online.front_end = "pmf"`` a window's factor comes from the point-mass front end
 (:mod:`tangraph.graph.posterior_fix`) instead of TAP: its prior is the prediction jointly with
 the tide, which the graph then holds as a variable beside the calibration, its windows share no
 ping, and an ambiguous window is held and grown by the next pings.
@@ -98,17 +98,17 @@ class GraphNavigator:
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()
         # the point-mass front end's windows share no ping (window = spacing, no ramp)
-        firsts, self.fix_ends, overlaps = fix_windows(n, c.window, c.spacing,
-                                                      c.ramp_pings if c.front_end == "tap" else None)
+        ramp = c.fixes.ramp_pings if c.online.front_end == "tap" else None
+        firsts, self.fix_ends, overlaps = fix_windows(n, c.window, c.spacing, ramp)
         self.window_first = dict(zip(self.fix_ends.tolist(), firsts.tolist(), strict=True))
         self.window_overlap = dict(zip(self.fix_ends.tolist(), overlaps.tolist(), strict=True))
-        if c.front_end == "pmf":
+        if c.online.front_end == "pmf":
             self._terrain = online_fixes.window_terrain(survey, bathymetry, self.model)
             self._window_start = 0  # the first ping of the front end's next window
         # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
         # never marginalised), so what one window learnt of it sharpens the next
         calibration_std = graph_calibration_std(self.model)
-        self.tide = c.front_end == "pmf" and calibration_std is not None and self.model.tide_std > 0
+        self.tide = c.online.front_end == "pmf" and calibration_std is not None and self.model.tide_std > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
         self._tide_mean = float(self.model.tide)
         self.tide_key = TIDE  # the tide's GTSAM key: a new one after each step of the tide
@@ -130,12 +130,12 @@ class GraphNavigator:
                                m.robust_parameter, m.odometry_min_std, m.odometry_min_heading_std)
         params = gtsam.ISAM2Params()
         threshold = gtsam.ISAM2ThresholdMap()  # per coordinate; the pose keys are plain integers
-        threshold.insert(("\x00", np.array([c.relinearize_position, c.relinearize_position,
-                                              c.relinearize_threshold])))
-        threshold.insert(("c", np.array([1e-4, c.relinearize_threshold])))
+        threshold.insert(("\x00", np.array([c.online.relinearize_position, c.online.relinearize_position,
+                                              c.online.relinearize_threshold])))
+        threshold.insert(("c", np.array([1e-4, c.online.relinearize_threshold])))
         threshold.insert(("t", np.array([1e-3])))  # the tide (m), when held: a linear variable
         params.setRelinearizeThreshold(threshold)
-        params.relinearizeSkip = c.relinearize_skip
+        params.relinearizeSkip = c.online.relinearize_skip
         params.enablePartialRelinearizationCheck = True
         # iSAM2 inside GTSAM's fixed-lag smoother, which marginalises the key poses older than
         # its lag (their information stays as a linear factor on the newer ones) so that the work
@@ -244,7 +244,7 @@ class GraphNavigator:
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
         self._new_values.insert(k, gtsam.Pose2(*pose))
-        grows = self.config.front_end == "pmf" and self._is_end[k] and fix is None
+        grows = self.config.online.front_end == "pmf" and self._is_end[k] and fix is None
         if grows:
             self.window_first[k] = self._window_start
         extra = take_window(self, k, pose, joint, fix)
@@ -259,12 +259,12 @@ class GraphNavigator:
 
     def _grow_window(self, k: int) -> None:
         """The point-mass front end's next window: the pings after ``k``, or, when the window
-        ending at ``k`` was multimodal or uninformative and ``GraphConfig.n_pings`` allows, the
+        ending at ``k`` was multimodal or uninformative and ``GraphConfig.fixes.n_pings`` allows, the
         same window grown by the next ``front_end_pings`` pings (its pings are not lost: one
         window's soundings together may settle what a few could not)."""
         record = self.fixes[-1] if self.fixes and self.fixes[-1].index == k else None
         held = record is not None and record.status in (FixStatus.MULTIMODAL, FixStatus.UNINFORMATIVE)
-        if not (held and k + self.config.spacing - self._window_start + 1 <= self.config.n_pings):
+        if not (held and k + self.config.spacing - self._window_start + 1 <= self.config.fixes.n_pings):
             self._window_start = k + 1
 
     def _rebase(self, k: int) -> None:
@@ -338,7 +338,7 @@ class GraphNavigator:
 
     def _lag(self) -> float:
         """Seconds of key poses kept: the newest ``isam_window`` key poses (all without a window)."""
-        window = self.config.isam_window
+        window = self.config.online.isam_window
         n = len(self.graph.keys)
         if window is None or n <= window:
             return 1e18

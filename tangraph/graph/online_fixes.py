@@ -64,7 +64,7 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
     misfit; ``strict`` while lost); a fix whose covariance is not usable fails as
     ``INVALID_COVARIANCE``."""
     world, cov = nav._world(pose, joint)
-    pmf = nav.config.front_end == "pmf"
+    pmf = nav.config.online.front_end == "pmf"
     if pmf:  # the grid's half-width
         half_width = GRID_SIGMAS * float(np.sqrt(np.linalg.eigvalsh(cov[:2, :2]).max()))
     else:
@@ -98,7 +98,7 @@ def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> Wind
     """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
     ``poses`` of its pings, on the prediction ``N(world, cov)``."""
     first = nav.window_first[k]
-    patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.tap.min_soundings,
+    patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.fixes.tap.min_soundings,
                          poses=poses)
     likelihood, variance, map_variance, slope = nav._terrain
     mean, prior = np.append(world[:2], nav.model.tide), np.zeros((3, 3))
@@ -129,7 +129,7 @@ def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | No
 
 def misfit_noise(nav: GraphNavigator, k: int, sigma: float) -> float:
     """The residual std the window of ping ``k`` (its fix's residual std ``sigma``) is held
-    against by ``GraphConfig.misfit_ratio``: the model's ``measurement_std``, or the median
+    against by ``GraphConfig.fixes.misfit_ratio``: the model's ``measurement_std``, or the median
     over the last ``MISFIT_WINDOWS`` windows, this one included, when that is larger (from
     the ``MISFIT_WINDOWS // 3``-th window of the survey on). While the DR's constant errors
     are still unknown every window's patch is laid distorted and fits the map worse than

@@ -6,7 +6,7 @@ actions (:class:`Use`, :class:`Mark`, :class:`GiveUp`, :class:`Widen`, :class:`R
 the navigator executes on its graph and iSAM2 (:mod:`tangraph.graph.lost`). It uses no GTSAM
 object: what only the navigator knows (whether two fixes agree through the dead reckoning, how a
 fix sits against the belief given up, whether a key pose is still in iSAM2's window) comes with
-the window. The rules (``GraphConfig.lost_windows``, ``relocalise_fixes``, ``confirm_probability``):
+the window. The rules (``GraphConfig.online.lost_windows``, ``relocalise_fixes``, ``confirm_probability``):
 
 - a fix close to the prediction is used at once; a surprising one (NIS between the
   ``confirm_probability`` quantile and the gate) is ``HELD`` until a later accepted fix, as
@@ -248,11 +248,12 @@ class FixPolicy:
     def from_config(cls, config: GraphConfig, cell: float) -> FixPolicy:
         """The policy of ``config`` on a map of ``cell`` metres (its smallest cell size)."""
         cell = float(cell)
-        return cls(lost_windows=config.lost_windows, relocalise_fixes=config.relocalise_fixes,
-                   confirm_nis=gate_threshold(config.confirm_probability),
-                   agreement_nis=gate_threshold(config.gate_probability or 0.999),
-                   spacing=config.spacing, half_width_sigmas=config.half_width_sigmas,
-                   widest=config.max_half_width_cells * cell / config.half_width_sigmas, cell=cell)
+        return cls(lost_windows=config.online.lost_windows, relocalise_fixes=config.online.relocalise_fixes,
+                   confirm_nis=gate_threshold(config.online.confirm_probability),
+                   agreement_nis=gate_threshold(config.fixes.gate_probability or 0.999),
+                   spacing=config.spacing, half_width_sigmas=config.fixes.half_width_sigmas,
+                   widest=config.fixes.max_half_width_cells * cell / config.fixes.half_width_sigmas,
+                   cell=cell)
 
     def precise(self, outcome: FixOutcome, share: float = 0.5) -> bool:
         """Whether a fix's largest std is within ``share / half_width_sigmas`` of its search's

@@ -274,6 +274,90 @@ def _first_reasons(fault: tuple[str, float] | None, n_parts: int, other: float, 
     return []
 
 
+def _checked_prior(patch: Patch, prior_mean, prior_cov) -> tuple[np.ndarray, np.ndarray]:
+    """The prior's mean ``(3,)`` and covariance ``(3, 3)`` as arrays, refused unless finite with a
+    positive definite position part and a tide variance >= 0."""
+    m3 = np.asarray(prior_mean, float)
+    p3 = np.asarray(prior_cov, float)
+    if m3.shape != (3,) or p3.shape != (3, 3) or not (np.all(np.isfinite(p3)) and np.all(np.isfinite(m3))) \
+            or np.linalg.eigvalsh(p3[:2, :2]).min() <= 0 or p3[2, 2] < 0:
+        raise MatchingError(f"window {patch.first}..{patch.reference}: the prior covariance is not finite "
+                            "and positive definite")
+    return m3, p3
+
+
+def _refined(weigh, weighed: tuple, centre: np.ndarray, lay: np.ndarray) -> tuple[tuple, int]:
+    """The window weighed at the grid's resolution, from ``weighed``, the result of the first,
+    blurred, ``weigh(centre, lay, True)``: a posterior narrower than ``REFINE_SPACINGS`` spacings
+    is weighed again on a grid laid over it, one that spills over the grid's edge on a grid four
+    times as wide, up to ``MAX_REFINE`` more grids; one resolved on a blurred grid is weighed
+    again on it unblurred. Returns the last weighing and how many grids were laid."""
+    grids, blurred = 1, True
+    while True:
+        mass, mean, cov = weighed[3:]
+        axes = _axes(lay)
+        inv = np.linalg.inv(axes)
+        narrow = np.linalg.eigvalsh(inv @ cov @ inv.T).min() < REFINE_SPACINGS**2
+        spilled = grids > 1 and _edge(mass) > EDGE_MASS
+        if not (narrow or spilled) or grids > MAX_REFINE:
+            if not blurred:
+                return weighed, grids
+            weighed = weigh(centre, lay, False)  # resolved on this grid: weigh it again as it is
+            blurred = False
+            continue
+        # a narrow posterior may sit between the points: lay the next grid over the cells around it
+        lay = 4.0 * lay if spilled else cov + axes @ axes.T / 3.0
+        centre = mean
+        weighed = weigh(centre, lay, False)
+        blurred = False
+        grids += 1
+
+
+def _residual_std(likelihood: TerrainLikelihood, patch: Patch, position: np.ndarray, tide: float) -> float:
+    """The RMS residual of the window's soundings at ``position`` with ``tide`` (NaN with none on
+    the map)."""
+    residual = likelihood.residuals(position[None, :], patch.offsets, patch.depths, np.array([tide]))[:, 0]
+    ok = np.isfinite(residual)
+    return float(np.sqrt(np.mean(residual[ok] ** 2))) if ok.any() else float("nan")
+
+
+def _factor(weighed: tuple, joint: bool, m3: np.ndarray, p3: np.ndarray,
+            reasons: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The window's factor from its last weighing: ``(position, covariance, joint_mean,
+    joint_cov)``, the posterior less the prior ``N(m3, p3)``, in (north, east, tide) when
+    ``joint`` (the tide's posterior joined to the grid's moments), else in (north, east); a
+    refused window (``reasons``, which the removal may add to) keeps its posterior as its
+    record and NaN joint moments."""
+    points, _, update, mass, mean, cov = weighed
+    position, covariance = mean, cov  # a refused window's record shows its posterior
+    joint_mean, joint_cov = np.full(3, np.nan), np.full((3, 3), np.nan)
+    if reasons:
+        return position, covariance, joint_mean, joint_cov
+    if joint:
+        factor = _remove_prior(*_joint_moments(points, update, mass, mean, cov), m3, p3, reasons)
+        if factor is not None:
+            joint_mean, joint_cov = factor
+            position, covariance = joint_mean[:2], joint_cov[:2, :2]
+    else:
+        factor = _remove_prior(mean, cov, m3[:2], p3[:2, :2], reasons)
+        if factor is not None:
+            position, covariance = factor
+    return position, covariance, joint_mean, joint_cov
+
+
+def _joint_moments(points: np.ndarray, update, mass: np.ndarray, mean: np.ndarray,
+                   cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The posterior's mean and covariance of (north, east, tide): the grid's moments joined by
+    each point's tide posterior."""
+    tide_mean = float(mass @ update.tide)
+    spread = update.tide - tide_mean
+    post3 = np.zeros((3, 3))
+    post3[:2, :2] = cov
+    post3[:2, 2] = post3[2, :2] = (mass * spread) @ (points - mean)
+    post3[2, 2] = update.tide_var + mass @ spread**2
+    return np.append(mean, tide_mean), post3
+
+
 def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndarray,
                   map_variance: np.ndarray | None, slope: np.ndarray, prior_mean, prior_cov, *,
                   tide_factor: bool = False) -> WindowFix:
@@ -298,12 +382,8 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         definite position part, or no sounding of the window has the map under it anywhere on
         the grid.
     """
-    m3 = np.asarray(prior_mean, float)
-    p3 = np.asarray(prior_cov, float)
+    m3, p3 = _checked_prior(patch, prior_mean, prior_cov)
     where = f"window {patch.first}..{patch.reference}"
-    if m3.shape != (3,) or p3.shape != (3, 3) or not (np.all(np.isfinite(p3)) and np.all(np.isfinite(m3))) \
-            or np.linalg.eigvalsh(p3[:2, :2]).min() <= 0 or p3[2, 2] < 0:
-        raise MatchingError(f"{where}: the prior covariance is not finite and positive definite")
     m, p = m3[:2], p3[:2, :2]
     gain_t = np.linalg.solve(p, p3[:2, 2])  # the tide's prior regression on the position
     tide_var = max(float(p3[2, 2] - p3[:2, 2] @ gain_t), 0.0)  # given the position
@@ -323,7 +403,8 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
         mass, mean, cov = _moments(points, log_post)
         return points, log_post, update, mass, mean, _floored(cov, axes)
 
-    points, log_post, update, mass, mean, cov = weigh(m, p, True)
+    weighed = weigh(m, p, True)
+    points, log_post, update, mass = weighed[:4]
     log_lik = update.log_likelihood
     fault = _depth_fault(likelihood, patch, variance, map_variance, _resolution(
         likelihood.bathymetry, patch.offsets + m, _axes(p), slope), points, log_post, log_lik,
@@ -334,47 +415,13 @@ def posterior_fix(patch: Patch, likelihood: TerrainLikelihood, variance: np.ndar
     n_fits, elsewhere = _parts(log_lik, _moments(points, log_lik)[0])
     edge = _edge(mass)
     reasons = _first_reasons(fault, n_parts, other, n_fits, elsewhere)
-    grids, centre, lay, blurred = 1, m, p, True
-    while not reasons:
-        axes = _axes(lay)
-        inv = np.linalg.inv(axes)
-        narrow = np.linalg.eigvalsh(inv @ cov @ inv.T).min() < REFINE_SPACINGS**2
-        spilled = grids > 1 and _edge(mass) > EDGE_MASS
-        if not (narrow or spilled) or grids > MAX_REFINE:
-            if blurred:  # resolved on this grid: weigh it again as it is
-                points, log_post, update, mass, mean, cov = weigh(centre, lay, False)
-                blurred = False
-                continue
-            break
-        # a narrow posterior may sit between the points: lay the next grid over the cells around it
-        lay = 4.0 * lay if spilled else cov + axes @ axes.T / 3.0
-        centre = mean
-        points, log_post, update, mass, mean, cov = weigh(centre, lay, False)
-        blurred = False
-        grids += 1
-    position, covariance = mean, cov  # a refused window's record shows its posterior
-    joint_mean, joint_cov = np.full(3, np.nan), np.full((3, 3), np.nan)
+    grids = 1
     if not reasons:
-        if joint:  # the tide's posterior joins the grid's moments
-            tide_mean = float(mass @ update.tide)
-            spread = update.tide - tide_mean
-            post3 = np.zeros((3, 3))
-            post3[:2, :2] = cov
-            post3[:2, 2] = post3[2, :2] = (mass * spread) @ (points - mean)
-            post3[2, 2] = update.tide_var + mass @ spread**2
-            factor = _remove_prior(np.append(mean, tide_mean), post3, m3, p3, reasons)
-            if factor is not None:
-                joint_mean, joint_cov = factor
-                position, covariance = joint_mean[:2], joint_cov[:2, :2]
-        else:
-            factor = _remove_prior(mean, cov, m, p, reasons)
-            if factor is not None:
-                position, covariance = factor
-    best = int(np.argmax(log_post))
-    tide_best = float(update.tide[best])
-    residual = likelihood.residuals(mean[None, :], patch.offsets, patch.depths, np.array([tide_best]))[:, 0]
-    ok = np.isfinite(residual)
-    sigma = float(np.sqrt(np.mean(residual[ok] ** 2))) if ok.any() else float("nan")
+        weighed, grids = _refined(weigh, weighed, m, p)
+    points, log_post, update, mass, mean, cov = weighed
+    position, covariance, joint_mean, joint_cov = _factor(weighed, joint, m3, p3, reasons)
+    tide_best = float(update.tide[int(np.argmax(log_post))])
+    sigma = _residual_std(likelihood, patch, mean, tide_best)
     quality = FixQuality(peak_ratio=float("inf") if n_parts < 2 else other, n_basins=max(n_parts, n_fits, 1),
                          area_fraction=float(np.sqrt(np.linalg.det(cov) / np.linalg.det(p))),
                          touches_edge=edge > EDGE_MASS, reasons=tuple(reasons),

@@ -8,7 +8,7 @@ stack on chains of about 10^5 poses. The marginal covariance of every
 key pose comes from one multifrontal elimination of the linearised graph, also ordered by METIS
 (``gtsam.Marginals`` cannot be given an ordering from Python and crashes on such chains).
 
-With ``GraphConfig.smoother_terrain = "soundings"`` (or ``"field"``) a last solve replaces the
+With ``GraphConfig.batch.smoother_terrain = "soundings"`` (or ``"field"``) a last solve replaces the
 fixes by every sounding (:mod:`tangraph.graph.terrain_solve`). The ping-rate track is recovered
 from the key poses and the DR (:func:`~tangraph.graph.batch.dense_track`).
 """
@@ -88,7 +88,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
     started = _time.perf_counter()
     try:
         ordering = metis_ordering(factors, graph.calibrated)
-        result, iterations = gauss_newton(factors, values, ordering, config.max_iterations)
+        result, iterations = gauss_newton(factors, values, ordering, config.batch.max_iterations)
     except (RuntimeError, IndexError) as exc:  # GTSAM's indeterminant system; METIS on odd graphs
         raise _translate(exc, graph) from None
     solved = _time.perf_counter()
@@ -102,7 +102,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
         calib = np.asarray(result.atVector(CALIBRATION), float)
     cov = np.full((keys.size, 5, 5), np.nan)
     calib_cov = np.zeros((2, 2))
-    if config.smoother_covariance == "all":
+    if config.batch.smoother_covariance == "all":
         cov, calib_cov = marginals(factors, result, keys, ordering, graph.calibrated)
         cov = joint_in_frame(pose[:, 2], cov)
     done = _time.perf_counter()
@@ -165,7 +165,7 @@ def _solve(graph: PoseGraph, records: list[FixRecord], config: GraphConfig, init
     the candidates' inliers (and whether the start prior is one) by :func:`~tangraph.graph.robust.gnc`,
     then the solve with the inliers only; otherwise the accepted fixes. Returns the solution,
     the records with their final status and whether the start prior was kept."""
-    if config.robust_solve != "gnc":
+    if config.batch.robust_solve != "gnc":
         fixes = [(r.index, r.position, r.covariance) for r in records if r.accepted]
         return smooth_pose_graph(graph.with_fixes(fixes), config, initial=initial,
                                  calibration=calibration), records, True
@@ -212,20 +212,21 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
     ordering = metis_ordering(full.factor_graph(), graph.calibrated)
 
     def solve(factors, values):
-        return gauss_newton(factors, values, ordering, config.max_iterations)[0]
+        return gauss_newton(factors, values, ordering, config.batch.max_iterations)[0]
 
     as_candidate = start and len(keys) >= 2  # with fewer fixes the start is all there is
     if not as_candidate and start:
         fixed.append(plain.start_factor())
     try:
         result = gnc(fixed, candidate, len(fixes) + int(as_candidate), values, solve,
-                     probability=config.gnc_probability)
+                     probability=config.batch.gnc_probability)
     except RuntimeError as exc:  # a weighted graph GTSAM finds indeterminant
         if not as_candidate:
             raise _translate(exc, graph) from None
         fixed.append(plain.start_factor())
         try:
-            result = gnc(fixed, candidate, len(fixes), values, solve, probability=config.gnc_probability)
+            result = gnc(fixed, candidate, len(fixes), values, solve,
+                         probability=config.batch.gnc_probability)
         except RuntimeError as again:
             raise _translate(again, graph) from None
         as_candidate = False
@@ -247,7 +248,7 @@ def _smoothed_meta(nav: GraphNavigator, solution: SmootherSolution, records, rou
     last = survey.n_pings - 1
     joint = np.zeros((5, 5))
     joint[3:, 3:] = solution.calibration_cov
-    if config.smoother_covariance == "all" and solution.keys[-1] == last:
+    if config.batch.smoother_covariance == "all" and solution.keys[-1] == last:
         joint = solution.covariance[-1]
     last_inlier = max((r.index for r in records if r.accepted), default=-1)
     tails = [e for e in nav.episodes  # never relocalised online and no fix kept after
@@ -266,7 +267,7 @@ def _smoothed_meta(nav: GraphNavigator, solution: SmootherSolution, records, rou
         "start_prior": "kept" if start_kept else "outlier",
         "optimizer_iterations": solution.iterations,
         "final_error": solution.error,
-        "terrain": config.smoother_terrain,
+        "terrain": config.batch.smoother_terrain,
     })
     return meta
 
@@ -277,11 +278,11 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
 
     A forward pass of :class:`~tangraph.graph.GraphNavigator` makes and gates the fixes; the whole
     graph, the DR's calibration included, is then solved at once (:func:`smooth_pose_graph`).
-    With ``GraphConfig.robust_solve="gnc"`` (the default) the fixes the forward pass accepted,
+    With ``GraphConfig.batch.robust_solve="gnc"`` (the default) the fixes the forward pass accepted,
     gated or held, and the start prior, are weighed by graduated non-convexity
     (:mod:`tangraph.graph.robust`) and the graph is solved with the inliers alone, the online
     pass's breaks undone. Re-matching around the smoothed track follows
-    (``GraphConfig.rematch_iterations``), and the ping-rate track is recovered from the key poses
+    (``GraphConfig.batch.rematch_iterations``), and the ping-rate track is recovered from the key poses
     and the DR (:func:`dense_track`).
 
     Parameters
@@ -307,8 +308,8 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         pings belong to) and ``forward_lost_episodes`` (all of the forward pass's).
     """
     started = _time.perf_counter()
-    if isinstance(config, GraphConfig) and config.front_end != "tap":  # the online graph's only
-        config = dataclasses.replace(config, front_end="tap")
+    if isinstance(config, GraphConfig) and config.online.front_end != "tap":  # the online graph's only
+        config = config.replace(front_end="tap")
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
     forward = _time.perf_counter()
     config = nav.config
@@ -318,24 +319,24 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     solution, records, start_kept = _solve(graph, nav.fixes, config, initial, nav.calibration)
     dense = dense_track(survey, nav.white, solution, nav.origin)
     rounds = 0
-    for rounds in range(1, config.rematch_iterations + 1):
+    for rounds in range(1, config.batch.rematch_iterations + 1):
         remade = _rematch(nav, dense[0], dense[1], solution)
         new_solution, new_records, new_start = _solve(graph, remade, config, solution.pose,
                                                       solution.calibration)
-        if not _moved(records, new_records, config.rematch_tolerance):
+        if not _moved(records, new_records, config.batch.rematch_tolerance):
             rounds -= 1
             break
         solution, records, start_kept = new_solution, new_records, new_start
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("re-match %d: %d fixes accepted", rounds, sum(r.accepted for r in records))
     soundings = refined = None
-    if config.smoother_terrain != "fixes":
+    if config.batch.smoother_terrain != "fixes":
         solution, soundings, refined = terrain_solve(nav, start_kept, solution, config)
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("terrain solve: %d of %d soundings used", soundings["soundings_used"],
                  soundings["soundings"])
     pose, cov = dense
-    if config.smoother_covariance == "none":
+    if config.batch.smoother_covariance == "none":
         cov = np.full_like(cov, np.nan)
     meta = _smoothed_meta(nav, solution, records, rounds, start_kept)
     if soundings is not None:

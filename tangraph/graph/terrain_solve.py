@@ -1,7 +1,7 @@
 """The smoother's last solve on every sounding: terrain factors per ping instead of the fixes,
 and optionally the map's error estimated with the track.
 
-With ``GraphConfig.smoother_terrain = "soundings"`` the fixes are replaced by every sounding,
+With ``GraphConfig.batch.smoother_terrain = "soundings"`` the fixes are replaced by every sounding,
 each a terrain factor on a key pose at its ping (:mod:`tangraph.graph.terrain_factors`):
 Gauss-Newton from the fixes' solution, with a tide variable, re-linearised at every iteration;
 the soundings judged as innovations of the fixes' solution, one by one and ping by ping, again
@@ -57,7 +57,7 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
     (:func:`_ping_graph`: the white DR noise between pings is then the odometry's, correlations
     and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
     it), the tide's and the soundings, the soundings re-gated at each converged solve; with
-    ``config.smoother_terrain = "field"`` and a map that states its error, the map's error
+    ``config.batch.smoother_terrain = "field"`` and a map that states its error, the map's error
     solved with them (:func:`_field_solve`). Returns the solution (its keys every ping), what it
     used and the refined map (None but with ``"field"``)."""
     started = _time.perf_counter()
@@ -81,7 +81,7 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
         start = float(np.median(finite)) if finite.size else terrain.tide
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
-    if config.smoother_terrain == "field" and nav.map_error is not None:
+    if config.batch.smoother_terrain == "field" and nav.map_error is not None:
         if nav.model.map_offset_std > 0:  # the map's horizontal offset, solved with the rest
             terrain = dataclasses.replace(terrain, map_offset_std=float(nav.model.map_offset_std))
             factors.add(gtsam.PriorFactorVector(MAP_OFFSET, np.zeros(2),
@@ -111,7 +111,7 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
     pose, calibration, tide = state
     keys = np.asarray(graph.keys, np.int64)
     cov, calib_cov = np.full((keys.size, 5, 5), np.nan), np.zeros((2, 2))
-    if config.smoother_covariance == "all":
+    if config.batch.smoother_covariance == "all":
         extra = terrain_factors.linear_factors(terrain, nav.bathymetry, pose, calibration, tide, used)
         cov, calib_cov = batch.marginals(factors, values, keys, ordering, graph.calibrated, extra)
         cov = joint_in_frame(pose[:, 2], cov)
@@ -173,7 +173,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
         solving = dataclasses.replace(terrain, variance=noise * noise_factor**2 + scaled.nugget)
         for attempt in range(_GATE_ROUNDS):
             solved = field_solve.solve(factors, values, solving, bathymetry, scaled, used, unpack, u=u,
-                                       max_iterations=config.max_iterations)
+                                       max_iterations=config.batch.max_iterations)
             values, u, iterations = solved.values, solved.u, iterations + solved.iterations
             regated = judged(values, noise_factor, hold.variance_ratio(field_factor))
             # ``used`` stays the last solve's: its system holds those soundings and no others
@@ -197,7 +197,7 @@ def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference
     cov = joint_in_frame(pose[:, 2], cov)
     found_error = field_solve.scaled_error(error, hold.field, field_factor)
     refined = field_solve.refined_map(found_error, scaled.field, solved, inverse)
-    if config.smoother_covariance != "all":
+    if config.batch.smoother_covariance != "all":
         cov, calib_cov = np.full_like(cov, np.nan), np.zeros((2, 2))
     assert u is not None  # solved at least once
     offset = scaled.offset(u)
@@ -231,7 +231,7 @@ def _gated_solve(factors, values, terrain, bathymetry, used, config: GraphConfig
         for factor in terrain_factors.linear_factors(terrain, bathymetry, *state, used):
             linear.push_back(factor)
         ordering = batch.shared_last(gtsam.Ordering.MetisGaussianFactorGraph(linear))
-        values, n = batch.gauss_newton(factors, values, ordering, config.max_iterations,
+        values, n = batch.gauss_newton(factors, values, ordering, config.batch.max_iterations,
                                   **_terrain_terms(terrain, bathymetry, used, reference))
         iterations += n
         state = _unpack(values, terrain, reference)

@@ -29,13 +29,13 @@ tide_std = 0.1
 map_correlation_length = 10.0
 robust_kernel = "cauchy"
 """
-GRAPH = """[graph]
+GRAPH = """[graph.fixes]
 n_pings = 120
 fix_spacing = 60
 accept_multimodal = false
 gate_probability = 0.99
 
-[graph.tap]
+[graph.fixes.tap]
 criterion = "msd"
 alpha = 0.01
 """

@@ -141,7 +141,7 @@ def test_dr_covariance_is_honest_when_nothing_corrects_it(rough_map):
     for _ in range(runs):
         k, b = rng.normal(0.0, model.speed_scale_std), rng.normal(0.0, model.heading_bias_std)
         survey = _dr_survey(model, k, b, rng)
-        config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0)
+        config = GraphConfig().replace(n_pings=10_000, ramp_pings=None, key_interval=30.0)
         track = GraphNavigator(survey, rough_map, config, model=model).run().track()
         e = track.pose[-1, :2] - survey.true_pose[-1, :2]
         nees.append(e @ np.linalg.solve(track.covariance[-1, :2, :2], e))
@@ -160,14 +160,14 @@ def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
     from tangraph.matching import tap_fix
 
     config = GraphConfig()
-    fix = tap_fix(biased_survey.replace(dr_pose=biased_survey.true_pose), rough_map, 59, 20, config.tap,
+    fix = tap_fix(biased_survey.replace(dr_pose=biased_survey.true_pose), rough_map, 59, 20, config.fixes.tap,
                   prior=biased_survey.true_pose[59, :2])
     predicted, cov = biased_survey.true_pose[59], np.eye(3) * 4.0
     assert judge_fix(fix, predicted, cov, config, 50.0).record.status is FixStatus.ACCEPTED
     two = _flagged(fix, "multimodal: 2 basins")
     used = judge_fix(two, predicted, cov, config, 50.0)
     assert used.accepted and used.record.status is FixStatus.ACCEPTED and "multimodal" in used.record.reason
-    refused = judge_fix(two, predicted, cov, dataclasses.replace(config, accept_multimodal=False), 50.0)
+    refused = judge_fix(two, predicted, cov, config.replace(accept_multimodal=False), 50.0)
     assert refused.record.status is FixStatus.MULTIMODAL and not refused.accepted
     flat = judge_fix(_flagged(fix, "uninformative: touches the edge"), predicted, cov, config, 50.0)
     assert flat.record.status is FixStatus.UNINFORMATIVE

@@ -34,7 +34,7 @@ def flat_map(std: float, length: float) -> BathymetryMap:
 
 
 #: the field smoother on a flat map: nothing tells the calibration, nothing to re-match
-FIELD_ON_FLAT = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+FIELD_ON_FLAT = GraphConfig().replace(smoother_terrain="field", rematch_iterations=0)
 KNOWN_DR = {"speed_scale_std": 0.0, "heading_bias_std": 0.0}  # no calibration variable: the DR as it is
 
 
@@ -103,11 +103,11 @@ def test_the_covariance_is_the_bound_of_the_same_model():
     truth, survey = lawnmower(start_error=(0.0, 0.0))
     survey = noise_free(biased_dr(survey, truth), bathymetry)
     bound = bound_rmse(posterior_crb(survey, bathymetry, MODEL, kind="smoother"))
-    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    config = GraphConfig().replace(smoother_terrain="field", rematch_iterations=0)
     track = smooth_survey(survey, bathymetry, config, model=MODEL)
     claimed = np.sqrt(np.mean(np.trace(track.covariance[:, :2, :2], axis1=1, axis2=2)))
     assert bound <= claimed <= 1.15 * bound
-    widened = smooth_survey(survey, bathymetry, dataclasses.replace(config, smoother_terrain="soundings"),
+    widened = smooth_survey(survey, bathymetry, config.replace(smoother_terrain="soundings"),
                             model=MODEL)
     assert np.sqrt(np.mean(np.trace(widened.covariance[:, :2, :2], axis1=1, axis2=2))) > 1.5 * bound
     info = track.meta["soundings"]
@@ -177,9 +177,9 @@ def test_a_map_without_error_is_solved_as_soundings():
     bathymetry = smooth_map()
     _, survey = lawnmower()
     survey = noise_free(survey, bathymetry)
-    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    config = GraphConfig().replace(smoother_terrain="field", rematch_iterations=0)
     field = smooth_survey(survey, bathymetry, config, model=MODEL)
-    soundings = smooth_survey(survey, bathymetry, dataclasses.replace(config, smoother_terrain="soundings"),
+    soundings = smooth_survey(survey, bathymetry, config.replace(smoother_terrain="soundings"),
                               model=MODEL)
     np.testing.assert_array_equal(field.pose, soundings.pose)
     assert "refined_map" not in field.meta and "field_nodes" not in field.meta["soundings"]
@@ -312,7 +312,7 @@ def test_the_map_offset_is_recovered_and_the_track_kept():
     survey = survey.replace(beam_depth=depth)
     model = NavigationModel(sounding_std=0.05, tide_std=0.5, speed_noise=0.02, initial_position_std=2.0,
                             speed_scale_std=0.02, heading_bias_std=0.03, map_offset_std=5.0)
-    config = GraphConfig(smoother_terrain="field", rematch_iterations=0)
+    config = GraphConfig().replace(smoother_terrain="field", rematch_iterations=0)
     track = smooth_survey(survey, bathymetry, config, model=model)
     info = track.meta["soundings"]
     found, std = np.array(info["map_offset"]), np.array(info["map_offset_std"])

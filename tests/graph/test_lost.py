@@ -39,7 +39,7 @@ def test_a_wrong_start_is_found_lost_and_relocalised(wrong_start, rough_map):
 
 
 def test_without_the_lost_test_the_wrong_start_is_a_confident_wrong_answer(wrong_start, rough_map):
-    track = navigate_online(wrong_start, rough_map, dataclasses.replace(CONFIG, lost_windows=None))
+    track = navigate_online(wrong_start, rough_map, CONFIG.replace(lost_windows=None))
     assert track.meta["lost_episodes"] == [] and not track.lost.any()
     assert track_metrics(track, wrong_start.true_pose)["confident_wrong"] > 0.5
 
@@ -58,7 +58,8 @@ def test_a_clean_survey_is_never_lost(small_survey, rough_map):
 
 
 def _fix_at(survey, bathymetry, k, offset):
-    fix = tap_fix(survey, bathymetry, k, CONFIG.n_pings, dataclasses.replace(CONFIG.tap, half_width=30.0),
+    fix = tap_fix(survey, bathymetry, k, CONFIG.fixes.n_pings,
+                  dataclasses.replace(CONFIG.fixes.tap, half_width=30.0),
                   prior=survey.true_pose[k, :2])
     return dataclasses.replace(fix, position=survey.true_pose[k, :2] + np.asarray(offset, float),
                                covariance=np.eye(2))
@@ -142,7 +143,7 @@ def test_a_false_alarm_ends_when_a_fix_agrees_with_the_belief_held(small_survey,
     """Two precise fixes 40 m off in a row (as a block of shifted pings gives) make the navigator
     lost with ``lost_windows=2``; the next genuine fix agrees with the belief it gave up, so the
     episode ends there, with no jump, and the track stays as good as the clean one."""
-    config = dataclasses.replace(CONFIG, lost_windows=2)
+    config = CONFIG.replace(lost_windows=2)
     bad = {k: _fix_at(small_survey, rough_map, k, [40.0, -10.0]) for k in (99, 109)}
     nav = GraphNavigator(small_survey, rough_map, config)
     for k in range(small_survey.n_pings):
@@ -186,7 +187,7 @@ def test_a_fix_whose_key_left_the_isam2_window_is_left_to_the_smoother(small_sur
     from tangraph.graph.lost import use
     from tangraph.graph.policy import Candidate
 
-    config = dataclasses.replace(CONFIG, isam_window=3)
+    config = CONFIG.replace(isam_window=3)
     nav = GraphNavigator(small_survey, rough_map, config)
     for _ in range(150):
         nav.step()
@@ -203,7 +204,7 @@ def test_a_fix_whose_key_left_the_isam2_window_is_left_to_the_smoother(small_sur
 def test_without_the_robust_solve_the_smoother_keeps_the_widened_start(wrong_start, rough_map):
     """With ``robust_solve="none"`` the smoother solves the online graph as it is: the start
     prior the lost navigator widened stays widened, so the fixes that relocalised it hold."""
-    track = smooth_survey(wrong_start, rough_map, dataclasses.replace(CONFIG, robust_solve="none"))
+    track = smooth_survey(wrong_start, rough_map, CONFIG.replace(robust_solve="none"))
     errors = np.hypot(*(track.pose[:, :2] - wrong_start.true_pose[:, :2]).T)
     assert np.sqrt(np.mean(errors**2)) < 5.0
 
@@ -218,11 +219,11 @@ def test_the_misfit_test_holds_a_window_against_the_ones_around_it(small_survey,
     assert nav._misfit_noise(19, 8.0 * noise) == noise  # two windows: too few to say what fits
     bad = [9.0, 10.0, 8.5, 9.5, 9.0, 8.0, 10.0, 9.0, 8.5]
     for k, sigma in zip(range(29, 119, 10), bad, strict=True):
-        limit = CONFIG.misfit_ratio * nav._misfit_noise(k, sigma * noise)
+        limit = CONFIG.fixes.misfit_ratio * nav._misfit_noise(k, sigma * noise)
         assert sigma * noise < limit  # all as bad: none refused
     for k in range(119, 239, 10):
         nav._misfit_noise(k, noise)  # the DR's errors known: the windows fit
-    assert 5.0 * noise > CONFIG.misfit_ratio * nav._misfit_noise(239, 5.0 * noise)  # one bad one
+    assert 5.0 * noise > CONFIG.fixes.misfit_ratio * nav._misfit_noise(239, 5.0 * noise)  # one bad one
     kept = list(nav._residuals)
     nav._misfit_noise(239, 5.0 * noise)  # the same window judged again (after a widening)
     assert list(nav._residuals) == kept and len(kept) == 10  # it pushes no older window out
@@ -232,7 +233,7 @@ def test_a_forward_pass_lost_to_the_end_leaves_only_the_smoothers_unfixed_tail_l
     """An online navigator that never relocalises is lost to the end; the smoother, which weighs
     every fix again, flags only the pings after the last fix it kept, and keeps the forward
     pass's episodes apart."""
-    config = dataclasses.replace(CONFIG, relocalise_fixes=10_000)
+    config = CONFIG.replace(relocalise_fixes=10_000)
     online = navigate_online(wrong_start, rough_map, config)
     assert online.meta["lost_episodes"][-1]["end"] is None and online.lost[-1]
     track = smooth_survey(wrong_start, rough_map, config)
@@ -244,7 +245,7 @@ def test_a_forward_pass_lost_to_the_end_leaves_only_the_smoothers_unfixed_tail_l
 
 def test_without_confirmation_a_surprising_fix_is_used_at_once(small_survey, rough_map):
     """``confirm_probability=None``: a fix within the gate is used at once, however surprising."""
-    config = dataclasses.replace(CONFIG, confirm_probability=None)
+    config = CONFIG.replace(confirm_probability=None)
     k = 99
     nav = GraphNavigator(small_survey, rough_map, config)
     for _ in range(k):

@@ -14,6 +14,7 @@ from tangraph.graph import (
     GraphConfig,
     GraphNavigator,
     dense_track,
+    load_graph_config,
     navigate_online,
     propagate,
     smooth_pose_graph,
@@ -58,7 +59,7 @@ def dr_only_survey(model: DeadReckoningModel, n: int = 300) -> Survey:
 def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
     model = DeadReckoningModel(speed_noise=0.05, heading_walk=2e-4)
     survey = dr_only_survey(model)
-    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=30.0)
+    config = GraphConfig().replace(n_pings=10_000, ramp_pings=None, key_interval=30.0)
     nav = GraphNavigator(survey, rough_map, config, model=NavigationModel.from_dead_reckoning(
         model, initial_position_std=1e-3, odometry_min_std=1e-7, odometry_min_heading_std=1e-5,
         speed_scale_std=0.0, heading_bias_std=0.0)).run()
@@ -80,7 +81,7 @@ def test_odometry_only_graph_reproduces_dr_with_its_covariance(rough_map):
 
 def test_isam2_containers_cleared_and_window_bounded(rough_map):
     survey = dr_only_survey(DeadReckoningModel(speed_noise=0.05, heading_walk=1e-4), n=120)
-    config = GraphConfig(n_pings=10_000, ramp_pings=None, key_interval=1.0, isam_window=None)
+    config = GraphConfig().replace(n_pings=10_000, ramp_pings=None, key_interval=1.0, isam_window=None)
     nav = GraphNavigator(survey, rough_map, config)
     for _ in range(survey.n_pings):
         nav.step()
@@ -88,7 +89,7 @@ def test_isam2_containers_cleared_and_window_bounded(rough_map):
     # each factor added once: the start's heading and position, the calibration prior, the odometry
     assert nav.isam.getFactorsUnsafe().size() == 3 + len(nav.graph.odometry)
     assert nav.isam.calculateEstimate().size() == survey.n_pings + 1  # and the calibration
-    windowed = GraphNavigator(survey, rough_map, dataclasses.replace(config, isam_window=5)).run()
+    windowed = GraphNavigator(survey, rough_map, config.replace(isam_window=5)).run()
     assert windowed.isam.calculateEstimate().size() <= 11
     np.testing.assert_allclose(windowed.track().pose, nav.track().pose, atol=1e-6)
     with pytest.raises(TangraphError, match="all have been processed"):
@@ -126,9 +127,9 @@ def test_rematch_converges(small_survey, rough_map):
     tolerance (an oscillating re-match would run to the cap): here within 1 cm after 5 rounds,
     the moves shrinking each round (measured: 2 rounds to 5 cm, 8 to 1 mm); it moves the fixes
     and does not make the track worse."""
-    config = GraphConfig(key_interval=20.0, rematch_iterations=10, rematch_tolerance=0.01)
+    config = GraphConfig().replace(key_interval=20.0, rematch_iterations=10, rematch_tolerance=0.01)
     smoothed = smooth_survey(small_survey, rough_map, config)
-    single = smooth_survey(small_survey, rough_map, dataclasses.replace(config, rematch_iterations=0))
+    single = smooth_survey(small_survey, rough_map, config.replace(rematch_iterations=0))
     done = smoothed.meta["rematch_iterations"]
     assert 1 <= done < 10 and single.meta["rematch_iterations"] == 0
     # re-matched patches are laid with the smoothed poses: the fixes move, and the track does not get worse
@@ -171,12 +172,13 @@ def test_step_returns_copies_and_patches_are_laid_rigidly(small_survey, rough_ma
 
 def outlier_fixes(survey, bathymetry, config, rate: float, rng) -> dict:
     """Wrong but confident fixes at ``rate`` of the window ends: the genuine fix moved 15-40 m."""
-    ends = np.arange(config.n_pings - 1, survey.n_pings, config.spacing)
+    ends = np.arange(config.fixes.n_pings - 1, survey.n_pings, config.spacing)
     chosen = rng.choice(ends[1:], size=max(1, round(rate * ends.size)), replace=False)
     fixes = {}
     for k in chosen:
-        genuine = tap_fix(survey, bathymetry, int(k), config.n_pings,
-                          dataclasses.replace(config.tap, half_width=30.0), prior=survey.true_pose[k, :2])
+        genuine = tap_fix(survey, bathymetry, int(k), config.fixes.n_pings,
+                          dataclasses.replace(config.fixes.tap, half_width=30.0),
+                          prior=survey.true_pose[k, :2])
         angle, distance = rng.uniform(0, 2 * np.pi), rng.uniform(15.0, 40.0)
         fixes[int(k)] = dataclasses.replace(
             genuine, position=genuine.position + distance * np.array([np.cos(angle), np.sin(angle)]))
@@ -205,7 +207,7 @@ def test_outlier_fixes_do_not_pull_the_track(small_survey, rough_map, rate):
 
 
 def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
-    config = GraphConfig(key_interval=20.0, gate_probability=None, confirm_probability=None,
+    config = GraphConfig().replace(key_interval=20.0, gate_probability=None, confirm_probability=None,
                          lost_windows=None)
     truth = small_survey.true_pose
     bad = outlier_fixes(small_survey, rough_map, config, 0.1, np.random.default_rng(5))
@@ -221,11 +223,11 @@ def test_robust_kernel_alone_limits_an_outlier(small_survey, rough_map):
 
 @pytest.mark.parametrize("cov", [np.zeros((2, 2)), -np.eye(2), np.full((2, 2), np.nan)])
 def test_bad_fix_covariance_in_a_step_is_refused(small_survey, rough_map, cov):
-    config = GraphConfig(key_interval=20.0, n_pings=10, fix_spacing=None)
+    config = GraphConfig().replace(key_interval=20.0, n_pings=10, fix_spacing=None)
     nav = GraphNavigator(small_survey, rough_map, config)
     for _ in range(29):
         nav.step()
-    fix = tap_fix(small_survey, rough_map, 29, config.n_pings, config.tap,
+    fix = tap_fix(small_survey, rough_map, 29, config.fixes.n_pings, config.fixes.tap,
                   prior=small_survey.true_pose[29, :2])
     with pytest.raises(TangraphError, match=r"fix at ping 29 \(window 20\.\.29\)"):
         nav.step(fix=dataclasses.replace(fix, covariance=cov))
@@ -240,26 +242,34 @@ def test_a_model_is_required_when_the_survey_has_none(small_survey, rough_map):
     assert track.meta["n_fixes_accepted"] > 0
 
 
-@pytest.mark.parametrize("changes", [{"front_end": "ekf"}, {"key_interval": 0.0}, {"n_pings": 0},
-                                     {"gate_probability": 1.5}, {"isam_window": 1},
-                                     {"min_half_width_cells": 10.0, "max_half_width_cells": 5.0},
-                                     {"relinearize_threshold": float("nan")},
-                                     {"ramp_pings": 0},
-                                     {"tap": TapConfig(half_width=30.0)},
-                                     {"tap": TapConfig(step=2.0), "tap_step_cells": 1.0}])
-def test_config_is_validated(changes):
-    with pytest.raises(TangraphError, match="GraphConfig"):
-        GraphConfig(**changes)
+@pytest.mark.parametrize(("changes", "named"), [
+    ({"front_end": "ekf"}, "OnlineConfig.front_end"), ({"key_interval": 0.0}, "GraphConfig.key_interval"),
+    ({"n_pings": 0}, "FixConfig.n_pings"), ({"gate_probability": 1.5}, "FixConfig.gate_probability"),
+    ({"isam_window": 1}, "OnlineConfig.isam_window"),
+    ({"min_half_width_cells": 10.0, "max_half_width_cells": 5.0}, "FixConfig: max_half_width_cells"),
+    ({"relinearize_threshold": float("nan")}, "OnlineConfig.relinearize_threshold"),
+    ({"ramp_pings": 0}, "FixConfig.ramp_pings"),
+    ({"tap": TapConfig(half_width=30.0)}, "FixConfig: tap.half_width"),
+    ({"tap": TapConfig(step=2.0), "tap_step_cells": 1.0}, "FixConfig: tap.step"),
+    ({"rematch_iterations": -1}, "BatchConfig.rematch_iterations"),
+    ({"gnc_probability": 1.0}, "BatchConfig.gnc_probability"),
+    ({"n_ping": 20}, "unknown GraphConfig field 'n_ping'"),
+    ({"optimizer": "lm"}, "GraphConfig.optimizer is no longer a setting"),
+])
+def test_config_is_validated(changes, named):
+    """Every part checks its fields, naming the part and the field."""
+    with pytest.raises(TangraphError, match=named):
+        GraphConfig().replace(**changes)
 
 
 def test_config_honours_what_it_is_given():
     """A fixed half-width and a step in metres are used as given; a removed key is refused by
     name, with where its job went."""
-    config = GraphConfig(half_width_rule="fixed", tap=TapConfig(half_width=30.0, step=2.0))
+    config = GraphConfig().replace(half_width_rule="fixed", tap=TapConfig(half_width=30.0, step=2.0))
     bathy = BathymetryMap(np.arange(5) * 5.0, np.arange(5) * 5.0, np.zeros((5, 5)))
     assert search_half_width(config, bathy, np.eye(2) * 1e4) == 30.0
     assert search_step(config, bathy) == 2.0
-    assert search_step(GraphConfig(tap_step_cells=1.0), bathy) == 5.0
+    assert search_step(GraphConfig().replace(tap_step_cells=1.0), bathy) == 5.0
     removed = r"cfg.toml: GraphConfig.optimizer is no longer a setting: .*gauss_newton"
     with pytest.raises(TangraphError, match=removed):
         GraphConfig.from_mapping({"optimizer": "lm"}, "cfg.toml")
@@ -304,7 +314,7 @@ def test_covariances_over_seeds_match_the_measured_anees(rough_map):
 
 
 def test_a_fix_window_may_end_at_the_first_ping(small_survey, rough_map):
-    config = GraphConfig(n_pings=1, fix_spacing=50, key_interval=20.0)
+    config = GraphConfig().replace(n_pings=1, fix_spacing=50, key_interval=20.0)
     track = navigate_online(small_survey, rough_map, config)
     assert [f.index for f in track.fixes] == [0, 50, 100, 150, 200]
 
@@ -325,19 +335,34 @@ def test_a_map_error_shared_by_the_soundings_widens_every_fix(small_survey, roug
 
 
 def test_graph_config_from_a_toml_file(tmp_path):
-    from tangraph.graph import load_graph_config
-
+    """A file gives the parts as tables; a part's field at the top level is refused naming its
+    table, a moved or unknown key by name."""
     path = tmp_path / "graph.toml"
-    path.write_text('[graph]\nn_pings = 60\nsmoother_terrain = "field"\n[graph.tap]\ncriterion = "msd"\n')
+    path.write_text('[graph]\nkey_interval = 30.0\n[graph.fixes]\nn_pings = 40\n[graph.fixes.tap]\n'
+                    'criterion = "msd"\n[graph.online]\nfront_end = "pmf"\n[graph.batch]\n'
+                    'smoother_terrain = "field"\n')
     config = load_graph_config(path)
-    assert (config.n_pings, config.smoother_terrain, config.tap.criterion.value) == (60, "field", "msd")
+    assert (config.key_interval, config.fixes.n_pings, config.fixes.tap.criterion.value) == (30.0, 40, "msd")
+    assert (config.online.front_end, config.batch.smoother_terrain) == ("pmf", "field")
+    assert config == GraphConfig.from_mapping(config.as_dict())  # the track's metadata reads back
+    assert config.spacing == config.window == 3  # the point-mass front end's windows
+    path.write_text('[graph]\nn_pings = 60\n')
+    with pytest.raises(TangraphError, match=r"graph.toml: GraphConfig.n_pings is now in the fixes part"):
+        load_graph_config(path)
+    with pytest.raises(TangraphError, match=r"GraphConfig.lost_windows is now in the online part"):
+        GraphConfig.from_mapping({"lost_windows": 3}, "cfg.toml")
+    with pytest.raises(TangraphError, match="cfg.toml: GraphConfig.batch must be a table"):
+        GraphConfig.from_mapping({"batch": 3}, "cfg.toml")
     path.write_text('[graph]\nrobust_kernel = "cauchy"\n')
     moved = r"graph.toml: GraphConfig.robust_kernel .* NavigationModel.robust_kernel"
     with pytest.raises(TangraphError, match=moved):
         load_graph_config(path)
-    path.write_text('[graph.tap]\ncriterio = "msd"\n')
+    path.write_text('[graph.fixes.tap]\ncriterio = "msd"\n')
     with pytest.raises(TangraphError, match="unknown TapConfig field 'criterio'"):
         load_graph_config(path)
-    path.write_text("[graph]\nn_pings = 60\n[other]\nx = 1\n")
+    path.write_text('[graph.online]\nn_pings = 3\n')
+    with pytest.raises(TangraphError, match="unknown OnlineConfig field 'n_pings'"):
+        load_graph_config(path)
+    path.write_text("[graph]\nkey_interval = 60.0\n[other]\nx = 1\n")
     with pytest.raises(TangraphError, match="keys outside \\[graph\\]: other"):
         load_graph_config(path)

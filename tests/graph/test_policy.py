@@ -8,7 +8,6 @@ through the dead reckoning), and the prediction is at the origin.
 from __future__ import annotations
 
 import ast
-import dataclasses
 import inspect
 import math
 from types import SimpleNamespace
@@ -160,7 +159,7 @@ def test_a_held_fix_no_fix_comes_to_agree_with_is_unconfirmed_after_two_windows(
 
 
 def test_without_confirmation_a_surprising_fix_is_used():
-    policy = FixPolicy.from_config(dataclasses.replace(CONFIG, confirm_probability=None), cell=5.0)
+    policy = FixPolicy.from_config(CONFIG.replace(confirm_probability=None), cell=5.0)
     state, actions = policy.decide(PolicyState(), window(19, nis=SURPRISING))
     assert summary(actions) == [("use", 0, "")] and state.held is None
 
@@ -212,7 +211,7 @@ def test_vague_windows_beyond_the_search_are_no_evidence():
 
 
 def test_without_lost_windows_the_navigator_is_never_lost():
-    policy = FixPolicy.from_config(dataclasses.replace(CONFIG, lost_windows=None), cell=5.0)
+    policy = FixPolicy.from_config(CONFIG.replace(lost_windows=None), cell=5.0)
     windows = [window(k, FixStatus.OUTSIDE_SEARCH, record=n) for n, k in enumerate(range(9, 99, 10))]
     state, actions = run(windows, policy=policy)
     assert actions == [] and not state.lost and state.episodes == ()
@@ -227,7 +226,7 @@ def test_a_lost_navigator_widens_only_up_to_the_widest_search():
     breaks = state.episodes[-1].breaks
     assert POLICY.widest == pytest.approx(250.0) and len(state.episodes) == 1
     assert widenings == list(breaks) and widenings[:39] == [HALF_WIDTH] * 39
-    assert len(widenings) < len(windows) // CONFIG.lost_windows  # it stopped widening
+    assert len(widenings) < len(windows) // CONFIG.online.lost_windows  # it stopped widening
     assert np.sqrt(np.sum(np.square(breaks))) == pytest.approx(POLICY.widest)
 
 

@@ -213,7 +213,7 @@ def test_a_prior_without_a_covariance_is_refused():
 
 
 def test_the_online_graph_on_the_point_mass_front_end(small_survey, rough_map):
-    config = GraphConfig(front_end="pmf")
+    config = GraphConfig().replace(front_end="pmf")
     nav = GraphNavigator(small_survey, rough_map, config)
     track = nav.run().track()
     ends = sorted(nav.window_first)
@@ -235,9 +235,9 @@ def test_an_ambiguous_window_grows_and_used_windows_share_no_ping(rough_map):
     # a wide start: the first windows' soundings fit several places within the prediction's reach
     survey = simulate(small_scenario(start_position_std=30.0), rng=np.random.default_rng(61),
                       bathymetry=rough_map, seed=61)
-    nav = GraphNavigator(survey, rough_map, GraphConfig(front_end="pmf")).run()
+    nav = GraphNavigator(survey, rough_map, GraphConfig().replace(front_end="pmf")).run()
     lengths = {k: k - first + 1 for k, first in nav.window_first.items() if k <= nav.index}
-    assert max(lengths.values()) > 3 and max(lengths.values()) <= nav.config.n_pings
+    assert max(lengths.values()) > 3 and max(lengths.values()) <= nav.config.fixes.n_pings
     used = sorted((nav.window_first[r.index], r.index) for r in nav.fixes if r.accepted)
     assert all(a[1] < b[0] for a, b in itertools.pairwise(used))  # disjoint
     track = nav.track()
@@ -257,7 +257,7 @@ def test_the_online_graph_learns_the_tide_from_its_windows(rough_map):
     scenario = small_scenario()
     scenario = dataclasses.replace(scenario, sonar=dataclasses.replace(scenario.sonar, tide=1.5))
     survey = simulate(scenario, rng=np.random.default_rng(62), bathymetry=rough_map, seed=62)
-    track = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"))
+    track = navigate_online(survey, rough_map, GraphConfig().replace(front_end="pmf"))
     tide = track.meta["tide"]
     assert tide["tide_std"] < 0.05  # from the prior's 3 m
     assert abs(tide["tide"] - 1.5) < 3 * tide["tide_std"] + 0.01
@@ -265,7 +265,7 @@ def test_the_online_graph_learns_the_tide_from_its_windows(rough_map):
     from tangraph.sensors import NavigationModel
 
     model = dataclasses.replace(NavigationModel.from_survey(survey), tide=1.5, tide_std=0.0)
-    known = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"), model=model)
+    known = navigate_online(survey, rough_map, GraphConfig().replace(front_end="pmf"), model=model)
     assert "tide" not in known.meta
 
 
@@ -273,16 +273,16 @@ def test_the_batch_smoother_weighs_tap_fixes_whatever_the_front_end(small_survey
     from tangraph.graph import smooth_survey
 
     tap = smooth_survey(small_survey, rough_map, GraphConfig())
-    other = smooth_survey(small_survey, rough_map, GraphConfig(front_end="pmf"))
+    other = smooth_survey(small_survey, rough_map, GraphConfig().replace(front_end="pmf"))
     np.testing.assert_array_equal(other.pose, tap.pose)
-    assert other.meta["config"]["front_end"] == "tap"  # the record says what was run
+    assert other.meta["config"]["online"]["front_end"] == "tap"  # the record says what was run
 
 
 def test_front_end_is_validated():
     from tangraph.errors import TangraphError
 
-    with pytest.raises(TangraphError, match="GraphConfig.front_end must be one of tap, pmf, got 'grid'"):
-        GraphConfig(front_end="grid")
+    with pytest.raises(TangraphError, match="OnlineConfig.front_end must be one of tap, pmf, got 'grid'"):
+        GraphConfig().replace(front_end="grid")
 
 
 def test_a_step_of_the_depths_is_a_tide_step_a_block_of_them_a_fault(rough_map):
@@ -298,18 +298,18 @@ def test_a_step_of_the_depths_is_a_tide_step_a_block_of_them_a_fault(rough_map):
     scenario = small_scenario()
     scenario = dataclasses.replace(scenario, sonar=dataclasses.replace(scenario.sonar, tide=1.5))
     survey = simulate(scenario, rng=np.random.default_rng(62), bathymetry=rough_map, seed=62)
-    clean = navigate_online(survey, rough_map, GraphConfig(front_end="pmf"))
+    clean = navigate_online(survey, rough_map, GraphConfig().replace(front_end="pmf"))
     n = survey.n_pings
     ping = np.arange(n)[:, None]
     block = survey.replace(beam_depth=survey.beam_depth + np.where(ping // 20 == n // 40, 6.0, 0.0))
-    faulty = navigate_online(block, rough_map, GraphConfig(front_end="pmf"))
+    faulty = navigate_online(block, rough_map, GraphConfig().replace(front_end="pmf"))
     assert any(f.status is FixStatus.MISFIT and f.detail.startswith("depth fault") for f in faulty.fixes)
     assert faulty.meta["tide"]["steps"] == [] and abs(faulty.meta["tide"]["tide"] - 1.5) < 0.1
     rmse = {name: np.sqrt(np.mean(position_errors(t, survey.true_pose) ** 2))
             for name, t in (("clean", clean), ("faulty", faulty))}
     assert rmse["faulty"] < 1.5 * rmse["clean"] + 0.5, rmse
     stepped = survey.replace(beam_depth=survey.beam_depth + np.where(ping >= n // 2, 1.5, 0.0))
-    track = navigate_online(stepped, rough_map, GraphConfig(front_end="pmf"))
+    track = navigate_online(stepped, rough_map, GraphConfig().replace(front_end="pmf"))
     assert len(track.meta["tide"]["steps"]) == 1 and n // 2 < track.meta["tide"]["steps"][0] < n // 2 + 80
     assert abs(track.meta["tide"]["tide"] - 3.0) < 0.1
     errors = position_errors(track, survey.true_pose)

@@ -107,7 +107,7 @@ def test_a_flat_map_informs_the_tide_only():
 def smooth(survey, bathymetry, terrain, model, **options):
     from tangraph.graph import GraphConfig, smooth_survey
 
-    config = GraphConfig(smoother_terrain=terrain, rematch_iterations=0, **options)
+    config = GraphConfig().replace(smoother_terrain=terrain, rematch_iterations=0, **options)
     known = model.replace(speed_scale_std=0.0, heading_bias_std=0.0)  # no calibration variable
     return smooth_survey(survey, bathymetry, config, model=known)
 
