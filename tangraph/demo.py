@@ -23,12 +23,17 @@ import os
 import shutil
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.outputs import Terminated, deferred_signals, remove_stale_partials, sigterm_exits
 from tangraph.track import Track
+
+if TYPE_CHECKING:
+    from tangraph.maps.grid import BathymetryMap
+    from tangraph.survey import Survey
 
 __all__ = ["DEMO_SCENARIOS", "DemoResult", "run_demo"]
 
@@ -287,10 +292,7 @@ def run_demo(
         report folder is removed; it is a ``SystemExit`` with status 143.
     """
     from tangraph.maps import load
-    from tangraph.navigation import dead_reckoning_track, navigate
-    from tangraph.sim.scenario import load_scenario, simulate_run
-    from tangraph.survey import write_survey
-    from tangraph.track import write_track_csv
+    from tangraph.sim.scenario import load_scenario
 
     started = time.perf_counter()
     out = Path(out)
@@ -307,64 +309,17 @@ def run_demo(
             shutil.rmtree(partial, ignore_errors=True)  # this process's name: ours to replace
             (partial / "tracks").mkdir(parents=True)
             bar.set_postfix_str(names[0])
-            run = simulate_run(scenario, rng=np.random.default_rng(seeds[0]), bathymetry=bathymetry,
-                               seed=seed)
-            survey = run.survey
-            if run.world is not None:  # the estimators navigate on the prior map
-                from tangraph.maps import write_map
-
-                bathymetry = run.bathymetry
-                write_map(bathymetry, partial / "prior_map.nc")
-                survey = survey.replace(meta={**survey.meta, "map": str((out / "prior_map.nc").resolve()),
-                                              "map_read": {}})  # where it will be: smooth finds it
-            if quick:
-                survey = survey.pings(0, survey.n_pings // 2)
-            write_survey(survey, partial / "survey.nc")
+            survey, bathymetry = _simulated(scenario, bathymetry, seeds[0], seed, quick, partial, out)
             bar.update()
-            tracks: dict[str, Track] = {"dead reckoning": dead_reckoning_track(survey)}
             n_particles = 300 if quick else 1000
-            methods = ["isam2", "smoother", *FILTERS]
-            for name, child in zip(methods, [None, None, *seeds[1:]], strict=True):
-                bar.set_postfix_str(name)
-                config = None
-                if name in PARTICLE_FILTERS:
-                    from tangraph.filters import default_config
-
-                    config = dataclasses.replace(default_config(name), n_particles=n_particles)
-                rng = None if child is None else np.random.default_rng(child)
-                tracks[name] = navigate(survey, bathymetry, name, config, rng=rng)
-                bar.update()
+            tracks = _navigated(survey, bathymetry, seeds[1:], n_particles, bar)
             bar.set_postfix_str("figures")
             figures = _figures(partial, survey, bathymetry, tracks)
             bar.update()
-            for label, track in tracks.items():
-                write_track_csv(
-                    track,
-                    partial / "tracks" / f"{label.replace(' ', '_')}.csv",
-                    crs=bathymetry.crs,
-                    origin=bathymetry.origin,
-                )
-            from tangraph.eval import posterior_crb
-            from tangraph.sensors import NavigationModel
-
-            model = NavigationModel.from_survey(survey)
-            bounds = {kind: posterior_crb(survey, bathymetry, model, kind=kind)
-                      for kind in ("smoother", "filter")}
-            rows = [_row(label, track, survey, bounds) for label, track in tracks.items()]
-            settings = {
-                "map": map_name,
-                "map_error": map_error,
-                "scenario": scenario.as_dict(),
-                "seed": seed,
-                "quick": quick,
-                "n_particles": n_particles,
-                "filter_configs": {k: tracks[k].meta.get("config") for k in FILTERS},
-                "graph_configs": {k: tracks[k].meta.get("config") for k in ("isam2", "smoother")},
-            }
-            (partial / "settings.json").write_text(json.dumps(settings, indent=2, default=str))
-            (partial / "results.json").write_text(json.dumps(rows, indent=2))
-            seconds = time.perf_counter() - started
-            report = _report(partial, survey, bathymetry, rows, settings, seconds)
+            settings = {"map": map_name, "map_error": map_error, "scenario": scenario.as_dict(), "seed": seed,
+                        "quick": quick, "n_particles": n_particles}
+            rows, settings = _results(partial, survey, bathymetry, tracks, settings)
+            report = _report(partial, survey, bathymetry, rows, settings, time.perf_counter() - started)
         except BaseException as exc:
             with deferred_signals():  # a second Ctrl-C does not stop the clean-up half-way
                 shutil.rmtree(partial, ignore_errors=True)
@@ -373,14 +328,7 @@ def run_demo(
             raise
         finally:
             bar.close()
-        with deferred_signals():  # never the old report gone and the new one not yet in place
-            if out.exists():  # force: the old report goes only once the new one is complete
-                old = out.parent / f".{out.name}.old-{os.getpid()}"
-                out.rename(old)
-                partial.rename(out)
-                shutil.rmtree(old, ignore_errors=True)
-            else:
-                partial.rename(out)
+        _put_in_place(partial, out)
     return DemoResult(
         out=out,
         report=out / report.name,
@@ -388,3 +336,82 @@ def run_demo(
         figures={k: out / p.name for k, p in figures.items()},
         seconds=time.perf_counter() - started,
     )
+
+
+def _simulated(scenario, bathymetry: BathymetryMap, child: np.random.SeedSequence, seed: int, quick: bool,
+               partial: Path, out: Path) -> tuple[Survey, BathymetryMap]:
+    """The demo's survey (half of it when ``quick``), written to ``partial/survey.nc``, and the
+    map the estimators navigate on: the scenario's prior map (written as ``prior_map.nc``, the
+    survey pointing to where it will be in ``out``) when its seafloor is not the map."""
+    from tangraph.sim.scenario import simulate_run
+    from tangraph.survey import write_survey
+
+    run = simulate_run(scenario, rng=np.random.default_rng(child), bathymetry=bathymetry, seed=seed)
+    survey = run.survey
+    if run.world is not None:  # the estimators navigate on the prior map
+        from tangraph.maps import write_map
+
+        bathymetry = run.bathymetry
+        write_map(bathymetry, partial / "prior_map.nc")
+        survey = survey.replace(meta={**survey.meta, "map": str((out / "prior_map.nc").resolve()),
+                                      "map_read": {}})  # where it will be: smooth finds it
+    if quick:
+        survey = survey.pings(0, survey.n_pings // 2)
+    write_survey(survey, partial / "survey.nc")
+    return survey, bathymetry
+
+
+def _navigated(survey: Survey, bathymetry: BathymetryMap, children, n_particles: int,
+               bar) -> dict[str, Track]:
+    """The dead reckoning and every method's track (the filters seeded by ``children``, the
+    particle filters with ``n_particles``), a stage of ``bar`` each."""
+    from tangraph.navigation import dead_reckoning_track, navigate
+
+    tracks: dict[str, Track] = {"dead reckoning": dead_reckoning_track(survey)}
+    methods = ["isam2", "smoother", *FILTERS]
+    for name, child in zip(methods, [None, None, *children], strict=True):
+        bar.set_postfix_str(name)
+        config = None
+        if name in PARTICLE_FILTERS:
+            from tangraph.filters import default_config
+
+            config = dataclasses.replace(default_config(name), n_particles=n_particles)
+        rng = None if child is None else np.random.default_rng(child)
+        tracks[name] = navigate(survey, bathymetry, name, config, rng=rng)
+        bar.update()
+    return tracks
+
+
+def _results(partial: Path, survey: Survey, bathymetry: BathymetryMap, tracks: dict[str, Track],
+             settings: dict) -> tuple[list[dict], dict]:
+    """Every track written to ``partial/tracks`` as CSV, the table's rows against the
+    Cramér-Rao bounds, and the settings with the methods' configs, both written as JSON."""
+    from tangraph.eval import posterior_crb
+    from tangraph.sensors import NavigationModel
+    from tangraph.track import write_track_csv
+
+    for label, track in tracks.items():
+        write_track_csv(track, partial / "tracks" / f"{label.replace(' ', '_')}.csv", crs=bathymetry.crs,
+                        origin=bathymetry.origin)
+    model = NavigationModel.from_survey(survey)
+    bounds = {kind: posterior_crb(survey, bathymetry, model, kind=kind) for kind in ("smoother", "filter")}
+    rows = [_row(label, track, survey, bounds) for label, track in tracks.items()]
+    settings = {**settings,
+                "filter_configs": {k: tracks[k].meta.get("config") for k in FILTERS},
+                "graph_configs": {k: tracks[k].meta.get("config") for k in ("isam2", "smoother")}}
+    (partial / "settings.json").write_text(json.dumps(settings, indent=2, default=str))
+    (partial / "results.json").write_text(json.dumps(rows, indent=2))
+    return rows, settings
+
+
+def _put_in_place(partial: Path, out: Path) -> None:
+    """The complete report folder moved to ``out``; an old one there goes only once the new one
+    is in place, and a signal waits until both moves are done."""
+    with deferred_signals():  # never the old report gone and the new one not yet in place
+        if out.exists():  # force: the old report goes only once the new one is complete
+            old = out.parent / f".{out.name}.old-{os.getpid()}"
+            out.rename(old)
+            partial.rename(out)
+            shutil.rmtree(old, ignore_errors=True)
+        else:
+            partial.rename(out)

@@ -9,9 +9,16 @@ field (:mod:`tangraph.eval.map_field`) solved sparsely (:mod:`tangraph.eval.sele
 lines). Nothing here touches files.
 """
 
-from tangraph.eval.crb import CramerRaoBound, bound_rmse, metrics_with_bound, posterior_crb
+from tangraph.eval.crb import CramerRaoBound, posterior_crb
 from tangraph.eval.map_check import MapCheck, calibrate_error, check_map_error
-from tangraph.eval.metrics import anees_band, format_figure, position_nees, track_metrics
+from tangraph.eval.metrics import (
+    anees_band,
+    bound_rmse,
+    format_figure,
+    metrics_with_bound,
+    position_nees,
+    track_metrics,
+)
 
 __all__ = [
     "CramerRaoBound",

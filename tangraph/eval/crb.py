@@ -94,7 +94,7 @@ from tangraph.sensors.navigation_model import KNOWN_STD, NavigationModel
 from tangraph.sensors.terrain import MapError, map_error
 from tangraph.survey import Survey
 
-__all__ = ["BoundKind", "CramerRaoBound", "bound_rmse", "metrics_with_bound", "posterior_crb"]
+__all__ = ["BoundKind", "CramerRaoBound", "posterior_crb"]
 
 logger = logging.getLogger(__name__)
 
@@ -230,39 +230,13 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
     >>> np.sqrt(np.diag(bound.position_cov[-1])).round(2).tolist(), bound.map_error
     ([2.68, 11.64], True)
     """
-    if not isinstance(survey, Survey):
-        raise TangraphError(f"posterior_crb: survey must be a Survey, got {type(survey).__name__}")
-    if survey.true_pose is None:
-        raise TangraphError("posterior_crb: the survey has no true_pose; the bound is linearised at "
-                            "the truth")
-    if not isinstance(bathymetry, BathymetryMap):
-        raise TangraphError(f"posterior_crb: bathymetry must be a BathymetryMap, got "
-                            f"{type(bathymetry).__name__}")
-    if not isinstance(model, NavigationModel):
-        raise TangraphError(f"posterior_crb: model must be a NavigationModel, got {type(model).__name__}")
-    if kind not in _KINDS:
-        raise TangraphError(f"posterior_crb: kind must be one of {_KINDS}, got {kind!r}")
-    if model.dropout_speed_noise > 0:
-        logger.info("posterior_crb: DVL dropouts are not modelled (the survey does not record them)")
-
+    _check_arguments(survey, bathymetry, model, kind)
     layout = _Layout.of(model)
-    scale = layout.scale(model, survey.time)
-    f, q = _transitions(survey, model, layout)
+    scale, f, q, p0 = _scaled_model(survey, model, layout)
     features, n_soundings = _sounding_features(survey, bathymetry, order)
-    # Work in units of each state's natural spread: dp / initial std, s / its prior std, ...
-    f = f / scale[:, None] * scale[None, :]
-    q = q / np.outer(scale, scale)
-    p0 = np.diag(layout.prior_variance(model)) / np.outer(scale, scale)
     error = map_error(bathymetry, model)
-    if error.is_zero or n_soundings == 0:
-        factor = _information_factor(features, model.sounding_std, layout) * scale[:, None]
-        filtered, predicted = _forward(p0, f, q, factor)
-        p = filtered if kind == "filter" else _rts(filtered, predicted, f)
-        p = p * np.outer(scale, scale)
-        position, constants, extra = p[:, :2, :2], p[-1], dict[str, Any]()
-    else:
-        position, constants, extra = _field_bound(survey, model, error, kind, layout, scale, f, q, p0,
-                                                  features)
+    solve = _plain_bound if error.is_zero or n_soundings == 0 else _field_bound
+    position, constants, extra = solve(survey, model, error, kind, layout, scale, f, q, p0, features)
     cal = constants[np.ix_(layout.calibration, layout.calibration)]
     tide = layout.tide
     tide_std = float(np.sqrt(max(constants[tide, tide], 0.0))) if tide is not None else 0.0
@@ -270,47 +244,6 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
                  n_soundings, f", a map error field of {extra['field_nodes']} nodes" if extra else "")
     return CramerRaoBound(position_cov=position, calibration_cov=cal, tide_std=tide_std, kind=kind,
                           n_soundings=n_soundings, **extra)
-
-
-def bound_rmse(bound: CramerRaoBound, skip: int = 0) -> float:
-    """The bound's horizontal RMSE, ``sqrt(mean over pings of trace(position_cov))``, m.
-
-    The figure to set next to an estimator's position RMSE (``track_metrics(...)["rmse"]``, with
-    the same ``skip``): their ratio ``RMSE / PCRB`` is at least about 1 for any estimator.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "filter")
-    >>> bound_rmse(bound)
-    2.0
-    """
-    if not isinstance(bound, CramerRaoBound):
-        raise TangraphError(f"bound_rmse: bound must be a CramerRaoBound, got {type(bound).__name__}")
-    skip = int(skip)
-    if not 0 <= skip < bound.n_pings:
-        raise TangraphError(f"bound_rmse: skip={skip} leaves no ping of {bound.n_pings}")
-    trace = np.trace(bound.position_cov[skip:], axis1=1, axis2=2)
-    return float(np.sqrt(max(float(np.mean(trace)), 0.0)))
-
-
-def metrics_with_bound(metrics: dict[str, float], bound: CramerRaoBound, *,
-                       skip: int = 0) -> dict[str, float]:
-    """A copy of :func:`~tangraph.eval.track_metrics` figures with ``pcrb`` (the bound's RMSE,
-    :func:`bound_rmse`) and ``rmse_over_pcrb`` added; ``skip`` must be the one the metrics used.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "smoother")
-    >>> metrics_with_bound({"rmse": 3.0}, bound)
-    {'rmse': 3.0, 'pcrb': 2.0, 'rmse_over_pcrb': 1.5}
-    """
-    if "rmse" not in metrics:
-        raise TangraphError("metrics_with_bound: the metrics have no 'rmse' (use track_metrics)")
-    pcrb = bound_rmse(bound, skip)
-    ratio = float(metrics["rmse"]) / pcrb if pcrb > 0 else float("inf")
-    return {**metrics, "pcrb": pcrb, "rmse_over_pcrb": ratio}
 
 
 # -- the linearised model ------------------------------------------------------------------------
@@ -469,6 +402,51 @@ def _rts(filtered: np.ndarray, predicted: np.ndarray, f: np.ndarray) -> np.ndarr
 
 
 # -- the bound with the map's error field -------------------------------------------------------
+def _check_arguments(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel, kind: str) -> None:
+    """Refuse arguments of the wrong type, a survey without truth and an unknown ``kind``."""
+    if not isinstance(survey, Survey):
+        raise TangraphError(f"posterior_crb: survey must be a Survey, got {type(survey).__name__}")
+    if survey.true_pose is None:
+        raise TangraphError("posterior_crb: the survey has no true_pose; the bound is linearised at "
+                            "the truth")
+    if not isinstance(bathymetry, BathymetryMap):
+        raise TangraphError(f"posterior_crb: bathymetry must be a BathymetryMap, got "
+                            f"{type(bathymetry).__name__}")
+    if not isinstance(model, NavigationModel):
+        raise TangraphError(f"posterior_crb: model must be a NavigationModel, got {type(model).__name__}")
+    if kind not in _KINDS:
+        raise TangraphError(f"posterior_crb: kind must be one of {_KINDS}, got {kind!r}")
+    if model.dropout_speed_noise > 0:
+        logger.info("posterior_crb: DVL dropouts are not modelled (the survey does not record them)")
+
+
+
+def _scaled_model(survey: Survey, model: NavigationModel,
+                  layout: _Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The linearised model's ``(scale, f, q, p0)`` in units of each state's natural spread
+    (``dp`` over the start's std, ``s`` over its prior std, ...): ``scale (n,)`` the units, ``f``
+    and ``q (K, n, n)`` the transitions and their noise, ``p0 (n, n)`` the prior."""
+    scale = layout.scale(model, survey.time)
+    f, q = _transitions(survey, model, layout)
+    f = f / scale[:, None] * scale[None, :]
+    q = q / np.outer(scale, scale)
+    p0 = np.diag(layout.prior_variance(model)) / np.outer(scale, scale)
+    return scale, f, q, p0
+
+
+def _plain_bound(survey: Survey, model: NavigationModel, error: MapError, kind: BoundKind, layout: _Layout,
+                 scale: np.ndarray, f: np.ndarray, q: np.ndarray, p0: np.ndarray,
+                 features: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The bound with no map error (every sounding's error its own): a Kalman filter over the
+    linearised model, smoothed by RTS for ``"smoother"``; called and returning as
+    :func:`_field_bound` (``survey`` and ``error`` unused)."""
+    factor = _information_factor(features, model.sounding_std, layout) * scale[:, None]
+    filtered, predicted = _forward(p0, f, q, factor)
+    p = filtered if kind == "filter" else _rts(filtered, predicted, f)
+    p = p * np.outer(scale, scale)
+    return p[:, :2, :2], p[-1], dict[str, Any]()
+
+
 def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: BoundKind,
                  layout: _Layout, scale: np.ndarray, f: np.ndarray, q: np.ndarray, p0: np.ndarray,
                  features: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:

@@ -10,10 +10,12 @@ import numpy as np
 from scipy import stats
 
 from tangraph.errors import TangraphError
+from tangraph.eval.crb import CramerRaoBound
 from tangraph.geometry import mahalanobis2
 from tangraph.track import Track, position_errors
 
-__all__ = ["anees_band", "format_figure", "position_nees", "track_metrics"]
+__all__ = ["anees_band", "bound_rmse", "format_figure", "metrics_with_bound", "position_nees",
+           "track_metrics"]
 
 
 def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
@@ -105,3 +107,44 @@ def format_figure(value) -> str:
     if not np.isfinite(value):
         return ""
     return f"{value:.2f}" if abs(float(value)) < 1e4 else f"{value:.1e}"
+
+
+def bound_rmse(bound: CramerRaoBound, skip: int = 0) -> float:
+    """The bound's horizontal RMSE, ``sqrt(mean over pings of trace(position_cov))``, m.
+
+    The figure to set next to an estimator's position RMSE (``track_metrics(...)["rmse"]``, with
+    the same ``skip``): their ratio ``RMSE / PCRB`` is at least about 1 for any estimator.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "filter")
+    >>> bound_rmse(bound)
+    2.0
+    """
+    if not isinstance(bound, CramerRaoBound):
+        raise TangraphError(f"bound_rmse: bound must be a CramerRaoBound, got {type(bound).__name__}")
+    skip = int(skip)
+    if not 0 <= skip < bound.n_pings:
+        raise TangraphError(f"bound_rmse: skip={skip} leaves no ping of {bound.n_pings}")
+    trace = np.trace(bound.position_cov[skip:], axis1=1, axis2=2)
+    return float(np.sqrt(max(float(np.mean(trace)), 0.0)))
+
+
+def metrics_with_bound(metrics: dict[str, float], bound: CramerRaoBound, *,
+                       skip: int = 0) -> dict[str, float]:
+    """A copy of :func:`~tangraph.eval.track_metrics` figures with ``pcrb`` (the bound's RMSE,
+    :func:`bound_rmse`) and ``rmse_over_pcrb`` added; ``skip`` must be the one the metrics used.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> bound = CramerRaoBound(np.tile(np.diag([3.0, 1.0]), (4, 1, 1)), np.eye(2), 0.1, "smoother")
+    >>> metrics_with_bound({"rmse": 3.0}, bound)
+    {'rmse': 3.0, 'pcrb': 2.0, 'rmse_over_pcrb': 1.5}
+    """
+    if "rmse" not in metrics:
+        raise TangraphError("metrics_with_bound: the metrics have no 'rmse' (use track_metrics)")
+    pcrb = bound_rmse(bound, skip)
+    ratio = float(metrics["rmse"]) / pcrb if pcrb > 0 else float("inf")
+    return {**metrics, "pcrb": pcrb, "rmse_over_pcrb": ratio}

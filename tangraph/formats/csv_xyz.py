@@ -228,19 +228,11 @@ def _utc_iso(seconds: float) -> str:
     return np.datetime_as_string(np.datetime64(us, "us"), unit=unit) + "Z"
 
 
-def import_csv_xyz(
-    navigation: str | os.PathLike,
-    soundings: str | os.PathLike,
-    *,
-    sign: Literal["depth", "elevation"] = "depth",
-    crs: str | None = None,
-    columns: Mapping[str, int | str] | None = None,
-    header: bool = True,
-    time_format: TimeFormat = "auto",
-    timezone: str | None = None,
-    time_tolerance: float = 1e-3,
-    units: str | None = None,
-) -> Survey:
+def import_csv_xyz(navigation: str | os.PathLike, soundings: str | os.PathLike, *,
+                   sign: Literal["depth", "elevation"] = "depth", crs: str | None = None,
+                   columns: Mapping[str, int | str] | None = None, header: bool = True,
+                   time_format: TimeFormat = "auto", timezone: str | None = None,
+                   time_tolerance: float = 1e-3, units: str | None = None) -> Survey:
     """A survey from a CSV navigation log and an XYZ soundings file.
 
     Parameters
@@ -313,6 +305,14 @@ def import_csv_xyz(
     ...                columns={"time": 0, "lat": 1, "lon": 2, "heading": 3, "depth": 4},
     ...                crs="EPSG:25833")  # doctest: +SKIP
     """
+    return _survey_from_files(navigation, soundings, sign, crs, columns, header, time_format, timezone,
+                              time_tolerance, units)
+
+
+def _survey_from_files(navigation, soundings, sign, crs, columns, header, time_format, timezone,
+                       time_tolerance, units) -> Survey:
+    """The survey of :func:`import_csv_xyz` (its options checked here): both files read, their clocks
+    checked, positions put in the survey's frame, soundings grouped into posed pings."""
     if sign not in ("depth", "elevation"):
         raise SurveyError(f"sign must be 'depth' or 'elevation', got {sign!r}")
     if time_format not in ("auto", "seconds", "epoch", "iso"):
@@ -330,58 +330,12 @@ def import_csv_xyz(
         raise SurveyError(
             f"{xyz_path}, line {xyz.lines[i]}: expected columns time x y z, got {len(xyz.rows[i])} columns"
         )
-
-    t_nav, absolute, naive_nav = _times(nav, *cols["time"], time_format, zone)
-    t_s, absolute_s, naive_s = _times(xyz, 0, "0 (time)", time_format, zone)
-    if absolute != absolute_s:
-        kinds = {True: "absolute (epoch or ISO 8601)", False: "seconds on their own clock"}
-        raise SurveyError(f"{nav_path}: times are {kinds[absolute]} but {xyz_path}: times are "
-                          f"{kinds[absolute_s]}; both files must use one clock")
-    if zone is not None and not (naive_nav or naive_s):
-        raise SurveyError(f"timezone={timezone!r} applies to ISO 8601 times without a zone, and "
-                          f"neither {nav_path} nor {xyz_path} has any")
-    order = np.argsort(t_nav, kind="stable")
-    if np.any(np.diff(t_nav[order]) <= 0):
-        raise SurveyError(f"{nav_path}: repeated times in column {cols['time'][1]}")
-    a, b = ("lat", "lon") if geographic else ("north", "east")
-    n_nav, e_nav = nav.numbers(*cols[a]), nav.numbers(*cols[b])
-    heading = np.radians(nav.numbers(*cols["heading"]))
-    y_s, x_s = xyz.numbers(2, "2 (y)"), xyz.numbers(1, "1 (x)")
-    z_s = xyz.numbers(3, "3 (z)", finite=False) * (depth_unit if sign == "depth" else -depth_unit)
-    if feet is not None:
-        n_nav, e_nav, y_s, x_s = (v * feet.metres_per_unit for v in (n_nav, e_nav, y_s, x_s))
-
-    local = geographic and crs is None  # a transverse Mercator centred on the log: origin (0, 0)
-    recorded = {"crs": crs} if target is None else target.meta()
-    if geographic:
-        crs, (n_nav, e_nav, heading, y_s, x_s) = _project_log(nav, cols, n_nav, e_nav, heading,
-                                                             y_s, x_s, crs, target)
-        if local:
-            recorded = {"crs": crs}
-    if crs is None or local:
-        origin = (0.0, 0.0)
-    else:
-        origin = (float(np.floor(n_nav.min())), float(np.floor(e_nav.min())))
-    n_nav, e_nav = n_nav - origin[0], e_nav - origin[1]
-    y_s, x_s = y_s - origin[0], x_s - origin[1]
-
-    t_nav = t_nav[order]
-    inside = (t_s >= t_nav[0]) & (t_s <= t_nav[-1])
-    n_dropped = int((~inside).sum())
-    _check_clocks(t_nav, t_s, inside, nav_path, xyz_path)
-    t_s, x_s, y_s, z_s = t_s[inside], x_s[inside], y_s[inside], z_s[inside]
-    if t_s.size == 0:
-        raise SurveyError(
-            f"{xyz_path}: no sounding lies within the navigation log's time span [{t_nav[0]}, {t_nav[-1]}] s"
-        )
-    s_order = np.argsort(t_s, kind="stable")
-    t_s, x_s, y_s, z_s = t_s[s_order], x_s[s_order], y_s[s_order], z_s[s_order]
-    new_ping = np.concatenate([[True], np.diff(t_s) > time_tolerance])
-    ping = np.cumsum(new_ping) - 1
-    ping_time = t_s[new_ping]
-    slot = np.arange(t_s.size) - np.flatnonzero(new_ping)[ping]
-    n_beams = int(slot.max()) + 1
-
+    t_nav, t_s, absolute, order = _clocks(nav, xyz, cols, time_format, zone, timezone)
+    z_scale = depth_unit if sign == "depth" else -depth_unit
+    recorded, origin, (n_nav, e_nav, heading), (y_s, x_s, z_s) = _positions(
+        nav, xyz, cols, geographic, feet, z_scale, crs, target)
+    ping_time, north, east, depth, n_dropped = _pings(t_nav, t_s, x_s, y_s, z_s, time_tolerance, nav_path,
+                                                      xyz_path)
     heading = np.unwrap(heading[order])
     pose = np.column_stack(
         [
@@ -390,10 +344,6 @@ def import_csv_xyz(
             np.mod(np.interp(ping_time, t_nav, heading), 2 * np.pi),
         ]
     )
-    north = np.full((ping_time.size, n_beams), np.nan)
-    east = north.copy()
-    depth = north.copy()
-    north[ping, slot], east[ping, slot], depth[ping, slot] = y_s, x_s, z_s
     forward, starboard = to_body(pose, north, east)
     meta = {
         "source": {"navigation": str(nav_path), "soundings": str(xyz_path)},
@@ -414,6 +364,78 @@ def import_csv_xyz(
         beam_depth=depth,
         meta=meta,
     )
+
+
+def _clocks(nav: _Table, xyz: _Table, cols: dict[str, tuple[int, str]], time_format: TimeFormat, zone,
+            timezone: str | None):
+    """The log's times in order, the soundings' times, whether both are absolute, and the order
+    of the log's rows; refused: the files on different clocks, a ``timezone`` that no time
+    needs, repeated log times."""
+    t_nav, absolute, naive_nav = _times(nav, *cols["time"], time_format, zone)
+    t_s, absolute_s, naive_s = _times(xyz, 0, "0 (time)", time_format, zone)
+    if absolute != absolute_s:
+        kinds = {True: "absolute (epoch or ISO 8601)", False: "seconds on their own clock"}
+        raise SurveyError(f"{nav.path}: times are {kinds[absolute]} but {xyz.path}: times are "
+                          f"{kinds[absolute_s]}; both files must use one clock")
+    if zone is not None and not (naive_nav or naive_s):
+        raise SurveyError(f"timezone={timezone!r} applies to ISO 8601 times without a zone, and "
+                          f"neither {nav.path} nor {xyz.path} has any")
+    order = np.argsort(t_nav, kind="stable")
+    if np.any(np.diff(t_nav[order]) <= 0):
+        raise SurveyError(f"{nav.path}: repeated times in column {cols['time'][1]}")
+    return t_nav[order], t_s, absolute, order
+
+
+def _positions(nav: _Table, xyz: _Table, cols, geographic: bool, feet, z_scale: float, crs, target):
+    """The survey's CRS as recorded in its meta, its origin, and in the local frame the log's (north,
+    east, heading) and the soundings' (north, east, depth times ``z_scale``): lat/lon projected,
+    north/east in feet turned to metres."""
+    a, b = ("lat", "lon") if geographic else ("north", "east")
+    n_nav, e_nav = nav.numbers(*cols[a]), nav.numbers(*cols[b])
+    heading = np.radians(nav.numbers(*cols["heading"]))
+    y_s, x_s = xyz.numbers(2, "2 (y)"), xyz.numbers(1, "1 (x)")
+    z_s = xyz.numbers(3, "3 (z)", finite=False) * z_scale
+    if feet is not None:
+        n_nav, e_nav, y_s, x_s = (v * feet.metres_per_unit for v in (n_nav, e_nav, y_s, x_s))
+    local = geographic and crs is None  # a transverse Mercator centred on the log: origin (0, 0)
+    recorded = {"crs": crs} if target is None else target.meta()
+    if geographic:
+        crs, (n_nav, e_nav, heading, y_s, x_s) = _project_log(nav, cols, n_nav, e_nav, heading,
+                                                             y_s, x_s, crs, target)
+        if local:
+            recorded = {"crs": crs}
+    if crs is None or local:
+        origin = (0.0, 0.0)
+    else:
+        origin = (float(np.floor(n_nav.min())), float(np.floor(e_nav.min())))
+    return (recorded, origin, (n_nav - origin[0], e_nav - origin[1], heading),
+            (y_s - origin[0], x_s - origin[1], z_s))
+
+
+def _pings(t_nav, t_s, x_s, y_s, z_s, time_tolerance: float, nav_path, xyz_path):
+    """The soundings within the log's time span (``t_nav``, in order) grouped into pings, those
+    closer in time than ``time_tolerance``: the ping times, the (pings, beams) north, east and
+    depth of their soundings (NaN past a ping's last), and the number of soundings dropped."""
+    inside = (t_s >= t_nav[0]) & (t_s <= t_nav[-1])
+    n_dropped = int((~inside).sum())
+    _check_clocks(t_nav, t_s, inside, nav_path, xyz_path)
+    t_s, x_s, y_s, z_s = t_s[inside], x_s[inside], y_s[inside], z_s[inside]
+    if t_s.size == 0:
+        raise SurveyError(
+            f"{xyz_path}: no sounding lies within the navigation log's time span [{t_nav[0]}, {t_nav[-1]}] s"
+        )
+    s_order = np.argsort(t_s, kind="stable")
+    t_s, x_s, y_s, z_s = t_s[s_order], x_s[s_order], y_s[s_order], z_s[s_order]
+    new_ping = np.concatenate([[True], np.diff(t_s) > time_tolerance])
+    ping = np.cumsum(new_ping) - 1
+    ping_time = t_s[new_ping]
+    slot = np.arange(t_s.size) - np.flatnonzero(new_ping)[ping]
+    n_beams = int(slot.max()) + 1
+    north = np.full((ping_time.size, n_beams), np.nan)
+    east = north.copy()
+    depth = north.copy()
+    north[ping, slot], east[ping, slot], depth[ping, slot] = y_s, x_s, z_s
+    return ping_time, north, east, depth, n_dropped
 
 
 def _depth_unit(units: str | None, feet, nav_path, xyz_path) -> float:

@@ -249,9 +249,17 @@ def import_sontek_sum(
         and records the median drift of the DR from the GPS over 300 s windows: near the GPS's own
         resolution means the velocity is GPS-referenced, not an independent bottom track.
     """
-    import pyproj
-
     files = [paths] if isinstance(paths, str | os.PathLike) else list(paths)
+    azimuths, draft = _checked_options(files, timezone, crs, dr_heading, beam_azimuths_deg, draft)
+    records, rec, t_utc, steps = _read_run(files, timezone)
+    return _survey_of_run(records, rec, t_utc, steps, crs=crs, timezone=timezone, water_level=water_level,
+                          water_level_interpolate=water_level_interpolate, draft=draft, dr_heading=dr_heading,
+                          declination_deg=declination_deg, azimuths=azimuths)
+
+
+def _checked_options(files, timezone, crs, dr_heading, beam_azimuths_deg, draft) -> tuple[np.ndarray, float]:
+    """Refuse no file, a missing time zone or CRS and an unknown or impossible option; the slant
+    beams' azimuths (radians) and the draft (a float)."""
     if not files:
         raise SurveyError("import_sontek_sum: no .sum file given")
     if timezone is None:
@@ -271,6 +279,13 @@ def import_sontek_sum(
     draft = float(draft)
     if not (np.isfinite(draft) and 0.0 <= draft < 5.0):
         raise SurveyError(f"draft must be between 0 and 5 m, got {draft!r}")
+    return azimuths, draft
+
+
+def _read_run(files: list, timezone):
+    """The files' records in the order of their start, joined into one record, its UTC times and
+    the steps (s) between its samples; refused: files not following each other within
+    ``MAX_FILE_GAP``, a time that does not increase."""
     records = sorted((read_sontek_sum(f) for f in files), key=lambda r: r.local_time[0])
     utc = [_to_utc(r.local_time, timezone, r.path) for r in records]
     for (a, ta), (b, tb) in zip(zip(records, utc, strict=True), zip(records[1:], utc[1:], strict=True),
@@ -287,15 +302,15 @@ def import_sontek_sum(
     if np.any(steps <= 0):
         i = int(np.argmax(steps <= 0))
         raise SurveyError(f"{rec.path}: time does not increase at sample {int(rec.sample[i + 1])}")
-    time = np.concatenate([[0.0], np.cumsum(steps)])
+    return records, rec, t_utc, steps
 
-    target = projected_crs(crs)
-    _check_area(target, crs, rec)
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
-    n, e, convergence = north_in_grid(transform, rec.lon, rec.lat, 1e-5)
-    reference, n_repeated = _gps_track(time, n, e, rec)
-    origin = (float(np.floor(reference[:, 0].min())), float(np.floor(reference[:, 1].min())))
-    reference -= origin
+
+def _survey_of_run(records, rec: SontekRecord, t_utc, steps, *, crs, timezone, water_level,
+                   water_level_interpolate, draft, dr_heading, declination_deg, azimuths) -> Survey:
+    """The survey of :func:`import_sontek_sum` from the run read (``rec``: ``records`` joined), its
+    options checked: GPS reference, dead reckoning, soundings, meta."""
+    time = np.concatenate([[0.0], np.cumsum(steps)])
+    target, origin, reference, convergence, n_repeated = _gps_reference(rec, time, crs)
 
     # the compass reads from magnetic north: + declination -> true north, + convergence -> grid
     psi = np.radians(rec.heading + float(declination_deg)) + convergence
@@ -384,6 +399,22 @@ def _check_area(target, crs: str, rec: SontekRecord) -> None:
             f"the area of use of {crs} ({area.name}: {area.south:g}..{area.north:g} N, "
             f"{area.west:g}..{area.east:g} E); give the CRS of the survey's region"
         )
+
+
+def _gps_reference(rec: SontekRecord, time, crs):
+    """The CRS of the survey (the positions checked against its area of use), the origin of its
+    local frame, the GPS track in that frame, the grid convergence and the number of samples
+    that repeat the previous position."""
+    import pyproj
+
+    target = projected_crs(crs)
+    _check_area(target, crs, rec)
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
+    n, e, convergence = north_in_grid(transform, rec.lon, rec.lat, 1e-5)
+    reference, n_repeated = _gps_track(time, n, e, rec)
+    origin = (float(np.floor(reference[:, 0].min())), float(np.floor(reference[:, 1].min())))
+    reference -= origin
+    return target, origin, reference, convergence, n_repeated
 
 
 def _gps_track(time, north, east, rec: SontekRecord) -> tuple[np.ndarray, int]:

@@ -212,8 +212,6 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         positive down; NaN where the range is 0 or the Q0 flags say the point failed the
         sonar's brightness or colinearity filter or has no detection.
     """
-    import pyproj
-
     if crs is None:
         raise SurveyError(f"{path}: give the projected CRS of the survey (crs=, CLI: --crs), e.g. EPSG:32610")
     draft = float(draft)
@@ -222,37 +220,11 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
     target = projected_crs(crs)
     p = Path(path)
     pings, nav, facts = _read_xtf(p)
-    sizes = sorted({q.angle.size for q in pings})
-    if len(sizes) != 1:
-        raise SurveyError(f"{p}: pings have different numbers of beams {sizes}")
-    unix = np.array([q.time for q in pings])
-    steps = np.diff(unix)
-    if np.any(steps <= 0):
-        i = int(np.argmax(steps <= 0))
-        raise SurveyError(f"{p}: ping time does not increase at bathymetry packet {i + 1}")
-    if nav.shape[0] >= 2 and np.all(np.diff(nav[:, 0]) > 0):
-        lat, lon = np.interp(unix, nav[:, 0], nav[:, 1]), np.interp(unix, nav[:, 0], nav[:, 2])
-        position_source = "raw navigation packets (type 107), interpolated to the ping times"
-    else:
-        lat, lon = np.array([q.lat for q in pings]), np.array([q.lon for q in pings])
-        position_source = "ping headers (type 65)"
-    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
-    north, east, convergence = north_in_grid(transform, lon, lat, 1e-5)
-    if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
-        raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
-    origin = (float(np.floor(north.min())), float(np.floor(east.min())))
-    heading = np.mod(np.radians([q.heading for q in pings]) + convergence, 2 * np.pi)
-    pose = np.column_stack([north - origin[0], east - origin[1], heading])
+    unix = _ping_times(p, pings)
+    pose, origin, convergence, position_source = _pose(p, pings, nav, unix, crs, target)
     attitude = np.radians([(q.pitch, q.roll) for q in pings])
-    heave = np.array([q.heave for q in pings])
-    two_way = np.vstack([q.two_way_time for q in pings])
-    angle = np.vstack([q.angle for q in pings])
-    quality = np.vstack([q.quality for q in pings])
-    sound_speed = np.array([q.sound_speed for q in pings])
-    valid = np.isfinite(two_way) & ((quality & _Q_FILTERS) == _Q_FILTERS) & ((quality & _Q_DETECT) != 0)
-    rng = np.where(valid, 0.5 * sound_speed[:, None] * two_way, np.nan)
-    forward, starboard, down = _level(rng, angle, attitude)
-    vehicle_depth = draft - heave
+    two_way, sound_speed, valid, (forward, starboard, down) = _soundings(pings, attitude)
+    vehicle_depth = draft - np.array([q.heave for q in pings])
     start = np.datetime64(round(float(unix[0]) * 1e6), "us")
     meta = {
         "format": "xtf",
@@ -271,7 +243,7 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         "ray_model": "straight rays at the transducer sound speed",
         "grid_convergence_deg": float(np.degrees(np.median(convergence))),
         "n_pings": len(pings),
-        "n_beams": int(rng.shape[1]),
+        "n_beams": int(valid.shape[1]),
         "n_navigation": int(nav.shape[0]),
         "n_beams_without_return": int((~valid).sum()),
         "n_no_range": int((~np.isfinite(two_way)).sum()),
@@ -289,6 +261,54 @@ def import_xtf(path: str | os.PathLike, *, crs: str | None, draft: float = 0.0) 
         attitude=attitude,
         meta=meta,
     )
+
+
+def _ping_times(p: Path, pings: list[_Ping]) -> np.ndarray:
+    """The pings' Unix times; refused: pings with different numbers of beams, a time that does not
+    increase."""
+    sizes = sorted({q.angle.size for q in pings})
+    if len(sizes) != 1:
+        raise SurveyError(f"{p}: pings have different numbers of beams {sizes}")
+    unix = np.array([q.time for q in pings])
+    steps = np.diff(unix)
+    if np.any(steps <= 0):
+        i = int(np.argmax(steps <= 0))
+        raise SurveyError(f"{p}: ping time does not increase at bathymetry packet {i + 1}")
+    return unix
+
+
+def _pose(p: Path, pings: list[_Ping], nav: np.ndarray, unix: np.ndarray, crs: str, target):
+    """The pings' (north, east, heading from grid north) in the local frame, its origin, the grid
+    convergence and where the positions come from: the raw navigation interpolated to the ping
+    times where it has two or more fixes in increasing time, else the ping headers."""
+    import pyproj
+
+    if nav.shape[0] >= 2 and np.all(np.diff(nav[:, 0]) > 0):
+        lat, lon = np.interp(unix, nav[:, 0], nav[:, 1]), np.interp(unix, nav[:, 0], nav[:, 2])
+        position_source = "raw navigation packets (type 107), interpolated to the ping times"
+    else:
+        lat, lon = np.array([q.lat for q in pings]), np.array([q.lon for q in pings])
+        position_source = "ping headers (type 65)"
+    transform = pyproj.Transformer.from_crs("EPSG:4326", target.crs, always_xy=True).transform
+    north, east, convergence = north_in_grid(transform, lon, lat, 1e-5)
+    if not (np.all(np.isfinite(north)) and np.all(np.isfinite(east))):
+        raise SurveyError(f"{p}: positions do not project into {crs}; give the CRS of the survey's region")
+    origin = (float(np.floor(north.min())), float(np.floor(east.min())))
+    heading = np.mod(np.radians([q.heading for q in pings]) + convergence, 2 * np.pi)
+    pose = np.column_stack([north - origin[0], east - origin[1], heading])
+    return pose, origin, convergence, position_source
+
+
+def _soundings(pings: list[_Ping], attitude: np.ndarray):
+    """The pings' two-way travel times, sound speeds, which points are valid (a range and Q0 flags
+    passed) and the level-frame (forward, starboard, down) of the valid ones (NaN elsewhere)."""
+    two_way = np.vstack([q.two_way_time for q in pings])
+    angle = np.vstack([q.angle for q in pings])
+    quality = np.vstack([q.quality for q in pings])
+    sound_speed = np.array([q.sound_speed for q in pings])
+    valid = np.isfinite(two_way) & ((quality & _Q_FILTERS) == _Q_FILTERS) & ((quality & _Q_DETECT) != 0)
+    rng = np.where(valid, 0.5 * sound_speed[:, None] * two_way, np.nan)
+    return two_way, sound_speed, valid, _level(rng, angle, attitude)
 
 
 def _level(rng: np.ndarray, angle: np.ndarray, attitude: np.ndarray):

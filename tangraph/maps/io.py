@@ -442,13 +442,20 @@ def read_map(
     >>> m.crs.startswith("+proj=tmerc")
     True
     """
-    from tangraph.maps import hydro, raster
-
     p = Path(path)
     fmt = _format_of(p, format, reading=True)
     common: dict[str, Any] = {"crs": crs, "cell": cell, "name": name}
     grid: dict[str, Any] = {**common, "nodata": nodata, "units": units, "uncertainty": uncertainty,
                             "max_scale_error": max_scale_error}
+    return _read_as(fmt, p, variable, sign, common, grid)
+
+
+def _read_as(fmt: str, p: Path, variable: str | None, sign: Sign | None, common: dict[str, Any],
+             grid: dict[str, Any]) -> BathymetryMap:
+    """The map of ``p`` read by format ``fmt``'s reader: ``grid`` the settings of a gridded
+    format, ``common`` those a triangulated surface takes (:func:`read_map`'s)."""
+    from tangraph.maps import hydro, raster
+
     if fmt == "netcdf":
         return read_netcdf(p, variable=variable, sign=sign, **grid)
     if fmt == "geotiff":

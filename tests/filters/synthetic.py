@@ -1,9 +1,10 @@
 """Small synthetic surveys with a known truth for the filter tests (no ray casting: the soundings
-are the map's bilinear depth at the true footprints plus seeded noise)."""
+are the map's bilinear depth at the true footprints plus seeded noise), and a bare fix."""
 
 from __future__ import annotations
 
 import dataclasses
+import types
 
 import numpy as np
 
@@ -69,3 +70,8 @@ def final_error(track, survey: Survey) -> float:
 
 def dr_final_error(survey: Survey) -> float:
     return float(np.hypot(*(survey.dr_pose[-1, :2] - survey.true_pose[-1, :2])))
+
+
+def gaussian_fix(position, std):
+    """What :func:`~tangraph.filters.fixes.decide_fix` reads of a fix."""
+    return types.SimpleNamespace(position=np.asarray(position, float), covariance=np.eye(2) * std**2)

@@ -1,16 +1,27 @@
-"""The shared terrain likelihood against a numpy reference, and the resampling schemes."""
+"""The shared terrain likelihood (tangraph.filters.likelihood) against a numpy reference: the kernel
+with NaN and off-map soundings, turned offsets, residual sums, the tide update's checks, MBARI's
+information exponents, and no map data as no evidence."""
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters import FilterDivergence
+from tangraph.filters import FilterDivergence, default_config, run_filter
+from tangraph.filters.belief import model_belief
 from tangraph.filters.likelihood import TerrainLikelihood, log_normalise
-from tangraph.filters.resampling import Resampler, resample
+from tangraph.filters.model import FilterModel, survey_pings
+from tangraph.filters.steps import evaluate, reweight
 from tangraph.maps import BathymetryMap
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 from tests.maps.reference import interpolate
+
+MAP = rough_map(0)
+SURVEY = multibeam_survey(MAP, pings=12)
+MODEL = navigation(SURVEY, initial_position_std=10.0, sounding_std=0.5)
 
 
 def with_missing(per_sounding: np.ndarray) -> np.ndarray:
@@ -72,31 +83,6 @@ def test_divergence_and_bad_arguments_are_named():
         TerrainLikelihood(rough(), sigma=1.0).log_likelihood(np.zeros(3), np.zeros((1, 2)), np.zeros(1))
 
 
-@pytest.mark.parametrize("scheme", list(Resampler))
-def test_one_particle_with_all_the_weight(scheme):
-    w = np.array([0.0, 0.0, 1.0, 0.0])
-    idx = resample(w, scheme, rng=np.random.default_rng(0))
-    assert idx.tolist() == [2, 2, 2, 2]
-    assert w.tolist() == [0.0, 0.0, 1.0, 0.0]  # not modified
-
-
-@pytest.mark.parametrize("scheme", [Resampler.SYSTEMATIC, Resampler.STRATIFIED, Resampler.RESIDUAL])
-def test_equal_weights_keep_every_particle_once(scheme):
-    assert sorted(resample(np.full(10, 0.1), scheme, rng=np.random.default_rng(1))) == list(range(10))
-
-
-@pytest.mark.parametrize("scheme", list(Resampler))
-def test_mean_counts_are_n_times_the_weights(scheme):
-    w = np.array([0.05, 0.15, 0.3, 0.5])
-    n, runs = 40, 400
-    rng = np.random.default_rng(5)
-    counts = np.array([np.bincount(resample(w, scheme, rng=rng, n=n), minlength=4) for _ in range(runs)])
-    if scheme in (Resampler.SYSTEMATIC, Resampler.RESIDUAL):  # each count within floor/ceil of N w
-        assert np.all(counts >= np.floor(n * w)) and np.all(counts <= np.ceil(n * w))
-    standard_error = np.sqrt(n * w * (1 - w) / runs)  # multinomial bound on the others' scatter
-    assert np.all(np.abs(counts.mean(axis=0) - n * w) < 4 * standard_error)
-
-
 def test_no_finite_sounding_carries_no_information():
     ll = TerrainLikelihood(rough(), sigma=1.0).log_likelihood(
         np.zeros((3, 2)) + 100, np.zeros((2, 2)), [np.nan] * 2
@@ -129,3 +115,109 @@ def test_turned_offsets_match_the_numpy_reference():
     )
     east = m.depth_at(particles[0, 0], particles[0, 1] + 10.0)
     np.testing.assert_allclose(one[0, 0], 50.0 - east, rtol=1e-10)
+
+
+def test_residual_sums_match_the_numpy_reference():
+    m = rough_map(1, shape=(60, 60))
+    rng = np.random.default_rng(2)
+    particles = rng.uniform(-20, 320, (400, 2))
+    offsets = rng.normal(0, 10, (25, 2))
+    depths = rng.uniform(70, 90, 25)
+    depths[4] = np.nan
+    got = TerrainLikelihood(m, 1.0).residual_sums(particles, offsets, depths)
+    keep = np.isfinite(depths)
+    qn, qe = particles[:, 0:1] + offsets[keep, 0], particles[:, 1:2] + offsets[keep, 1]
+    h, _ = interpolate(m.north, m.east, m.depth, qn.ravel(), qe.ravel())
+    r = depths[keep] - h.reshape(qn.shape)
+    want = np.column_stack([r.sum(axis=1), (r**2).sum(axis=1)])
+    finite = np.isfinite(want[:, 0])
+    assert 0 < finite.sum() < finite.size
+    np.testing.assert_allclose(got[finite], want[finite], rtol=1e-10)
+    assert np.isnan(got[~finite]).all()
+
+
+def test_tide_update_checks_its_inputs_as_log_likelihood_does():
+    like = TerrainLikelihood(MAP, 0.5)
+    particles, offsets, depths, tide = np.zeros((4, 2)), np.zeros((3, 2)), np.ones(3), np.zeros(4)
+    with pytest.raises(TangraphError, match=r"particles must have shape \(N, 2\), got \(4, 3\)"):
+        like.tide_update(np.zeros((4, 3)), offsets, depths, tide, 0.0)
+    with pytest.raises(TangraphError, match="offsets .* and depths .* do not match"):
+        like.tide_update(particles, offsets, np.ones(2), tide, 0.0)
+    with pytest.raises(TangraphError, match=r"tide must have shape \(4,\) as particles, got \(3,\)"):
+        like.tide_update(particles, offsets, depths, np.zeros(3), 0.0)
+    with pytest.raises(TangraphError, match="tide_var must be a finite number >= 0, got -1.0"):
+        like.tide_update(particles, offsets, depths, tide, -1.0)
+    # NaN depths are skipped, as log_likelihood skips them
+    centre = MAP.north[100], MAP.east[100]
+    particles = np.array(centre) + np.random.default_rng(0).normal(0, 5, (4, 2))
+    depths = MAP.depth_at(centre[0] + offsets[:, 0], centre[1] + offsets[:, 1])
+    depths[1] = np.nan
+    got = like.tide_update(particles, offsets, depths, tide, 0.0)[0]
+    np.testing.assert_allclose(got, like.log_likelihood(particles, offsets[[0, 2]], depths[[0, 2]]))
+
+
+def test_the_compiled_exponents_match_the_reference():
+    """The likelihood kernel's exponents against :func:`tangraph.sensors.information_exponent` on
+    the cloud's predicted depths (a weighted cloud, some particles off the map's data)."""
+    from tangraph.sensors import information_exponent
+
+    model = MODEL.replace(map_std=0.3, map_correlation_length=20.0)
+    depth = np.array(MAP.depth)
+    depth[MAP.north > 240.0, :] = np.nan  # the map's data stop by the survey
+    cut = MAP.replace(depth=depth)
+    fm = FilterModel.from_model(model, cut)
+    ping = survey_pings(SURVEY, cut, model)[5]
+    rng = np.random.default_rng(7)
+    belief = model_belief(SURVEY.dr_pose[5, :2], fm, 300, rng=rng, std=40.0)
+    belief = reweight(belief, rng.normal(0, 1, 300), where="test")
+    got = evaluate(belief, ping, fm).exponent
+    residual = fm.terrain.likelihood.residuals(belief.particles, ping.offsets, ping.depths, belief.tide,
+                                               turn=-belief.calibration[:, 1])
+    predicted = ping.depths[None, :] - residual.T  # (N, B), NaN off the map
+    assert np.isnan(predicted).any()
+    want = information_exponent(predicted, belief.weights, ping.map_variance)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def test_a_sounding_whose_map_lies_under_negligible_weight_is_left_out():
+    """Only particles of tiny weight (1e-200) have the map under some soundings: those soundings
+    are left out for all (no NaN from their weighted spread), the others weigh as usual."""
+    from tangraph.filters.likelihood import TerrainLikelihood
+
+    depth = np.array(MAP.depth)
+    depth[MAP.north > 300.0, :] = np.nan
+    cut = MAP.replace(depth=depth)
+    like = TerrainLikelihood(cut, 0.5)
+    rng = np.random.default_rng(3)
+    north = np.concatenate([np.full(3, 350.0), np.full(57, 210.0), np.full(40, 260.0)])
+    particles = np.column_stack([north + rng.uniform(-2, 2, 100), rng.uniform(200, 300, 100)])
+    # three far north, off the map; 57 whose second sounding (80 m north) has the map; 40 without
+    offsets = np.array([[0.0, 0.0], [80.0, 0.0], [-5.0, 10.0]])  # the second: north of most
+    depths = np.array([80.0, 80.0, 80.0])
+    weights = np.full(100, 1.0)
+    weights[3:60] = 1e-200  # the particles whose second sounding has the map: negligible weight
+    update = like.ping_update(particles, offsets, depths, np.zeros(100), 0.1, weights=weights,
+                              variance=np.full(3, 0.5), map_variance=np.full(3, 0.04))
+    assert np.all(np.isfinite(update.log_likelihood))
+    assert update.exponent[1] == 0.0
+    assert update.exponent[0] > 0.0 and update.exponent[2] > 0.0
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf"])
+def test_a_filter_started_at_the_edge_of_the_maps_data_does_not_collapse(method):
+    """Half the cloud's soundings fall where the map has no data: no data is no evidence, so the
+    cloud keeps its particles there instead of collapsing onto the few with the map under every
+    sounding (with the old rule one ping took the spread to zero)."""
+    depth = np.array(MAP.depth)
+    edge = 215.0  # north of the start: the map's data stop here
+    depth[MAP.north > edge, :] = np.nan
+    cut = MAP.replace(depth=depth)
+    survey = multibeam_survey(MAP, pings=8, start=(200.0, 150.0), heading_deg=90.0, rate=0.5)
+    model = navigation(survey, initial_position_std=15.0, sounding_std=0.5)
+    config = dataclasses.replace(default_config(method), n_particles=800)
+    track = run_filter(method, survey, cut, config, model=model, rng=np.random.default_rng(0))
+    spread = np.sqrt(np.trace(track.covariance[:, :2, :2], axis1=1, axis2=2))
+    error = np.hypot(*(track.pose[:, :2] - survey.true_pose[:, :2]).T)
+    # the old rule: 37-45 m off with a spread of 0.2-0.6 m; now within its spread at every ping
+    assert np.all(error < 3 * spread + 0.5), (error.round(2), spread.round(2))
+    assert track.meta["n_divergences"] == 0

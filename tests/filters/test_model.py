@@ -1,5 +1,6 @@
-"""The shared model: motion, residual sums, and the terrain likelihood with a known or an
-estimated (Rao-Blackwellised) tide against direct computations."""
+"""The shared model (tangraph.filters.model): motion, the terrain likelihood with a known or an
+estimated (Rao-Blackwellised) tide against direct computations, and the pings: checked, NaN
+soundings dropped, carrying the terrain model's variances."""
 
 from __future__ import annotations
 
@@ -7,11 +8,18 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from tangraph.errors import TangraphError
+from tangraph.filters import PFConfig, run_filter
+from tangraph.filters.belief import initial_belief
 from tangraph.filters.likelihood import TerrainLikelihood
-from tangraph.filters.model import MotionModel, Ping, TerrainModel, survey_pings
-from tangraph.sensors import NavigationModel
-from tests.filters.synthetic import multibeam_survey, rough_map
-from tests.maps.reference import interpolate
+from tangraph.filters.model import FilterModel, MotionModel, Ping, TerrainModel, survey_pings
+from tangraph.filters.pf import pf_step
+from tangraph.sensors import NavigationModel, sounding_variances
+from tests.filters.synthetic import multibeam_survey, navigation, rough_map
+
+MAP = rough_map(0)
+SURVEY = multibeam_survey(MAP, pings=12)
+MODEL = navigation(SURVEY, initial_position_std=10.0, sounding_std=0.5)
 
 
 def ping(offsets, depths, index=1, increment=(0.0, 0.0)):
@@ -57,25 +65,6 @@ def test_motion_model_from_the_navigation_model():
     assert MotionModel.from_model(nav, floor=0.5) == MotionModel(0.2, 0.01, 0.003, 0.5)
 
 
-def test_residual_sums_match_the_numpy_reference():
-    m = rough_map(1, shape=(60, 60))
-    rng = np.random.default_rng(2)
-    particles = rng.uniform(-20, 320, (400, 2))
-    offsets = rng.normal(0, 10, (25, 2))
-    depths = rng.uniform(70, 90, 25)
-    depths[4] = np.nan
-    got = TerrainLikelihood(m, 1.0).residual_sums(particles, offsets, depths)
-    keep = np.isfinite(depths)
-    qn, qe = particles[:, 0:1] + offsets[keep, 0], particles[:, 1:2] + offsets[keep, 1]
-    h, _ = interpolate(m.north, m.east, m.depth, qn.ravel(), qe.ravel())
-    r = depths[keep] - h.reshape(qn.shape)
-    want = np.column_stack([r.sum(axis=1), (r**2).sum(axis=1)])
-    finite = np.isfinite(want[:, 0])
-    assert 0 < finite.sum() < finite.size
-    np.testing.assert_allclose(got[finite], want[finite], rtol=1e-10)
-    assert np.isnan(got[~finite]).all()
-
-
 def test_known_tide_is_the_plain_gaussian_likelihood():
     m = rough_map(2, shape=(60, 60))
     rng = np.random.default_rng(3)
@@ -118,19 +107,6 @@ def test_uncertain_tide_is_marginalised_exactly():
     assert update.tide_var == pytest.approx(1 / (1 / tide_sd**2 + 8 / sigma**2))
 
 
-def test_survey_pings_drop_nan_soundings_and_keep_empty_pings():
-    m = rough_map(0)
-    s = multibeam_survey(m, pings=5, beams=4)
-    depth = np.array(s.beam_depth)
-    depth[1, 2] = np.nan
-    depth[3] = np.nan
-    pings = survey_pings(s.replace(beam_depth=depth))
-    assert [p.n_soundings for p in pings] == [4, 3, 4, 0, 4]
-    assert pings[0].first and not pings[1].first
-    np.testing.assert_allclose(pings[2].increment, s.dr_pose[2, :2] - s.dr_pose[1, :2])
-    assert pings[0].dt == 0.0 and pings[2].dt == pytest.approx(s.time[2] - s.time[1])
-
-
 def test_heading_error_turns_the_soundings_back():
     """A particle whose heading error is b sees its world-aligned (DR-heading) offsets turned by -b:
     with the truth's b, the soundings of a turned swath match the map again."""
@@ -147,3 +123,104 @@ def test_heading_error_turns_the_soundings_back():
     got = terrain.evaluate(np.tile(truth, (2, 1)), np.zeros(2), 0.0, ping(dr_offsets, depths), [0.0, b])
     assert got.log_likelihood[1] == pytest.approx(0.0, abs=1e-9)
     assert got.log_likelihood[0] < -10.0
+
+
+def test_survey_pings_drop_nan_soundings_and_keep_empty_pings():
+    m = rough_map(0)
+    s = multibeam_survey(m, pings=5, beams=4)
+    depth = np.array(s.beam_depth)
+    depth[1, 2] = np.nan
+    depth[3] = np.nan
+    pings = survey_pings(s.replace(beam_depth=depth))
+    assert [p.n_soundings for p in pings] == [4, 3, 4, 0, 4]
+    assert pings[0].first and not pings[1].first
+    np.testing.assert_allclose(pings[2].increment, s.dr_pose[2, :2] - s.dr_pose[1, :2])
+    assert pings[0].dt == 0.0 and pings[2].dt == pytest.approx(s.time[2] - s.time[1])
+
+
+def test_nan_soundings_are_skipped():
+    """A survey with NaN beams gives exactly the track of the survey without those beams."""
+    depth = np.array(SURVEY.beam_depth)
+    depth[:, 0] = np.nan
+    depth[5] = np.nan  # one ping with no return at all
+    with_nan = SURVEY.replace(beam_depth=depth)
+    cut = with_nan.replace(
+        beam_forward=SURVEY.beam_forward[:, 1:],
+        beam_starboard=SURVEY.beam_starboard[:, 1:],
+        beam_depth=depth[:, 1:],
+    )
+    config = PFConfig(n_particles=300)
+    a = run_filter("pf", with_nan, MAP, config, model=MODEL, rng=np.random.default_rng(4))
+    b = run_filter("pf", cut, MAP, config, model=MODEL, rng=np.random.default_rng(4))
+    assert np.all(np.isfinite(a.pose))
+    np.testing.assert_array_equal(a.pose, b.pose)
+
+
+@pytest.mark.parametrize(
+    ("fields", "message"),
+    [
+        ({"offsets": np.zeros((3, 3))}, r"offsets \(B, 2\) and depths \(B,\) do not match"),
+        ({"depths": np.zeros(2)}, r"offsets \(B, 2\) and depths \(B,\) do not match"),
+        ({"offsets": np.array([[0.0, 0.0], [np.nan, 1.0], [0.0, 1.0]])}, "offsets must be finite"),
+        ({"depths": np.array([1.0, np.inf, 2.0])}, "depths must be finite or NaN, got inf"),
+        ({"increment": np.zeros(3)}, r"increment must be a finite \(2,\) array"),
+        ({"increment": np.array([np.nan, 0.0])}, r"increment must be a finite \(2,\) array"),
+    ],
+)
+def test_a_bad_ping_is_refused(fields, message):
+    args = {"index": 2, "increment": np.zeros(2), "offsets": np.zeros((3, 2)), "depths": np.ones(3)}
+    with pytest.raises(TangraphError, match=f"Ping 2: {message}"):
+        Ping(**(args | fields))
+
+
+@pytest.mark.parametrize("index", [-1, 1.5, True])
+def test_a_ping_index_is_a_count(index):
+    with pytest.raises(TangraphError, match="Ping: index must be an integer >= 0"):
+        Ping(index, np.zeros(2), np.zeros((0, 2)), np.zeros(0))
+
+
+def test_nan_depths_in_a_ping_are_dropped_not_a_divergence():
+    """A NaN depth handed straight to a step (not through survey_pings) is a missing sounding:
+    the step weighs the ping by the other soundings, as if the NaN one were not there."""
+    config = PFConfig(n_particles=100, ess_threshold=0.0, tempering=False)
+    model = FilterModel.from_model(MODEL, MAP, config)
+    ping = survey_pings(SURVEY)[1]
+    depths = ping.depths.copy()
+    depths[[0, 7]] = np.nan
+    with_nan = Ping(ping.index, ping.increment, ping.offsets, depths)
+    keep = np.isfinite(depths)
+    without = Ping(ping.index, ping.increment, ping.offsets[keep], depths[keep])
+    assert with_nan.n_soundings == without.n_soundings == depths.size - 2
+    np.testing.assert_array_equal(with_nan.offsets, without.offsets)
+    belief = initial_belief(SURVEY.dr_pose[0, :2], 5.0, 100, rng=np.random.default_rng(0))
+    a = pf_step(belief, with_nan, model, config, rng=np.random.default_rng(1))
+    b = pf_step(belief, without, model, config, rng=np.random.default_rng(1))
+    np.testing.assert_array_equal(a.belief.log_weights, b.belief.log_weights)
+    all_nan = Ping(ping.index, ping.increment, ping.offsets, np.full(depths.size, np.nan))
+    result = pf_step(belief, all_nan, model, config, rng=np.random.default_rng(1))  # no divergence
+    np.testing.assert_array_equal(result.belief.log_weights, belief.log_weights)
+
+
+def test_pings_carry_the_terrain_models_variances():
+    model = MODEL.replace(map_std=0.3, map_correlation_length=20.0)
+    pings = survey_pings(SURVEY, MAP, model)
+    want = sounding_variances(SURVEY, MAP, model)
+    for ping in pings:
+        keep = np.isfinite(SURVEY.beam_depth[ping.index])
+        np.testing.assert_allclose(ping.variance, want[ping.index, keep])
+        np.testing.assert_allclose(ping.map_variance, 0.09)
+    # soundings that share a map error count as fewer: each variance is above noise + map error
+    assert all(np.all(p.variance > 0.5**2 + 0.3**2) for p in pings)
+    # a perfect map: the sounding noise alone; no model: nothing carried
+    perfect = survey_pings(SURVEY, MAP, MODEL)
+    assert all(np.allclose(p.variance, 0.25) and np.allclose(p.map_variance, 0.0) for p in perfect)
+    assert all(p.variance is None for p in survey_pings(SURVEY))
+
+
+def test_a_filter_that_knows_the_map_is_wrong_is_less_confident():
+    config = PFConfig(n_particles=500)
+    plain = run_filter("pf", SURVEY, MAP, config, model=MODEL, rng=np.random.default_rng(4))
+    model = MODEL.replace(map_std=0.3, map_correlation_length=30.0)
+    wrong = run_filter("pf", SURVEY, MAP, config, model=model, rng=np.random.default_rng(4))
+    det = [np.linalg.det(t.covariance[-1, :2, :2]) for t in (plain, wrong)]
+    assert det[1] > 2 * det[0], det

@@ -12,8 +12,14 @@ import pytest
 from tangraph.errors import TangraphError
 from tangraph.filters import PMFConfig, point_mass_filter, run_filter
 from tangraph.sensors import DeadReckoningModel
+from tests.filters.linear_gaussian import (
+    kalman,
+    kalman_mixture,
+    linear_gaussian_run,
+    linear_model,
+    sloped_seabed,
+)
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
-from tests.filters.test_pf import kalman, kalman_mixture, linear_gaussian_run, linear_model, sloped_seabed
 
 
 @pytest.mark.parametrize(("seed", "tide_sd"), [(0, 0.0), (2, 3.0)])

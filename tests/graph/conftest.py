@@ -1,4 +1,5 @@
-"""A small simulated survey on a rough synthetic map, shared by the graph tests."""
+"""A small simulated survey on a rough synthetic map, and spoilt surveys (a biased DR, a DR started
+far off), shared by the graph tests."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pytest
 
 from tangraph.maps import fractal
 from tangraph.sensors import DeadReckoningModel, MultibeamConfig
+from tangraph.sim.faults import offset_start
 from tangraph.sim.scenario import Scenario, simulate
 
 
@@ -40,3 +42,17 @@ def small_survey(rough_map):
 def with_dr(scenario: Scenario, **changes) -> Scenario:
     model = dataclasses.replace(scenario.dead_reckoning, **changes)
     return dataclasses.replace(scenario, dead_reckoning=model)
+
+
+@pytest.fixture(scope="module")
+def biased_survey(rough_map):
+    from tangraph.sim.scenario import simulate
+
+    scenario = small_scenario(duration=800.0, heading_bias=float(np.deg2rad(3.0)), speed_scale=0.03)
+    return simulate(scenario, rng=np.random.default_rng(100), bathymetry=rough_map, seed=100)
+
+
+@pytest.fixture(scope="module")
+def wrong_start(small_survey):
+    """The DR starts 120 m from the truth while the model says 10 m (std)."""
+    return offset_start(small_survey, [90.0, -80.0])

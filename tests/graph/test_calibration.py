@@ -3,8 +3,6 @@ heading bias, and the honesty of the DR covariance it carries when nothing corre
 
 from __future__ import annotations
 
-import dataclasses
-
 import gtsam
 import numpy as np
 import pytest
@@ -19,7 +17,6 @@ from tangraph.graph.calibration import (
 )
 from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
 from tangraph.survey import Survey
-from tests.graph.conftest import small_scenario
 
 
 def _numerical(f, x, eps=1e-6):
@@ -67,14 +64,6 @@ def test_world_position_factor_jacobians_match_numerical_derivatives():
         return factor.whitenedError(v)
 
     np.testing.assert_allclose(a, _numerical(whitened, np.zeros(5)), atol=1e-6)
-
-
-@pytest.fixture(scope="module")
-def biased_survey(rough_map):
-    from tangraph.sim.scenario import simulate
-
-    scenario = small_scenario(duration=800.0, heading_bias=float(np.deg2rad(3.0)), speed_scale=0.03)
-    return simulate(scenario, rng=np.random.default_rng(100), bathymetry=rough_map, seed=100)
 
 
 @pytest.mark.parametrize("run", [navigate_online, smooth_survey])
@@ -147,29 +136,3 @@ def test_dr_covariance_is_honest_when_nothing_corrects_it(rough_map):
         nees.append(e @ np.linalg.solve(track.covariance[-1, :2, :2], e))
     lo, hi = stats.chi2.ppf([0.005, 0.995], 2 * runs) / runs
     assert lo < np.mean(nees) < hi
-
-
-def _flagged(fix, *reasons):
-    quality = dataclasses.replace(fix.quality, reasons=tuple(reasons))
-    return dataclasses.replace(fix, quality=quality)
-
-
-def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
-    from tangraph.fix_records import FixStatus
-    from tangraph.graph.fixes import judge_fix
-    from tangraph.matching import tap_fix
-
-    config = GraphConfig()
-    fix = tap_fix(biased_survey.replace(dr_pose=biased_survey.true_pose), rough_map, 59, 20, config.fixes.tap,
-                  prior=biased_survey.true_pose[59, :2])
-    predicted, cov = biased_survey.true_pose[59], np.eye(3) * 4.0
-    assert judge_fix(fix, predicted, cov, config, 50.0).record.status is FixStatus.ACCEPTED
-    two = _flagged(fix, "multimodal: 2 basins")
-    used = judge_fix(two, predicted, cov, config, 50.0)
-    assert used.accepted and used.record.status is FixStatus.ACCEPTED and "multimodal" in used.record.reason
-    refused = judge_fix(two, predicted, cov, config.replace(accept_multimodal=False), 50.0)
-    assert refused.record.status is FixStatus.MULTIMODAL and not refused.accepted
-    flat = judge_fix(_flagged(fix, "uninformative: touches the edge"), predicted, cov, config, 50.0)
-    assert flat.record.status is FixStatus.UNINFORMATIVE
-    far = judge_fix(fix, predicted + np.array([200.0, 0.0, 0.0]), cov, config, 50.0)
-    assert far.record.status is FixStatus.GATE and far.record.nis > 13.8

@@ -1,4 +1,5 @@
-"""Factors, frames and the pose graph: Jacobians against numerical derivatives, least squares by hand."""
+"""Factors and frames (tangraph.graph.factors): Jacobians against numerical derivatives, propagation
+against its own derivatives and Monte Carlo, a bad fix covariance refused naming the fix."""
 
 from __future__ import annotations
 
@@ -8,20 +9,14 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.graph import (
-    GraphConfig,
-    PoseGraph,
     between_noise,
     check_fix_covariance,
     compose,
-    key_indices,
     propagate,
-    smooth_pose_graph,
     tangent_to_world,
-    window_ends,
     world_to_tangent,
 )
 from tangraph.graph.factors import position_fix_factor
-from tangraph.graph.online import _translate
 from tangraph.sensors import odometry
 
 
@@ -126,78 +121,6 @@ def test_bad_fix_covariance_is_refused_naming_the_fix(cov):
         check_fix_covariance(cov, "fix at ping 17")
 
 
-def test_key_indices_cover_windows_interval_and_ends():
-    t = np.arange(0.0, 100.0, 2.0)  # 50 pings
-    ends = window_ends(50, 10, 10)
-    np.testing.assert_array_equal(ends, [9, 19, 29, 39, 49])
-    keys = key_indices(t, ends, key_interval=7.0)
-    assert keys[0] == 0 and keys[-1] == 49 and set(ends) <= set(keys)
-    assert np.all(np.diff(t[keys]) < 7.0 + 2.0)  # the first ping at least 7 s after the last key
-
-
-def linear_graph():
-    """Three poses heading north with the heading pinned: a linear problem in the positions."""
-    graph = PoseGraph(robust_kernel="none", min_std=1e-9, min_heading_std=1e-9)
-    truth = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [20.0, 0.0, 0.0]])
-    for k, p in enumerate(truth):
-        graph.add_pose(k, float(k), p + np.array([1.0, -1.0, 0.0]))
-    p0_cov = np.diag([4.0, 9.0, 1e-12])
-    graph.add_pose_prior(0, [0.5, 0.2, 0.0], p0_cov)
-    q01, q12 = np.diag([1.0, 0.25, 1e-12]), np.array([[0.5, 0.1, 0.0], [0.1, 0.3, 0.0], [0.0, 0.0, 1e-12]])
-    graph.add_odometry(0, 1, [10.2, -0.1, 0.0], q01)
-    graph.add_odometry(1, 2, [9.7, 0.3, 0.0], q12)
-    f1, f2 = np.array([[2.0, 0.5], [0.5, 1.0]]), np.diag([0.8, 1.5])
-    graph.add_position_fix(1, [10.4, 0.6], f1)
-    graph.add_position_fix(2, [19.1, -0.2], f2)
-    # The same problem by hand: unknowns (n0, e0, n1, e1, n2, e2), weighted least squares.
-    eye, zero = np.eye(2), np.zeros((2, 2))
-    rows = [(np.hstack([eye, zero, zero]), [0.5, 0.2], p0_cov[:2, :2]),
-            (np.hstack([-eye, eye, zero]), [10.2, -0.1], q01[:2, :2]),
-            (np.hstack([zero, -eye, eye]), [9.7, 0.3], q12[:2, :2]),
-            (np.hstack([zero, eye, zero]), [10.4, 0.6], f1),
-            (np.hstack([zero, zero, eye]), [19.1, -0.2], f2)]
-    info = sum(a.T @ np.linalg.inv(c) @ a for a, _, c in rows)
-    vector = sum(a.T @ np.linalg.inv(c) @ np.asarray(z) for a, z, c in rows)
-    cov = np.linalg.inv(info)
-    return graph, (cov @ vector).reshape(3, 2), cov
-
-
-def test_smoother_matches_hand_computed_least_squares():
-    graph, expected, cov = linear_graph()
-    solution = smooth_pose_graph(graph, GraphConfig())
-    np.testing.assert_allclose(solution.pose[:, :2], expected, atol=1e-6)
-    for k in range(3):
-        np.testing.assert_allclose(solution.covariance[k, :2, :2], cov[2 * k : 2 * k + 2, 2 * k : 2 * k + 2],
-                                   rtol=1e-5, atol=1e-9)
-
-
-def test_gap_without_odometry_names_the_unconstrained_poses():
-    graph = PoseGraph()
-    for k in range(6):
-        graph.add_pose(k * 10, float(k), [k * 10.0, 0.0, 0.0])
-    graph.add_pose_prior(0, [0.0, 0.0, 0.0], np.diag([1.0, 1.0, 0.01]))
-    for i, j in ((0, 10), (10, 20), (30, 40), (40, 50)):  # no odometry from 20 to 30
-        graph.add_odometry(i, j, [10.0, 0.0, 0.0], np.diag([0.1, 0.1, 1e-4]))
-    graph.add_position_fix(40, [40.0, 0.0], np.eye(2))
-    with pytest.raises(TangraphError, match=r"pings 30\.\.50 \(3 key poses\)"):
-        smooth_pose_graph(graph)
-    graph.add_position_fix(50, [50.0, 0.0], np.eye(2))  # two fixes pin the part after the gap
-    solution = smooth_pose_graph(graph)
-    np.testing.assert_allclose(solution.pose[-1, :2], [50.0, 0.0], atol=1e-6)
-
-
-def test_gtsam_indeterminant_error_is_translated():
-    graph = PoseGraph()
-    graph.add_pose(0, 0.0, [0, 0, 0])
-    graph.add_pose(7, 1.0, [1, 0, 0])
-    graph.add_pose_prior(0, [0, 0, 0], np.eye(3))
-    error = _translate(RuntimeError("Indeterminate linear system detected while working near variable\n"
-                                    "7 (Symbol: 7)."), graph)
-    assert isinstance(error, TangraphError) and "ping 7" in str(error)
-    other = RuntimeError("something else")
-    assert _translate(other, graph) is other
-
-
 def test_inverse_increment_covariance_matches_monte_carlo():
     """The covariance of d^-1 against 200 000 sampled increments: within 3 % (Monte Carlo error of
     a variance over n samples is sqrt(2 / n) = 0.3 %)."""
@@ -218,36 +141,3 @@ def test_inverse_increment_covariance_matches_monte_carlo():
     np.testing.assert_allclose(got, np.cov(inverse.T), rtol=0.03, atol=1e-6)
     # a pure rotation of the position block (the old code) misses the heading's lever arm
     assert got[1, 1] > 1.5 * np.diag(cov)[:2].max()
-
-
-def test_with_fixes_leaves_the_original_graph_alone():
-    from tangraph.graph import PoseGraph
-
-    graph = PoseGraph()
-    graph.add_pose(0, 0.0, [0.0, 0.0, 0.0])
-    graph.add_pose_prior(0, [0.0, 0.0, 0.0], np.eye(3))
-    graph.add_position_fix(0, [1.0, 1.0], np.eye(2))
-    other = graph.with_fixes([])
-    other.add_pose(1, 1.0, [1.0, 0.0, 0.0])
-    other.add_odometry(0, 1, [1.0, 0.0, 0.0], np.eye(3) * 0.01)
-    assert graph.keys == [0] and len(graph.odometry) == 0 and len(graph.fixes) == 1
-    assert graph.factor_graph().size() == 2 and other.factor_graph().size() == 2
-
-
-def test_a_widened_start_is_kept_and_undone_with_the_breaks():
-    from tangraph.graph import PoseGraph
-
-    graph = PoseGraph()
-    graph.add_pose(0, 0.0, [0.0, 0.0, 0.0])
-    graph.add_start(0, [0.0, 0.0, 0.0], 10.0, 0.01)
-    wide = graph.widen_start(200.0)
-    assert graph.start_break == pytest.approx(200.0) and graph._factors["start"] == [wide]
-
-    def position_std(g):
-        cov = gtsam.Marginals(g.factor_graph(), g.values(None, None)).marginalCovariance(0)
-        return float(np.sqrt(cov[0, 0]))
-
-    assert position_std(graph) == pytest.approx(np.hypot(10.0, 200.0), rel=1e-6)
-    assert position_std(graph.with_fixes([])) == pytest.approx(np.hypot(10.0, 200.0), rel=1e-6)
-    assert position_std(graph.with_fixes([], breaks=False)) == pytest.approx(10.0, rel=1e-6)
-    assert graph.start_break == pytest.approx(200.0)  # the original keeps its break

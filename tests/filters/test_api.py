@@ -1,4 +1,7 @@
-"""Every filter recovers a known truth from seeded noise; run_filter dispatches and checks its config."""
+"""The filter family through its public door (tangraph.filters.api): every filter recovers a known
+truth from seeded noise, estimates an unknown tide and the DR's speed scale and heading bias, keeps a
+known calibration, and its track carries what run_filter promises; run_filter dispatches, checks the
+config and takes the model from the survey."""
 
 from __future__ import annotations
 
@@ -12,20 +15,24 @@ from tangraph.filters import (
     FilterMethod,
     MLEConfig,
     PFConfig,
-    SJCPFConfig,
     config_type,
     default_config,
     run_filter,
 )
-from tangraph.maps import fractal
-from tangraph.sensors import DeadReckoningModel, NavigationModel, simulate_dead_reckoning
-from tangraph.sim import trajectories
-from tangraph.survey import Survey
+from tangraph.sensors import NavigationModel
+from tests.filters.calibrated import MAP as CALIBRATED_MAP
+from tests.filters.calibrated import calibrated_survey
 from tests.filters.synthetic import dr_final_error, final_error, multibeam_survey, navigation, rough_map
 
 MAP = rough_map(0)
 SURVEY = multibeam_survey(MAP, seed=1, pings=50)
 MODEL = navigation(SURVEY, initial_position_std=20.0, sounding_std=0.5)
+
+#: the run of the known-calibration test (12 pings), and of the model's test (30 pings)
+SURVEY_12 = multibeam_survey(MAP, pings=12)
+MODEL_12 = navigation(SURVEY_12, initial_position_std=10.0, sounding_std=0.5)
+SURVEY_30 = multibeam_survey(MAP, seed=1, pings=30)
+MODEL_30 = navigation(SURVEY_30, initial_position_std=20.0, sounding_std=0.5)
 
 MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is ~25 m off at the end
     "pf": dict(n_particles=1000),
@@ -36,7 +43,6 @@ MULTIBEAM = {  # 50 pings of 30 beams, 0.3 m noise, a 3 deg heading bias: DR is 
     "mle": dict(),
     "pmf": dict(),
 }
-
 
 # Thresholds of the recovery test. Scale: the rms slope at the footprints is 0.28 (0.20 per axis), so
 # one ping's 30 soundings of 0.3 m noise bound a position to about 0.3 / sqrt(30) / 0.20 = 0.27 m
@@ -87,26 +93,38 @@ def test_an_unknown_tide_is_estimated(method):
     assert late(estimated) < 1.5 < 3.0 < late(known), (late(estimated), late(known))
 
 
-def test_sjcpf_recovers_the_truth_from_a_single_beam_on_a_coarse_chart():
-    """Chen & Che's setting, scaled down: 500 m cells, one sounding per 100 m, 5 m depth noise,
-    2 deg heading bias and 0.1 m/s speed noise; 300 pings."""
-    rng = np.random.default_rng(0)
-    chart = fractal((120, 120), 500.0, rng=rng, beta=3.0, relief=300.0, mean_depth=2000.0)
-    k = 300
-    time, truth = trajectories.straight_line(
-        np.array([5000.0, 5000.0]), np.radians(45.0), 1.0, (k - 1) * 100.0, 0.01
-    )
-    dr = simulate_dead_reckoning(time, truth, DeadReckoningModel.chen2022(), rng=rng).pose
-    depth = chart.depth_at(truth[:, 0], truth[:, 1])[:, None] + 5.0 * rng.standard_normal((k, 1))
-    zeros = np.zeros((k, 1))
-    survey = Survey(time, dr, np.full(k, 100.0), zeros, zeros, depth, true_pose=truth)
-    model = NavigationModel.from_dead_reckoning(
-        DeadReckoningModel.chen2022(), initial_position_std=300.0, sounding_std=7.5
-    )
-    track = run_filter("sjcpf", survey, chart, SJCPFConfig(), model=model, rng=np.random.default_rng(1))
-    rmse = np.sqrt(np.mean(np.sum((track.pose[:, :2] - truth[:, :2]) ** 2, axis=1)))
-    dr_rmse = np.sqrt(np.mean(np.sum((dr[:, :2] - truth[:, :2]) ** 2, axis=1)))
-    assert rmse < dr_rmse / 4, (rmse, dr_rmse)
+# Measured (one-off study, not run here) on surveys 1-5, filters seeded 50 + survey, 2000
+# particles: the errors of k and b in reported sigmas were within 1.6 and 1.0 (PF), 0.9 and 2.5
+# (IPF), 2.9 and 2.7 (JBPF); the posterior std of k was 0.0025-0.0035 (prior 0.03) and of b
+# 0.04-0.11 deg (prior 3 deg). The test asks for 3 sigma on the survey where all were within 1.6.
+@pytest.mark.parametrize("method", ["pf", "ipf", "jbpf"])
+def test_a_known_speed_scale_and_heading_bias_are_recovered(method):
+    survey = calibrated_survey(1)
+    model = navigation(survey)  # priors of mean 0: std 3 % (k) and 3 deg (b)
+    assert model.speed_scale == 0.0 and model.heading_bias == 0.0
+    config = config_type(method)(n_particles=2000)
+    track = run_filter(method, survey, CALIBRATED_MAP, config, model=model, rng=np.random.default_rng(51))
+    c = track.meta["calibration"]
+    truth_b = survey.dr_pose[-1, 2] - survey.true_pose[-1, 2]
+    assert truth_b == pytest.approx(np.radians(3.0))
+    assert abs(c["speed_scale"] - 0.03) < 3 * c["speed_scale_std"], c
+    assert abs(c["heading_error"] - truth_b) < 3 * c["heading_error_std"], c
+    assert c["speed_scale_std"] < 0.2 * model.speed_scale_std  # learnt, not the prior
+    assert c["heading_error_std"] < 0.2 * model.heading_bias_std
+    assert track.meta["n_lost"] == 0 and track.meta["n_divergences"] == 0
+    assert np.hypot(*(track.pose[-1, :2] - survey.true_pose[-1, :2])) < 2.0
+
+
+@pytest.mark.parametrize("method", ["pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle", "pmf"])
+def test_a_known_calibration_stays_as_given(method):
+    """A model whose speed scale and heading bias are known (stds 0) keeps them at their prior
+    mean: the filter reports them with no uncertainty."""
+    model = MODEL_12.replace(speed_scale=0.01, heading_bias=0.02, speed_scale_std=0.0, heading_bias_std=0.0)
+    config = config_type(method)(n_particles=200) if method not in ("mle", "pmf") else None
+    track = run_filter(method, SURVEY_12, MAP, config, model=model, rng=np.random.default_rng(2))
+    c = track.meta["calibration"]
+    assert c["speed_scale"] == pytest.approx(0.01) and c["speed_scale_std"] == pytest.approx(0.0, abs=1e-12)
+    assert np.all(np.isfinite(track.pose[:, :2])) and np.all(np.isfinite(track.covariance[:, :2, :2]))
 
 
 @pytest.mark.parametrize("method", list(FilterMethod))
@@ -151,3 +169,21 @@ def test_default_configs():
     assert sjcpf.jitter_std is None and sjcpf.jitter_fraction * 100.0 == pytest.approx(15.0)
     assert default_config("ipf").n_particles == 2000  # Han et al.'s replay
     assert isinstance(default_config("mle"), MLEConfig)
+
+
+def test_the_model_comes_from_the_survey_and_the_map_error_inflates_the_likelihood():
+    """No model: ``NavigationModel.from_survey`` (1.5 x the recorded 0.3 m depth noise); a model's
+    map error is added in quadrature to its sounding std."""
+    track = run_filter("pf", SURVEY_30, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
+    assert track.meta["sounding_std"] == pytest.approx(0.45)
+    assert track.meta["navigation_model"] == NavigationModel.from_survey(SURVEY_30).as_dict()
+    inflated = MODEL_30.replace(sounding_std=0.3, map_std=0.4)
+    track = run_filter(
+        "pf", SURVEY_30, MAP, PFConfig(n_particles=100), model=inflated, rng=np.random.default_rng(0)
+    )
+    assert track.meta["sounding_std"] == pytest.approx(0.5)
+    recorded = SURVEY_30.replace(meta={})
+    with pytest.raises(TangraphError, match="pf: this survey does not record its dead-reckoning error model"):
+        run_filter("pf", recorded, MAP, PFConfig(n_particles=100), rng=np.random.default_rng(0))
+    with pytest.raises(TangraphError, match="model must be a tangraph.sensors.NavigationModel"):
+        run_filter("mle", SURVEY_30, MAP, model={"sounding_std": 0.5}, rng=None)

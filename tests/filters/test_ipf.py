@@ -1,17 +1,17 @@
-"""IPF's auxiliary resampling and SJCPF's correlation correction, step by step."""
+"""IPF's auxiliary resampling (tangraph.filters.ipf), step by step: children redrawn from their parents
+and weighted by the likelihood ratio, the bootstrap update without resampling, plain copies at the
+first ping, the ESS it records."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from tangraph.filters import FilterHealth, IPFConfig, SJCPFConfig
-from tangraph.filters.belief import Belief, initial_belief, state_moments
-from tangraph.filters.correlation import pearson_rows
+from tangraph.filters import IPFConfig
+from tangraph.filters.belief import initial_belief, state_moments
 from tangraph.filters.ipf import ipf_step
-from tangraph.filters.model import FilterModel, MotionModel, TerrainModel, survey_pings
+from tangraph.filters.model import FilterModel, survey_pings
 from tangraph.filters.resampling import resample
-from tangraph.filters.sjcpf import sjcpf_step
 from tangraph.filters.steps import evaluate, predict, shrink_calibration
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
@@ -75,64 +75,6 @@ def test_ipf_without_resampling_is_the_bootstrap_update():
     assert not result.resampled and "ancestors" not in result.info
     moved = predict(belief, ping, model, rng=np.random.default_rng(2)).particles
     np.testing.assert_allclose(result.belief.particles, moved)
-
-
-def sjcpf_belief(n=6, window=4, filled=3):
-    rng = np.random.default_rng(3)
-    particles = SURVEY.true_pose[1, :2] + rng.normal(0, 8, (n, 2))
-    history = np.arange(n * window, dtype=float).reshape(n, window) ** 1.5
-    measured = np.array([1.0, 4.0, 2.0, 8.0])[:window]
-    return Belief(particles, np.full(n, -np.log(n)), np.zeros(n), 0.0, history, measured, n_history=filled)
-
-
-def test_sjcpf_weights_by_likelihood_times_the_correlation_kernel():
-    config = SJCPFConfig(
-        n_particles=6, window=4, jitter_std=0.0, ess_threshold=0.0, kernel_constant=3.0, tempering=False
-    )
-    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 2.0, 0.0))
-    belief = sjcpf_belief()
-    ping = survey_pings(SURVEY)[1]
-    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
-    moved = belief.particles + ping.increment
-    update = model.terrain.evaluate(moved, belief.tide, 0.0, ping)
-    history = np.column_stack([belief.history[:, 1:], update.predicted])
-    measured = np.append(belief.measured[1:], np.mean(ping.depths))
-    rho = pearson_rows(history, measured)
-    logw = update.log_likelihood + 3.0 * rho
-    np.testing.assert_allclose(
-        result.belief.log_weights, logw - np.log(np.sum(np.exp(logw - logw.max()))) - logw.max()
-    )
-    np.testing.assert_allclose(result.belief.history, history)
-    np.testing.assert_allclose(result.belief.measured, measured)
-    assert result.belief.n_history == 4 and not result.resampled
-
-
-def test_sjcpf_does_not_correct_before_the_window_is_full():
-    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=0.0, tempering=False)
-    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 2.0, 0.0))
-    belief = sjcpf_belief(filled=1)
-    ping = survey_pings(SURVEY)[1]
-    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(0))
-    update = model.terrain.evaluate(belief.particles + ping.increment, belief.tide, 0.0, ping)
-    expected = update.log_likelihood - np.max(update.log_likelihood)
-    expected -= np.log(np.exp(expected).sum())
-    np.testing.assert_allclose(result.belief.log_weights, expected)
-    assert result.belief.n_history == 2
-
-
-def test_sjcpf_history_follows_the_particles_through_resampling():
-    config = SJCPFConfig(n_particles=6, window=4, jitter_std=0.0, ess_threshold=1.0, tempering=False,
-                         health=FilterHealth(ping_gate=False))
-    model = FilterModel(MotionModel(0.0, 0.0), TerrainModel(MAP, 0.5, 0.0))
-    belief = sjcpf_belief()
-    ping = survey_pings(SURVEY)[1]
-    result = sjcpf_step(belief, ping, model, config, rng=np.random.default_rng(4))
-    ancestors = result.info["ancestors"]
-    assert result.resampled and len(set(ancestors.tolist())) < 6  # some particles were copied
-    update = model.terrain.evaluate(belief.particles + ping.increment, belief.tide, 0.0, ping)
-    np.testing.assert_array_equal(result.belief.particles, (belief.particles + ping.increment)[ancestors])
-    np.testing.assert_array_equal(result.belief.history[:, :-1], belief.history[ancestors, 1:])
-    np.testing.assert_array_equal(result.belief.history[:, -1], update.predicted[ancestors])
 
 
 def test_ipf_at_the_first_ping_resamples_plain_copies():

@@ -1,0 +1,65 @@
+"""A window's fix judged (tangraph.graph.fixes): its record and status, the misfit test, and the
+search's half-width and step as the config gives them."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.graph import FixStatus, GraphConfig
+from tangraph.graph.fixes import judge_fix, search_half_width, search_step
+from tangraph.maps.grid import BathymetryMap
+from tangraph.matching import TapConfig, tap_fix
+
+CONFIG = GraphConfig(key_interval=20.0)
+
+
+def test_config_honours_what_it_is_given():
+    """A fixed half-width and a step in metres are used as given; a removed key is refused by
+    name, with where its job went."""
+    config = GraphConfig().replace(half_width_rule="fixed", tap=TapConfig(half_width=30.0, step=2.0))
+    bathy = BathymetryMap(np.arange(5) * 5.0, np.arange(5) * 5.0, np.zeros((5, 5)))
+    assert search_half_width(config, bathy, np.eye(2) * 1e4) == 30.0
+    assert search_step(config, bathy) == 2.0
+    assert search_step(GraphConfig().replace(tap_step_cells=1.0), bathy) == 5.0
+    removed = r"cfg.toml: GraphConfig.optimizer is no longer a setting: .*gauss_newton"
+    with pytest.raises(TangraphError, match=removed):
+        GraphConfig.from_mapping({"optimizer": "lm"}, "cfg.toml")
+
+
+def _flagged(fix, *reasons):
+    quality = dataclasses.replace(fix.quality, reasons=tuple(reasons))
+    return dataclasses.replace(fix, quality=quality)
+
+
+def test_fix_outcomes_are_records_with_a_status(biased_survey, rough_map):
+    from tangraph.fix_records import FixStatus
+    from tangraph.graph.fixes import judge_fix
+    from tangraph.matching import tap_fix
+
+    config = GraphConfig()
+    fix = tap_fix(biased_survey.replace(dr_pose=biased_survey.true_pose), rough_map, 59, 20, config.fixes.tap,
+                  prior=biased_survey.true_pose[59, :2])
+    predicted, cov = biased_survey.true_pose[59], np.eye(3) * 4.0
+    assert judge_fix(fix, predicted, cov, config, 50.0).record.status is FixStatus.ACCEPTED
+    two = _flagged(fix, "multimodal: 2 basins")
+    used = judge_fix(two, predicted, cov, config, 50.0)
+    assert used.accepted and used.record.status is FixStatus.ACCEPTED and "multimodal" in used.record.reason
+    refused = judge_fix(two, predicted, cov, config.replace(accept_multimodal=False), 50.0)
+    assert refused.record.status is FixStatus.MULTIMODAL and not refused.accepted
+    flat = judge_fix(_flagged(fix, "uninformative: touches the edge"), predicted, cov, config, 50.0)
+    assert flat.record.status is FixStatus.UNINFORMATIVE
+    far = judge_fix(fix, predicted + np.array([200.0, 0.0, 0.0]), cov, config, 50.0)
+    assert far.record.status is FixStatus.GATE and far.record.nis > 13.8
+
+
+def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):
+    fix = tap_fix(small_survey, rough_map, 59, 20, TapConfig(half_width=30.0),
+                  prior=small_survey.true_pose[59, :2])
+    outcome = judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0, noise=fix.sigma / 5.0)
+    assert outcome.record.status is FixStatus.MISFIT and "5.0 x the model's" in outcome.record.detail
+    assert judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0,
+                     noise=fix.sigma).record.status is not FixStatus.MISFIT
