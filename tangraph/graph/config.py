@@ -21,6 +21,7 @@ __all__ = ["BatchConfig", "FixConfig", "GraphConfig", "OnlineConfig", "load_grap
 
 _TAP_DEFAULT = TapConfig()
 _STEP_CELLS = 0.5  # FixConfig.tap_step_cells' default
+_FRONT_END_PINGS = 3  # OnlineConfig.front_end_pings' default
 # Settings that were removed, with where their job went (an old config naming one is refused).
 _MOVED = "moved to NavigationModel.{0} (a model file's [navigation] table)"
 _REMOVED = {
@@ -191,7 +192,8 @@ class OnlineConfig:
         footprints and a wrong start make it fail where TAP holds (the robustness study), and
         on a recorded lake survey it converged on the map's noise (the caputh_replay study).
     front_end_pings : int
-        Pings per window of the point-mass front end (default 3: on three seeds each of
+        Pings per window of the point-mass front end, so only with ``front_end = "pmf"`` (another
+        value with ``"tap"`` is refused: it would not be used; default 3: on three seeds each of
         ``demo``, ``wang2019`` and ``han2020`` windows of 2 and 3 pings gave the lowest online
         RMSE, 5, 10 and 20 pings more, a single ping much more; see the graph_vs_filters study).
     relinearize_threshold, relinearize_position : float
@@ -234,7 +236,7 @@ class OnlineConfig:
     """
 
     front_end: Literal["tap", "pmf"] = "tap"
-    front_end_pings: int = 3
+    front_end_pings: int = _FRONT_END_PINGS
     relinearize_threshold: float = 0.005
     relinearize_position: float = 1.0
     relinearize_skip: int = 1
@@ -246,6 +248,10 @@ class OnlineConfig:
     def __post_init__(self) -> None:
         _choice(self, "front_end", ("tap", "pmf"))
         _integer(self, "front_end_pings", 1)
+        if self.front_end == "tap" and self.front_end_pings != _FRONT_END_PINGS:
+            raise TangraphError(f"OnlineConfig: front_end_pings = {self.front_end_pings} is the point-mass "
+                                "front end's and is not used with front_end = 'tap': set front_end = 'pmf' "
+                                "to use it, or leave it out")
         check_number(self, "relinearize_threshold", open_low=True)
         check_number(self, "relinearize_position", open_low=True)
         _integer(self, "relinearize_skip", 1)

@@ -19,6 +19,7 @@ from tangraph.matching import TapConfig
     ({"ramp_pings": 0}, "FixConfig.ramp_pings"),
     ({"tap": TapConfig(half_width=30.0)}, "FixConfig: tap.half_width"),
     ({"tap": TapConfig(step=2.0), "tap_step_cells": 1.0}, "FixConfig: tap.step"),
+    ({"front_end_pings": 5}, "OnlineConfig: front_end_pings = 5 is the point-mass front end's"),
     ({"rematch_iterations": -1}, "BatchConfig.rematch_iterations"),
     ({"gnc_probability": 1.0}, "BatchConfig.gnc_probability"),
     ({"n_ping": 20}, "unknown GraphConfig field 'n_ping'"),
