@@ -52,7 +52,8 @@ def _method(method: FilterMethod | str) -> FilterMethod:
         return FilterMethod(method)
     except ValueError:
         known = ", ".join(m.value for m in FilterMethod)
-        raise TangraphError(f"unknown filter method {method!r}; known: {known}") from None
+        given = repr(method) if isinstance(method, str) else f"of type {type(method).__name__}"
+        raise TangraphError(f"unknown filter method {given}; known: {known}") from None
 
 
 def config_type(method: FilterMethod | str) -> type:

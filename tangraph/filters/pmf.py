@@ -60,11 +60,14 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
+import os
 import time as _time
 from typing import Any
 
 import numpy as np
 
+from tangraph.errors import TangraphError
 from tangraph.filters.belief import Belief
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import FilterModel, Ping, survey_pings
@@ -82,6 +85,7 @@ from tangraph.validation import check_count, check_number
 __all__ = ["PMFConfig", "point_mass_filter"]
 
 _log = logging.getLogger(__name__)
+_VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
 
 
 @dataclasses.dataclass(frozen=True)
@@ -136,8 +140,6 @@ class PMFConfig:
     relocalise_radius: float | None = None
 
     def __post_init__(self) -> None:
-        from tangraph.errors import TangraphError
-
         n = self.grid_points
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
             raise TangraphError(f"PMFConfig.grid_points must be an odd integer >= 5, got {n!r}")
@@ -369,6 +371,24 @@ class _Run:
         }
 
 
+def _check_memory(config: PMFConfig, n_beams: int) -> None:
+    """Refuse, naming the setting, a grid whose weighing would need more than half of this
+    machine's memory (every point of every calibration node holds a few values and, while a ping
+    is weighed, one residual per sounding)."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    grids = [("grid_points", config.grid_points, math.prod(config.calibration_points))]
+    if config.relocalise:
+        grids.append(("relocalise_points", config.relocalise_points, 1))
+    for name, points, nodes in grids:
+        need = nodes * points**2 * 8 * (_VALUES_PER_POINT + n_beams)
+        if need > total / 2:
+            at = f" at {nodes} calibration nodes" if nodes > 1 else ""
+            raise TangraphError(
+                f"PMFConfig.{name} = {points}: weighing a grid of {points} x {points} points{at} needs "
+                f"about {need / 2**30:.1f} GiB, more than half of this machine's {total / 2**30:.0f} GiB"
+            )
+
+
 def point_mass_filter(
     survey: Survey,
     bathymetry: BathymetryMap,
@@ -398,6 +418,7 @@ def point_mass_filter(
     check_run_inputs(survey, bathymetry, rng, where="pmf", rng_optional=True)
     config = config or PMFConfig()
     navigation = survey_navigation_model(survey, model, where="pmf")
+    _check_memory(config, survey.beam_depth.shape[1])
     filter_model = FilterModel.from_model(navigation, bathymetry)
     grid = _Grid(config, config.min_spacing)
     slope = slope_moment(bathymetry)

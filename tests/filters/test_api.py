@@ -159,6 +159,9 @@ def test_run_filter_refuses_another_methods_config_and_unknown_methods():
         run_filter("mle", SURVEY, MAP, {"window": 3}, rng=np.random.default_rng(0))
     with pytest.raises(TangraphError, match="unknown filter method 'ukf'"):
         run_filter("ukf", SURVEY, MAP, rng=np.random.default_rng(0))
+    with pytest.raises(TangraphError, match="unknown filter method of type Survey; known: pf, ") as caught:
+        run_filter(SURVEY, "pf", MAP, rng=np.random.default_rng(0))  # arguments swapped: no repr of a survey
+    assert "\n" not in str(caught.value)
 
 
 def test_default_configs():

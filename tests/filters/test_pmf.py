@@ -136,6 +136,17 @@ def test_bad_settings_are_named(settings, message):
     assert "\n" not in str(caught.value)
 
 
+@pytest.mark.parametrize(("settings", "field"), [({"grid_points": 100_001}, "grid_points = 100001"),
+                                               ({"relocalise": True, "relocalise_points": 200_001},
+                                                "relocalise_points = 200001")])
+def test_a_grid_too_large_for_memory_is_refused_before_any_work(settings, field):
+    bathymetry = rough_map()
+    survey = multibeam_survey(bathymetry, pings=5)
+    with pytest.raises(TangraphError, match=f"PMFConfig.{field}: .* GiB, more than half") as caught:
+        point_mass_filter(survey, bathymetry, PMFConfig(**settings), model=navigation(survey))
+    assert "\n" not in str(caught.value)
+
+
 def test_the_spacing_floor_is_honoured():
     """``min_spacing`` floors the grid: with one 5 cm sounding per ping on the slope the
     posterior across the depth contours narrows to 0.3 m; the default grid follows it (as the
