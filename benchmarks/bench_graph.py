@@ -11,7 +11,9 @@ steps with a slight turn, odometry plus a position prior every 100 poses) solved
 :func:`tangraph.graph.smooth_pose_graph` (LM, METIS), with and without the marginal covariance of
 every pose (target: 100 000 poses in <= 15 s; 300 000 without a crash). ``--long N``: the
 navigator over N key poses with a given fix every 10 (no TAP), to show the update time stays
-flat as the chain grows. Nothing is asserted.
+flat as the chain grows, and a plain GTSAM ``IncrementalFixedLagSmoother`` loop on the same
+chain with the fixes the navigator used, in the same run (target: tangraph's mean update at most
+2 x the plain loop's). Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -104,6 +106,52 @@ def long_online(n: int) -> None:
     print(f"online, {n} key poses, {accepted} fixes (graph only): {total:.1f} s; "
           f"update mean {updates.mean():.2f} ms, p99 {np.percentile(updates, 99):.2f} ms, "
           f"last 10 % / first 10 % = {updates[-tenth:].mean() / updates[:tenth].mean():.2f}")
+    used = {f.index: (f.position, f.covariance) for f in nav.fixes if f.accepted}
+    # the navigator keeps between isam_window and twice as many key poses: the plain loop 1.5 times
+    plain = plain_loop(survey, used, lag=1.5 * (config.online.isam_window or n))
+    print(f"  plain IncrementalFixedLagSmoother loop on the same chain and fixes: update mean "
+          f"{plain.mean():.2f} ms, p99 {np.percentile(plain, 99):.2f} ms; tangraph / plain: mean "
+          f"{updates.mean() / plain.mean():.2f}, p99 "
+          f"{np.percentile(updates, 99) / np.percentile(plain, 99):.2f}")
+
+
+def plain_loop(survey, fixes: dict, lag: float) -> np.ndarray:
+    """GTSAM's ``IncrementalFixedLagSmoother`` on its own (ms per key pose): the survey's DR
+    increments as ``BetweenFactorPose2``, the fixes the navigator used as translation priors, the
+    key poses of the last ``lag`` seconds kept, every update followed by the newest pose's estimate and
+    marginal covariance, as a navigator reports them (no calibration variable, no robust kernel,
+    no fix policy: what tangraph's online graph adds is what the ratio measures)."""
+    import gtsam
+
+    params = gtsam.ISAM2Params()
+    params.setRelinearizeThreshold(0.005)
+    smoother = gtsam.IncrementalFixedLagSmoother(float(lag), params)
+    pose = survey.dr_pose
+    odometry = gtsam.noiseModel.Diagonal.Sigmas(np.array([0.05, 0.05, 1e-3]))
+    times = []
+    for k in range(survey.n_pings):
+        factors, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        stamps = gtsam.FixedLagSmootherKeyTimestampMap()
+        here = gtsam.Pose2(*pose[k])
+        values.insert(k, here)
+        stamps.insert((k, float(survey.time[k])))
+        if k == 0:
+            start = gtsam.noiseModel.Diagonal.Sigmas(np.array([5.0, 5.0, 0.1]))
+            factors.add(gtsam.PriorFactorPose2(0, here, start))
+        else:
+            step = gtsam.Pose2(*pose[k - 1]).between(here)
+            factors.add(gtsam.BetweenFactorPose2(k - 1, k, step, odometry))
+        if k in fixes:
+            position, cov = fixes[k]
+            factors.add(gtsam.PoseTranslationPrior2D(k, np.asarray(position, float),
+                                                     gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov))))
+        t0 = time.perf_counter()
+        smoother.update(factors, values, stamps)
+        isam = smoother.getISAM2()
+        isam.calculateEstimatePose2(k)
+        isam.marginalCovariance(k)
+        times.append(time.perf_counter() - t0)
+    return np.asarray(times) * 1e3
 
 
 def chain(n: int, prior_every: int = 100, calibrated: bool = False) -> PoseGraph:
