@@ -7,7 +7,9 @@ filter (a grid, no particles), on the survey's :class:`~tangraph.sensors.Navigat
 heading error) and every track reports their estimate (``meta["calibration"]``); configs hold
 algorithm settings only.
 
-This package exports what running a filter needs. The pieces for writing a new one are in its
+This package exports what running a filter needs: :func:`run_filter` is the one door (each
+filter's own function, which it calls, is in the filter's module:
+``tangraph.filters.pf.bootstrap_pf`` and so on). The pieces for writing a new one are in its
 modules: the shared model (:mod:`tangraph.filters.model`: motion, terrain, pings), the terrain
 likelihood (:mod:`tangraph.filters.likelihood`), the particle belief
 (:mod:`tangraph.filters.belief`), the steps a filter is built from (:mod:`tangraph.filters.steps`,
@@ -18,14 +20,14 @@ resampling (:mod:`tangraph.filters.resampling`) and the SJCPF's correlations
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
 from tangraph.filters.config import FilterHealth, ParticleConfig
-from tangraph.filters.ipf import IPFConfig, ipf
-from tangraph.filters.jbpf import JBPFConfig, jbpf
+from tangraph.filters.ipf import IPFConfig
+from tangraph.filters.jbpf import JBPFConfig
 from tangraph.filters.likelihood import FilterDivergence, OffMap
-from tangraph.filters.mle import MLEConfig, mle_filter
-from tangraph.filters.pf import PFConfig, bootstrap_pf
-from tangraph.filters.pmf import PMFConfig, point_mass_filter
-from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
-from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf
+from tangraph.filters.mle import MLEConfig
+from tangraph.filters.pf import PFConfig
+from tangraph.filters.pmf import PMFConfig
+from tangraph.filters.sjcpf import SJCPFConfig
+from tangraph.filters.tercom_pf import TercomPFConfig
 
 __all__ = [
     "FilterDivergence",
@@ -40,14 +42,7 @@ __all__ = [
     "ParticleConfig",
     "SJCPFConfig",
     "TercomPFConfig",
-    "bootstrap_pf",
     "config_type",
     "default_config",
-    "ipf",
-    "jbpf",
-    "mle_filter",
-    "point_mass_filter",
     "run_filter",
-    "sjcpf",
-    "tercom_pf",
 ]

@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters import IPFConfig, PFConfig, bootstrap_pf, ipf, run_filter
+from tangraph.filters import IPFConfig, PFConfig, run_filter
+from tangraph.filters.ipf import ipf
+from tangraph.filters.pf import bootstrap_pf
 from tests.filters.calibrated import MAP, calibrated_survey
 from tests.filters.linear_gaussian import (
     kalman,

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters import PMFConfig, point_mass_filter, run_filter
+from tangraph.filters import PMFConfig, run_filter
+from tangraph.filters.pmf import point_mass_filter
 from tangraph.sensors import DeadReckoningModel
 from tests.filters.linear_gaussian import (
     kalman,
