@@ -1,4 +1,5 @@
-"""The main job: ``tangraph demo`` end to end, and its refusals."""
+"""The main job (tangraph.demo): ``run_demo`` end to end, an interrupted run, and the scenario a
+map's demo runs; the ``demo`` command's refusals are in tests/cli/test_demo.py."""
 
 from __future__ import annotations
 
@@ -7,27 +8,8 @@ import json
 import pytest
 
 import tangraph.navigation
-from tangraph.cli import main
 from tangraph.demo import run_demo
 from tangraph.errors import TangraphError
-
-
-def test_unknown_map_lists_the_demo_maps(tmp_path, capsys):
-    assert main(["demo", "--map", "atlantis", "--out", str(tmp_path / "d")]) == 2
-    err = capsys.readouterr().err
-    assert "unknown map 'atlantis'" in err and "merimbula" in err and "polar500" in err
-    assert main(["demo", "--map", "vancouver", "--out", str(tmp_path / "d")]) == 2
-    assert "no survey laid out on map 'vancouver'" in capsys.readouterr().err
-    assert not (tmp_path / "d").exists()
-
-
-def test_an_existing_folder_is_not_clobbered(tmp_path, capsys):
-    out = tmp_path / "mine"
-    out.mkdir()
-    (out / "notes.txt").write_text("precious")
-    assert main(["demo", "--out", str(out), "--quick", "-q"]) == 2
-    assert "--force" in capsys.readouterr().err
-    assert (out / "notes.txt").read_text() == "precious"
 
 
 def test_an_interrupted_demo_leaves_nothing_behind(tmp_path, monkeypatch):

@@ -1,7 +1,9 @@
 """The package's layout (issue 23): its import graph has no circle (no module reaches itself
 through the imports of others, counting imports inside functions (a deferred import only hides a
-circle) but not those made for type hints alone (``if TYPE_CHECKING:``)), and no module is over
-``MAX_MODULE_LINES`` lines nor any function over ``MAX_FUNCTION_LINES`` (docstring included)."""
+circle) but not those made for type hints alone (``if TYPE_CHECKING:``)), no module is over
+``MAX_MODULE_LINES`` lines nor any function over ``MAX_FUNCTION_LINES`` (docstring included),
+and every module has its test module (``tangraph/PKG/MOD.py``: ``tests/PKG/test_MOD.py``) or is
+listed, with the test modules that test it through its users, in ``TESTED_THROUGH``."""
 
 import ast
 from pathlib import Path
@@ -9,6 +11,30 @@ from pathlib import Path
 import tangraph
 
 PACKAGE = Path(tangraph.__file__).parent
+TESTS = Path(__file__).parent
+# Modules with no test module of their own, and the test modules that test them through their users.
+TESTED_THROUGH: dict[str, tuple[str, ...]] = {
+    "tangraph._lazy": ("test_toplevel.py", "maps/test_maps.py"),
+    "tangraph.errors": ("test_hostile.py",),
+    "tangraph.tomlfile": ("cli/test_tracks.py", "graph/test_config.py"),
+    "tangraph.track_outputs": ("cli/test_tracks.py",),
+    "tangraph.cli.simulate": ("sim/test_scenario.py",),
+    "tangraph.experiments.registry": ("cli/test_experiment.py", "experiments/test_caputh_replay.py"),
+    "tangraph.experiments.scheduling": ("experiments/test_runner.py",),
+    "tangraph.experiments.tables": ("experiments/test_runner.py",),
+    "tangraph.experiments.tasks": ("experiments/test_runner.py",),
+    "tangraph.filters.pmf_bank": ("filters/test_pmf.py",),
+    "tangraph.filters.pmf_grid": ("filters/test_pmf.py",),
+    "tangraph.formats._checks": ("formats/test_csv_xyz.py", "formats/test_sontek.py", "formats/test_xtf.py"),
+    "tangraph.graph.batch": ("graph/test_smoother.py",),
+    "tangraph.maps._common": ("maps/test_hostile_maps.py", "maps/test_netcdf.py"),
+    "tangraph.maps._grid_checks": ("maps/test_grid.py", "maps/test_hostile_maps.py"),
+    "tangraph.matching.search_direct": ("matching/test_search.py",),
+    "tangraph.matching.search_fft": ("matching/test_search.py",),
+    "tangraph.matching.tap_noise": ("matching/test_tap.py",),
+    "tangraph.matching.tap_types": ("matching/test_tap.py",),
+    "tangraph.sim.seafloor": ("sim/test_scenario.py",),
+}
 
 
 def _graph() -> dict[str, set[str]]:
@@ -132,3 +158,28 @@ def test_no_module_and_no_function_too_long():
     stale = ([name for name in LONG_MODULES if modules.get(name, 0) <= MAX_MODULE_LINES]
              + [name for name in LONG_FUNCTIONS if functions.get(name, 0) <= MAX_FUNCTION_LINES])
     assert stale == [], "exempt but no longer too long (or gone): remove the entries"
+
+
+def _test_module(path: Path) -> Path | None:
+    """The test module of a module of the package (None for a package's ``__init__`` and
+    ``__main__``): ``tangraph/PKG/MOD.py`` -> ``tests/PKG/test_MOD.py``, a private module's
+    leading underscore dropped."""
+    if path.name in ("__init__.py", "__main__.py"):
+        return None
+    parts = path.relative_to(PACKAGE).parts
+    return TESTS.joinpath(*parts[:-1], "test_" + parts[-1].removeprefix("_"))
+
+
+def test_every_module_has_its_test_module():
+    missing, stale = [], []
+    for path in sorted(PACKAGE.rglob("*.py")):
+        if "_experiments" in path.parts or (test := _test_module(path)) is None:
+            continue
+        name = ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if name in TESTED_THROUGH:
+            stale += [name] if test.exists() else []
+            missing += [f"{name}: {t}" for t in TESTED_THROUGH[name] if not (TESTS / t).exists()]
+        elif not test.exists():
+            missing.append(f"{name}: {test.relative_to(TESTS.parent)}")
+    assert missing == [], "a module without its test module (or TESTED_THROUGH naming one that is gone)"
+    assert stale == [], "listed in TESTED_THROUGH but has its own test module: remove the entry"

@@ -1,5 +1,5 @@
-"""Outputs that never destroy data: a set of files written as one, SIGTERM as a clean stop, and
-the partial folders of killed runs."""
+"""Outputs that never destroy data (tangraph.outputs): a set of files written as one, SIGTERM as a
+clean stop, and the partial folders of killed runs (removed by the next demo)."""
 
 from __future__ import annotations
 
@@ -11,14 +11,10 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
 import pytest
 
 import tangraph.navigation
-import tangraph.track
-from tangraph.cli import main
 from tangraph.demo import run_demo
-from tangraph.errors import TangraphError
 from tangraph.outputs import (
     OutputSet,
     Terminated,
@@ -224,36 +220,3 @@ def test_sigterm_stops_the_demo_and_leaves_no_partial_folder(tmp_path):
     assert demo.returncode == 143, err
     assert "Traceback" not in err and "stopped by SIGTERM" in err
     assert list(tmp_path.iterdir()) == []
-
-
-# -- the navigate / smooth commands ------------------------------------------------------------
-@pytest.fixture(scope="module")
-def small_survey(tmp_path_factory):
-    from tangraph.maps import load
-    from tangraph.sim.scenario import load_scenario, simulate
-    from tangraph.survey import write_survey
-
-    bathymetry = load("merimbula")
-    survey = simulate(load_scenario("wang2019"), rng=np.random.default_rng(3), bathymetry=bathymetry, seed=3)
-    path = tmp_path_factory.mktemp("outputs") / "wang.nc"
-    write_survey(survey.pings(0, 80), path)
-    return path
-
-
-def test_a_failing_tum_leaves_no_track_and_keeps_the_old_figure(small_survey, tmp_path, monkeypatch):
-    def full(*args, **kwargs):
-        raise TangraphError("no space left for the TUM file")
-
-    out, tum, fig = tmp_path / "t.csv", tmp_path / "t.tum", tmp_path / "t.png"
-    fig.write_text("the old figure")
-    monkeypatch.setattr(tangraph.track, "write_track_tum", full)
-    args = ["navigate", str(small_survey), "--method", "pf", "--particles", "100", "-q",
-            "-o", str(out), "--tum", str(tum), "--plot", str(fig), "--force"]
-    assert main(args) == 2
-    assert not out.exists() and not tum.exists() and fig.read_text() == "the old figure"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.png"]
-    monkeypatch.undo()
-    assert main(args) == 0
-    assert out.read_text().startswith("time,") and np.loadtxt(tum).shape == (80, 8)
-    assert fig.read_bytes()[:4] == b"\x89PNG"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.csv", "t.png", "t.tum"]

@@ -1,34 +1,23 @@
-"""Survey: validation, the NetCDF round trip, and importing a CSV log with XYZ soundings."""
+"""Survey (tangraph.survey): validation, footprints, cutting pings, the NetCDF round trip and bad
+files; and survey files as CF trajectories: absolute time, latitude/longitude, standard names,
+versions."""
 
 from __future__ import annotations
 
+import datetime
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import netCDF4
 import numpy as np
+import pyproj
 import pytest
 import xarray as xr
 
-from tangraph.formats import import_csv_xyz
-from tangraph.survey import Survey, SurveyError, footprints, read_survey, write_survey
-
-
-def make_survey(k=20, b=7, seed=0, truth=True):
-    rng = np.random.default_rng(seed)
-    time = np.cumsum(rng.uniform(0.5, 1.5, k))
-    pose = np.column_stack(
-        [np.cumsum(rng.normal(1, 0.1, k)), np.cumsum(rng.normal(0.5, 0.1, k)), rng.uniform(0, 2 * np.pi, k)]
-    )
-    depth = rng.uniform(40, 60, (k, b))
-    depth[rng.random((k, b)) < 0.1] = np.nan
-    depth[3] = np.nan  # an empty ping
-    return Survey(
-        time=time,
-        dr_pose=pose,
-        vehicle_depth=rng.uniform(5, 10, k),
-        beam_forward=rng.normal(0, 1, (k, b)),
-        beam_starboard=np.tile(np.linspace(-30, 30, b), (k, 1)),
-        beam_depth=depth,
-        true_pose=pose + rng.normal(0, 1, (k, 3)) if truth else None,
-        meta={"map": "merimbula", "seed": seed, "sonar": {"n_beams": b}},
-    )
+from tangraph.survey import SCHEMA_VERSION, SurveyError, footprints, read_survey, write_survey
+from tests.survey_cases import make_survey
 
 
 @pytest.mark.parametrize("truth", [True, False])
@@ -94,52 +83,6 @@ def test_bad_files_are_named(tmp_path):
         read_survey(tmp_path / "junk.nc")
 
 
-def test_import_csv_xyz_recovers_body_footprints(tmp_path):
-    s = make_survey(k=12, b=5, truth=False)
-    s = s.replace(beam_depth=np.where(np.isnan(s.beam_depth), 50.0, s.beam_depth))  # all returns
-    north, east = s.footprints()
-    # the log at twice the ping rate: pings at log times, so interpolation is exact
-    log_time = np.sort(np.r_[s.time, s.time[:-1] + np.diff(s.time) / 3])
-    heading = np.degrees(np.unwrap(s.dr_pose[:, 2]))
-    nav = np.column_stack(
-        [
-            log_time,
-            *(
-                np.interp(log_time, s.time, v)
-                for v in (s.dr_pose[:, 0], s.dr_pose[:, 1], heading, s.vehicle_depth)
-            ),
-        ]
-    )
-    np.savetxt(tmp_path / "nav.csv", nav, delimiter=",", header="time,north,east,heading,depth", comments="")
-    rows = np.column_stack([np.repeat(s.time, s.n_beams), east.ravel(), north.ravel(), s.beam_depth.ravel()])
-    rows = np.vstack([rows, [s.time[-1] + 100, 0, 0, 10]])  # a sounding after the log ends
-    np.savetxt(tmp_path / "soundings.xyz", rows[::-1])  # order must not matter
-    imported = import_csv_xyz(tmp_path / "nav.csv", tmp_path / "soundings.xyz")
-    np.testing.assert_allclose(imported.time, s.time)
-    np.testing.assert_allclose(imported.dr_pose[:, :2], s.dr_pose[:, :2], atol=1e-9)
-    np.testing.assert_allclose(np.cos(imported.dr_pose[:, 2] - s.dr_pose[:, 2]), 1.0, atol=1e-12)
-    # beams within a ping may come in another order: compare sorted by starboard
-    for got, want in ((imported.beam_starboard, s.beam_starboard), (imported.beam_forward, s.beam_forward)):
-        np.testing.assert_allclose(np.sort(got, axis=1), np.sort(want, axis=1), atol=1e-6)
-    assert imported.meta["n_dropped_outside_navigation"] == 1
-
-    from tangraph.cli import main
-
-    out = tmp_path / "imported.nc"
-    assert (
-        main(["survey", "import", str(tmp_path / "nav.csv"), str(tmp_path / "soundings.xyz"), "-o", str(out)])
-        == 0
-    )
-    np.testing.assert_array_equal(read_survey(out).beam_depth, imported.beam_depth)
-
-
-def test_import_names_missing_columns(tmp_path):
-    (tmp_path / "nav.csv").write_text("time,north,east,depth\n0,0,0,5\n1,1,0,5\n")
-    (tmp_path / "s.xyz").write_text("0 0 0 10\n")
-    with pytest.raises(SurveyError, match=r"nav.csv: missing columns \['heading'\]"):
-        import_csv_xyz(tmp_path / "nav.csv", tmp_path / "s.xyz")
-
-
 def test_pings_cuts_every_array_and_names_a_bad_range():
     import numpy as np
     import pytest
@@ -163,3 +106,154 @@ def test_pings_cuts_every_array_and_names_a_bad_range():
     for start, stop in ((3, 3), (-1, 2), (0, 6)):
         with pytest.raises(SurveyError, match="not inside 0..4"):
             survey.pings(start, stop)
+
+
+# -- CF trajectories ---------------------------------------------------------------------------
+PLACED = {"crs": "EPSG:32755", "origin": [5_900_000.0, 750_000.0]}
+
+
+def placed_survey(truth=True, start_time="2024-05-01T10:00:00.25+02:00", **meta):
+    s = make_survey(k=12, b=4, truth=truth)
+    extra = {"start_time": start_time} if start_time else {}
+    return s.replace(meta={**s.meta, **PLACED, **extra, **meta}, attitude=np.full((12, 2), 0.01))
+
+
+def attrs_of(path):
+    with netCDF4.Dataset(path) as ds:
+        return ({k: ds.getncattr(k) for k in ds.ncattrs()},
+                {v.name: ({k: v.getncattr(k) for k in v.ncattrs()}, v.dtype, v.dimensions)
+                 for v in ds.variables.values()})
+
+
+@pytest.mark.parametrize("truth", [True, False])
+def test_a_placed_survey_is_a_cf_trajectory(tmp_path, truth):
+    s = placed_survey(truth=truth)
+    path = write_survey(s, tmp_path / "run7.nc")
+    glob, var = attrs_of(path)
+    assert glob["featureType"] == "trajectory" and glob["Conventions"] == "CF-1.8"
+    assert glob["tangraph_survey_version"] == SCHEMA_VERSION == 2
+    traj_attrs, traj_type, _ = var["trajectory"]
+    assert traj_attrs["cf_role"] == "trajectory_id" and traj_type == np.dtype("S1")  # char, not vlen
+    time_attrs = var["time"][0]
+    assert time_attrs["units"] == "seconds since 2024-05-01 08:00:00.250000"  # UTC
+    assert (time_attrs["standard_name"], time_attrs["calendar"], time_attrs["axis"]) == (
+        "time", "standard", "T")
+    assert var["lat"][0]["standard_name"] == "latitude" and var["lat"][0]["units"] == "degrees_north"
+    assert var["lon"][0]["standard_name"] == "longitude" and var["lon"][0]["units"] == "degrees_east"
+    assert var["lat"][0]["long_name"].endswith("(true_pose)" if truth else "(dr_pose)")
+    assert var["vehicle_depth"][0]["standard_name"] == "depth" and var["vehicle_depth"][0]["axis"] == "Z"
+    assert var["beam_depth"][0]["standard_name"] == "sea_floor_depth_below_sea_surface"
+    assert var["pitch"][0]["standard_name"] == "platform_pitch_fore_up"
+    assert var["roll"][0]["standard_name"] == "platform_roll_starboard_down"
+    for name in ("dr_north", "beam_depth", "pitch"):
+        coordinates = set(var[name][0]["coordinates"].split())
+        assert coordinates == {"time", "lat", "lon", "vehicle_depth", "trajectory"}
+    for name in ("time", "lat", "lon"):
+        assert "_FillValue" not in var[name][0]  # coordinates have no missing values
+    reference = s.true_pose if truth else s.dr_pose
+    lon, lat = pyproj.Transformer.from_crs("EPSG:32755", "EPSG:4326", always_xy=True).transform(
+        reference[:, 1] + 750_000.0, reference[:, 0] + 5_900_000.0)
+    with xr.open_dataset(path) as ds:
+        np.testing.assert_allclose(ds["lat"].values, lat, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(ds["lon"].values, lon, rtol=0, atol=1e-12)
+        assert str(ds["trajectory"].values.item()) == "run7"
+        # a CF reader gets absolute times
+        assert ds["time"].values[0] == np.datetime64("2024-05-01T08:00:00.25") + np.timedelta64(
+            round(s.time[0] * 1e9), "ns")
+    back = read_survey(path)
+    np.testing.assert_array_equal(back.time, s.time)  # seconds from the start, exactly
+    np.testing.assert_array_equal(back.attitude, s.attitude)
+    assert back.meta == s.meta
+
+
+def test_depths_on_another_datum_have_no_standard_name(tmp_path):
+    path = write_survey(placed_survey(vertical_datum="chart datum"), tmp_path / "s.nc")
+    var = attrs_of(path)[1]
+    assert "standard_name" not in var["beam_depth"][0] and "standard_name" not in var["vehicle_depth"][0]
+    assert var["vehicle_depth"][0]["axis"] == "Z"
+
+
+def test_an_unplaced_survey_has_plain_seconds_and_no_lat_lon(tmp_path):
+    s = make_survey(k=12, b=4)
+    path = write_survey(s, tmp_path / "sim.nc")
+    glob, var = attrs_of(path)
+    assert glob["featureType"] == "trajectory" and "lat" not in var and "lon" not in var
+    assert var["time"][0]["units"] == "s" and "standard_name" not in var["time"][0]
+    np.testing.assert_array_equal(read_survey(path).time, s.time)
+
+
+def test_a_survey_whose_crs_does_not_project_is_written_without_lat_lon(tmp_path, caplog):
+    s = placed_survey(crs="not a crs")
+    path = write_survey(s, tmp_path / "bad.nc")
+    assert "no latitude/longitude written" in caplog.text
+    assert "lat" not in attrs_of(path)[1]
+    assert read_survey(path).meta["crs"] == "not a crs"
+
+
+def test_time_is_read_against_any_epoch(tmp_path):
+    s = placed_survey()
+    path = write_survey(s, tmp_path / "s.nc")
+    # another tool rewrites the file with its own time encoding (decoded, then re-encoded)
+    with xr.open_dataset(path) as ds:
+        ds = ds.load()
+    ds["time"].encoding.update(units="hours since 1970-01-01", dtype="float64")
+    ds.to_netcdf(tmp_path / "rewritten.nc")
+    assert attrs_of(tmp_path / "rewritten.nc")[1]["time"][0]["units"] == "hours since 1970-01-01"
+    np.testing.assert_allclose(read_survey(tmp_path / "rewritten.nc").time, s.time, rtol=0, atol=1e-5)
+    # without a start time in the metadata, the start is the first ping
+    with xr.open_dataset(path, decode_times=False) as ds:
+        ds = ds.load()
+    ds.attrs["tangraph_meta"] = "{}"
+    ds.to_netcdf(tmp_path / "no_start.nc")
+    back = read_survey(tmp_path / "no_start.nc")
+    np.testing.assert_allclose(back.time, s.time - s.time[0], rtol=0, atol=1e-9)
+    start = datetime.datetime.fromisoformat(back.meta["start_time"])
+    expected = datetime.datetime(2024, 5, 1, 8, 0, 0, 250000, tzinfo=datetime.UTC) + datetime.timedelta(
+        seconds=float(s.time[0]))
+    assert abs((start - expected).total_seconds()) < 1e-5
+
+
+def test_version_1_files_still_read(tmp_path):
+    s = placed_survey()
+    path = write_survey(s, tmp_path / "s.nc")
+    with xr.open_dataset(path, decode_times=False) as ds:
+        ds = ds.load()
+    old = ds.reset_coords().drop_vars(["lat", "lon", "trajectory"])
+    old["time"].attrs = {"units": "s", "long_name": "time from the survey start"}
+    old.attrs = {k: v for k, v in ds.attrs.items() if k != "featureType"}
+    old.attrs["tangraph_survey_version"] = 1
+    for v in old.variables.values():
+        v.encoding.pop("coordinates", None)
+    old.to_netcdf(tmp_path / "v1.nc")
+    back = read_survey(tmp_path / "v1.nc")
+    np.testing.assert_array_equal(back.time, s.time)
+    np.testing.assert_array_equal(back.true_pose, s.true_pose)
+    old.attrs["tangraph_survey_version"] = 3
+    old.to_netcdf(tmp_path / "v3.nc")
+    with pytest.raises(SurveyError, match="tangraph_survey_version is 3, this tangraph reads 1 and 2"):
+        read_survey(tmp_path / "v3.nc")
+
+
+def test_unknown_time_units_are_named(tmp_path):
+    path = write_survey(placed_survey(), tmp_path / "s.nc")
+    with netCDF4.Dataset(path, "a") as ds:
+        ds["time"].units = "fortnights since 2024-01-01"
+    with pytest.raises(SurveyError, match=r"s.nc: time has units 'fortnights since 2024-01-01'"):
+        read_survey(path)
+
+
+# a folder holding the CF tables standard-names.xml, area-types.xml and regions.xml (the checker
+# downloads them otherwise)
+_TABLES = os.environ.get("TANGRAPH_CF_TABLES")
+
+
+@pytest.mark.skipif(shutil.which("cfchecks") is None or not _TABLES,
+                    reason="the CF checker needs cfchecks and local CF tables (TANGRAPH_CF_TABLES)")
+def test_cf_checker_finds_no_error_or_warning(tmp_path):
+    tables = Path(_TABLES)
+    for s, name in ((placed_survey(), "placed.nc"), (make_survey(k=12, b=4), "plain.nc")):
+        path = write_survey(s, tmp_path / name)
+        command = ["cfchecks", "-s", str(tables / "standard-names.xml"), "-a", str(tables / "area-types.xml"),
+                   "-r", str(tables / "regions.xml"), str(path)]
+        out = subprocess.run(command, capture_output=True, text=True, check=False).stdout
+        assert "ERRORS detected: 0" in out and "WARNINGS given: 0" in out, out

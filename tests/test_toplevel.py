@@ -1,16 +1,13 @@
 """The top-level package (issue 23, one door per job): ``tangraph.navigate`` is the library's one
-entry point, the very function the CLI calls, with what a script needs to call it beside it; and
-``import tangraph`` stays fast (its names load the heavy libraries only when first used)."""
+entry point, the very function the CLI calls (tests/cli/test_tracks.py checks that it does),
+with what a script needs to call it beside it; and ``import tangraph`` stays fast (its names
+load the heavy libraries only when first used)."""
 
 import subprocess
 import sys
-from types import SimpleNamespace
-
-import pytest
 
 import tangraph
 import tangraph.navigation
-from tangraph.errors import TangraphError
 
 #: the names a script needs to navigate a survey from the top level, and where they live
 DOOR = {
@@ -27,25 +24,6 @@ DOOR = {
 
 def test_navigate_is_the_one_in_navigation():
     assert tangraph.navigate is tangraph.navigation.navigate
-
-
-@pytest.mark.parametrize("command", ["navigate", "smooth"])
-def test_the_cli_goes_through_the_same_door(command, monkeypatch, tmp_path):
-    import tangraph.cli.tracks as tracks
-    from tangraph.cli import main
-
-    calls = []
-    survey, bathymetry = SimpleNamespace(name="survey"), SimpleNamespace(name="map", depth_std=None)
-
-    def door(*args, **kwargs):
-        calls.append((*args[:2], str(args[2])))
-        raise TangraphError("through the door")
-
-    assert tangraph.navigate is tangraph.navigation.navigate
-    monkeypatch.setattr(tracks, "_survey_and_map", lambda args: (survey, bathymetry))
-    monkeypatch.setattr(tangraph.navigation, "navigate", door)
-    assert main([command, "s.nc", "-o", str(tmp_path / "track.csv")]) == 2
-    assert calls == [(survey, bathymetry, "isam2" if command == "navigate" else "smoother")]
 
 
 def test_every_name_of_the_door_resolves_to_its_module_s():

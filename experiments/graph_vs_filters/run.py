@@ -333,13 +333,13 @@ def main(argv=None) -> int:
     parser.add_argument("--dr", choices=["demo", "own"], default="demo",
                         help="the demo's drifting DR in every scenario, or each scenario's own")
     args = parser.parse_args(argv)
-    args.out = output_folder(args, HERE)
-    runs = 4 if args.quick else args.runs
     methods = args.methods or [*GRAPH, *(("pf", "ipf", "sjcpf") if args.quick else FILTERS)]
     graph = field_values(args.graph)
     model = _model_settings(field_values(args.model, "--model"))
-    _check_settings(graph, model)
+    _check_settings(graph, model)  # bad settings refused before the output folder is made
     filter_settings = _filter_settings(args.filter, methods)
+    args.out = output_folder(args, HERE)
+    runs = 4 if args.quick else args.runs
     configs = [
         {"scenario": s, "methods": list(methods), "n_particles": args.particles, "dr": args.dr,
          "graph": graph, "filter": filter_settings, "model": model}

@@ -220,12 +220,12 @@ def main(argv=None) -> int:
     parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="GraphConfig settings of the graph's runs (values as Python literals)")
     args = parser.parse_args(argv)
+    graph = field_values(args.graph)
+    graph_settings(graph)  # a bad field refused before any run, and before the output folder
     args.out = output_folder(args, HERE)
     runs = 3 if args.quick else args.runs
     cases = ["clean", "shift-30", "start-200"] if args.quick else args.cases
     methods = ["isam2", "smoother"] if args.quick else args.methods
-    graph = field_values(args.graph)
-    graph_settings(graph)  # a bad field refused before any run
     config = {"cases": cases, "methods": methods, "graph": graph}
     table = run_many(one_run, [config], runs, args.seed, scheduler=args.scheduler, workers=args.workers)
     failed = table["error"].notna()

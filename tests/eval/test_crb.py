@@ -1,7 +1,9 @@
-"""Tests of the posterior Cramér-Rao bound: against an independent dense batch solve and a
-hand-built scalar Kalman filter on a planar seabed, the pure DR covariance on a flat one, the
-order filter >= smoother, monotonicity in the soundings, bad inputs, and (slow) a Monte Carlo run
-of an exact estimator on the simulator's own dead reckoning."""
+"""Tests of the posterior Cramér-Rao bound (tangraph.eval.crb): against an independent dense batch
+solve and a hand-built scalar Kalman filter on a planar seabed, the pure DR covariance on a flat
+one, the order filter >= smoother, monotonicity in the soundings, bad inputs, and (slow) a Monte
+Carlo run of an exact estimator on the simulator's own dead reckoning; without a map error it is
+the bound it always was (numbers pinned before the map error field came in), also on a map that
+says it is exact. The bound's joint solve with the field is tested in test_map_field.py."""
 
 from __future__ import annotations
 
@@ -9,66 +11,18 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.eval import CramerRaoBound, bound_rmse, metrics_with_bound, posterior_crb
+from tangraph.eval import CramerRaoBound, bound_rmse, posterior_crb
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import (
     KNOWN_STD,
     DeadReckoningModel,
     NavigationModel,
     increment_covariance,
+    map_error,
     simulate_dead_reckoning,
 )
 from tangraph.survey import Survey
-
-SLOPE = (0.04, -0.03)  # d depth / d north, d depth / d east
-
-
-def _seabed(slope=SLOPE, east_end=800.0) -> BathymetryMap:
-    north = np.arange(0.0, 1001.0, 10.0)
-    east = np.arange(0.0, east_end + 1.0, 10.0)
-    depth = 30.0 + slope[0] * north[:, None] + slope[1] * east[None, :]
-    return BathymetryMap(north=north, east=east, depth=depth, name="plane")
-
-
-def _truth(k: int = 40) -> tuple[np.ndarray, np.ndarray]:
-    """A turning track (uneven sampling, sideslip) that runs off the east edge of ``_seabed``."""
-    t = np.cumsum(np.r_[0.0, 2.0 + 0.5 * np.sin(np.arange(k - 1))])
-    psi = 0.4 + 0.03 * t
-    course = psi + 0.05
-    dt = np.diff(t)
-    north = 400.0 + np.r_[0.0, np.cumsum(2.0 * np.cos(course[:-1]) * dt)]
-    east = 700.0 + np.r_[0.0, np.cumsum(2.0 * np.sin(course[:-1]) * dt)]
-    return t, np.column_stack([north, east, psi])
-
-
-def _survey(k: int = 40, beams: int = 7, *, rng_seed: int = 3, width: float = 40.0) -> Survey:
-    t, truth = _truth(k)
-    rng = np.random.default_rng(rng_seed)
-    starboard = np.tile(np.linspace(-width, width, beams), (k, 1))
-    forward = 3.0 * np.sin(starboard / 7.0)
-    depth = 30.0 + rng.normal(size=(k, beams))
-    depth[rng.random((k, beams)) < 0.15] = np.nan  # beams without a return
-    depth[5] = np.nan  # an empty ping
-    return Survey(time=t, dr_pose=truth, vehicle_depth=np.zeros(k), beam_forward=forward,
-                  beam_starboard=starboard, beam_depth=depth, true_pose=truth)
-
-
-MODEL = NavigationModel(speed_noise=0.1, heading_noise=0.01, heading_walk=0.002, speed_scale_std=0.02,
-                        heading_bias_std=0.03, initial_position_std=5.0, sounding_std=0.3, tide_std=0.5)
-
-
-def _jd(d: np.ndarray) -> np.ndarray:
-    return np.column_stack([-d[:, 1], d[:, 0]])
-
-
-def _soundings(survey: Survey, seabed: BathymetryMap):
-    """Mask of the soundings that count, and their heading features ``g . J r`` (plane: g fixed)."""
-    truth = survey.true_pose
-    north, east = survey.footprints(truth)
-    used = np.isfinite(survey.beam_depth) & seabed.contains(north, east)
-    g = np.array(SLOPE)
-    turn = g[1] * (north - truth[:, :1]) - g[0] * (east - truth[:, 1:2])
-    return used, turn
+from tests.eval.crb_cases import MODEL, SLOPE, _jd, _seabed, _soundings, _survey
 
 
 def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationModel):
@@ -269,21 +223,6 @@ def test_bad_inputs_name_the_problem():
         CramerRaoBound(np.zeros((3, 2)), np.eye(2), 0.0, "filter")
 
 
-def test_bound_rmse_and_the_ratio_to_a_track_rmse():
-    cov = np.array([np.diag([8.0, 1.0]), np.diag([2.0, 2.0])])
-    bound = CramerRaoBound(cov, np.eye(2), 0.1, "smoother", n_soundings=5)
-    assert bound_rmse(bound) == pytest.approx(np.sqrt(6.5))
-    assert bound_rmse(bound, skip=1) == pytest.approx(2.0)
-    np.testing.assert_allclose(bound.drms, [3.0, 2.0])
-    out = metrics_with_bound({"rmse": 4.0, "anees": 1.0}, bound, skip=1)
-    assert out == {"rmse": 4.0, "anees": 1.0, "pcrb": 2.0, "rmse_over_pcrb": 2.0}
-    with pytest.raises(TangraphError, match="skip=2"):
-        bound_rmse(bound, skip=2)
-    with pytest.raises(TangraphError, match="rmse"):
-        metrics_with_bound({"anees": 1.0}, bound)
-    assert not bound.position_cov.flags.writeable
-
-
 @pytest.mark.slow
 def test_an_exact_estimator_of_the_simulated_dead_reckoning_meets_the_bound():
     # The simulator's DR (drawn calibration, walk, white errors, start offset) over a planar seabed,
@@ -356,3 +295,71 @@ def _design(survey: Survey, model: NavigationModel):
         a.append(dp)
         e.append(eye[3] + walk + eye[white + m + 1])
     return np.array(a), np.array(e), {"tide": eye[4], "var": var}
+
+
+# -- without a map error -----------------------------------------------------------------------
+def _doctest_case():
+    """The sloped seabed of ``posterior_crb``'s example: north-going, the tide known."""
+    axis = np.arange(0.0, 1001.0, 10.0)
+    seabed = BathymetryMap(north=axis, east=axis, depth=20 + 0.05 * axis[:, None] + 0 * axis)
+    t = np.arange(100.0)
+    truth = np.column_stack([100 + 2 * t, 500 + 0 * t, 0 * t])
+    offset = np.tile(np.linspace(-20.0, 20.0, 9), (100, 1))
+    survey = Survey(time=t, dr_pose=truth, vehicle_depth=0 * t, beam_forward=0 * offset,
+                    beam_starboard=offset, beam_depth=25 + 0 * offset, true_pose=truth)
+    return survey, seabed, NavigationModel(tide_std=0.0)
+
+
+# The bound at pings 0, 5, 17 and the last (row-major 2 x 2), the calibration covariance and the tide
+# std, computed at 95ab902, before the map error field (repr of the float64 values).
+PINNED = {
+    ("doctest", "filter"): (
+        [[9.999999999999986, 0.0, 0.0, 100.0],
+         [1.8324112892794624, -6.6503970716460796e-18, -6.6503970716460796e-18, 100.12230545260074],
+         [0.7352120222501969, -1.9130934999017277e-17, -1.9130934999017277e-17, 101.1023682657522],
+         [0.44197177504418667, -5.27188708468719e-17, -5.27188708468719e-17, 117.14066722628775]],
+        [3.694324168799874e-05, -8.202096674023627e-24, -8.202096674023627e-24, 0.0004309041737141203], 0.0),
+    ("doctest", "smoother"): (
+        [[0.4403507598793807, 2.211447468192402e-32, 2.211447468192402e-32, 100.00000000000016],
+         [0.3725927920157442, -2.6471852524526444e-18, -2.6471852524526444e-18, 100.0555904173715],
+         [0.2513699096391293, -9.008719100532431e-18, -9.008719100532431e-18, 100.54062522481355],
+         [0.44197177504418667, -5.27188708468719e-17, -5.27188708468719e-17, 117.14066722628775]],
+        [3.694324168799874e-05, -8.202096674023627e-24, -8.202096674023627e-24, 0.0004309041737141203], 0.0),
+    ("turning", "filter"): (
+        [[21.94656488549594, 2.2900763358762553, 2.2900763358762553, 23.282442748081827],
+         [22.23457255664754, 2.335617458637607, 2.3356174586376075, 23.722694680194685],
+         [23.73128154556751, 2.8200622652918574, 2.8200622652918574, 25.384304040322476],
+         [25.644345868143713, 4.441856303577177, 4.441856303577177, 28.35212887169172]],
+        [0.0002700358564555495, -4.3928562154407765e-05, -4.3928562154407765e-05, 0.0002826543615527324],
+        0.22659938267667737),
+    ("turning", "smoother"): (
+        [[21.821556483586342, 2.3838326372218033, 2.3838326372218033, 23.21212552195444],
+         [22.08478574754946, 2.4634891921000266, 2.4634891921000266, 23.469521446304643],
+         [23.265771430552217, 3.002552097826587, 3.002552097826587, 24.51604701939478],
+         [25.644345868143713, 4.441856303577177, 4.441856303577177, 28.35212887169172]],
+        [0.0002700358564555495, -4.3928562154407765e-05, -4.3928562154407765e-05, 0.0002826543615527324],
+        0.22659938267667737),
+}
+
+
+@pytest.mark.parametrize(("case", "kind"), list(PINNED))
+def test_without_a_map_error_the_bound_is_the_one_before_the_field(case, kind):
+    survey, seabed, model = _doctest_case() if case == "doctest" else (_survey(), _seabed(), MODEL)
+    assert map_error(seabed, model).is_zero
+    got = posterior_crb(survey, seabed, model, kind=kind)
+    position, calibration, tide = PINNED[(case, kind)]
+    pings = [0, 5, 17, survey.n_pings - 1]
+    want = np.array(position).reshape(-1, 2, 2)
+    np.testing.assert_allclose(got.position_cov[pings], want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    np.testing.assert_allclose(got.calibration_cov.ravel(), calibration, rtol=1e-12, atol=1e-15)
+    assert got.tide_std == pytest.approx(tide, rel=1e-12)
+    assert not got.map_error and got.field_nodes == 0
+
+
+def test_a_map_that_says_it_is_exact_overrides_the_models_default():
+    survey, seabed = _survey(), _seabed()
+    exact = seabed.replace(depth_std=np.zeros(seabed.shape))
+    got = posterior_crb(survey, exact, MODEL.replace(map_std=0.3))
+    want = posterior_crb(survey, seabed, MODEL)
+    assert not got.map_error
+    np.testing.assert_array_equal(got.position_cov, want.position_cov)

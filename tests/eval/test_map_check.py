@@ -1,78 +1,14 @@
-"""Check lines: a map's stated error tested against held-out soundings (tangraph.eval.map_check)."""
+"""Check lines: a map's stated error tested against held-out soundings (tangraph.eval.map_check):
+each survey, or each line of one survey, against the map of the others, and the map's error
+scaled by the check."""
 
 import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.eval.map_check import MapCheck, check_map_error, window_scores
-from tangraph.maps import BathymetryMap
+from tangraph.eval.map_check import MapCheck, check_map_error
 from tangraph.sensors import NavigationModel
-from tangraph.sensors.matern import matern_field
-from tangraph.survey import Survey
-
-AXIS_N = np.arange(0.0, 400.0, 2.0)
-AXIS_E = np.arange(0.0, 2000.0, 2.0)
-SOUNDING_STD = 0.1
-
-
-def seafloor(north, east):
-    return 30.0 + 0.02 * north + 1.5 * np.sin(east / 60.0) * np.cos(north / 45.0)
-
-
-def line_survey(truth, rng, *, lines, offsets=(-3.0, 0.0, 3.0), name="s"):
-    """Lines along east at the given norths, a ping per metre, beams across, soundings of the
-    seafloor ``truth(north, east)`` with white noise; the reference track is the truth."""
-    east = np.arange(20.0, 1980.0, 1.0)
-    poses = np.concatenate([np.column_stack([np.full(east.size, n), east if i % 2 == 0 else east[::-1],
-                                             np.full(east.size, 0.0 if i % 2 == 0 else np.pi / 2 * 2)])
-                            for i, n in enumerate(lines)])
-    k, b = poses.shape[0], len(offsets)
-    fwd, stb = np.zeros((k, b)), np.tile(np.asarray(offsets, float), (k, 1))
-    survey = Survey(time=np.arange(k, dtype=float), dr_pose=poses, true_pose=poses, vehicle_depth=np.zeros(k),
-                    beam_forward=fwd, beam_starboard=stb, beam_depth=np.zeros((k, b)), meta={"name": name})
-    north, east_ = survey.footprints(poses)
-    depth = truth(north, east_) + SOUNDING_STD * rng.standard_normal((k, b))
-    return survey.replace(beam_depth=depth)
-
-
-def test_scores_are_standard_normal_when_the_map_errs_as_it_says():
-    # the map is the seafloor less a Matérn field of the std and range it states: the window
-    # means of held-out soundings, standardised, are N(0, 1) up to Monte Carlo error
-    model = NavigationModel(sounding_std=SOUNDING_STD)
-    scores = []
-    for seed in range(6):
-        rng = np.random.default_rng(seed)
-        d = matern_field(AXIS_N, AXIS_E, 0.3, 20.0, rng=rng)
-        grid = BathymetryMap(AXIS_N, AXIS_E, seafloor(AXIS_N[:, None], AXIS_E[None, :]) - d,
-                             depth_std=np.full(d.shape, 0.3), correlation_length=20.0)
-        truth = BathymetryMap(AXIS_N, AXIS_E, seafloor(AXIS_N[:, None], AXIS_E[None, :]))
-        survey = line_survey(truth.depth_at, rng, lines=[100.0, 250.0])
-        scores.append(window_scores(survey, grid, model, window=50.0))
-    scores = np.concatenate(scores)
-    # windows 50 m long, 2.5 ranges: nearly independent; RMS^2 of W normals has std sqrt(2 / W)
-    assert scores.size > 400
-    assert abs(np.mean(scores**2) - 1.0) < 4 * np.sqrt(2.0 / scores.size)
-    assert np.mean(np.abs(scores) > 3.0) < 0.02
-
-
-def test_a_patch_the_map_does_not_know_is_heavy_tailed():
-    # the same, with the seafloor 2 m shallower over 400 m of one line: the bulk stays at 1,
-    # the RMS and the share beyond 3 say a few windows are far worse than the map states
-    model = NavigationModel(sounding_std=SOUNDING_STD)
-    rng = np.random.default_rng(1)
-    d = matern_field(AXIS_N, AXIS_E, 0.3, 20.0, rng=rng)
-    grid = BathymetryMap(AXIS_N, AXIS_E, seafloor(AXIS_N[:, None], AXIS_E[None, :]) - d,
-                         depth_std=np.full(d.shape, 0.3), correlation_length=20.0)
-    truth = BathymetryMap(AXIS_N, AXIS_E, seafloor(AXIS_N[:, None], AXIS_E[None, :]))
-
-    def changed(north, east):
-        return truth.depth_at(north, east) - 2.0 * ((east > 800) & (east < 1200) & (north < 150))
-
-    s = window_scores(line_survey(changed, rng, lines=[100.0, 250.0]), grid, model, window=50.0)
-    check = MapCheck(s, np.zeros(s.size, int), ("changed",), 50.0)
-    assert check.rms > 1.8
-    assert 0.6 < check.robust < 1.4
-    assert check.share_beyond_3 > 0.03
+from tests.eval.line_cases import SOUNDING_STD, line_survey, seafloor
 
 
 def test_check_map_error_holds_each_survey_out():

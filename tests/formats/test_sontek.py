@@ -1,18 +1,18 @@
-"""The SonTek RiverSurveyor reader against hand-checked rows of the real Lake Caputh files, and
-its refusals of bad input (each one line naming file, line and column)."""
+"""The SonTek RiverSurveyor reader (tangraph.formats.sontek) against hand-checked rows of the real
+Lake Caputh files, its refusals of bad input (each one line naming file, line and column), and a
+CRS in feet."""
 
 from __future__ import annotations
-
-import datetime as dt
 
 import numpy as np
 import pytest
 
-from tangraph.formats import import_sontek_sum, read_sontek_sum, read_water_level
+from tangraph.formats import import_sontek_sum, read_sontek_sum
 from tangraph.formats.sontek import _footprints
 from tangraph.survey import SurveyError
+from tests.formats.feet_cases import same_track, utm_in
+from tests.formats.recorded_files import LONG_RUN, _write
 
-LONG_RUN = "20250327110103.sum"
 OPTIONS = {"crs": "EPSG:25833", "timezone": "Europe/Berlin"}
 
 
@@ -119,16 +119,6 @@ def test_compass_dead_reckoning_and_declination(caputh):
     assert s.dr_pose[1, 2] == pytest.approx(psi)
 
 
-
-
-def _write(tmp_path, caputh, edit, name="run.sum"):
-    lines = (caputh / LONG_RUN).read_bytes().decode("latin-1").split("\r")[:20]
-    lines = edit(lines)
-    path = tmp_path / name
-    path.write_bytes("\r".join(lines).encode("latin-1"))
-    return path
-
-
 @pytest.mark.parametrize(
     ("edit", "message"),
     [
@@ -192,33 +182,13 @@ def test_daylight_saving_change_is_refused(tmp_path, caputh):
         "2025-03-30T01:30:00Z"
 
 
-def test_read_water_level_refuses_bad_rows(tmp_path):
-    p = tmp_path / "level.csv"
-    p.write_text("date;waterlevel\n16.01.2025;0.762\n2025-01-18;0,764\n")
-    table = read_water_level(p)
-    assert table.on(dt.date(2025, 1, 18)) == 0.764
-    p.write_text("date;waterlevel\n16.01.2025;high\n")
-    with pytest.raises(SurveyError, match="line 2, column 2: 'high' is not a level"):
-        read_water_level(p)
-    p.write_text("date;waterlevel\n16.13.2025;0.7\n")
-    with pytest.raises(SurveyError, match="line 2, column 1: '16.13.2025' is not a date"):
-        read_water_level(p)
+def test_sontek_in_feet(caputh):
+    import logging
 
+    from tangraph.formats import import_sontek_sum
 
-def test_cli_refuses_a_malformed_file_in_one_line_and_writes_nothing(tmp_path, caputh, capsys):
-    from tangraph.cli import main
-
-    bad = _write(tmp_path, caputh, lambda ls: [*ls[:5], ls[5][:40], *ls[6:]])
-    out = tmp_path / "survey.nc"
-    args = ["survey", "import", "--format", "sontek-sum", str(bad), "--crs", "EPSG:25833",
-            "--timezone", "Europe/Berlin", "-o", str(out)]
-    assert main(args) == 2
-    err = capsys.readouterr().err.strip()
-    assert err.count("\n") == 0 and "run.sum, line 6: " in err and "Traceback" not in err
-    assert not out.exists() and not list(tmp_path.glob(".survey*"))
-    with pytest.raises(SystemExit) as exc:
-        main(["survey", "import", "--format", "sontek", str(bad), "-o", str(out)])
-    assert exc.value.code == 2 and "invalid choice: 'sontek'" in capsys.readouterr().err
-    assert main([*args[:4], str(caputh / LONG_RUN), "--crs", "EPSG:32610", "--timezone", "UTC",
-                 "-o", str(out)]) == 2
-    assert "outside the area of use of EPSG:32610" in capsys.readouterr().err and not out.exists()
+    logging.getLogger("tangraph.formats.sontek").setLevel(logging.ERROR)
+    run = caputh / "20250327110103.sum"
+    metres = import_sontek_sum(run, crs="EPSG:25833", timezone="Europe/Berlin")
+    feet = import_sontek_sum(run, crs=utm_in("us-ft", 33, "+ellps=GRS80"), timezone="Europe/Berlin")
+    same_track(feet, metres)

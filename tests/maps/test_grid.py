@@ -1,4 +1,6 @@
-"""BathymetryMap and its kernels: deterministic cases, the numpy reference, bad input."""
+"""BathymetryMap (tangraph.maps.grid): query shapes, geometry and derived maps, bad input; and the
+map's error as data: ``depth_std`` and ``correlation_length``, their queries, and the maps made
+from one that has them."""
 
 from __future__ import annotations
 
@@ -8,68 +10,22 @@ import xarray as xr
 
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps import BathymetryMap
+from tests.maps.grid_cases import plane, rough
 from tests.maps.reference import interpolate as reference
 
 
-def plane(a=100.0, gn=0.1, ge=-0.05, shape=(20, 30), cell=(5.0, 4.0)):
-    north = 10.0 + cell[0] * np.arange(shape[0])
-    east = -50.0 + cell[1] * np.arange(shape[1])
-    nn, ee = np.meshgrid(north, east, indexing="ij")
-    return BathymetryMap(north=north, east=east, depth=a + gn * nn + ge * ee, name="plane")
-
-
-def rough(seed=0, shape=(60, 50), nan_fraction=0.02):
+def mapped(seed=0, shape=(30, 40), nan_fraction=0.05, correlation_length=40.0):
+    """A rough map with NaN holes and a std layer that varies from cell to cell."""
     rng = np.random.default_rng(seed)
-    depth = 50 + rng.normal(size=shape).cumsum(axis=0).cumsum(axis=1) * 0.1
+    depth = 50 + rng.normal(size=shape).cumsum(axis=0) * 0.2
     depth[rng.random(shape) < nan_fraction] = np.nan
-    return BathymetryMap(north=np.arange(shape[0]) * 2.0, east=100 + np.arange(shape[1]) * 3.0,
-                         depth=depth)
+    std = 0.1 + rng.random(shape)
+    return BathymetryMap(north=np.arange(shape[0]) * 5.0, east=200 + np.arange(shape[1]) * 4.0,
+                         depth=depth, crs="EPSG:32633", origin=(6e6, 5e5), name="rough",
+                         depth_std=std, correlation_length=correlation_length)
 
 
-# -- deterministic cases -------------------------------------------------------------------
-@pytest.mark.parametrize("order", [1, 3])
-def test_plane_is_reproduced_exactly_with_its_gradient(order):
-    m = plane()
-    rng = np.random.default_rng(1)
-    qn = rng.uniform(m.north[0], m.north[-1], 500)
-    qe = rng.uniform(m.east[0], m.east[-1], 500)
-    np.testing.assert_allclose(m.depth_at(qn, qe, order=order), 100 + 0.1 * qn - 0.05 * qe, atol=1e-9)
-    grad = m.gradient_at(qn, qe, order=order)
-    np.testing.assert_allclose(grad[:, 0], 0.1, atol=1e-9)
-    np.testing.assert_allclose(grad[:, 1], -0.05, atol=1e-9)
-
-
-@pytest.mark.parametrize("order", [1, 3])
-def test_cell_centres_return_the_stored_depth(order):
-    m = rough(nan_fraction=0)
-    nn, ee = np.meshgrid(m.north, m.east, indexing="ij")
-    np.testing.assert_allclose(m.depth_at(nn, ee, order=order), m.depth, atol=1e-9)
-
-
-@pytest.mark.parametrize("order", [1, 3])
-def test_off_the_map_is_nan_never_clamped(order):
-    m = plane()
-    n_lo, n_hi, e_lo, e_hi = m.extent
-    qn = np.array([n_lo - 1e-6, n_hi + 1e-6, n_lo, n_hi, np.nan, 20.0])
-    qe = np.array([e_lo, e_lo, e_lo - 1e-6, e_hi + 1e-6, 0.0, np.nan])
-    assert np.all(np.isnan(m.depth_at(qn, qe, order=order)))
-    assert np.all(np.isnan(m.gradient_at(qn, qe, order=order)))
-    # the corners themselves are on the map
-    assert np.isfinite(m.depth_at(n_hi, e_hi, order=order))
-
-
-def test_nan_cell_poisons_bilinear_neighbourhood_only():
-    depth = np.full((5, 5), 10.0)
-    depth[2, 2] = np.nan
-    m = BathymetryMap(north=np.arange(5.0), east=np.arange(5.0), depth=depth)
-    assert np.isnan(m.depth_at(1.5, 1.5))
-    assert np.isnan(m.depth_at(2.5, 2.9))
-    assert m.depth_at(0.5, 0.5) == 10.0
-    assert m.depth_at(3.1, 0.2) == 10.0
-    # bicubic falls back to bilinear next to the NaN, so it is finite where bilinear is
-    assert m.depth_at(0.5, 0.5, order=3) == 10.0
-
-
+# -- queries -----------------------------------------------------------------------------------
 def test_shapes_broadcast_and_scalars_stay_scalar():
     m = plane()
     assert np.ndim(m.depth_at(20.0, 0.0)) == 0
@@ -77,50 +33,7 @@ def test_shapes_broadcast_and_scalars_stay_scalar():
     assert m.gradient_at(np.full((3, 4), 20.0), np.zeros((3, 4))).shape == (3, 4, 2)
 
 
-# -- against the numpy reference -----------------------------------------------------------
-@pytest.mark.parametrize("order", [1, 3])
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_kernel_matches_numpy_reference(order, seed):
-    m = rough(seed=seed)
-    rng = np.random.default_rng(seed + 10)
-    n_lo, n_hi, e_lo, e_hi = m.extent
-    # inside, outside, on the edges and exactly on cell centres
-    qn = np.concatenate([rng.uniform(n_lo - 5, n_hi + 5, 4000), m.north[[0, -1, 3]]])
-    qe = np.concatenate([rng.uniform(e_lo - 5, e_hi + 5, 4000), m.east[[0, -1, 7]]])
-    value_ref, grad_ref = reference(m.north, m.east, m.depth, qn, qe, order=order)
-    np.testing.assert_allclose(m.depth_at(qn, qe, order=order), value_ref, rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(m.gradient_at(qn, qe, order=order), grad_ref, rtol=1e-10, atol=1e-9)
-    assert np.isnan(value_ref).sum() > 100  # the comparison covered NaN cases
-
-
-@pytest.mark.parametrize("order", [1, 3])
-def test_gradient_matches_finite_differences(order):
-    m = rough(nan_fraction=0)
-    rng = np.random.default_rng(5)
-    qn = rng.uniform(m.north[2], m.north[-3], 300)
-    qe = rng.uniform(m.east[2], m.east[-3], 300)
-    h = 1e-6
-    fd_n = (m.depth_at(qn + h, qe, order=order) - m.depth_at(qn - h, qe, order=order)) / (2 * h)
-    fd_e = (m.depth_at(qn, qe + h, order=order) - m.depth_at(qn, qe - h, order=order)) / (2 * h)
-    grad = m.gradient_at(qn, qe, order=order)
-    np.testing.assert_allclose(grad[:, 0], fd_n, atol=1e-5)
-    np.testing.assert_allclose(grad[:, 1], fd_e, atol=1e-5)
-
-
-def test_bicubic_is_more_accurate_than_bilinear_on_a_smooth_surface():
-    north = np.arange(0, 200.0, 10)
-    east = np.arange(0, 200.0, 10)
-    f = lambda n, e: 50 + 5 * np.sin(n / 30) * np.cos(e / 40)  # noqa: E731
-    nn, ee = np.meshgrid(north, east, indexing="ij")
-    m = BathymetryMap(north=north, east=east, depth=f(nn, ee))
-    rng = np.random.default_rng(0)
-    qn, qe = rng.uniform(20, 170, (2, 2000))
-    err1 = np.abs(m.depth_at(qn, qe, order=1) - f(qn, qe)).max()
-    err3 = np.abs(m.depth_at(qn, qe, order=3) - f(qn, qe)).max()
-    assert err3 < err1 / 4
-
-
-# -- geometry and derived maps -------------------------------------------------------------
+# -- geometry and derived maps -----------------------------------------------------------------
 def test_cell_size_extent_contains():
     m = plane()
     assert m.cell_size == (5.0, 4.0)
@@ -179,7 +92,7 @@ def test_map_copies_and_freezes_its_inputs():
         m.depth[0, 0] = 5
 
 
-# -- bad input -----------------------------------------------------------------------------
+# -- bad input ---------------------------------------------------------------------------------
 @pytest.mark.parametrize(
     ("north", "east", "depth", "message"),
     [
@@ -206,3 +119,141 @@ def test_bad_queries_are_refused():
     with pytest.raises(MapFormatError, match="positive"):
         BathymetryMap.from_xarray(xr.DataArray(np.ones((2, 2)), dims=("north", "east"),
                                                coords={"north": [0, 1], "east": [0, 1]}))
+
+
+# -- the map's error: the fields ---------------------------------------------------------------
+def test_depth_std_is_copied_read_only_and_nan_over_no_data():
+    m = mapped()
+    std = np.full(m.shape, 0.5)
+    e = BathymetryMap(m.north, m.east, m.depth, depth_std=std, correlation_length=12)
+    std[0, 0] = 99.0  # the caller's array does not reach the map
+    assert not e.depth_std.flags.writeable and e.depth_std.dtype == np.float64
+    np.testing.assert_array_equal(np.isnan(e.depth_std), np.isnan(m.depth))  # finite std over NaN depth: NaN
+    assert np.nanmax(e.depth_std) == 0.5
+    assert e.correlation_length == 12.0 and isinstance(e.correlation_length, float)
+    plain = BathymetryMap(m.north, m.east, m.depth)
+    assert plain.depth_std is None and plain.correlation_length is None and plain.error_summary() == {}
+
+
+def test_repr_mentions_the_error_layer():
+    text = repr(mapped())
+    assert "depth_std=[" in text and "correlation_length=40 m" in text
+    assert "depth_std" not in repr(mapped().replace(depth_std=None, correlation_length=None))
+
+
+DIAGONAL = np.eye(3, 4) > 0
+
+
+@pytest.mark.parametrize(("std", "match"), [
+    (np.full((3, 5), 0.1), r"map 'bad': depth_std has shape \(3, 5\), expected the depth's \(3, 4\)"),
+    (np.where(DIAGONAL, -0.2, 0.1), r"map 'bad': depth_std holds 3 negative value\(s\) \(e\.g\. -0\.2 m"),
+    (np.where(DIAGONAL, np.inf, 0.1), r"map 'bad': depth_std holds 3 infinite value"),
+    (np.where(DIAGONAL, np.nan, 0.1), r"map 'bad': depth_std is NaN in 3 cell\(s\) where depth holds data"),
+])
+def test_bad_depth_std_is_refused_in_one_line(std, match):
+    with pytest.raises(MapFormatError, match=match) as info:
+        BathymetryMap(north=[0.0, 1, 2], east=[0.0, 1, 2, 3], depth=np.ones((3, 4)), name="bad",
+                      depth_std=std)
+    assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize("length", [0.0, -5.0, np.inf, np.nan, "abc", True])
+def test_bad_correlation_length_is_refused(length):
+    with pytest.raises(MapFormatError, match=r"map 'bad': correlation_length must be a finite length > 0 m"):
+        BathymetryMap(north=[0.0, 1], east=[0.0, 1], depth=np.ones((2, 2)), name="bad",
+                      correlation_length=length)
+
+
+def test_std_on_no_data_only_is_not_an_error():
+    depth = np.array([[1.0, np.nan], [1.0, 1.0]])
+    m = BathymetryMap(north=[0.0, 1], east=[0.0, 1], depth=depth, depth_std=[[0.1, np.nan], [0.1, 0.1]])
+    assert np.isnan(m.depth_std[0, 1])
+
+
+# -- the map's error: queries ------------------------------------------------------------------
+def test_depth_std_at_matches_the_numpy_reference_and_is_nan_where_depth_is():
+    m = mapped(seed=3)
+    rng = np.random.default_rng(4)
+    qn = rng.uniform(-10, m.north[-1] + 10, 4000)
+    qe = rng.uniform(m.east[0] - 10, m.east[-1] + 10, 4000)
+    expected, _ = reference(m.north, m.east, np.asarray(m.depth_std), qn, qe, order=1, with_gradient=False)
+    got = m.depth_std_at(qn, qe)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-12, equal_nan=True)
+    np.testing.assert_array_equal(np.isnan(got), np.isnan(m.depth_at(qn, qe)))
+    assert np.isnan(got).any() and np.isfinite(got).any()  # the case tests both
+
+
+def test_depth_std_at_keeps_the_query_shape_and_is_exact_on_cells():
+    m = mapped(nan_fraction=0.0)
+    assert m.depth_std_at(np.zeros((2, 3)), 200.0).shape == (2, 3)
+    i, j = 7, 11
+    assert m.depth_std_at(m.north[i], m.east[j]) == pytest.approx(m.depth_std[i, j], abs=1e-12)
+
+
+def test_depth_std_at_without_a_layer_says_so():
+    with pytest.raises(TangraphError, match=r"map 'rough' has no depth_std"):
+        mapped().replace(depth_std=None).depth_std_at(0.0, 200.0)
+
+
+# -- the map's error: new maps from this one ---------------------------------------------------
+def test_crop_carries_the_error_layer():
+    m = mapped()
+    c = m.crop(north=(20, 80), east=(220, 300))
+    rows = (m.north >= 20) & (m.north <= 80)
+    cols = (m.east >= 220) & (m.east <= 300)
+    np.testing.assert_array_equal(c.depth_std, m.depth_std[np.ix_(rows, cols)])
+    assert c.correlation_length == m.correlation_length
+
+
+def test_resample_finer_interpolates_the_std_bilinearly():
+    m = mapped(nan_fraction=0.0)
+    r = m.resample(2.5, order=3)
+    nn, ee = np.meshgrid(r.north, r.east, indexing="ij")
+    np.testing.assert_allclose(r.depth_std, m.depth_std_at(nn, ee), atol=1e-12)
+    assert np.nanmin(r.depth_std) >= np.min(m.depth_std) and r.correlation_length == 40.0
+
+
+def test_resample_coarser_averages_the_std_and_keeps_its_nan_with_depth():
+    m = mapped(seed=5, nan_fraction=0.1)
+    r = m.resample(10.0)
+    np.testing.assert_array_equal(np.isnan(r.depth_std), np.isnan(r.depth))
+    assert np.nanmin(m.depth_std) <= np.nanmin(r.depth_std)
+    assert np.nanmax(r.depth_std) <= np.nanmax(m.depth_std)
+    flat = mapped(nan_fraction=0.0).replace(depth_std=np.full((30, 40), 0.7))
+    np.testing.assert_allclose(flat.resample(20.0).depth_std, 0.7)
+
+
+def test_replace_keeps_the_layer_and_refuses_a_new_shape_without_one():
+    m = mapped()
+    deeper = m.replace(depth=m.depth + 1)
+    assert deeper.depth_std is m.depth_std or np.array_equal(deeper.depth_std, m.depth_std, equal_nan=True)
+    with pytest.raises(TangraphError, match=r"changes shape \(30, 40\) -> \(2, 2\) but depth_std was not"):
+        m.replace(north=[0.0, 1], east=[0.0, 1], depth=np.ones((2, 2)))
+    small = m.replace(north=[0.0, 1], east=[0.0, 1], depth=np.ones((2, 2)), depth_std=None)
+    assert small.depth_std is None and small.correlation_length == 40.0
+    filled = np.where(np.isnan(m.depth), 50.0, m.depth)  # new data where the std is NaN
+    with pytest.raises(MapFormatError, match=r"depth_std is NaN in \d+ cell\(s\) where depth holds data"):
+        m.replace(depth=filled)
+
+
+def test_dataset_round_trip_and_descending_coordinates():
+    m = mapped()
+    ds = m.to_dataset()
+    assert ds["depth"].attrs["ancillary_variables"] == "depth_std"
+    assert ds["depth_std"].attrs["units"] == "m"
+    back = BathymetryMap.from_xarray(ds)
+    np.testing.assert_array_equal(back.depth_std, m.depth_std)
+    assert back.correlation_length == 40.0 and back.crs == m.crs and back.origin == m.origin
+    flipped = BathymetryMap.from_xarray(ds.isel(north=slice(None, None, -1), east=slice(None, None, -1)))
+    np.testing.assert_array_equal(flipped.depth_std, m.depth_std)
+    np.testing.assert_array_equal(flipped.depth, m.depth)
+    assert BathymetryMap.from_xarray(m.to_xarray()).depth_std is None  # the DataArray: depth only
+    assert "depth_std" not in mapped().replace(depth_std=None).to_dataset()
+
+
+def test_error_summary():
+    m = mapped()
+    s = m.error_summary()
+    assert s["depth_std_m"]["median"] == pytest.approx(np.nanmedian(m.depth_std))
+    assert s["depth_std_m"]["max"] == pytest.approx(np.nanmax(m.depth_std))
+    assert s["correlation_length_m"] == 40.0

@@ -1,16 +1,17 @@
-"""Tests of the Open3D bridge: meshes, TIN gridding, ray casting and sounding gridding."""
+"""Tests of the Open3D bridge (tangraph.maps.mesh): meshes, TIN gridding, ray casting, and mesh
+files (round trips, z-up vertices, sidecars with the CRS and the origin)."""
 
 from __future__ import annotations
 
+import json
 import re
 
 import numpy as np
-import open3d as o3d
+import pyproj
 import pytest
 
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps.grid import BathymetryMap
-from tangraph.maps.gridding import SoundingGrid, grid_soundings
 from tangraph.maps.mesh import (
     cast_rays,
     from_mesh,
@@ -20,6 +21,7 @@ from tangraph.maps.mesh import (
     triangles_to_map,
     write_mesh,
 )
+from tests.maps.mesh_cases import CRS, ORIGIN, _ply_vertices, small_map
 
 
 def flat_map(ny: int, nx: int, depth: float = 50.0, cell: float = 1.0, n0: float = 0.0):
@@ -46,7 +48,7 @@ def smooth_map(cell: float = 1.5) -> BathymetryMap:
     return BathymetryMap(north, east, D0 + A * np.sin(KN * nn) * np.cos(KE * ee), name="sines")
 
 
-# -- to_mesh ----------------------------------------------------------------------------------
+# -- to_mesh -----------------------------------------------------------------------------------
 def test_to_mesh_full_grid_counts_vertices_and_normals():
     m = flat_map(4, 5, depth=30.0)
     mesh = to_mesh(m)
@@ -82,7 +84,7 @@ def test_to_mesh_removes_vertices_no_triangle_uses():
     assert np.asarray(mesh.triangles).max() == 5
 
 
-# -- ray casting ------------------------------------------------------------------------------
+# -- ray casting -------------------------------------------------------------------------------
 def test_round_trip_vertical_rays_match_depth_at_within_the_interpolation_bound():
     """Mesh depth (piecewise linear) vs bilinear depth_at on the same cells.
 
@@ -132,7 +134,7 @@ def test_cast_rays_keeps_leading_shape():
     assert cast_rays(scene, o, [0, 0, 1]).shape == (2, 4)
 
 
-# -- TIN -> map -------------------------------------------------------------------------------
+# -- TIN -> map --------------------------------------------------------------------------------
 def plane(n, e):
     return 20.0 + 0.3 * n - 0.2 * e
 
@@ -168,70 +170,7 @@ def test_map_mesh_map_round_trip_is_exact_with_holes():
     np.testing.assert_allclose(back.depth, m.depth, atol=1e-9, equal_nan=True)
 
 
-# -- soundings --------------------------------------------------------------------------------
-SOUNDINGS = np.array(
-    [
-        [0.0, 0.0, 10.0],
-        [0.3, 0.2, 12.0],
-        [0.4, 0.1, 14.0],
-        [0.1, 1.9, 20.0],
-        [2.0, 1.0, 30.0],
-        [1.6, 1.4, 34.0],
-        [np.nan, 1.0, 5.0],
-        [1.0, 1.0, np.nan],
-    ]
-)
-
-
-def check_hand_made(g: SoundingGrid, n_dropped: int = 2):
-    np.testing.assert_array_equal(g.count, [[3, 0, 1], [0, 0, 0], [0, 2, 0]])
-    nan = np.nan
-    np.testing.assert_allclose(
-        g.mean.depth, [[12, nan, 20], [nan, nan, nan], [nan, 32, nan]], rtol=1e-15
-    )
-    np.testing.assert_allclose(
-        g.std, [[2, nan, nan], [nan, nan, nan], [nan, np.sqrt(8), nan]], rtol=1e-15
-    )
-    np.testing.assert_array_equal(g.mean.north, [0, 1, 2])
-    np.testing.assert_array_equal(g.mean.east, [0, 1, 2])
-    assert g.n_dropped == n_dropped
-
-
-def test_grid_soundings_hand_made():
-    g = grid_soundings(SOUNDINGS, cell=1.0, name="mb")
-    check_hand_made(g)
-    assert g.mean.name == "mb"
-    assert not g.count.flags.writeable
-
-
-def test_grid_soundings_point_cloud_same_as_array():
-    pcd = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(SOUNDINGS))
-    check_hand_made(grid_soundings(pcd, cell=1.0))
-
-
-def test_grid_soundings_extent_drops_points_outside():
-    g = grid_soundings(SOUNDINGS, cell=1.0, extent=(0.0, 1.0, 0.0, 2.0))
-    np.testing.assert_array_equal(g.count, [[3, 0, 1], [0, 0, 0]])
-    assert g.n_dropped == 4
-
-
-def test_grid_soundings_matches_a_loop_over_cells():
-    rng = np.random.default_rng(3)
-    pts = np.column_stack(
-        [rng.uniform(-5, 20, 3000), rng.uniform(100, 112, 3000), rng.normal(40, 2, 3000)]
-    )
-    g = grid_soundings(pts, cell=2.5)
-    i = np.rint((pts[:, 0] - pts[:, 0].min()) / 2.5).astype(int)
-    j = np.rint((pts[:, 1] - pts[:, 1].min()) / 2.5).astype(int)
-    assert g.count.sum() == 3000
-    for a, b in [(0, 0), (3, 2), (10, 4), (5, 1)]:
-        z = pts[(i == a) & (j == b), 2]
-        assert g.count[a, b] == z.size
-        np.testing.assert_allclose(g.mean.depth[a, b], z.mean(), rtol=1e-12)
-        np.testing.assert_allclose(g.std[a, b], z.std(ddof=1), rtol=1e-9)
-
-
-# -- files ------------------------------------------------------------------------------------
+# -- files -------------------------------------------------------------------------------------
 @pytest.mark.parametrize(("suffix", "atol"), [(".ply", 1e-12), (".obj", 1e-4)])
 def test_mesh_file_round_trip(tmp_path, suffix, atol):
     m = with_nan(smooth_map(cell=2.0).crop(north=(200, 240), east=(-30, 10)), (4, 6))
@@ -247,7 +186,39 @@ def test_mesh_file_round_trip(tmp_path, suffix, atol):
     np.testing.assert_allclose(back.depth, m.depth, atol=atol, equal_nan=True)
 
 
-# -- bad input --------------------------------------------------------------------------------
+@pytest.mark.parametrize("suffix", [".ply", ".obj"])
+def test_mesh_z_up_vertices_are_east_north_elevation(tmp_path, suffix):
+    m = small_map()
+    ned = write_mesh(m, tmp_path / f"ned{suffix}")
+    enu = write_mesh(m, tmp_path / f"enu{suffix}", z_up=True)
+    assert not (tmp_path / f"ned{suffix}.json").exists()  # a sidecar only when asked
+    (vn, tn), (ve, te) = _ply_vertices(ned), _ply_vertices(enu)
+    np.testing.assert_allclose(ve, np.column_stack([vn[:, 1], vn[:, 0], -vn[:, 2]]), atol=1e-5)
+    np.testing.assert_array_equal(te, tn)
+    assert np.all(ve[:, 2] < 0) and np.isclose(ve[:, 2].max(), -20.0, atol=1e-5)
+    # triangles face up (+z) in the z-up mesh: cross product of the edges
+    a, b, c = ve[te[:, 0]], ve[te[:, 1]], ve[te[:, 2]]
+    assert np.all(np.cross(b - a, c - a)[:, 2] > 0)
+
+
+@pytest.mark.parametrize("z_up", [False, True])
+def test_mesh_sidecar_holds_crs_origin_units_and_axes(tmp_path, z_up):
+    m = small_map()
+    path = write_mesh(m, tmp_path / "lake.ply", z_up=z_up, sidecar=True)
+    about = json.loads((tmp_path / "lake.ply.json").read_text())
+    assert about["crs"] == CRS
+    assert pyproj.CRS.from_wkt(about["crs_wkt"]).to_epsg() == 32755
+    assert about["origin"] == {"northing": ORIGIN[0], "easting": ORIGIN[1]}
+    assert about["units"] == "m" and about["map"] == "lake"
+    assert about["axes"] == (["east", "north", "up"] if z_up else ["north", "east", "down"])
+    assert about["up"] == ("+z" if z_up else "-z")
+    assert path.is_file()
+    local = json.loads(write_mesh(small_map(None), tmp_path / "local.obj", sidecar=True)
+                       .with_name("local.obj.json").read_text())
+    assert local["crs"] is None and local["crs_wkt"] is None
+
+
+# -- bad input ---------------------------------------------------------------------------------
 def test_read_mesh_errors_name_the_file(tmp_path):
     missing = tmp_path / "nothing.ply"
     with pytest.raises(MapFormatError, match=re.escape(str(missing))):
@@ -310,19 +281,6 @@ def test_cast_rays_rejects_bad_rays():
         cast_rays(scene, [np.nan, 1.0, 0.0], [0.0, 0.0, 1.0])
     with pytest.raises(TangraphError, match="do not broadcast"):
         cast_rays(scene, np.zeros((2, 3)), np.ones((3, 3)))
-
-
-def test_grid_soundings_rejects_bad_input():
-    with pytest.raises(TangraphError, match=r"points must have shape \(N, 3\)"):
-        grid_soundings(np.zeros((4, 2)), cell=1.0)
-    with pytest.raises(TangraphError, match="no finite soundings"):
-        grid_soundings(np.full((3, 3), np.nan), cell=1.0)
-    with pytest.raises(TangraphError, match="cell must be"):
-        grid_soundings(SOUNDINGS, cell=-1.0)
-    with pytest.raises(TangraphError, match="north spans"):
-        grid_soundings([[0.0, 0, 1], [0.1, 5, 1]], cell=1.0)
-    with pytest.raises(TangraphError, match="extent"):
-        grid_soundings(SOUNDINGS, cell=1.0, extent=(2.0, 1.0, 0.0, 1.0))
 
 
 def test_linear_tin_gridding_agrees_with_ray_casting_and_falls_back_for_overlaps():

@@ -1,4 +1,6 @@
-"""TAP fixes: known answers, regions' nesting, covariance against the CRLB, flags and bad input."""
+"""TAP fixes (tangraph.matching.tap, with its regions in tap_regions and its noise model in
+tap_noise): known answers, regions' nesting, covariance against the CRLB, the jackknife, the map
+error's sandwich, flags and bad input."""
 
 from __future__ import annotations
 
@@ -6,12 +8,11 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.maps import BathymetryMap, fractal, ridges
+from tangraph.maps import BathymetryMap, ridges
 from tangraph.matching.patch import MatchingError
 from tangraph.matching.tap import RegionMethod, TapConfig, criterion_at, nees, tap_fix
-from tangraph.survey import Survey, footprints
-
-CELL = 5.0
+from tangraph.survey import footprints
+from tests.matching.tap_cases import CELL, rough_map, survey_on
 
 
 def bowl(a=2e-4, b=1e-4, c=5e-5):
@@ -21,49 +22,6 @@ def bowl(a=2e-4, b=1e-4, c=5e-5):
     east = np.arange(0, 1500.0, CELL)
     nn, ee = np.meshgrid(north - 700, east - 800, indexing="ij")
     return BathymetryMap(north=north, east=east, depth=100 + a * nn**2 + b * ee**2 + c * nn * ee, name="bowl")
-
-
-def rough_map(seed=0):
-    return fractal((300, 300), CELL, rng=np.random.default_rng(seed), beta=3.0, relief=5.0, mean_depth=80.0)
-
-
-def survey_on(
-    bathymetry,
-    *,
-    offset=(15.0, -10.0),
-    noise=0.0,
-    tide=1.5,
-    seed=0,
-    pings=10,
-    beams=41,
-    start=(500.0, 400.0),
-    heading=np.pi / 2,
-    spacing=5.0,
-):
-    """Soundings of a straight run sampled from the map itself; DR = truth + ``offset``."""
-    rng = np.random.default_rng(seed)
-    k = np.arange(pings)
-    truth = np.column_stack(
-        [
-            start[0] + k * spacing * np.cos(heading),
-            start[1] + k * spacing * np.sin(heading),
-            np.full(pings, heading),
-        ]
-    )
-    forward = np.zeros((pings, beams))
-    starboard = np.tile(np.linspace(-60, 60, beams), (pings, 1))
-    north, east = footprints(truth, forward, starboard)
-    depth = bathymetry.depth_at(north, east) + tide + noise * rng.normal(size=forward.shape)
-    dr = truth + np.array([*offset, 0.0])
-    return Survey(
-        time=k.astype(float),
-        dr_pose=dr,
-        vehicle_depth=np.full(pings, 10.0),
-        beam_forward=forward,
-        beam_starboard=starboard,
-        beam_depth=depth,
-        true_pose=truth,
-    )
 
 
 def test_noise_free_fix_lands_on_the_truth_with_the_tide():
@@ -164,23 +122,6 @@ def test_bad_input_is_refused_with_a_reason():
         tap_fix(s, m, 9, 10, prior=(-500.0, 0.0))
 
 
-def test_plot_fix_draws_the_regions_and_the_ellipse(tmp_path):
-    from matplotlib.figure import Figure
-
-    from tangraph.plot import plot_fix
-
-    m = rough_map(2)
-    s = survey_on(m, noise=0.3, seed=2)
-    fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0, step=2.5))
-    fig = Figure()
-    ax = plot_fix(fix, fig.add_subplot(), truth=s.true_pose[9, :2])
-    labels = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert any(label.startswith("calibrated 95%") for label in labels)
-    assert "95% covariance ellipse" in labels and "truth" in labels
-    fig.savefig(tmp_path / "fix.png")
-    assert (tmp_path / "fix.png").stat().st_size > 10_000
-
-
 def test_calibrated_region_covers_the_truth_at_its_level():
     """300 seeded fixes on one rough terrain: the calibrated 95 % region holds the truth in
     0.95 +- 4 binomial standard errors of the fixes, and the region covariance is never
@@ -228,17 +169,6 @@ def test_a_fix_that_rests_on_one_ping_gets_the_jackknifes_large_covariance():
     fix = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0))
     assert np.sqrt(np.linalg.eigvalsh(plain.covariance).max()) < 3.0  # the mound pins it down...
     assert np.sqrt(np.linalg.eigvalsh(fix.covariance).max()) > 10.0  # ...but one ping sees it
-
-
-def test_larger_covariance_is_the_larger_in_every_direction():
-    from tangraph.matching.tap import _larger
-
-    np.testing.assert_allclose(_larger(np.diag([1.0, 4.0]), np.diag([4.0, 1.0])), np.diag([4.0, 4.0]))
-    a = np.array([[2.0, 0.5], [0.5, 1.0]])
-    np.testing.assert_allclose(_larger(a, 0.1 * a), a)
-    infinite = np.full((2, 2), np.inf)  # an uninformative window's (the CRLB's when singular)
-    assert np.array_equal(_larger(infinite, a), infinite)
-    assert np.array_equal(_larger(a, infinite), a)
 
 
 def test_a_best_match_on_the_search_edge_says_the_truth_may_lie_beyond():

@@ -1,4 +1,6 @@
-"""The maps' modules: one role each, short, and below the surveys (issue 23)."""
+"""The maps package (tangraph.maps): its modules one role each, short, and below the surveys
+(issue 23); its names, ``grid_surveys`` among them, found when first asked for, without loading
+the surveys."""
 
 import ast
 import subprocess

@@ -1,4 +1,5 @@
-"""The error of a map gridded from soundings (`gridded_error`, carried by `SoundingGrid.depth`)."""
+"""The error of a map gridded from soundings (tangraph.maps.gridding_error: ``gridded_error``,
+carried by ``SoundingGrid.depth``), with the surveys' positioning std added through the slope."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ import pytest
 from tangraph.errors import TangraphError
 from tangraph.maps import block_reduce, fill_gaps
 from tangraph.maps.gridding_error import gridded_error
+from tests.gridding_cases import _plane_survey
 
 
 def test_a_measured_cell_gets_the_standard_error_of_its_value():
@@ -143,27 +145,6 @@ def test_neighbourhood_must_be_a_count():
         gridded_error(filled_strip(), neighbourhood=-1)
 
 
-def _plane_survey(offset_std: float, seed: int = 0, n_lines: int = 12, north_slope: float = 0.1):
-    """Lines 10 m apart running east over the plane ``30 + north_slope n + 0.05 e``, each placed
-    by a reference track off the truth by its own constant offset of std ``offset_std`` per axis."""
-    from tangraph.survey import Survey
-
-    rng = np.random.default_rng(seed)
-    east = np.arange(0.0, 200.0, 1.0)
-    surveys = []
-    for line in range(n_lines):
-        truth = np.column_stack([np.full(east.size, 10.0 * line), east, np.full(east.size, np.pi / 2)])
-        placed = truth.copy()
-        placed[:, :2] += offset_std * rng.standard_normal(2)
-        starboard = np.tile([-2.0, 0.0, 2.0], (east.size, 1))
-        n_true = truth[:, :1] - starboard  # heading east: starboard is south
-        depth = 30.0 + north_slope * n_true + 0.05 * truth[:, 1:2]
-        surveys.append(Survey(time=east.copy(), dr_pose=placed, vehicle_depth=np.zeros(east.size),
-                              beam_forward=np.zeros((east.size, 3)), beam_starboard=starboard,
-                              beam_depth=depth, true_pose=placed))
-    return surveys
-
-
 def test_the_positioning_std_adds_its_depth_error_through_the_slope():
     """On a plane of slope ``g`` every cell's variance gains exactly ``p^2 |g|^2`` away from
     the map's edges (where a cell's value is the plane at its soundings' centroid, not at its
@@ -222,11 +203,3 @@ def test_a_map_placed_by_an_erring_track_states_the_error_it_has():
     told, untold = z_rms(10.0), z_rms(0.0)
     assert 0.7 < told < 1.25, told
     assert untold > 2.0 * told, (told, untold)
-
-
-def test_the_positioning_std_must_be_a_length():
-    from tangraph.maps import grid_surveys
-
-    for bad in (-1.0, float("nan"), True, "3"):
-        with pytest.raises(TangraphError, match="position_std must be a number of metres >= 0"):
-            grid_surveys(_plane_survey(0.0, n_lines=2), cell=10.0, position_std=bad)

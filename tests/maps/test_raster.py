@@ -1,36 +1,34 @@
-"""GeoTIFF and NetCDF maps as GDAL (rasterio) writes and reads them."""
+"""GeoTIFF maps (tangraph.maps.raster) as GDAL (rasterio) writes and reads them: a real file;
+compressions, tiles and COGs, CRSs as EPSG codes and as WKT, pixel-is-point; south-up and
+rotated rasters refused, geographic ones projected; tangraph's GeoTIFFs placed by GDAL (older
+ones still read, large ones tiled); the map's error as a second band; unreadable files named."""
 
 from __future__ import annotations
-
-import shutil
-import subprocess
 
 import numpy as np
 import pyproj
 import pytest
-import xarray as xr
 
 from tangraph.errors import MapFormatError
-from tangraph.maps import BathymetryMap, read_map, write_map
+from tangraph.maps import BathymetryMap, catalogue_path, read_map, write_map
 from tangraph.maps.projection import local_crs
+from tests.maps.io_cases import (
+    CELL,
+    LCC_WKT,
+    NX,
+    NY,
+    TOP,
+    WEST,
+    assert_placed,
+    error_map,
+    raster,
+    tangraph_map,
+)
 
 rasterio = pytest.importorskip("rasterio")
 from rasterio.transform import Affine  # noqa: E402
 
-# a Lambert conformal conic on GRS80 that has no EPSG code: the CRS must travel as WKT
-LCC_WKT = pyproj.CRS(
-    "+proj=lcc +lat_0=-32 +lon_0=135 +lat_1=-28 +lat_2=-36 +x_0=1000000 +y_0=2000000 +ellps=GRS80 "
-    "+units=m +no_defs +type=crs"
-).to_wkt()
-NY, NX, CELL = 37, 29, 5.0
-WEST, TOP = 1_234_500.0, 2_345_600.0
-
-
-def raster(nodata=-9999.0):
-    rng = np.random.default_rng(7)
-    depth = (60 + rng.normal(size=(NY, NX)).cumsum(axis=0)).astype(np.float32)
-    depth[5, 7] = nodata
-    return depth
+MAPS = catalogue_path()
 
 
 def write_with_rasterio(path, data, *, crs=LCC_WKT, transform=None, nodata=-9999.0, **options):
@@ -42,14 +40,19 @@ def write_with_rasterio(path, data, *, crs=LCC_WKT, transform=None, nodata=-9999
     return path
 
 
-def assert_placed(m, data, crs_wkt):
-    """The map holds ``data`` (north-up rows) on cell centres of the test geotransform."""
-    expected = np.where(data == -9999.0, np.nan, data)[::-1].astype(float)
-    np.testing.assert_array_equal(m.depth, expected)
-    np.testing.assert_allclose(m.east + m.origin[1], WEST + (np.arange(NX) + 0.5) * CELL, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(m.north + m.origin[0], TOP - (np.arange(NY)[::-1] + 0.5) * CELL,
-                               rtol=0, atol=1e-9)
-    assert pyproj.CRS(m.crs).equals(pyproj.CRS(crs_wkt))
+# -- a real file -------------------------------------------------------------------------------
+def test_geotiff_lidar_dem_georeference():
+    path = MAPS / "lidar_dem.tif"
+    with pytest.raises(MapFormatError, match="pass sign="):
+        read_map(path)
+    m = read_map(path, sign="elevation")
+    assert m.shape == (400, 400)
+    assert m.cell_size == (1.0, 1.0)
+    assert m.crs == "EPSG:26915"
+    # tie point = top-left corner of the top-left pixel; the map's origin is the centre of the
+    # bottom-left cell
+    assert m.origin == pytest.approx((5150885.424942633 - 399.5, 429252.313370022 + 0.5))
+    assert np.nanmax(m.depth) == pytest.approx(-379.65933, abs=1e-3)
 
 
 # -- GeoTIFFs written by GDAL ------------------------------------------------------------------
@@ -123,14 +126,6 @@ def test_a_geographic_geotiff_is_projected(tmp_path):
 
 
 # -- GeoTIFFs written by tangraph, read by GDAL ------------------------------------------------
-def tangraph_map(crs, origin=(5_900_123.5, 750_456.25)):
-    rng = np.random.default_rng(3)
-    depth = 40 + rng.normal(size=(12, 15)).cumsum(axis=1)
-    depth[3, 4] = np.nan
-    return BathymetryMap(north=100 + np.arange(12) * 2.5, east=-50 + np.arange(15) * 2.5, depth=depth,
-                         crs=crs, origin=origin, name="small")
-
-
 @pytest.mark.parametrize("crs", ["EPSG:32755", local_crs(-37.0, 150.0), LCC_WKT],
                          ids=["epsg", "geographic-source", "wkt"])
 def test_gdal_places_tangraph_geotiffs(tmp_path, crs):
@@ -182,71 +177,6 @@ def test_geotiffs_of_older_tangraph_still_read(tmp_path):
     np.testing.assert_allclose(back.depth, m.depth, atol=1e-5)
 
 
-# -- NetCDF ------------------------------------------------------------------------------------
-@pytest.mark.parametrize("crs", ["EPSG:32755", local_crs(-37.0, 150.0), None], ids=["epsg", "tmerc", "none"])
-def test_netcdf_round_trip_keeps_the_frame(tmp_path, crs):
-    m = tangraph_map(crs, origin=(5_900_123.5, 750_456.25) if crs else (0.0, 0.0))
-    path = write_map(m, tmp_path / "m.nc")
-    back = read_map(path)
-    assert back.crs == m.crs and back.origin == m.origin and back.name == m.name
-    np.testing.assert_allclose(back.north, m.north, rtol=0, atol=1e-9)
-    np.testing.assert_allclose(back.east, m.east, rtol=0, atol=1e-9)
-    np.testing.assert_array_equal(back.depth, m.depth)
-    with xr.open_dataset(path) as ds:
-        assert ds["depth"].dims == ("y", "x")
-        np.testing.assert_allclose(ds["x"].values, m.east + m.origin[1])
-        np.testing.assert_allclose(ds["y"].values, m.north + m.origin[0])
-        assert ds["x"].attrs["standard_name"] == "projection_x_coordinate"
-        if crs is None:
-            assert "crs" not in ds and "grid_mapping" not in ds["depth"].attrs
-        else:
-            assert ds["depth"].attrs["grid_mapping"] == "crs"
-            assert pyproj.CRS.from_cf(ds["crs"].attrs).equals(pyproj.CRS(crs))
-
-
-def test_netcdf_with_only_cf_grid_mapping_parameters(tmp_path):
-    """x/y and a grid mapping as GDAL and GMT write them, the CRS given only by CF parameters."""
-    cf = {k: v for k, v in pyproj.CRS(LCC_WKT).to_cf().items() if k not in ("crs_wkt", "spatial_ref")}
-    assert cf["grid_mapping_name"] == "lambert_conformal_conic"
-    data = raster()
-    x = WEST + (np.arange(NX) + 0.5) * CELL
-    y = TOP - (np.arange(NY) + 0.5) * CELL  # north-up rows, as GDAL writes them
-    ds = xr.Dataset(
-        {"elevation": (("y", "x"), -np.where(data == -9999, np.nan, data),
-                       {"grid_mapping": "lambert", "units": "m", "positive": "up"}),
-         "lambert": ((), 0, cf)},
-        coords={"x": ("x", x, {"standard_name": "projection_x_coordinate", "units": "m"}),
-                "y": ("y", y, {"standard_name": "projection_y_coordinate", "units": "m"})},
-    )
-    ds.to_netcdf(tmp_path / "cf.nc")
-    m = read_map(tmp_path / "cf.nc")
-    assert_placed(m, data, LCC_WKT)
-    assert m.origin == (y[-1], x[0])  # a foreign grid: the origin at its first cell centre
-
-
-@pytest.mark.skipif("netCDF" not in rasterio.drivers.raster_driver_extensions().values(),
-                    reason="rasterio's GDAL has no netCDF driver")
-@pytest.mark.parametrize("crs", ["EPSG:32755", local_crs(-37.0, 150.0)], ids=["epsg", "tmerc"])
-def test_gdal_places_tangraph_netcdf(tmp_path, crs):
-    m = tangraph_map(crs)
-    path = write_map(m, tmp_path / "m.nc")
-    with rasterio.open(f'NETCDF:"{path}":depth') as src:
-        assert pyproj.CRS.from_wkt(src.crs.to_wkt()).equals(pyproj.CRS(crs))
-        west, south = m.east[0] + m.origin[1] - 1.25, m.north[0] + m.origin[0] - 1.25
-        np.testing.assert_allclose(tuple(src.bounds), (west, south, west + 15 * 2.5, south + 12 * 2.5))
-        np.testing.assert_allclose(src.read(1)[::-1], m.depth)  # GDAL gives north-up rows
-
-
-def test_netcdf_maps_of_older_tangraph_still_read(tmp_path):
-    """tangraph <= 0.1 wrote dims (north, east) in local metres, CRS and origin as attributes."""
-    m = tangraph_map(local_crs(-37.0, 150.0))
-    m.to_xarray().to_dataset().to_netcdf(tmp_path / "old.nc")
-    back = read_map(tmp_path / "old.nc")
-    assert back.crs == m.crs and back.origin == m.origin and back.name == m.name
-    np.testing.assert_array_equal(back.north, m.north)
-    np.testing.assert_array_equal(back.depth, m.depth)
-
-
 def test_large_maps_are_written_tiled(tmp_path):
     rng = np.random.default_rng(1)
     m = BathymetryMap(north=np.arange(600) * 1.0, east=np.arange(520) * 1.0,
@@ -258,44 +188,46 @@ def test_large_maps_are_written_tiled(tmp_path):
     np.testing.assert_allclose(read_map(path).depth, m.depth, atol=1e-5)
 
 
-def gmt(folder, *args):
-    """Run GMT in ``folder`` (it leaves a gmt.history where it runs)."""
-    return subprocess.run(["gmt", *args], capture_output=True, text=True, check=True, cwd=folder)
+# -- the map's error ---------------------------------------------------------------------------
+def test_geotiff_second_band_says_what_it_holds(tmp_path):
+    m = error_map()
+    path = write_map(m, tmp_path / "m.tif")
+    with rasterio.open(path) as src:
+        assert src.count == 2 and src.descriptions == ("depth", "depth_std")
+        assert src.tags(2)["units"] == "m" and "standard deviation" in src.tags(2)["long_name"]
+        assert float(src.tags()["TANGRAPH_ERROR_CORRELATION_LENGTH_M"]) == 35.5
+    with rasterio.open(write_map(m.replace(depth_std=None), tmp_path / "one.tif")) as src:
+        assert src.count == 1
+    with pytest.raises(MapFormatError, match=r"one\.tif: one band, no uncertainty band to read"):
+        read_map(tmp_path / "one.tif", uncertainty=True)
 
 
-@pytest.mark.skipif(shutil.which("gmt") is None, reason="GMT is not installed")
-def test_gmt_places_tangraph_netcdf(tmp_path):
-    m = tangraph_map("EPSG:32755")
-    path = write_map(m, tmp_path / "m.nc")
-    info = gmt(tmp_path, "grdinfo", "-C", str(path))
-    fields = [float(v) for v in info.stdout.split()[1:]]
-    (west, east, south, north, v_min, v_max, dx, dy, nx, ny), pixel = fields[:10], fields[10]
-    half = 0.5 * pixel  # GMT may take the half-cell coordinates as pixel registration: the same cells
-    assert (nx, ny, dx, dy) == (15, 12, 2.5, 2.5)
-    assert (west + half * dx, east - half * dx) == pytest.approx(
-        (m.east[0] + m.origin[1], m.east[-1] + m.origin[1]))
-    assert (south + half * dy, north - half * dy) == pytest.approx(
-        (m.north[0] + m.origin[0], m.north[-1] + m.origin[0]))
-    assert (v_min, v_max) == pytest.approx((np.nanmin(m.depth), np.nanmax(m.depth)))
-    xyz = gmt(tmp_path, "grd2xyz", str(path))
-    rows = np.loadtxt(xyz.stdout.splitlines())  # cell centres, north row first
-    np.testing.assert_allclose(rows[:, 2].reshape(12, 15)[::-1], m.depth)
-    np.testing.assert_allclose(rows[:15, 0], m.east + m.origin[1])
-    np.testing.assert_allclose(rows[::15, 1][::-1], m.north + m.origin[0])
+def test_bad_geotiff_and_npz_layers_are_named(tmp_path):
+    m = error_map()
+    bad = m.depth_std.copy()
+    bad[4, 4] = -1.0
+    profile = {"driver": "GTiff", "height": 14, "width": 11, "count": 2, "dtype": "float32", "nodata": np.nan,
+               "crs": "EPSG:32633", "transform": Affine(4, 0, 0, 0, -5, 70)}
+    with rasterio.open(tmp_path / "neg.tif", "w", **profile) as dst:
+        dst.write(np.stack([m.depth, bad])[:, ::-1].astype(np.float32))
+        dst.set_band_description(2, "uncertainty")
+        dst.update_tags(1, positive="down")
+    with pytest.raises(MapFormatError, match=r"neg\.tif: uncertainty band 'uncertainty' holds 1 negative"):
+        read_map(tmp_path / "neg.tif")
+    with rasterio.open(tmp_path / "other.tif", "w", **profile) as dst:
+        dst.write(np.stack([m.depth, bad])[:, ::-1].astype(np.float32))
+        dst.set_band_description(2, "backscatter")
+        dst.update_tags(1, positive="down")
+    with pytest.raises(MapFormatError, match=r"other\.tif: 2 bands; .*band 2 is 'backscatter'.*=False"):
+        read_map(tmp_path / "other.tif")
+    assert read_map(tmp_path / "other.tif", uncertainty=False).depth_std is None
+    np.savez(tmp_path / "nan.npz", north=m.north, east=m.east, depth=np.nan_to_num(m.depth),
+             depth_std=m.depth_std)  # depth everywhere, std NaN where it was not
+    with pytest.raises(MapFormatError, match=r"nan\.npz: uncertainty array 'depth_std' is NaN in 2 cell"):
+        read_map(tmp_path / "nan.npz")
 
 
-@pytest.mark.skipif(shutil.which("gmt") is None, reason="GMT is not installed")
-@pytest.mark.parametrize("registration", [[], ["-r"]], ids=["gridline", "pixel"])
-def test_grids_written_by_gmt(tmp_path, registration):
-    path = tmp_path / "g.nc"
-    gmt(tmp_path, "grdmath", "-R750000/750100/5900000/5900050", "-I10", *registration,
-        "X", "750000", "SUB", "100", "ADD", "=", str(path))
-    m = read_map(path, crs="EPSG:32755", sign="depth")
-    first = 5.0 if registration else 0.0  # pixel registration: the centre of the first cell
-    assert m.origin == (5_900_000.0 + first, 750_000.0 + first) and m.cell_size == (10.0, 10.0)
-    np.testing.assert_allclose(m.depth, np.broadcast_to(100 + first + m.east, m.shape))
-
-
+# -- bad input ---------------------------------------------------------------------------------
 def test_unreadable_multiband_and_ungeoreferenced_geotiffs_are_named(tmp_path):
     (tmp_path / "junk.tif").write_text("junk")
     with pytest.raises(MapFormatError, match="junk.tif: not a readable GeoTIFF"):

@@ -1,8 +1,18 @@
+"""Track metrics (tangraph.eval.metrics): the position NEES, a track's RMSE and errors, the ANEES
+band, and the bound's RMSE with a track's RMSE over it."""
+
 import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.eval import anees_band, position_nees, track_metrics
+from tangraph.eval import (
+    CramerRaoBound,
+    anees_band,
+    bound_rmse,
+    metrics_with_bound,
+    position_nees,
+    track_metrics,
+)
 from tangraph.track import Track
 
 
@@ -54,11 +64,16 @@ def test_anees_band_covers_an_honest_covariance_at_its_probability():
         anees_band(0)
 
 
-def test_the_package_keeps_its_flat_names():
-    import tangraph.eval
-    from tangraph.eval import crb, metrics
-
-    assert tangraph.eval.track_metrics is metrics.track_metrics
-    assert tangraph.eval.posterior_crb is crb.posterior_crb
-    assert {"anees_band", "format_figure", "position_nees", "track_metrics", "posterior_crb",
-            "CramerRaoBound", "bound_rmse", "metrics_with_bound"} <= set(tangraph.eval.__all__)
+def test_bound_rmse_and_the_ratio_to_a_track_rmse():
+    cov = np.array([np.diag([8.0, 1.0]), np.diag([2.0, 2.0])])
+    bound = CramerRaoBound(cov, np.eye(2), 0.1, "smoother", n_soundings=5)
+    assert bound_rmse(bound) == pytest.approx(np.sqrt(6.5))
+    assert bound_rmse(bound, skip=1) == pytest.approx(2.0)
+    np.testing.assert_allclose(bound.drms, [3.0, 2.0])
+    out = metrics_with_bound({"rmse": 4.0, "anees": 1.0}, bound, skip=1)
+    assert out == {"rmse": 4.0, "anees": 1.0, "pcrb": 2.0, "rmse_over_pcrb": 2.0}
+    with pytest.raises(TangraphError, match="skip=2"):
+        bound_rmse(bound, skip=2)
+    with pytest.raises(TangraphError, match="rmse"):
+        metrics_with_bound({"anees": 1.0}, bound)
+    assert not bound.position_cov.flags.writeable

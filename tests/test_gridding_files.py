@@ -1,0 +1,49 @@
+"""Gridding files into a map (tangraph.gridding_files): the library's errors name its keywords,
+``tangraph maps grid``'s name its options."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tangraph.errors import TangraphError
+from tangraph.gridding_files import grid_files
+from tangraph.survey import write_survey
+from tests.gridding_cases import nadir_survey, random_soundings
+
+
+def test_grid_files_names_its_keywords_or_the_callers_options(tmp_path):
+    """The library's errors name its keywords; ``tangraph maps grid`` passes its own name and options,
+    and its messages are exactly those it always printed."""
+    pts = random_soundings(n=300)
+    plain = write_survey(nadir_survey(pts, origin=(0, 0)), tmp_path / "plain.nc")
+    xyz = tmp_path / "s.xyz"
+    np.savetxt(xyz, pts[:, [1, 0, 2]])
+    out = tmp_path / "out.nc"
+    cli = {"where": "maps grid", "option_name": lambda keyword: "--" + keyword.replace("_", "-")}
+    cases = [
+        ([plain], {"units": "ft"}, "grid_files: units applies to x y z text; survey files hold depths "
+         "(positive down) in their own CRS", "maps grid: --units applies to x y z text; survey files hold "
+         "depths (positive down) in their own CRS"),
+        ([xyz], {"lines": True}, "grid_files: check_lines and lines need survey files (.nc)",
+         "maps grid: --check-lines and --lines need survey files (.nc)"),
+        ([xyz], {}, "grid_files: x y z text input needs sign (depth or elevation)",
+         "maps grid: x y z text input needs --sign (depth or elevation)"),
+        ([xyz], {"sign": "depth", "use_dr": True}, "grid_files: use_dr applies to survey files (.nc), not "
+         "x y z text", "maps grid: --use-dr applies to survey files (.nc), not x y z text"),
+        ([plain], {"use_dr": True, "check_lines": True}, "grid_files: check_lines compares soundings at "
+         "reference tracks; not with use_dr", "maps grid: --check-lines compares soundings at reference "
+         "tracks; not with --use-dr"),
+        ([plain, xyz], {}, "grid_files: give survey files (.nc) or one x y z text file, not both",
+         "maps grid: give survey files (.nc) or one x y z text file, not both"),
+        ([plain], {"output": plain}, f"grid_files: the output {plain} is one of the inputs",
+         f"maps grid: the output {plain} is one of the inputs"),
+    ]
+    for inputs, options, library, command in cases:
+        options = {"output": out, **options}
+        for wording, message in (({}, library), (cli, command)):
+            with pytest.raises(TangraphError) as err:
+                grid_files(inputs, cell=10.0, **options, **wording)
+            assert str(err.value) == message
+    grid, check = grid_files([xyz], tmp_path / "xyz.nc", cell=10.0, sign="depth", position_std=0.5)
+    assert check is None and grid.mean.name == "xyz" and grid.meta["position_std"] == 0.5
