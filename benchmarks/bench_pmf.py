@@ -49,7 +49,8 @@ def main(argv=None) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments" / "graph_vs_filters"))
     from run import _survey  # the study's scenario with the demo's drifting DR
 
-    survey, bathymetry = _survey({"scenario": args.scenario, "dr": "demo"}, np.random.default_rng(args.seed))
+    run = _survey({"scenario": args.scenario, "dr": "demo"}, np.random.default_rng(args.seed))
+    survey, bathymetry = run.survey, run.bathymetry
     model = NavigationModel.from_survey(survey)
     b = survey.beam_depth.shape[1]
     print(f"PMF vs PF on {args.scenario} (seed {args.seed}): {survey.n_pings} pings of {b} soundings; "
