@@ -57,7 +57,6 @@ from tangraph.experiments.tables import (
     _save,
     _table,
 )
-from tangraph.experiments.tables import _installed as _installed  # the runner's name before the split
 from tangraph.experiments.tasks import RunFunction
 
 if TYPE_CHECKING:

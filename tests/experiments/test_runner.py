@@ -20,6 +20,7 @@ import psutil
 import pytest
 
 import tangraph.experiments.runner as runner
+import tangraph.experiments.tables as tables
 from tangraph.errors import TangraphError
 from tangraph.experiments import RESERVED_COLUMNS, rerun, run_many, run_rng, run_seed_sequence
 
@@ -281,7 +282,7 @@ def test_output_is_never_overwritten_unless_asked(tmp_path):
 
 def test_output_parquet(tmp_path):
     path = tmp_path / "study.parquet"
-    if not (runner._installed("pyarrow") or runner._installed("fastparquet")):
+    if not (tables._installed("pyarrow") or tables._installed("fastparquet")):
         with pytest.raises(TangraphError, match="needs pyarrow or fastparquet"):
             quiet(draw, CONFIGS, 2, seed=0, scheduler="synchronous", output=path)
         return
