@@ -33,7 +33,6 @@ TESTED_THROUGH: dict[str, tuple[str, ...]] = {
     "tangraph.matching.search_fft": ("matching/test_search.py",),
     "tangraph.matching.tap_noise": ("matching/test_tap.py",),
     "tangraph.matching.tap_types": ("matching/test_tap.py",),
-    "tangraph.sim.seafloor": ("sim/test_scenario.py",),
 }
 
 

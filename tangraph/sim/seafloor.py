@@ -6,7 +6,11 @@ in its TOML, :mod:`tangraph.sim.scenario`). Then:
 - the **true seafloor** is the scenario's map resampled (bicubic) to ``seafloor.cell`` over the
   area the survey needs, plus a seeded Gaussian random field of std ``seafloor.std`` and range
   ``seafloor.correlation_length`` (the Matérn field of :func:`tangraph.sensors.matern_field`):
-  relief the map never had;
+  relief the map never had. With ``seafloor.patch_scale_std > 0`` the field's std varies in
+  patches: it is multiplied by ``exp(patch_scale_std * g - patch_scale_std^2)``, ``g`` a unit
+  Matérn field of range ``seafloor.patch_length``, so its mean square stays ``std^2`` while a few
+  patches err several times more than the rest (a Gaussian scale mixture: the heavy-tailed,
+  patchy error that check lines find in maps gridded from real surveys);
 - the **prior map** the estimators navigate on is gridded (:func:`tangraph.maps.grid_surveys`)
   from a simulated earlier survey of that seafloor: a lawnmower of parallel lines
   ``prior_map.line_spacing`` apart, ray cast with the scenario's sonar (or
@@ -54,19 +58,23 @@ def _positive(table: dict, key: str, where: str, *, zero: bool = False) -> float
 @dataclasses.dataclass(frozen=True)
 class SeafloorSettings:
     """The true seafloor: the map at ``cell`` (m) plus a Matérn field of ``std`` (m) and range
-    ``correlation_length`` (m); ``margin`` (m) of seafloor around the survey's track."""
+    ``correlation_length`` (m), whose std varies in patches of range ``patch_length`` (m) by a
+    log-normal factor of log-std ``patch_scale_std`` (0: the same std everywhere; see the module
+    docstring); ``margin`` (m) of seafloor around the survey's track."""
 
     std: float = 0.3
     correlation_length: float = 30.0
     cell: float | None = None
     margin: float = 300.0
+    patch_scale_std: float = 0.0
+    patch_length: float = 300.0
 
     @classmethod
     def from_table(cls, table: dict, where: str) -> SeafloorSettings:
         _known_keys(cls, table, where)
         values: dict[str, Any] = {}
         for key in table:
-            values[key] = _positive(table, key, where, zero=key == "std")
+            values[key] = _positive(table, key, where, zero=key in ("std", "patch_scale_std"))
         return cls(**values)
 
 
@@ -152,6 +160,9 @@ def true_seafloor(source: BathymetryMap, track: np.ndarray, settings: SeafloorSe
     cell = settings.cell or min(source.cell_size)
     fine = crop.resample(cell, order=3) if cell != min(crop.cell_size) else crop
     field = matern_field(fine.north, fine.east, settings.std, settings.correlation_length, rng=rng)
+    if settings.patch_scale_std > 0:  # drawn after the field: a seafloor without patches is unchanged
+        s = settings.patch_scale_std
+        field *= np.exp(s * matern_field(fine.north, fine.east, 1.0, settings.patch_length, rng=rng) - s * s)
     return BathymetryMap(fine.north, fine.east, fine.depth + field, crs=source.crs, origin=source.origin,
                          name=f"{source.name} seafloor")
 
