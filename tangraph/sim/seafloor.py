@@ -6,11 +6,7 @@ in its TOML, :mod:`tangraph.sim.scenario`). Then:
 - the **true seafloor** is the scenario's map resampled (bicubic) to ``seafloor.cell`` over the
   area the survey needs, plus a seeded Gaussian random field of std ``seafloor.std`` and range
   ``seafloor.correlation_length`` (the Matérn field of :func:`tangraph.sensors.matern_field`):
-  relief the map never had. With ``seafloor.patch_scale_std > 0`` the field's std varies in
-  patches: it is multiplied by ``exp(patch_scale_std * g - patch_scale_std^2)``, ``g`` a unit
-  Matérn field of range ``seafloor.patch_length``, so its mean square stays ``std^2`` while a few
-  patches err several times more than the rest (a Gaussian scale mixture: the heavy-tailed,
-  patchy error that check lines find in maps gridded from real surveys);
+  relief the map never had;
 - the **prior map** the estimators navigate on is gridded (:func:`tangraph.maps.grid_surveys`)
   from a simulated earlier survey of that seafloor: a lawnmower of parallel lines
   ``prior_map.line_spacing`` apart, ray cast with the scenario's sonar (or
@@ -20,7 +16,15 @@ in its TOML, :mod:`tangraph.sim.scenario`). Then:
   ``prior_map.fill`` cells filled. Its error is spatially correlated, larger between lines and
   in filled gaps, and its data stop at edges, as a real map's do, while the truth stays known.
 
-The survey itself is ray cast on the true seafloor. Everything is drawn from the generator the
+The survey itself is ray cast on the true seafloor. With ``seafloor.change_std > 0`` the seafloor
+has **changed since the earlier survey**: the survey sees it plus a Matérn field of std
+``change_std`` and range ``correlation_length``, which the prior map cannot know of. With
+``seafloor.patch_scale_std > 0`` that change varies in patches: it is multiplied by
+``exp(patch_scale_std * g - patch_scale_std^2)``, ``g`` a unit Matérn field of range
+``seafloor.patch_length``, so its mean square stays ``change_std^2`` while a few patches change
+several times more than the rest (a Gaussian scale mixture: the heavy-tailed, patchy error
+that check lines find between the days of a real survey, which the gridding of one day's
+soundings does not see). Everything is drawn from the generator the
 caller passes, so a run's seed fixes its seafloor and prior map too.
 """
 
@@ -37,7 +41,7 @@ from tangraph.geometry import rotation_matrix
 from tangraph.maps.grid import BathymetryMap
 from tangraph.validation import number
 
-__all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "simulate_world"]
+__all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "changed_seafloor", "simulate_world"]
 
 log = logging.getLogger(__name__)
 
@@ -58,14 +62,16 @@ def _positive(table: dict, key: str, where: str, *, zero: bool = False) -> float
 @dataclasses.dataclass(frozen=True)
 class SeafloorSettings:
     """The true seafloor: the map at ``cell`` (m) plus a Matérn field of ``std`` (m) and range
-    ``correlation_length`` (m), whose std varies in patches of range ``patch_length`` (m) by a
-    log-normal factor of log-std ``patch_scale_std`` (0: the same std everywhere; see the module
-    docstring); ``margin`` (m) of seafloor around the survey's track."""
+    ``correlation_length`` (m); ``margin`` (m) of seafloor around the survey's track. Its change
+    since the earlier survey: a field of std ``change_std`` (m; 0: none) whose std varies in
+    patches of range ``patch_length`` (m) by a log-normal factor of log-std ``patch_scale_std``
+    (0: the same std everywhere; only with a change). See the module docstring."""
 
     std: float = 0.3
     correlation_length: float = 30.0
     cell: float | None = None
     margin: float = 300.0
+    change_std: float = 0.0
     patch_scale_std: float = 0.0
     patch_length: float = 300.0
 
@@ -74,7 +80,10 @@ class SeafloorSettings:
         _known_keys(cls, table, where)
         values: dict[str, Any] = {}
         for key in table:
-            values[key] = _positive(table, key, where, zero=key in ("std", "patch_scale_std"))
+            values[key] = _positive(table, key, where, zero=key in ("std", "change_std", "patch_scale_std"))
+        if values.get("patch_scale_std", 0.0) > 0 and values.get("change_std", 0.0) == 0:
+            raise TangraphError(f"{where}: patch_scale_std varies the seafloor's change since the earlier "
+                                "survey in patches: give change_std > 0 too")
         return cls(**values)
 
 
@@ -160,11 +169,24 @@ def true_seafloor(source: BathymetryMap, track: np.ndarray, settings: SeafloorSe
     cell = settings.cell or min(source.cell_size)
     fine = crop.resample(cell, order=3) if cell != min(crop.cell_size) else crop
     field = matern_field(fine.north, fine.east, settings.std, settings.correlation_length, rng=rng)
-    if settings.patch_scale_std > 0:  # drawn after the field: a seafloor without patches is unchanged
-        s = settings.patch_scale_std
-        field *= np.exp(s * matern_field(fine.north, fine.east, 1.0, settings.patch_length, rng=rng) - s * s)
     return BathymetryMap(fine.north, fine.east, fine.depth + field, crs=source.crs, origin=source.origin,
                          name=f"{source.name} seafloor")
+
+
+def changed_seafloor(seafloor: BathymetryMap, settings: SeafloorSettings, *,
+                     rng: np.random.Generator) -> BathymetryMap:
+    """``seafloor`` after its change since the earlier survey (the module docstring); the same
+    map when ``settings.change_std`` is 0."""
+    from tangraph.sensors.matern import matern_field
+
+    if settings.change_std == 0:
+        return seafloor
+    north, east = seafloor.north, seafloor.east
+    change = matern_field(north, east, settings.change_std, settings.correlation_length, rng=rng)
+    if settings.patch_scale_std > 0:
+        s = settings.patch_scale_std
+        change *= np.exp(s * matern_field(north, east, 1.0, settings.patch_length, rng=rng) - s * s)
+    return seafloor.replace(depth=seafloor.depth + change, name=f"{seafloor.name}, changed")
 
 
 def _prior_trajectory(seafloor: BathymetryMap, settings: PriorMapSettings) -> tuple[np.ndarray, np.ndarray]:
@@ -232,4 +254,5 @@ def simulate_world(source: BathymetryMap, track: np.ndarray, seafloor: SeafloorS
     of it (module docstring)."""
     truth = true_seafloor(source, track, seafloor, rng=rng)
     gridded, survey = prior_map(truth, prior, sonar, rng=rng, name=name)
-    return ScenarioWorld(truth, gridded, survey)
+    # drawn after the prior map: a world whose seafloor did not change is drawn as before
+    return ScenarioWorld(changed_seafloor(truth, seafloor, rng=rng), gridded, survey)

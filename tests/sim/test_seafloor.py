@@ -1,5 +1,5 @@
-"""The true seafloor of a world whose seafloor is not the map (:mod:`tangraph.sim.seafloor`): its
-random field, and the patches in which that field's std varies."""
+"""The world whose seafloor is not the map (:mod:`tangraph.sim.seafloor`): the true seafloor's
+random field, and its change since the earlier survey, which may vary in patches."""
 
 from __future__ import annotations
 
@@ -8,46 +8,54 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.maps import BathymetryMap
-from tangraph.sim.seafloor import SeafloorSettings, true_seafloor
+from tangraph.sim.seafloor import SeafloorSettings, changed_seafloor, true_seafloor
 
 AXIS = np.arange(0.0, 4000.0, 10.0)
 FLAT = BathymetryMap(AXIS, AXIS, np.full((AXIS.size, AXIS.size), 30.0), name="flat")
 TRACK = np.array([[1000.0, 1000.0], [3000.0, 3000.0]])
 
 
-def _error(settings: SeafloorSettings, seed: int = 4) -> np.ndarray:
-    seafloor = true_seafloor(FLAT, TRACK, settings, rng=np.random.default_rng(seed))
-    return seafloor.depth - 30.0
+def _change(settings: SeafloorSettings, seed: int = 4) -> np.ndarray:
+    """The seafloor's change since the earlier survey, on a flat map without relief of its own."""
+    rng = np.random.default_rng(seed)
+    seafloor = true_seafloor(FLAT, TRACK, SeafloorSettings(std=0.0), rng=rng)
+    return changed_seafloor(seafloor, settings, rng=rng).depth - seafloor.depth
 
 
-def test_without_patches_the_field_is_gaussian_and_unchanged_by_the_patch_settings():
-    plain = _error(SeafloorSettings(std=0.3, correlation_length=30.0))
-    np.testing.assert_array_equal(plain, _error(SeafloorSettings(std=0.3, patch_length=50.0)))
-    z = plain / plain.std()
+def test_the_seafloors_field_is_gaussian_and_without_a_change_the_seafloor_stays():
+    rng = np.random.default_rng(4)
+    seafloor = true_seafloor(FLAT, TRACK, SeafloorSettings(std=0.3, correlation_length=30.0), rng=rng)
+    relief = seafloor.depth - 30.0
+    assert relief.std() == pytest.approx(0.3, rel=0.05)
+    assert np.mean((relief / relief.std()) ** 4) == pytest.approx(3.0, abs=0.3)  # Gaussian kurtosis
+    assert changed_seafloor(seafloor, SeafloorSettings(), rng=rng) is seafloor
+
+
+def test_a_change_in_patches_keeps_its_mean_square_and_has_a_heavy_tail():
+    """A change of 0.3 m whose log-std is 1 over patches of 300 m: its kurtosis is about
+    ``3 exp(4)`` in expectation (far above a Gaussian's 3 in any draw), its RMS stays near 0.3 m
+    (the factor's mean square is 1; a map of a few patches scatters about it), and the worst 5 %
+    of 100 m squares change several times more than the median square (``exp(1.645)``, 5.2, for
+    a factor constant over a square; measured 3.9-6.5 over eight seeds)."""
+    plain = _change(SeafloorSettings(change_std=0.3))
     assert plain.std() == pytest.approx(0.3, rel=0.05)
-    assert np.mean(z**4) == pytest.approx(3.0, abs=0.3)  # Gaussian kurtosis
-
-
-def test_patches_keep_the_mean_square_and_give_the_field_a_heavy_tail():
-    """A log-std of 1 over patches of 300 m: the field's kurtosis is about ``3 exp(4)`` in
-    expectation (far above a Gaussian's 3 in any draw), its RMS stays near ``std`` (the
-    factor's mean square is 1; a map of a few patches scatters about it), and the worst 5 % of
-    100 m squares err several times more than the median square (``exp(1.645)``, 5.2, for a
-    factor constant over a square; measured 3.9-6.5 over eight seeds)."""
     rms, kurtosis, spread = [], [], []
     for seed in range(4):
-        error = _error(SeafloorSettings(std=0.3, correlation_length=30.0, patch_scale_std=1.0,
-                                        patch_length=300.0), seed)
-        rms.append(np.sqrt(np.mean(error**2)))
-        kurtosis.append(np.mean(error**4) / np.mean(error**2) ** 2)
-        n = error.shape[0] // 10 * 10
-        squares = error[:n, :n].reshape(n // 10, 10, n // 10, 10).std(axis=(1, 3)).ravel()
+        change = _change(SeafloorSettings(change_std=0.3, patch_scale_std=1.0, patch_length=300.0), seed)
+        rms.append(np.sqrt(np.mean(change**2)))
+        kurtosis.append(np.mean(change**4) / np.mean(change**2) ** 2)
+        n = change.shape[0] // 10 * 10
+        squares = change[:n, :n].reshape(n // 10, 10, n // 10, 10).std(axis=(1, 3)).ravel()
         spread.append(np.quantile(squares, 0.95) / np.median(squares))
     assert 0.15 < np.sqrt(np.mean(np.square(rms))) < 0.6
     assert min(kurtosis) > 10.0
     assert min(spread) > 3.0
 
 
-def test_a_negative_patch_scale_is_refused():
-    with pytest.raises(TangraphError, match="patch_scale_std"):
-        SeafloorSettings.from_table({"patch_scale_std": -1.0}, "scenario [seafloor]")
+@pytest.mark.parametrize(("table", "message"), [
+    ({"patch_scale_std": -1.0}, "patch_scale_std"),
+    ({"patch_scale_std": 1.0}, "patch_scale_std varies the seafloor's change .* give change_std > 0 too"),
+])
+def test_bad_change_settings_are_refused(table, message):
+    with pytest.raises(TangraphError, match=message):
+        SeafloorSettings.from_table(table, "scenario [seafloor]")
