@@ -180,8 +180,8 @@ def window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationM
 
 def tide_step(nav: GraphNavigator, k: int) -> None:
     """After the window ending at ``k``: when the point-mass front end's windows have found
-    the same depth fault (within ``TIDE_STEP_AGREE``) over ``TIDE_STEP_PINGS`` pings in a row, it is the
-    held tide that is wrong (a step of the water level or the datum, or a start on a bad
+    the same depth fault (within ``TIDE_STEP_AGREE``) over ``TIDE_STEP_PINGS`` pings in a row,
+    it is the held tide that is wrong (a step of the water level or the datum, or a start on a bad
     block), not their depths: the graph holds a new tide from here, its prior the old
     estimate moved by their offset with the model's tide std."""
     outcome = nav._last_outcome if nav._last_outcome and nav._last_outcome.record.index == k else None

@@ -251,11 +251,11 @@ def _depth_fault(likelihood: TerrainLikelihood, patch: Patch, variance, map_vari
     update = likelihood.ping_update(points, patch.offsets, patch.depths, tide, tide_var + FAULT_STD**2,
                                     weights=np.exp(log_prior - log_prior.max()),
                                     variance=variance + variance_extra, map_variance=map_variance)
-    free = special.logsumexp(log_prior + update.log_likelihood)
+    log_w = log_prior + update.log_likelihood
+    free = special.logsumexp(log_w)
     if not (np.isfinite(free) and free - held > np.log((1.0 - FAULT_PRIOR) / FAULT_PRIOR)):
         return None
-    log_w = log_prior + update.log_likelihood
-    offset = float(np.exp(log_w - special.logsumexp(log_w)) @ (update.tide - tide))
+    offset = float(np.exp(log_w - free) @ (update.tide - tide))
     return f"depth fault: the soundings sit {offset:+.2f} m off the held tide (log Bayes factor " \
         f"{free - held:.0f})", offset
 

@@ -58,3 +58,25 @@ def _soundings(survey: Survey, seabed: BathymetryMap):
     g = np.array(SLOPE)
     turn = g[1] * (north - truth[:, :1]) - g[0] * (east - truth[:, 1:2])
     return used, turn
+
+
+def _design(survey: Survey, model: NavigationModel):
+    """The dense linear model of the DR errors over its independent inputs (dp0, s, b, tide | v_n,
+    v_e, u per interval | n per ping): ping k's error is ``a[k] @ theta``, its heading error
+    ``e[k] @ theta``; with the tide's row and the inputs' prior variances."""
+    t, truth = survey.time, survey.true_pose
+    k = t.size
+    d, dt = np.diff(truth[:, :2], axis=0), np.diff(t)
+    var = [model.initial_position_std**2] * 2 + list(model.calibration_std**2) + [model.tide_std**2]
+    var += list(np.column_stack([(model.speed_noise * dt) ** 2] * 2 + [model.heading_walk**2 * dt]).ravel())
+    var += [model.heading_noise**2] * k
+    eye = np.eye(len(var))
+    white = 5 + 3 * (k - 1)
+    dp, walk = eye[:2].copy(), np.zeros(len(var))
+    a, e = [dp], [eye[3] + eye[white]]
+    for m in range(k - 1):
+        dp = dp + np.outer(d[m], eye[2]) + np.outer(_jd(d[m:m + 1])[0], e[-1]) + eye[5 + 3 * m:7 + 3 * m]
+        walk = walk + eye[7 + 3 * m]
+        a.append(dp)
+        e.append(eye[3] + walk + eye[white + m + 1])
+    return np.array(a), np.array(e), eye[4], np.array(var)

@@ -22,7 +22,7 @@ from tangraph.sensors import (
     simulate_dead_reckoning,
 )
 from tangraph.survey import Survey
-from tests.eval.crb_cases import MODEL, SLOPE, _jd, _seabed, _soundings, _survey
+from tests.eval.crb_cases import MODEL, SLOPE, _design, _jd, _seabed, _soundings, _survey
 
 
 def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationModel):
@@ -257,13 +257,13 @@ def test_an_exact_estimator_of_the_simulated_dead_reckoning_meets_the_bound():
         residual = z - seabed.depth_at(n_dr, e_dr)  # measured - map, laid from the DR
         # The estimator's linear model, built on the DR geometry (the truth stays unknown).
         est = survey.replace(true_pose=dr)
-        a, e, names = _design(est, model)
+        a, e, tide_row, var = _design(est, model)
         turn = g[1] * (n_dr - dr[:, :1]) - g[0] * (e_dr - dr[:, 1:2])
         used = np.isfinite(residual) & np.isfinite(template.beam_depth)
         ping = np.nonzero(used)[0]
-        h = -(g @ a)[ping] - turn[used][:, None] * e[ping] + names["tide"]
+        h = -(g @ a)[ping] - turn[used][:, None] * e[ping] + tide_row
         r = residual[used]
-        info = np.diag(1.0 / names["var"]) + h.T @ h / model.measurement_std**2
+        info = np.diag(1.0 / var) + h.T @ h / model.measurement_std**2
         theta = np.linalg.solve(info, h.T @ r / model.measurement_std**2)
         error = a[-1] @ theta - (dr[-1, :2] - truth[-1, :2])  # estimated minus true DR error
         nees.append(error @ np.linalg.solve(bound.position_cov[-1], error))
@@ -271,30 +271,6 @@ def test_an_exact_estimator_of_the_simulated_dead_reckoning_meets_the_bound():
     assert abs(np.mean(nees) - 2.0) < 3.5 * 2.0 / np.sqrt(runs)  # a mean of chi-square(2)
     ratio = np.mean(sq) / np.trace(bound.position_cov[-1])
     assert abs(ratio - 1.0) < 3.5 * np.std(sq) / np.sqrt(runs) / np.trace(bound.position_cov[-1])
-
-
-def _design(survey: Survey, model: NavigationModel):
-    """The maps ``A_k`` (ping error) and ``e_k`` (heading error) of the batch parameters, for the
-    Monte Carlo estimator (all noises of ``MODEL`` positive), and the parameters' tide row and
-    prior variances."""
-    t, pose = survey.time, survey.true_pose
-    k = t.size
-    d, dt = np.diff(pose[:, :2], axis=0), np.diff(t)
-    n_par = 5 + 3 * (k - 1) + k  # dp0, s, b, tide | v_n, v_e, u per interval | n per ping
-    var = np.concatenate([[model.initial_position_std**2] * 2, model.calibration_std**2, [model.tide_std**2],
-                          np.column_stack([(model.speed_noise * dt) ** 2, (model.speed_noise * dt) ** 2,
-                                           model.heading_walk**2 * dt]).ravel(),
-                          np.full(k, model.heading_noise**2)])
-    eye = np.eye(n_par)
-    white = 5 + 3 * (k - 1)
-    dp, walk = eye[:2].copy(), np.zeros(n_par)
-    a, e = [dp], [eye[3] + eye[white]]
-    for m in range(k - 1):
-        dp = dp + np.outer(d[m], eye[2]) + np.outer(_jd(d[m:m + 1])[0], e[-1]) + eye[5 + 3 * m:7 + 3 * m]
-        walk = walk + eye[7 + 3 * m]
-        a.append(dp)
-        e.append(eye[3] + walk + eye[white + m + 1])
-    return np.array(a), np.array(e), {"tide": eye[4], "var": var}
 
 
 # -- without a map error -----------------------------------------------------------------------

@@ -24,7 +24,7 @@ from tangraph.eval.map_field import (
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel, map_error, matern_correlation
 from tangraph.survey import Survey
-from tests.eval.crb_cases import MODEL, SLOPE, _jd, _seabed, _soundings, _survey
+from tests.eval.crb_cases import MODEL, SLOPE, _design, _seabed, _soundings, _survey
 
 FIELD = MODEL.replace(map_std=0.3, map_correlation_length=60.0)
 
@@ -161,28 +161,6 @@ def test_a_dead_reckoning_without_speed_noise_is_bounded_through_a_tiny_step_var
     old = posterior_crb(survey, seabed, model)
     got = posterior_crb(survey, seabed, model.replace(map_std=3e-7, map_correlation_length=60.0))
     np.testing.assert_allclose(got.position_cov, old.position_cov, rtol=1e-5)
-
-
-def _design(survey: Survey, model: NavigationModel):
-    """The dense linear model of the DR errors over its independent inputs (as in test_crb's batch
-    reference): ping k's error is ``a[k] @ theta``, its heading error ``e[k] @ theta``; with the
-    tide's row and the inputs' prior variances."""
-    t, truth = survey.time, survey.true_pose
-    k = t.size
-    d, dt = np.diff(truth[:, :2], axis=0), np.diff(t)
-    var = [model.initial_position_std**2] * 2 + list(model.calibration_std**2) + [model.tide_std**2]
-    var += list(np.column_stack([(model.speed_noise * dt) ** 2] * 2 + [model.heading_walk**2 * dt]).ravel())
-    var += [model.heading_noise**2] * k
-    eye = np.eye(len(var))
-    white = 5 + 3 * (k - 1)
-    dp, walk = eye[:2].copy(), np.zeros(len(var))
-    a, e = [dp], [eye[3] + eye[white]]
-    for m in range(k - 1):
-        dp = dp + np.outer(d[m], eye[2]) + np.outer(_jd(d[m:m + 1])[0], e[-1]) + eye[5 + 3 * m:7 + 3 * m]
-        walk = walk + eye[7 + 3 * m]
-        a.append(dp)
-        e.append(eye[3] + walk + eye[white + m + 1])
-    return np.array(a), np.array(e), eye[4], np.array(var)
 
 
 def test_the_bound_equals_a_dense_solve_with_the_fields_covariance_among_all_soundings():
