@@ -367,6 +367,7 @@ def main(argv=None) -> int:
         + f" --scenarios {' '.join(args.scenarios)} --dr {args.dr}"
         + ("" if args.methods is None else f" --methods {' '.join(args.methods)}")
         + ("" if not args.graph else f" --graph {' '.join(shlex.quote(item) for item in args.graph)}")
+        + ("" if not args.model else f" --model {' '.join(shlex.quote(item) for item in args.model)}")
         + ("" if not args.filter else f" --filter {' '.join(shlex.quote(item) for item in args.filter)}")
     )
     text = markdown(rows)

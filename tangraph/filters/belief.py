@@ -17,6 +17,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.model import FilterModel
+from tangraph.sensors.misfit import MisfitScale
 from tangraph.validation import check_count, check_number
 
 if TYPE_CHECKING:
@@ -51,7 +52,9 @@ class Belief:
     of which the last ``n_history`` are filled; ``n_fixes`` batch fixes absorbed (TERCOM-PF);
     ``calibration (N, 2)`` each particle's constant DR errors ``(k, b)`` (speed scale, heading
     error in rad, DR minus true; None: zeros); ``held`` a batch fix waiting to be confirmed
-    (TERCOM-PF, :func:`tangraph.filters.fixes.decide_fix`; resampling takes its anchor along).
+    (TERCOM-PF, :func:`tangraph.filters.fixes.decide_fix`; resampling takes its anchor along);
+    ``misfit`` the local misfit scale the cloud shares (:mod:`tangraph.sensors.misfit`; None:
+    the stated errors trusted).
     """
 
     particles: np.ndarray
@@ -64,6 +67,7 @@ class Belief:
     n_fixes: int = 0
     calibration: np.ndarray | None = None
     held: HeldFix | None = None
+    misfit: MisfitScale | None = None
 
     def __post_init__(self) -> None:
         if self.calibration is None:
@@ -211,7 +215,7 @@ def model_belief(
         history_length=history_length,
         calibration=nav.calibration_prior,
         calibration_std=nav.calibration_std,
-    )
+    ).replace(misfit=model.misfit_prior())
 
 
 @numba.njit(cache=True, nogil=True)

@@ -112,9 +112,9 @@ def ipf_step(
         mean, cov = weighted_moments(moved)
         return StepResult(moved, mean, cov, effective_sample_size(moved.weights), innovation=check,
                           counts={"n_gated": 1})
-    weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}").replace(
-        tide=update.tide, tide_var=update.tide_var
-    )
+    weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}")
+    weighted = weighted.replace(tide=update.tide, tide_var=update.tide_var,
+                                misfit=update.scale_after(weighted.weights))
     if _needs_tempering(moved, weighted, update, config):
         return _tempered(moved, ping, model, config, update, rng)
     ess = effective_sample_size(weighted.weights)

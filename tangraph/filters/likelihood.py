@@ -24,6 +24,13 @@ soundings' precisions ``l_b = a_b / v_b``:
   ping from the weighted cloud and passed back in for the same ping's later evaluations
   (tempering stages, IPF children) so that their likelihood ratios are of one function.
 
+- **a misfit scale of its own** (:mod:`tangraph.sensors.misfit`): given a ``Gamma(shape, rate)``
+  on the precision factor shared by the ping's soundings, the quadratic ``Q`` above (the tide
+  integrated out at the scale's estimate ``rate / shape``) enters the Student-t
+  ``lgamma(shape + n/2) - lgamma(shape) + shape log(rate) - (shape + n/2) log(rate + Q/2)``
+  with ``n`` the particle's summed expected squares ``a_b c_b``; the sub-cloud means take the
+  scale's estimate.
+
 Constants shared by all particles are dropped: weights are normalised. One kernel computes
 every particle's residuals (each particle's grid coordinates once, its soundings turned by its
 own angle ``turn``: a filter's particle turns them by minus its heading error), a second the
@@ -33,6 +40,7 @@ exponents, the sub-cloud means and every particle's likelihood and tide.
 from __future__ import annotations
 
 import dataclasses
+import math
 
 import numba
 import numpy as np
@@ -134,18 +142,22 @@ def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offs
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
-def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var,
-                   log_likelihood, tide_shift, total_precision, residual_sum, mapped):  # fmt: skip
+def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var, shape, rate,
+                   count_weight, log_likelihood, tide_shift, total_precision, residual_sum, mapped,
+                   quadratic, effective):  # fmt: skip
     """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift,
-    summed precision, sum of residuals and count of soundings with the map under it, from the
-    residuals ``(B, N)`` (NaN: no map) and the normalised ``weights (N,)``; ``precision (B,)``
-    is ``1 / v_b``. See the module docstring."""
+    summed precision, sum of residuals and count of soundings with the map under it, whitened
+    residual sum (at scale 1) and effective count, from the residuals ``(B, N)`` (NaN: no map)
+    and the normalised ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``; ``shape > 0``: the
+    misfit scale's ``Gamma(shape, rate)`` is integrated out (Student-t), else the scale is 1.
+    See the module docstring."""
     nb, n = residual.shape
     s1 = np.zeros(n)
     s2 = np.zeros(n)
     big_l = np.zeros(n)
     missing = np.zeros(n)
     any_map = False
+    scale = rate / shape if shape > 0.0 else 1.0
     for b in range(nb):
         total = 0.0
         mean = 0.0
@@ -182,12 +194,12 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
             for p in range(n):
                 r = residual[b, p]
                 if r == r and weights[p] > 0.0:
-                    top = max(top, -0.5 * lam * r * r)
+                    top = max(top, -0.5 * lam * r * r / scale)
             acc = 0.0
             for p in range(n):
                 r = residual[b, p]
                 if r == r and weights[p] > 0.0:
-                    acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
+                    acc += weights[p] * np.exp(-0.5 * lam * r * r / scale - top)
             imputed = top + np.log(acc / total)
         for p in range(n):
             r = residual[b, p]
@@ -197,23 +209,42 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 big_l[p] += lam
                 residual_sum[p] += r
                 mapped[p] += 1.0
+                effective[p] += exponent[b] * count_weight[b]
             else:
                 missing[p] += imputed
-    for p in range(n):
+    _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
+                 tide_shift, total_precision, quadratic)
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy", inline="always")
+def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
+                 tide_shift, total_precision, quadratic):  # fmt: skip
+    """Every particle's likelihood, tide shift, summed precision and whitened residual sum from its
+    sums over the soundings (:func:`_update_kernel`)."""
+    scale = rate / shape if shape > 0.0 else 1.0
+    for p in range(s1.size):
         if not any_map:
             log_likelihood[p] = -np.inf
             tide_shift[p] = 0.0
             total_precision[p] = 0.0
-        elif tide_var > 0.0:
-            gain = 1.0 / (1.0 / tide_var + big_l[p])
-            log_likelihood[p] = -0.5 * (s2[p] - gain * s1[p] * s1[p]) - 0.5 * np.log1p(tide_var * big_l[p]) \
-                + missing[p]
-            tide_shift[p] = gain * s1[p]
-            total_precision[p] = big_l[p]
+            quadratic[p] = np.nan
+            continue
+        log_det = 0.0
+        tide_shift[p] = 0.0
+        total_precision[p] = big_l[p] / scale
+        q = s2[p]
+        if tide_var > 0.0:  # the tide integrated out at the current scale
+            gain = 1.0 / (1.0 / tide_var + big_l[p] / scale)
+            q = s2[p] - gain * s1[p] * s1[p] / scale
+            log_det = -0.5 * np.log1p(tide_var * big_l[p] / scale)
+            tide_shift[p] = gain * s1[p] / scale
+        quadratic[p] = q
+        if shape > 0.0:
+            half = 0.5 * effective[p]
+            log_likelihood[p] = math.lgamma(shape + half) - math.lgamma(shape) + shape * np.log(rate) \
+                - (shape + half) * np.log(rate + 0.5 * q) + log_det + missing[p]
         else:
-            log_likelihood[p] = -0.5 * s2[p] + missing[p]
-            tide_shift[p] = 0.0
-            total_precision[p] = big_l[p]
+            log_likelihood[p] = -0.5 * q + log_det + missing[p]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -232,6 +263,8 @@ class PingLikelihood:
     predicted: np.ndarray
     exponent: np.ndarray
     mapped: np.ndarray
+    quadratic: np.ndarray | None = None
+    count: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -310,8 +343,20 @@ class TerrainLikelihood:
                          depths, tide, out)
         return out
 
+    def _per_sounding(self, nb: int, variance, map_variance, counts) -> tuple[np.ndarray, ...]:
+        """A ping's per-sounding arrays (variances, map error variances, counts) with their
+        defaults, of shape ``(nb,)``."""
+        v = np.full(nb, self.sigma**2) if variance is None else np.asarray(variance, dtype=np.float64)
+        mv = np.zeros(nb) if map_variance is None else np.asarray(map_variance, dtype=np.float64)
+        c = np.ones(nb) if counts is None else np.asarray(counts, dtype=np.float64)
+        for name, value in (("variance", v), ("map_variance", mv), ("counts", c)):
+            if value.shape != (nb,):
+                raise TangraphError(f"{name} must have shape ({nb},), got {value.shape}")
+        return v, mv, c
+
     def ping_update(self, particles, offsets, depths, tide, tide_var: float, *, turn=None, weights=None,
-                    variance=None, map_variance=None, exponent=None) -> PingLikelihood:
+                    variance=None, map_variance=None, exponent=None, scale=None,
+                    counts=None) -> PingLikelihood:
         """The likelihood of a ping for every particle (module docstring).
 
         Parameters
@@ -331,6 +376,12 @@ class TerrainLikelihood:
             (default 0: a perfect map, exponents 1).
         exponent : (B,), optional
             The exponents of an earlier evaluation of the same ping (default: from this cloud).
+        scale : tangraph.sensors.MisfitScale, optional
+            The local misfit scale to integrate out (a Student-t likelihood,
+            :mod:`tangraph.sensors.misfit`); None: the variances as stated (Gaussian).
+        counts : (B,), optional
+            Each sounding's expected whitened square (:func:`tangraph.sensors.misfit_counts`;
+            default 1), summed into the effective counts the scale is updated with.
 
         Raises
         ------
@@ -349,15 +400,10 @@ class TerrainLikelihood:
             t_var = np.nan
         if not (np.isfinite(t_var) and t_var >= 0):
             raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
-        v = np.full(nb, self.sigma**2) if variance is None else np.asarray(variance, dtype=np.float64)
-        mv = np.zeros(nb) if map_variance is None else np.asarray(map_variance, dtype=np.float64)
-        if v.shape != (nb,) or mv.shape != (nb,):
-            raise TangraphError(
-                f"variance and map_variance must have shape ({nb},), got {v.shape}, {mv.shape}"
-            )
+        v, mv, c = self._per_sounding(nb, variance, map_variance, counts)
         keep = np.isfinite(depths)
         if not keep.all():
-            offsets, depths, v, mv = offsets[keep], depths[keep], v[keep], mv[keep]
+            offsets, depths, v, mv, c = offsets[keep], depths[keep], v[keep], mv[keep], c[keep]
             exponent = None if exponent is None else np.asarray(exponent)[keep]
             nb = depths.size
         if not np.all(v > 0):
@@ -377,12 +423,15 @@ class TerrainLikelihood:
             raise TangraphError(f"exponent must have shape ({nb},), got {alpha.shape}")
         log_likelihood, shift, total = np.empty(n), np.empty(n), np.empty(n)
         residual_sum, count = np.zeros(n), np.zeros(n)
-        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, log_likelihood, shift, total,
-                       residual_sum, count)
+        quadratic, effective = np.empty(n), np.zeros(n)
+        shape, rate = (0.0, 1.0) if scale is None else (float(scale.shape), float(scale.rate))
+        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, shape, rate, np.ascontiguousarray(c),
+                       log_likelihood, shift, total, residual_sum, count, quadratic, effective)
         with np.errstate(invalid="ignore", divide="ignore"):
             predicted = np.where(count > 0, np.mean(depths) - residual_sum / count, np.nan)
         new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0
-        return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, count / nb)
+        return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, count / nb,
+                              None if scale is None else quadratic, None if scale is None else effective)
 
     def tide_update(
         self, particles, offsets, depths, tide, tide_var: float, *, turn=None

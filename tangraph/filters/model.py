@@ -48,6 +48,7 @@ from tangraph.filters.likelihood import TerrainLikelihood
 from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
+from tangraph.sensors.misfit import MisfitScale, misfit_counts
 from tangraph.survey import Survey
 
 __all__ = ["FilterModel", "MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
@@ -253,8 +254,9 @@ class TerrainUpdate:
     constant), the tide posterior ``tide (N,)``, ``tide_var``, the mean predicted depth of the
     ping's soundings ``predicted (N,)`` (map depth plus tide; NaN with no map under any), the
     soundings' information exponents ``exponent (B,)`` (reused by later evaluations of the same
-    ping) and the share of the ping's soundings with the map under each particle
-    ``mapped (N,)``."""
+    ping), the share of the ping's soundings with the map under each particle
+    ``mapped (N,)``, and with a misfit scale the ``scale`` the ping was weighed with and each
+    particle's ``quadratic`` and ``count`` (:meth:`tangraph.sensors.MisfitScale.after`)."""
 
     log_likelihood: np.ndarray
     tide: np.ndarray
@@ -262,6 +264,16 @@ class TerrainUpdate:
     predicted: np.ndarray
     exponent: np.ndarray | None = None
     mapped: np.ndarray | None = None
+    scale: MisfitScale | None = None
+    quadratic: np.ndarray | None = None
+    count: np.ndarray | None = None
+
+    def scale_after(self, weights: np.ndarray) -> MisfitScale | None:
+        """The misfit scale after this ping for the posterior ``weights (N,)`` (None without
+        one)."""
+        if self.scale is None or self.quadratic is None or self.count is None:
+            return self.scale
+        return self.scale.after(self.quadratic, self.count, weights)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -273,6 +285,7 @@ class TerrainModel:
     bathymetry: BathymetryMap
     sounding_std: float
     tide_std: float = 0.0
+    noise_std: float | None = None
     likelihood: TerrainLikelihood = dataclasses.field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -280,20 +293,32 @@ class TerrainModel:
 
     def evaluate(
         self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping, heading_error=None,
-        *, weights=None, exponent=None,
+        *, weights=None, exponent=None, scale: MisfitScale | None = None, extra_variance: float = 0.0,
     ) -> TerrainUpdate:  # fmt: skip
         """Likelihood of ``ping`` at ``particles (N, 2)`` whose tide posteriors are ``N(tide (N,),
         tide_var)``, whose heading errors are ``heading_error (N,)`` (rad, DR minus true; None:
         0: each particle's soundings are turned by ``-heading_error`` about it) and whose weights
         are ``weights (N,)`` (None: equal); ``exponent (B,)``: the information exponents of an
-        earlier evaluation of the same ping (None: from this cloud). See the module docstring."""
+        earlier evaluation of the same ping (None: from this cloud); ``scale``: the local misfit
+        scale before the ping (forgotten here over the ping's step and integrated out; None:
+        the variances as stated); ``extra_variance`` (m^2) is added to every sounding's
+        variance (a grid's resolution). See the module docstring."""
         turn = None if heading_error is None else -np.asarray(heading_error, dtype=np.float64)
+        variance = ping.variance if ping.variance is not None else np.full(ping.n_soundings,
+                                                                          self.sounding_std**2)
+        variance = variance + extra_variance
+        counts = None
+        if scale is not None:
+            scale = scale.forget(float(np.hypot(*ping.increment)))
+            noise = self.sounding_std if self.noise_std is None else self.noise_std
+            counts = misfit_counts(variance, ping.map_variance, noise**2 + extra_variance)
         update = self.likelihood.ping_update(
             particles, ping.offsets, ping.depths, tide, tide_var, turn=turn, weights=weights,
-            variance=ping.variance, map_variance=ping.map_variance, exponent=exponent,
+            variance=variance, map_variance=ping.map_variance, exponent=exponent, scale=scale,
+            counts=counts,
         )  # fmt: skip
         return TerrainUpdate(update.log_likelihood, update.tide, update.tide_var, update.predicted,
-                             update.exponent, update.mapped)
+                             update.exponent, update.mapped, scale, update.quadratic, update.count)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -327,6 +352,13 @@ class FilterModel:
         floor = getattr(config, "process_floor", 0.0) if config is not None else 0.0
         return cls(
             MotionModel.from_model(navigation, floor),
-            TerrainModel(bathymetry, navigation.measurement_std, navigation.tide_std),
+            TerrainModel(bathymetry, navigation.measurement_std, navigation.tide_std,
+                         navigation.sounding_std),
             navigation,
         )
+
+    def misfit_prior(self) -> MisfitScale | None:
+        """The local misfit scale a run starts from (the navigation model's ``misfit_dof`` and
+        ``misfit_length``); None when ``misfit_dof`` is 0 (the stated errors trusted)."""
+        nav = self.navigation
+        return MisfitScale.prior(nav.misfit_dof, nav.misfit_length) if nav.misfit_dof > 0 else None

@@ -203,15 +203,12 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
         return None, None
     points = state.points()
     n_points = state.n * state.n
-    turn = np.repeat(-state.nodes[:, 1], n_points)
     log_mass = (state.log_density - np.max(state.log_density)).ravel()
     weights = np.exp(log_mass)
     resolution = float(np.trace(state.axes.T @ slope @ state.axes)) / 12.0
-    variance = ping.variance if ping.variance is not None else np.full(ping.n_soundings,
-                                                                      model.terrain.sounding_std**2)
-    update = model.terrain.likelihood.ping_update(
-        points, ping.offsets, ping.depths, state.tide.ravel(), state.tide_var, turn=turn, weights=weights,
-        variance=variance + resolution, map_variance=ping.map_variance,
+    update = model.terrain.evaluate(
+        points, state.tide.ravel(), state.tide_var, ping, np.repeat(state.nodes[:, 1], n_points),
+        weights=weights, scale=state.misfit, extra_variance=resolution,
     )  # fmt: skip
     if np.all(np.isneginf(update.log_likelihood)):
         return None, None  # no point has the map under any sounding: no information
@@ -223,6 +220,7 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     state.log_density = posterior - log_total - np.log(state.cell_area)
     state.tide = update.tide.reshape(state.tide.shape)
     state.tide_var = update.tide_var
+    state.misfit = update.scale_after(np.exp(posterior.ravel() - np.max(posterior)))
     return check, update
 
 
@@ -286,7 +284,7 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
     return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
                      np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
                      navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
-                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))))
+                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit)
 
 
 @dataclasses.dataclass(eq=False)
@@ -425,6 +423,7 @@ def point_mass_filter(
     estimate = any(c > 1 and s > 0
                    for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
     state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
+    state.misfit = filter_model.misfit_prior()
     run = _Run(bathymetry, navigation, filter_model, config, grid, slope, estimate)
     k_total = survey.n_pings
     mean = np.empty((k_total, 2))

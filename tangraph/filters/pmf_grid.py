@@ -16,6 +16,7 @@ from scipy import ndimage
 
 from tangraph.filters.likelihood import log_normalise
 from tangraph.filters.pmf_bank import _evidence_fit, _log_gaussian, _place_nodes
+from tangraph.sensors.misfit import MisfitScale
 
 if TYPE_CHECKING:
     from tangraph.filters.pmf import PMFConfig
@@ -39,7 +40,9 @@ class PointMass:
     noise not yet convolved in; ``walk`` the heading error's variance grown since the nodes were
     placed. The calibration's posterior is ``prior (mean, cov)`` (the Gaussian it had when the
     nodes were placed) times the evidence since: each member's log mass less ``node_base (M,)``,
-    its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on."""
+    its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on;
+    ``misfit`` the local misfit scale the density shares (:mod:`tangraph.sensors.misfit`; None:
+    the stated errors trusted)."""
 
     nodes: np.ndarray
     node_base: np.ndarray
@@ -52,6 +55,7 @@ class PointMass:
     walk: float
     prior: tuple[np.ndarray, np.ndarray]
     placed: tuple[np.ndarray, np.ndarray]
+    misfit: MisfitScale | None = None
 
     @property
     def n(self) -> int:
@@ -318,4 +322,5 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
     area = float(abs(np.linalg.det(axes)))
     _, log_total = log_normalise(density.ravel(), where="pmf")
     return PointMass(nodes, node_base, new_centres, axes, density - log_total - np.log(area), tide,
-                     state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, prior, placed)
+                     state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, prior, placed,
+                     state.misfit)

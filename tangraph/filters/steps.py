@@ -142,7 +142,7 @@ def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> T
     assert belief.calibration is not None  # Belief.__post_init__ fills it
     return model.terrain.evaluate(
         belief.particles, belief.tide, belief.tide_var, ping, heading_error=belief.calibration[:, 1],
-        weights=belief.weights, exponent=exponent,
+        weights=belief.weights, exponent=exponent, scale=belief.misfit,
     )
 
 
@@ -264,7 +264,8 @@ def measure(
         floor = np.concatenate([[1e-6, 1e-6], _kernel_floor(model, config)])  # type: ignore[arg-type]
         current = shrink_state(resampled, moments, config.kernel_bandwidth, floor, rng=rng)  # type: ignore[union-attr,arg-type]
         update = evaluate(current, ping, model, exponent=update.exponent)
-    new = weighted.replace(tide=update.tide, tide_var=update.tide_var)
+    new = weighted.replace(tide=update.tide, tide_var=update.tide_var,
+                           misfit=update.scale_after(weighted.weights))
     return Measurement(new, update, first, tuple(exponents), tuple(stage_ess))
 
 

@@ -9,6 +9,7 @@ from tangraph.sensors.dead_reckoning import (
     simulate_dead_reckoning,
 )
 from tangraph.sensors.matern import matern_correlation, matern_field
+from tangraph.sensors.misfit import MisfitScale, misfit_counts
 from tangraph.sensors.navigation_model import (
     KNOWN_STD,
     NavigationModel,
@@ -40,6 +41,7 @@ __all__ = [
     "DeadReckoning",
     "DeadReckoningModel",
     "MapError",
+    "MisfitScale",
     "MultibeamConfig",
     "NavigationModel",
     "Pings",
@@ -51,6 +53,7 @@ __all__ = [
     "map_error",
     "matern_correlation",
     "matern_field",
+    "misfit_counts",
     "odometry",
     "rotation_matrix",
     "shared_among",

@@ -76,6 +76,12 @@ class NavigationModel:
         Range (m) of the map error's spatial correlation where the map states none; 0: one
         cell of the map. Soundings closer than this share their map error, so they count as
         fewer independent ones (:func:`~tangraph.sensors.terrain.sounding_variances`).
+    misfit_dof, misfit_length : float
+        The local misfit scale (:mod:`tangraph.sensors.misfit`): the filters hold how far the
+        soundings err beyond the stated sounding and map errors as a variable shared along the
+        track, with the tail of a Student-t of ``misfit_dof`` degrees of freedom, forgotten over
+        ``misfit_length`` m (a patch of the map that errs beyond its statement). ``misfit_dof``
+        0: the stated errors are trusted everywhere (a Gaussian likelihood).
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
     map_offset_std : float
@@ -123,6 +129,8 @@ class NavigationModel:
     sounding_std: float = 0.5
     map_std: float = 0.0
     map_correlation_length: float = 0.0
+    misfit_dof: float = 0.0
+    misfit_length: float = 200.0
     tide: float = 0.0
     tide_std: float = 3.0
     map_offset_std: float = 0.0
@@ -137,7 +145,8 @@ class NavigationModel:
                      "map_std", "map_correlation_length", "tide_std", "map_offset_std", "speed_scale_std",
                      "heading_bias_std"):
             _number(self, name, low=0.0)
-        for name in ("initial_position_std", "sounding_std"):
+        _number(self, "misfit_dof", low=0.0)
+        for name in ("initial_position_std", "sounding_std", "misfit_length"):
             _number(self, name, low=0.0, open_low=True)
         _number(self, "speed_scale", low=-0.5, high=0.5)
         _number(self, "heading_bias", low=-math.pi, high=math.pi)

@@ -16,6 +16,7 @@ from tangraph.filters.likelihood import TerrainLikelihood, log_normalise
 from tangraph.filters.model import FilterModel, survey_pings
 from tangraph.filters.steps import evaluate, reweight
 from tangraph.maps import BathymetryMap
+from tangraph.sensors import MisfitScale
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 from tests.maps.reference import interpolate
 
@@ -221,3 +222,100 @@ def test_a_filter_started_at_the_edge_of_the_maps_data_does_not_collapse(method)
     # the old rule: 37-45 m off with a spread of 0.2-0.6 m; now within its spread at every ping
     assert np.all(error < 3 * spread + 0.5), (error.round(2), spread.round(2))
     assert track.meta["n_divergences"] == 0
+
+
+def _misfit_case(seed=4):
+    holes = rough(seed)
+    m = holes.replace(depth=np.where(np.isfinite(holes.depth), holes.depth, 50.0))
+    rng = np.random.default_rng(seed)
+    particles = rng.uniform(150, 250, (300, 2))
+    offsets = rng.normal(0, 20, (25, 2))
+    depths = m.depth_at(200 + offsets[:, 0], 200 + offsets[:, 1]) + rng.normal(0, 1.0, 25)
+    keep = np.isfinite(depths)
+    return m, particles, offsets[keep], depths[keep], rng.uniform(0.2, 0.5, keep.sum())
+
+
+@pytest.mark.parametrize("tide_var", [0.0, 4.0])
+def test_the_misfit_scale_gives_the_student_t_of_its_formula(tide_var):
+    """The compiled Student-t (the scale integrated out, the tide at its estimate) against its
+    formula in numpy, per particle, with each sounding's own variance and count."""
+    from math import lgamma
+
+    m, particles, offsets, depths, variance = _misfit_case()
+    scale = MisfitScale(3.0, 7.5, 4.0, 100.0)  # a factor of 2.5 learnt
+    counts = np.linspace(0.5, 1.0, depths.size)
+    tide = np.full(len(particles), 0.3)
+    likelihood = TerrainLikelihood(m, sigma=0.5)
+    update = likelihood.ping_update(particles, offsets, depths, tide, tide_var, variance=variance,
+                                    exponent=np.ones(depths.size), scale=scale, counts=counts)
+    r = likelihood.residuals(particles, offsets, depths, tide)
+    ok = np.all(np.isfinite(r), axis=0)
+    assert ok.all()
+    lam = (1.0 / variance)[:, None]
+    s1, s2, big_l = np.sum(lam * r, 0), np.sum(lam * r**2, 0), np.sum(lam)
+    k = scale.factor
+    q, log_det = s2, 0.0
+    if tide_var:
+        gain = 1.0 / (1.0 / tide_var + big_l / k)
+        q = s2 - gain * s1**2 / k
+        log_det = -0.5 * np.log1p(tide_var * big_l / k)
+    half = 0.5 * counts.sum()
+    want = lgamma(3.0 + half) - lgamma(3.0) + 3.0 * np.log(7.5) - (3.0 + half) * np.log(7.5 + 0.5 * q)
+    want = want + log_det
+    np.testing.assert_allclose(update.log_likelihood[ok], want[ok], rtol=1e-9)
+    np.testing.assert_allclose(update.quadratic[ok], q[ok], rtol=1e-9)
+    np.testing.assert_allclose(update.count[ok], counts.sum(), rtol=1e-12)
+
+
+@pytest.mark.parametrize("tide_var", [0.0, 4.0])
+def test_a_sure_misfit_scale_of_one_is_the_gaussian_likelihood(tide_var):
+    m, particles, offsets, depths, variance = _misfit_case(5)
+    tide = np.zeros(len(particles))
+    likelihood = TerrainLikelihood(m, sigma=0.5)
+    sure = MisfitScale(1e9, 1e9, 2.0, 1.0)
+    args = (particles, offsets, depths, tide, tide_var)
+    gaussian = likelihood.ping_update(*args, variance=variance)
+    student = likelihood.ping_update(*args, variance=variance, scale=sure)
+    ok = np.isfinite(gaussian.log_likelihood)
+    assert ok.all()
+    a, b = gaussian.log_likelihood[ok], student.log_likelihood[ok]
+    np.testing.assert_allclose(b - b.max(), a - a.max(), atol=1e-4)
+    np.testing.assert_allclose(student.tide, gaussian.tide, rtol=1e-7)
+
+
+def test_where_the_map_errs_beyond_its_statement_the_likelihood_flattens():
+    """Residuals three times their stated std at the truth: once the scale has learnt them
+    (a factor near 9), a rival position's log-ratio is about a ninth of the Gaussian's."""
+    m, _, offsets, _, _ = _misfit_case(6)
+    rng = np.random.default_rng(6)
+    truth, rival = np.array([200.0, 200.0]), np.array([203.0, 201.0])
+    depths = m.depth_at(truth[0] + offsets[:, 0], truth[1] + offsets[:, 1]) + 3 * 0.5 * rng.standard_normal(
+        offsets.shape[0])
+    likelihood = TerrainLikelihood(m, sigma=0.5)
+    args = (np.stack([truth, rival]), offsets, depths, np.zeros(2), 0.0)
+    gaussian = likelihood.ping_update(*args).log_likelihood
+    learnt = MisfitScale(500.0, 4500.0, 4.0, 100.0)
+    student = likelihood.ping_update(*args, scale=learnt).log_likelihood
+    ratio = (student[0] - student[1]) / (gaussian[0] - gaussian[1])
+    assert gaussian[0] - gaussian[1] > 5
+    assert 0.08 < ratio < 0.14, ratio
+
+
+@pytest.mark.parametrize("method", ["pf", "pmf"])
+def test_the_misfit_scale_keeps_a_filter_honest_where_the_soundings_err_beyond_their_statement(method):
+    """Soundings five times as noisy as the model states: with the stated errors trusted the
+    filter's final NEES over ten runs is in the hundreds; with the misfit scale (8 degrees of
+    freedom) its mean is inside the chi-square(20)/10 band's upper 99.9 % point (4.5)."""
+    nees = {0.0: [], 8.0: []}
+    for dof in nees:
+        for seed in range(10):
+            survey = multibeam_survey(MAP, seed=seed, pings=30, noise=1.5)
+            model = navigation(survey, initial_position_std=10.0, sounding_std=0.3, misfit_dof=dof)
+            config = default_config(method)
+            if method == "pf":
+                config = dataclasses.replace(config, n_particles=1000)
+            track = run_filter(method, survey, MAP, config, model=model, rng=np.random.default_rng(seed))
+            e = track.pose[-1, :2] - survey.true_pose[-1, :2]
+            nees[dof].append(float(e @ np.linalg.solve(track.covariance[-1, :2, :2], e)))
+    assert np.mean(nees[0.0]) > 20
+    assert np.mean(nees[8.0]) < 4.5, np.round(nees[8.0], 2)
