@@ -217,7 +217,8 @@ def check_lines(cfg: dict, data: Path, bathymetry, march: dict, window: float = 
 
     def figures(check):
         return {"windows": check.windows, "rms": check.rms, "robust": check.robust,
-                "share_beyond_3": check.share_beyond_3, "per_survey": check.per_survey()}
+                "share_beyond_3": check.share_beyond_3, "misfit_dof": check.misfit_dof,
+                "per_survey": check.per_survey()}
 
     return {"window_m": window, "prior_runs_held_out": figures(held_out), "march_against_map": figures(later)}
 

@@ -19,7 +19,9 @@ reports the RMS of ``t`` (1 when the stated error holds; a Gaussian fitted to th
 window errors has its std that many times the stated one), a robust scale of ``t`` (the median
 ``|t|`` over its normal value: the bulk of the windows) and the share of windows with
 ``|t| > 3`` (0.27 % for a Gaussian). An RMS far above the robust scale says the map's error is
-heavy-tailed: most of the map is as good as it says, a few patches are far worse. The held-out
+heavy-tailed: most of the map is as good as it says, a few patches are far worse; the degrees of
+freedom of the Student-t that fits the scores best say how heavy (``MapCheck.misfit_dof``, the
+navigation model's ``misfit_dof``). The held-out
 survey's own position error adds to ``t`` (the slope times the GPS error), so the check errs on
 the side of finding the map worse than it is.
 
@@ -49,6 +51,7 @@ from tangraph.survey import Survey
 __all__ = ["MapCheck", "calibrate_error", "check_map_error", "survey_lines", "window_scores"]
 
 MIN_WINDOWS = 10  # a calibration rests on at least this many windows
+_MAX_DOF = 100.0  # a Student-t of more degrees of freedom than this is a Gaussian here
 TURN = np.deg2rad(30.0)  # a line ends where the course has turned this far from its start
 
 
@@ -84,6 +87,28 @@ class MapCheck:
         """The share of windows with ``|score| > 3`` (0.0027 for a Gaussian)."""
         return float(np.mean(np.abs(self.scores) > 3.0)) if self.scores.size else float("nan")
 
+    @property
+    def misfit_dof(self) -> float:
+        """The degrees of freedom of the Student-t of unit scale that fits the scores best
+        (maximum likelihood over 0.2-100): the tail of the map's error the check lines support,
+        the :class:`~tangraph.sensors.NavigationModel`'s ``misfit_dof``
+        (:mod:`tangraph.sensors.misfit`: a patch's error scale shared by its soundings, whose
+        mixture over patches is that Student-t); ``inf`` when a Gaussian tail fits as well, NaN
+        with no window."""
+        if not self.scores.size:
+            return float("nan")
+        from scipy import optimize, stats
+
+        scores = self.scores
+
+        def cost(log_dof: float) -> float:
+            return -float(np.sum(stats.t.logpdf(scores, np.exp(log_dof))))
+
+        best = optimize.minimize_scalar(cost, bounds=(np.log(0.2), np.log(_MAX_DOF)), method="bounded",
+                                        options={"xatol": 1e-4})
+        dof = float(np.exp(best.x))
+        return float("inf") if dof > 0.99 * _MAX_DOF else dof
+
     def per_survey(self) -> list[dict]:
         """One row per held-out survey: name, windows, RMS, robust scale, share beyond 3."""
         rows = []
@@ -98,7 +123,8 @@ class MapCheck:
         """One line: windows, RMS, robust scale, share beyond 3 sigma."""
         return (f"{self.windows} windows of {self.window:g} m: RMS {self.rms:.2f}, robust "
                 f"{self.robust:.2f}, {100 * self.share_beyond_3:.1f} % beyond 3 (1, 1 and 0.3 % when the "
-                "map's error is as stated)")
+                f"map's error is as stated); the tail of a Student-t of {self.misfit_dof:.2g} degrees of "
+                "freedom (misfit_dof)")
 
 
 def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
@@ -214,6 +240,7 @@ def calibrate_error(grid, check: MapCheck):
             f"than {MIN_WINDOWS}: too few to calibrate the map's error with (surveys that overlap more, or "
             "a shorter window)")
     figures = {"windows": check.windows, "window_m": check.window, "rms": round(check.rms, 4),
-               "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4)}
+               "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4),
+               "misfit_dof": round(check.misfit_dof, 4)}
     return dataclasses.replace(grid, error_scale=max(1.0, check.rms),
                                meta={**grid.meta, "check_lines": figures})

@@ -76,3 +76,20 @@ def test_one_survey_is_checked_line_by_line():
     assert check.robust < 3.0
     with pytest.raises(TangraphError, match="at least two lines"):
         check_map_error([survey.pings(0, 100)], cell=5.0, lines=True)
+
+
+@pytest.mark.parametrize("dof", [1.5, 4.0])
+def test_the_tail_of_the_scores_is_fitted_by_its_degrees_of_freedom(dof):
+    """Scores of a Student-t: its degrees of freedom recovered within four of their standard
+    errors (the Fisher information of ``nu`` with the scale known, from 4000 scores)."""
+    from scipy import special
+
+    scores = np.random.default_rng(7).standard_t(dof, 4000)
+    check = MapCheck(scores, np.zeros(scores.size, int), ("t",), 50.0)
+    v = dof
+    info = 0.25 * (special.polygamma(1, v / 2) - special.polygamma(1, (v + 1) / 2)) - (v + 5) / (
+        2 * v * (v + 1) * (v + 3))
+    assert abs(check.misfit_dof - dof) < 4 / np.sqrt(scores.size * info)
+    gaussian = MapCheck(np.random.default_rng(8).standard_normal(4000), np.zeros(4000, int), ("n",), 50.0)
+    assert gaussian.misfit_dof > 30
+    assert np.isnan(MapCheck(np.zeros(0), np.zeros(0, int), (), 50.0).misfit_dof)
