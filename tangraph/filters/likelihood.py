@@ -28,8 +28,10 @@ soundings' precisions ``l_b = a_b / v_b``:
   on the precision factor shared by the ping's soundings, the quadratic ``Q`` above (the tide
   integrated out at the scale's estimate ``rate / shape``) enters the Student-t
   ``lgamma(shape + n/2) - lgamma(shape) + shape log(rate) - (shape + n/2) log(rate + Q/2)``
-  with ``n`` the particle's summed expected squares ``a_b c_b``; the sub-cloud means take the
-  scale's estimate.
+  with ``n`` the particle's summed expected squares ``a_b c_b``; a sounding without a map depth
+  under a particle adds to its ``Q`` the sub-cloud's weighted mean of ``a_b r^2 / v_b`` and to its
+  ``n`` its ``a_b c_b`` (so every particle's Student-t has the same count, and none gains by having
+  no map under a sounding).
 
 Constants shared by all particles are dropped: weights are normalised. One kernel computes
 every particle's residuals (each particle's grid coordinates once, its soundings turned by its
@@ -188,8 +190,8 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
             else:
                 exponent[b] = spread / (spread + 2.0 * map_variance[b])
         lam = exponent[b] * precision[b]
-        imputed = 0.0
-        if count < n:  # some particles have no map under this sounding: the sub-cloud's mean
+        imputed = lam * square / total  # with a misfit scale: the sub-cloud's mean square
+        if count < n and shape <= 0.0:  # some particles have no map here: the sub-cloud's mean
             top = -np.inf
             for p in range(n):
                 r = residual[b, p]
@@ -212,6 +214,8 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 effective[p] += exponent[b] * count_weight[b]
             else:
                 missing[p] += imputed
+                if shape > 0.0:
+                    effective[p] += exponent[b] * count_weight[b]
     _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
                  tide_shift, total_precision, quadratic)
 
@@ -238,13 +242,14 @@ def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, ra
             q = s2[p] - gain * s1[p] * s1[p] / scale
             log_det = -0.5 * np.log1p(tide_var * big_l[p] / scale)
             tide_shift[p] = gain * s1[p] / scale
-        quadratic[p] = q
-        if shape > 0.0:
+        if shape > 0.0:  # missing[p]: the sub-clouds' mean squares of the soundings it has no map under
+            q += missing[p]
             half = 0.5 * effective[p]
             log_likelihood[p] = math.lgamma(shape + half) - math.lgamma(shape) + shape * np.log(rate) \
-                - (shape + half) * np.log(rate + 0.5 * q) + log_det + missing[p]
-        else:
+                - (shape + half) * np.log(rate + 0.5 * q) + log_det
+        else:  # missing[p]: the sub-clouds' mean log likelihoods
             log_likelihood[p] = -0.5 * q + log_det + missing[p]
+        quadratic[p] = q
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

@@ -28,6 +28,11 @@ parameters over the prior's is multiplied by ``exp(-d / length)`` (an exponentia
 the gamma statistics, as the variational adaptive Kalman filter of Särkkä & Nummenmaa 2009
 does in time).
 
+**Never better than stated.** The scale's estimate ``rate / shape`` is kept at 1 or more: residuals
+smaller than the stated errors do not make the soundings more precise than the map and the
+sonar say they are (the map's error is shared by soundings far apart, which a run of small
+residuals along the track cannot show), as a map is never made better than its gridding says.
+
 **Counting.** The terrain model's variances already count the map error that soundings share
 (the row-sum bound), so a sounding's expected whitened square is not 1 but
 ``c_b = (sounding_std^2 + s_b^2) / v_b`` (``s_b`` the map's stated error under it); each sounding
@@ -99,7 +104,8 @@ class MisfitScale:
         """The scale after a ping whose candidates (particles, grid points) have whitened
         residual sums ``quadratic (N,)`` (at scale 1) and effective counts ``count (N,)``,
         averaged over their posterior ``weights (N,)`` (normalised here; NaN entries and
-        zero weights are left out). Unchanged when no candidate of positive weight has one."""
+        zero weights are left out), its estimate never below 1 (module docstring). Unchanged
+        when no candidate of positive weight has one."""
         q = np.asarray(quadratic, dtype=np.float64)
         c = np.asarray(count, dtype=np.float64)
         w = np.asarray(weights, dtype=np.float64)
@@ -108,8 +114,8 @@ class MisfitScale:
         if total <= 0:
             return self
         w = w[ok] / total
-        return dataclasses.replace(self, shape=self.shape + 0.5 * float(w @ c[ok]),
-                                   rate=self.rate + 0.5 * float(w @ q[ok]))
+        shape = self.shape + 0.5 * float(w @ c[ok])
+        return dataclasses.replace(self, shape=shape, rate=max(self.rate + 0.5 * float(w @ q[ok]), shape))
 
 
 def misfit_counts(variance: np.ndarray, map_variance: np.ndarray | None, noise_variance: float) -> np.ndarray:

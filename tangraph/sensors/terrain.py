@@ -59,6 +59,11 @@ comparison instead of giving the candidate zero weight.
 that a belief predicts for a sounding spread no more than the map's error, the sounding cannot
 tell the belief's positions apart, and its small differences are the map's noise: the
 likelihood is raised to the exponent :func:`information_exponent` (MBARI's modified weighting).
+
+**Patches that err beyond the statement.** A real map errs as it states over most of its area
+and by several times that in patches (the check lines of :mod:`tangraph.eval.map_check`). The
+filters hold that excess as a scale on the variances above, shared along the track and
+integrated out (:mod:`tangraph.sensors.misfit`; ``NavigationModel.misfit_dof``).
 """
 
 from __future__ import annotations

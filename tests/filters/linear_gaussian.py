@@ -84,8 +84,10 @@ def kalman_mixture(survey, *, q, sigma, p0, scale_sd, nodes=80):
 
 def linear_model(*, q, sigma, p0, tide_sd=0.0, scale_sd=0.0):
     """The filters' navigation model of :func:`linear_gaussian_run` (one ping a second: the speed
-    noise is the process noise per ping; no heading error: its prior is negligible)."""
+    noise is the process noise per ping; no heading error: its prior is negligible; the stated
+    errors trusted, as the Kalman filter does: no misfit scale)."""
     return NavigationModel(
+        misfit_dof=0.0,
         speed_noise=q,
         speed_scale_std=scale_sd if scale_sd > 0 else 1e-12,
         heading_bias_std=1e-12,

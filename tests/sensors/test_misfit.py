@@ -63,3 +63,8 @@ def test_bad_scales_are_refused(field, value):
 def test_the_navigation_model_refuses_bad_misfit_settings(field, value):
     with pytest.raises(TangraphError, match=f"NavigationModel.{field}"):
         NavigationModel(**{field: value})
+
+
+def test_residuals_smaller_than_stated_do_not_make_the_soundings_more_precise():
+    scale = MisfitScale.prior(2.0, 1e9).after(np.array([1.0]), np.array([50.0]), np.array([1.0]))
+    assert scale.shape == 26.0 and scale.factor == 1.0
