@@ -280,7 +280,9 @@ class TerrainUpdate:
 class TerrainModel:
     """The terrain likelihood of a ping with a known (``tide_std = 0``) or uncertain tide;
     ``sounding_std`` is the std of one sounding's residual for pings that carry no variances
-    (a navigation model's ``measurement_std``: sounding and map errors)."""
+    (a navigation model's ``measurement_std``: sounding and map errors); ``noise_std`` the
+    sounding's own noise (a navigation model's ``sounding_std``; None: ``sounding_std``), from
+    which a misfit scale counts each sounding (:func:`tangraph.sensors.misfit_counts`)."""
 
     bathymetry: BathymetryMap
     sounding_std: float

@@ -80,10 +80,10 @@ class NavigationModel:
         The local misfit scale (:mod:`tangraph.sensors.misfit`): the filters hold how far the
         soundings err beyond the stated sounding and map errors as a variable shared along the
         track, with the tail of a Student-t of ``misfit_dof`` degrees of freedom, forgotten over
-        ``misfit_length`` m (a patch of the map that errs beyond its statement). The default
-        tail, 2, is that of real maps' check lines (the Lake Caputh runs held out against each
-        other fit 1.9; ``tangraph maps check`` fits a map's own, ``MapCheck.misfit_dof``).
-        ``misfit_dof`` 0: the stated errors are trusted everywhere (a Gaussian likelihood).
+        ``misfit_length`` m (a patch of the map that errs beyond its statement). 0 (the
+        default): the stated errors are trusted everywhere (a Gaussian likelihood). A map's
+        check lines say which tail it has (``tangraph maps check``, ``MapCheck.misfit_dof``:
+        the Lake Caputh runs held out against each other fit 1.9).
         The factor graph's fixes are not affected: each TAP window scales its fix by its own
         residual variance.
     tide, tide_std : float
@@ -133,7 +133,7 @@ class NavigationModel:
     sounding_std: float = 0.5
     map_std: float = 0.0
     map_correlation_length: float = 0.0
-    misfit_dof: float = 2.0
+    misfit_dof: float = 0.0
     misfit_length: float = 200.0
     tide: float = 0.0
     tide_std: float = 3.0
