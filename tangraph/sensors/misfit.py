@@ -3,7 +3,7 @@
 A real map errs as it states over most of its area and by several times that in patches: where
 the seafloor moved since the map's survey, where its lines left a gap, where a sounder's
 refraction bent a line (the Lake Caputh check lines: most of the map fits its stated error,
-one sounding in eight lies beyond three times it). A terrain likelihood that trusts the stated
+one window of track in ten lies beyond three times it). A terrain likelihood that trusts the stated
 error everywhere weighs the soundings of such a patch as if they were metres more precise than
 they are, and a filter converges on the patch's changed depths and reports it with confidence.
 
