@@ -159,7 +159,6 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
     big_l = np.zeros(n)
     missing = np.zeros(n)
     any_map = False
-    scale = rate / shape if shape > 0.0 else 1.0
     for b in range(nb):
         total = 0.0
         mean = 0.0
@@ -191,17 +190,17 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 exponent[b] = spread / (spread + 2.0 * map_variance[b])
         lam = exponent[b] * precision[b]
         imputed = lam * square / total  # with a misfit scale: the sub-cloud's mean square
-        if count < n and shape <= 0.0:  # some particles have no map here: the sub-cloud's mean
+        if count < n and shape <= 0.0:  # some particles have no map here: the sub-cloud's mean likelihood
             top = -np.inf
             for p in range(n):
                 r = residual[b, p]
                 if r == r and weights[p] > 0.0:
-                    top = max(top, -0.5 * lam * r * r / scale)
+                    top = max(top, -0.5 * lam * r * r)
             acc = 0.0
             for p in range(n):
                 r = residual[b, p]
                 if r == r and weights[p] > 0.0:
-                    acc += weights[p] * np.exp(-0.5 * lam * r * r / scale - top)
+                    acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
             imputed = top + np.log(acc / total)
         for p in range(n):
             r = residual[b, p]
