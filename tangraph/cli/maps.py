@@ -67,6 +67,7 @@ def _info_lines(r: dict) -> list[str]:
     error = [f"depth std median {r['depth_std_m']['median']:.3f} m, max {r['depth_std_m']['max']:.3f} m"
              ] if "depth_std_m" in r else []
     error += [f"correlation length {r['correlation_length_m']:g} m"] if "correlation_length_m" in r else []
+    error += [f"a Student-t tail of {r['error_dof']:.3g} degrees of freedom"] if "error_dof" in r else []
     lines.append(f"map error    {'; '.join(error) or 'not in the map (the model states its map std)'}")
     return lines
 
@@ -113,7 +114,9 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
         where="maps grid", option_name=_option,
     )
     if check is not None:
-        print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}")
+        tail = ("a Gaussian tail" if grid.error_dof is None else
+                f"the tail of a Student-t of {grid.error_dof:.3g} degrees of freedom (error_dof)")
+        print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}, {tail}")
     write_sounding_grid(grid, args.output, overwrite=args.force)
     print(_grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
 

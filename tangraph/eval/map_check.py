@@ -19,16 +19,17 @@ reports the RMS of ``t`` (1 when the stated error holds; a Gaussian fitted to th
 window errors has its std that many times the stated one), a robust scale of ``t`` (the median
 ``|t|`` over its normal value: the bulk of the windows) and the share of windows with
 ``|t| > 3`` (0.27 % for a Gaussian). An RMS far above the robust scale says the map's error is
-heavy-tailed: most of the map is as good as it says, a few patches are far worse; the degrees of
-freedom of the Student-t that fits the scores best say how heavy (``MapCheck.misfit_dof``, the
-navigation model's ``misfit_dof``). The held-out
-survey's own position error adds to ``t`` (the slope times the GPS error), so the check errs on
-the side of finding the map worse than it is.
+heavy-tailed: most of the map is as good as it says, a few patches are far worse; the Student-t
+that fits the scores best says how heavy (:meth:`MapCheck.tail`: its scale, and its degrees of
+freedom ``MapCheck.misfit_dof``). The held-out survey's own position error adds to ``t`` (the
+slope times the GPS error), so the check errs on the side of finding the map worse than it is.
 
 :func:`calibrate_error` gives a gridded map the error its check lines found: its ``depth_std``
-times the RMS (when above 1), the Gaussian of the variance its windows really show (the
-moment-matched one), which the estimators' Gaussian terrain model can use; a map is never made
-better than its gridding says.
+times the Student-t's scale and, when the tail is heavier than a Gaussian's, the Student-t's
+degrees of freedom as the map's ``error_dof``, which the filters' local misfit scale takes as
+its prior (:mod:`tangraph.sensors.misfit`: the error of most of the map as stated, a patch's
+several times it). A Gaussian tail gives the scale of the RMS (the variance the windows really
+show). A map is never made better than its gridding says: the scale is at least 1.
 
 Nothing here touches files.
 """
@@ -52,6 +53,7 @@ __all__ = ["MapCheck", "calibrate_error", "check_map_error", "survey_lines", "wi
 
 MIN_WINDOWS = 10  # a calibration rests on at least this many windows
 _MAX_DOF = 100.0  # a Student-t of more degrees of freedom than this is a Gaussian here
+_GAUSSIAN_TEST = 2.705543454095404  # 2 log-likelihood ratio of the Student-t over the Gaussian, at 5 %
 TURN = np.deg2rad(30.0)  # a line ends where the course has turned this far from its start
 
 
@@ -89,25 +91,43 @@ class MapCheck:
 
     @property
     def misfit_dof(self) -> float:
-        """The degrees of freedom of the Student-t of unit scale that fits the scores best
-        (maximum likelihood over 0.2-100): the tail of the map's error the check lines support,
-        the :class:`~tangraph.sensors.NavigationModel`'s ``misfit_dof``
+        """The degrees of freedom of the Student-t that fits the scores best (:meth:`tail`): the
+        tail of the map's error the check lines support, the map's ``error_dof``
         (:mod:`tangraph.sensors.misfit`: a patch's error scale shared by its soundings, whose
         mixture over patches is that Student-t); ``inf`` when a Gaussian tail fits as well, NaN
         with no window."""
+        return self.tail()[1]
+
+    def tail(self) -> tuple[float, float]:
+        """``(scale, dof)``: the Student-t that fits the scores best by maximum likelihood, its
+        scale never below 1 (a map is never made better than its gridding says: where the bulk
+        of the scores is narrower, the degrees of freedom are fitted at scale 1). ``dof`` is
+        ``inf`` when a Gaussian fits as well (the likelihood-ratio test of the Gaussian at 5 %,
+        on the boundary: half a chi-square(1), 2.71; the scale is then the RMS, at least 1);
+        ``(NaN, NaN)`` with no window."""
         if not self.scores.size:
-            return float("nan")
+            return float("nan"), float("nan")
         from scipy import optimize, stats
 
         scores = self.scores
 
-        def cost(log_dof: float) -> float:
-            return -float(np.sum(stats.t.logpdf(scores, np.exp(log_dof))))
+        def cost(x: np.ndarray) -> float:
+            return -float(np.sum(stats.t.logpdf(scores, np.exp(x[0]), scale=np.exp(x[1]))))
 
-        best = optimize.minimize_scalar(cost, bounds=(np.log(0.2), np.log(_MAX_DOF)), method="bounded",
-                                        options={"xatol": 1e-4})
-        dof = float(np.exp(best.x))
-        return float("inf") if dof > 0.99 * _MAX_DOF else dof
+        low, high = np.log(0.2), np.log(_MAX_DOF)
+        start = np.array([np.log(4.0), np.log(max(self.robust, 1e-3))])
+        best = optimize.minimize(cost, start, method="L-BFGS-B", bounds=[(low, high), (-7.0, 7.0)])
+        dof, scale = float(np.exp(best.x[0])), float(np.exp(best.x[1]))
+        gaussian = -float(np.sum(stats.norm.logpdf(scores, scale=max(self.rms, 1e-12))))
+        if dof > 0.99 * _MAX_DOF or 2.0 * (gaussian - best.fun) < _GAUSSIAN_TEST:
+            return max(1.0, self.rms), float("inf")
+        if scale < 1.0:  # the bulk better than stated: the tail at the stated scale
+            unit = optimize.minimize_scalar(lambda x: cost(np.array([x, 0.0])), bounds=(low, high),
+                                            method="bounded", options={"xatol": 1e-4})
+            dof, scale = float(np.exp(unit.x)), 1.0
+        if dof > 0.99 * _MAX_DOF:
+            return max(1.0, self.rms), float("inf")
+        return scale, dof
 
     def per_survey(self) -> list[dict]:
         """One row per held-out survey: name, windows, RMS, robust scale, share beyond 3."""
@@ -120,11 +140,12 @@ class MapCheck:
         return rows
 
     def summary(self) -> str:
-        """One line: windows, RMS, robust scale, share beyond 3 sigma."""
+        """One line: windows, RMS, robust scale, share beyond 3 sigma, the best Student-t."""
+        scale, dof = self.tail()
         return (f"{self.windows} windows of {self.window:g} m: RMS {self.rms:.2f}, robust "
                 f"{self.robust:.2f}, {100 * self.share_beyond_3:.1f} % beyond 3 (1, 1 and 0.3 % when the "
-                f"map's error is as stated); the tail of a Student-t of {self.misfit_dof:.2g} degrees of "
-                "freedom (misfit_dof)")
+                f"map's error is as stated); a Student-t of scale {scale:.2f} and {dof:.2g} degrees of "
+                "freedom fits best")
 
 
 def survey_lines(survey: Survey, *, min_length: float = 50.0) -> list[Survey]:
@@ -224,9 +245,10 @@ def check_map_error(
 
 
 def calibrate_error(grid, check: MapCheck):
-    """The :class:`~tangraph.maps.SoundingGrid` ``grid`` with its error scaled by what its check
-    lines found: ``error_scale = max(1, check.rms)`` (the module docstring), the check's figures
-    kept in its ``meta["check_lines"]``.
+    """The :class:`~tangraph.maps.SoundingGrid` ``grid`` with the error its check lines found:
+    the Student-t that fits their scores best (:meth:`MapCheck.tail`), its scale the grid's
+    ``error_scale`` and its degrees of freedom the ``error_dof`` (None, with the RMS as the
+    scale, when a Gaussian fits as well), the check's figures kept in its ``meta["check_lines"]``.
 
     Raises
     ------
@@ -239,8 +261,9 @@ def calibrate_error(grid, check: MapCheck):
             f"calibrate_error: the check lines scored {check.windows} windows of {check.window:g} m, fewer "
             f"than {MIN_WINDOWS}: too few to calibrate the map's error with (surveys that overlap more, or "
             "a shorter window)")
+    scale, dof = check.tail()
     figures = {"windows": check.windows, "window_m": check.window, "rms": round(check.rms, 4),
                "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4),
-               "misfit_dof": round(check.misfit_dof, 4)}
-    return dataclasses.replace(grid, error_scale=max(1.0, check.rms),
+               "misfit_dof": round(dof, 4), "scale": round(scale, 4)}
+    return dataclasses.replace(grid, error_scale=scale, error_dof=dof if np.isfinite(dof) else None,
                                meta={**grid.meta, "check_lines": figures})

@@ -360,7 +360,10 @@ class FilterModel:
         )
 
     def misfit_prior(self) -> MisfitScale | None:
-        """The local misfit scale a run starts from (the navigation model's ``misfit_dof`` and
-        ``misfit_length``); None when ``misfit_dof`` is 0 (the stated errors trusted)."""
+        """The local misfit scale a run starts from: the Student-t tail the map states (its
+        ``error_dof``), else the navigation model's ``misfit_dof``, forgotten over its
+        ``misfit_length``; None when neither gives one (the stated errors trusted)."""
         nav = self.navigation
-        return MisfitScale.prior(nav.misfit_dof, nav.misfit_length) if nav.misfit_dof > 0 else None
+        stated = self.terrain.bathymetry.error_dof
+        dof = nav.misfit_dof if stated is None else stated
+        return MisfitScale.prior(dof, nav.misfit_length) if dof > 0 else None

@@ -11,7 +11,7 @@ from typing import Literal
 import numpy as np
 
 from tangraph.errors import MapFormatError, TangraphError
-from tangraph.maps._grid_checks import check_correlation_length, check_depth_std
+from tangraph.maps._grid_checks import check_correlation_length, check_depth_std, check_error_dof
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.projection import project_geographic_grid
 
@@ -226,6 +226,15 @@ def correlation_length_from(attrs, keys, where: str) -> float | None:
     return None
 
 
+def error_dof_from(attrs, keys, where: str) -> float | None:
+    """The first of ``keys`` in ``attrs`` as a checked Student-t tail of the map's error (None if
+    none is there)."""
+    for key in keys:
+        if key in attrs and str(attrs[key]).strip():
+            return check_error_dof(attrs[key], f"{where}: attribute {key!r} (Student-t degrees of freedom)")
+    return None
+
+
 def metric_crs(crs: str | None, where: str) -> tuple[str | None, float]:
     """The CRS with its axes in metres and the metres per unit of the original's axes.
 
@@ -260,7 +269,7 @@ def _grid_to_map(
     y: np.ndarray, x: np.ndarray, depth: np.ndarray, *, geographic: bool, crs: str | None,
     cell: float | None, name: str, where: str, origin: tuple[float, float] | None = None,
     variable: str = "z", max_scale_error: float = 1e-3, depth_std: np.ndarray | None = None,
-    correlation_length: float | None = None,
+    correlation_length: float | None = None, error_dof: float | None = None,
 ) -> BathymetryMap:
     """Refuse implausible depths (metres), flip descending axes, then project (geographic) or
     shift to a local origin (projected, axes converted to metres): ``origin`` if given, else the
@@ -284,13 +293,14 @@ def _grid_to_map(
             if std is not None:  # the same grid: the same lat/lon, cell and projection
                 std = project_geographic_grid(y, x, std, cell=cell, name=name, source_crs=crs or "EPSG:4326",
                                               max_scale_error=max_scale_error).depth
-            return m.replace(depth_std=std, correlation_length=correlation_length)
+            return m.replace(depth_std=std, correlation_length=correlation_length, error_dof=error_dof)
         crs, scale = metric_crs(crs, where)
         y, x = y * scale, x * scale
         if origin is None:
             origin = (float(y[0]), float(x[0])) if crs else (0.0, 0.0)
         m = BathymetryMap(north=y - origin[0], east=x - origin[1], depth=depth, crs=crs,
-                          origin=origin, name=name, depth_std=std, correlation_length=correlation_length)
+                          origin=origin, name=name, depth_std=std, correlation_length=correlation_length,
+                          error_dof=error_dof)
     except MapFormatError as exc:
         raise MapFormatError(f"{where}: {exc}") from None
     return m.resample(cell) if cell is not None else m

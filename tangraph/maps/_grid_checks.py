@@ -117,6 +117,19 @@ def check_correlation_length(value, where: str) -> float:
     return length
 
 
+def check_error_dof(value, where: str) -> float:
+    """``value`` as a float if it is a finite number of degrees of freedom > 0, else a one-line
+    `MapFormatError` beginning with ``where``."""
+    try:
+        dof = float(value)
+    except (TypeError, ValueError):
+        dof = math.nan
+    if isinstance(value, bool) or not (math.isfinite(dof) and dof > 0):
+        shown = value.item() if isinstance(value, np.generic) else value
+        raise MapFormatError(f"{where} must be a finite number of degrees of freedom > 0, got {shown!r}")
+    return dof
+
+
 def as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
     """Query points as flat contiguous float64 ``north``, ``east`` and their broadcast shape."""
     n = np.asarray(north, dtype=np.float64)

@@ -15,6 +15,7 @@ from tangraph.maps._grid_checks import (
     check_axis,
     check_correlation_length,
     check_depth_std,
+    check_error_dof,
     check_projected,
 )
 from tangraph.maps._interp import depth_kernel, gradient_kernel
@@ -28,6 +29,8 @@ Order = Literal[1, 3]
 
 #: the attribute (of depth, in NetCDF and xarray) that holds the correlation length of the map's error
 CORRELATION_ATTRIBUTE = "error_correlation_length_m"
+#: the attribute (of depth) that holds the degrees of freedom of the map error's Student-t tail
+DOF_ATTRIBUTE = "error_student_t_dof"
 #: CF attributes of the error layer
 DEPTH_STD_ATTRS = {
     "long_name": "standard deviation of the error of depth",
@@ -59,6 +62,12 @@ class BathymetryMap:
         to NaN). None: the map does not say (the navigation model's stated default applies).
     correlation_length : float, optional
         The correlation length of the map's error, metres (> 0). None: not known.
+    error_dof : float, optional
+        The tail of the map's error (> 0): it errs by ``depth_std`` times a factor that varies
+        patch by patch, a Student-t of ``error_dof`` degrees of freedom over the map (its check
+        lines measure it: :func:`tangraph.eval.map_check.calibrate_error`); the filters' local
+        misfit scale takes its prior from it (:mod:`tangraph.sensors.misfit`). None: a Gaussian
+        error, as stated everywhere.
 
     Notes
     -----
@@ -90,6 +99,7 @@ class BathymetryMap:
     name: str = "map"
     depth_std: np.ndarray | None = None
     correlation_length: float | None = None
+    error_dof: float | None = None
 
     def __post_init__(self) -> None:
         where = f"map {self.name!r}"
@@ -119,6 +129,8 @@ class BathymetryMap:
         if self.correlation_length is not None:
             length = check_correlation_length(self.correlation_length, f"{where}: correlation_length")
             object.__setattr__(self, "correlation_length", length)
+        if self.error_dof is not None:
+            object.__setattr__(self, "error_dof", check_error_dof(self.error_dof, f"{where}: error_dof"))
         for a in (north, east, depth):
             a.setflags(write=False)
         object.__setattr__(self, "depth_std", depth_std)
@@ -166,11 +178,14 @@ class BathymetryMap:
             text += f", depth_std=[{np.nanmin(self.depth_std):g}, {np.nanmax(self.depth_std):g}] m"
         if self.correlation_length is not None:
             text += f", correlation_length={self.correlation_length:g} m"
+        if self.error_dof is not None:
+            text += f", error_dof={self.error_dof:.3g}"
         return text
 
     def error_summary(self) -> dict:
         """The error layer's figures as data: ``depth_std_m`` (median and max over the cells
-        with data) and ``correlation_length_m``, each only if the map has it (``{}`` if neither).
+        with data), ``correlation_length_m`` and ``error_dof``, each only if the map has it
+        (``{}`` if none).
 
         Examples
         --------
@@ -186,6 +201,8 @@ class BathymetryMap:
                                       "max": float(np.nanmax(self.depth_std))}
         if self.correlation_length is not None:
             summary["correlation_length_m"] = self.correlation_length
+        if self.error_dof is not None:
+            summary["error_dof"] = self.error_dof
         return summary
 
     # -- queries --------------------------------------------------------------------------
@@ -273,8 +290,8 @@ class BathymetryMap:
     def replace(self, **changes) -> BathymetryMap:
         """A copy with some fields changed (validated again).
 
-        ``depth_std`` and ``correlation_length`` travel unchanged unless given; a new grid
-        shape needs its own ``depth_std`` (or ``depth_std=None``), and new depths where the
+        ``depth_std``, ``correlation_length`` and ``error_dof`` travel unchanged unless given; a
+        new grid shape needs its own ``depth_std`` (or ``depth_std=None``), and new depths where the
         old layer is NaN are refused until one is given.
         """
         if self.depth_std is not None and "depth_std" not in changes and "depth" in changes:
@@ -379,7 +396,8 @@ class BathymetryMap:
     def to_dataset(self) -> xr.Dataset:
         """The map with its error layer as an ``xarray.Dataset``: ``depth`` (:meth:`to_xarray`)
         and, if the map has one, ``depth_std`` named by depth's CF ``ancillary_variables``;
-        ``correlation_length`` is depth's attribute ``error_correlation_length_m``.
+        ``correlation_length`` is depth's attribute ``error_correlation_length_m``, ``error_dof``
+        its attribute ``error_student_t_dof``.
 
         Examples
         --------
@@ -399,6 +417,8 @@ class BathymetryMap:
         variables = {"depth": depth}
         if self.correlation_length is not None:
             depth.attrs[CORRELATION_ATTRIBUTE] = self.correlation_length
+        if self.error_dof is not None:
+            depth.attrs[DOF_ATTRIBUTE] = self.error_dof
         if self.depth_std is not None:
             depth.attrs["ancillary_variables"] = "depth_std"
             variables["depth_std"] = depth.copy(data=np.array(self.depth_std)).rename("depth_std")
@@ -454,6 +474,7 @@ class BathymetryMap:
             name=name or str(da.attrs.get("name", da.name or "map")),
             depth_std=std,
             correlation_length=da.attrs.get(CORRELATION_ATTRIBUTE),
+            error_dof=da.attrs.get(DOF_ATTRIBUTE),
         )
 
 

@@ -54,7 +54,8 @@ class SoundingGrid:
     the map's error told from the soundings (:func:`tangraph.maps.gridding_error.gridded_error`),
     which :attr:`depth` carries as its ``depth_std`` (times ``error_scale``: 1, or the factor
     check lines found, :func:`tangraph.eval.map_check.calibrate_error`) and
-    ``correlation_length``.
+    ``correlation_length``; ``error_dof`` is the Student-t tail the check lines found (None:
+    Gaussian), the map's ``error_dof``.
     """
 
     mean: BathymetryMap
@@ -66,10 +67,13 @@ class SoundingGrid:
     gap_fill: np.ndarray | None = None
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
     error_scale: float = 1.0
+    error_dof: float | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.error_scale) and self.error_scale > 0):
             raise TangraphError(f"error_scale must be a finite number > 0, got {self.error_scale!r}")
+        if self.error_dof is not None and not (math.isfinite(self.error_dof) and self.error_dof > 0):
+            raise TangraphError(f"error_dof must be a finite number > 0 or None, got {self.error_dof!r}")
         count = np.array(self.count, dtype=np.int64)
         std = np.array(self.std, dtype=np.float64)
         if count.shape != self.mean.shape or std.shape != self.mean.shape:
@@ -110,13 +114,13 @@ class SoundingGrid:
     def depth(self) -> BathymetryMap:
         """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
         with the error layer of :attr:`error` (``depth_std`` times ``error_scale``,
-        ``correlation_length``)."""
+        ``correlation_length``) and ``error_dof``."""
         layer = self.mean.depth if self.statistic == "mean" else cast(np.ndarray, self.median)
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
         std = self.error.depth_std
         return self.mean.replace(depth=layer, depth_std=None if std is None else std * self.error_scale,
-                                 correlation_length=self.error.correlation_length)
+                                 correlation_length=self.error.correlation_length, error_dof=self.error_dof)
 
 
 # -- block reduce -----------------------------------------------------------------------------

@@ -23,12 +23,13 @@ from tangraph.maps._common import (
     check_memory,
     checked_std,
     correlation_length_from,
+    error_dof_from,
     metric_crs,
     resolve_sign,
     std_factor,
     unit_factor,
 )
-from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, BathymetryMap
+from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, DOF_ATTRIBUTE, BathymetryMap
 from tangraph.outputs import write_atomically
 
 __all__ = ["NETCDF_SUFFIXES", "read_netcdf", "write_netcdf", "write_sounding_grid"]
@@ -166,9 +167,10 @@ def _netcdf_uncertainty(ds, variable: str, uncertainty: Uncertainty, path: Path)
 
 
 def _netcdf_error(ds, var, std_name: str | None, depth: np.ndarray, depth_factor: float, nodata,
-                  path: Path) -> tuple[np.ndarray | None, float | None]:
-    """The std layer (metres, laid out as ``var``; None without ``std_name``) and the correlation
-    length (the attribute of the depths, of the std, or of the file) of a NetCDF map."""
+                  path: Path) -> tuple[np.ndarray | None, float | None, float | None]:
+    """The std layer (metres, laid out as ``var``; None without ``std_name``), the correlation
+    length and the Student-t tail (each the attribute of the depths, of the std, or of the file)
+    of a NetCDF map."""
     std, sources = None, [var.attrs, ds.attrs]
     if std_name is not None:
         where = f"{path}: uncertainty variable {std_name!r}"
@@ -180,11 +182,10 @@ def _netcdf_error(ds, var, std_name: str | None, depth: np.ndarray, depth_factor
                           where=where, factor=std_factor(std_var.attrs.get("units"), depth_factor, where))
         sources.insert(1, std_var.attrs)
     keys = (CORRELATION_ATTRIBUTE, "correlation_length_m", "correlation_length")
-    for attrs in sources:
-        length = correlation_length_from(attrs, keys, f"{path}:{std_name or var.name}")
-        if length is not None:
-            return std, length
-    return std, None
+    where = f"{path}:{std_name or var.name}"
+    length = next((v for a in sources if (v := correlation_length_from(a, keys, where)) is not None), None)
+    dof = next((v for a in sources if (v := error_dof_from(a, (DOF_ATTRIBUTE,), where)) is not None), None)
+    return std, length, dof
 
 
 def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=None, nodata=None,
@@ -210,7 +211,8 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         std_name = _netcdf_uncertainty(ds, variable, uncertainty, path)
         if tuple(var.dims) == ("north", "east") and "positive" in var.attrs:  # tangraph's own, older
             depth = var.copy(deep=False)
-            dropped = ("ancillary_variables",) + ((CORRELATION_ATTRIBUTE,) if uncertainty is False else ())
+            error_attributes = (CORRELATION_ATTRIBUTE, DOF_ATTRIBUTE)
+            dropped = ("ancillary_variables",) + (error_attributes if uncertainty is False else ())
             depth.attrs = {k: v for k, v in var.attrs.items() if k not in dropped}
             source = depth if std_name is None else xr.Dataset(
                 {"depth": depth.assign_attrs(ancillary_variables=std_name), std_name: ds[std_name]})
@@ -243,7 +245,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         depth_factor = _depth_factor(var.attrs.get("units"), units, crs_unit, where, variable)
         values = values * depth_factor
         factor = resolve_sign(values, var.attrs, variable, sign, f"{path}")
-        std, length = (None, None) if uncertainty is False else _netcdf_error(
+        std, length, dof = (None, None, None) if uncertainty is False else _netcdf_error(
             ds, var, std_name, values, depth_factor, nodata, path)
         y, x = np.asarray(ds[ydim].values, float), np.asarray(ds[xdim].values, float)
         if not geographic and crs_unit == 1.0:  # axes in feet with no CRS (or a metric one) saying so
@@ -255,7 +257,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         return _grid_to_map(
             y, x, factor * values, geographic=geographic, crs=the_crs, cell=cell, origin=origin,
             name=name or str(var.attrs.get("name", "")) or path.stem, where=where, variable=variable,
-            max_scale_error=max_scale_error, depth_std=std, correlation_length=length,
+            max_scale_error=max_scale_error, depth_std=std, correlation_length=length, error_dof=dof,
         )
 
 
@@ -272,8 +274,8 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
     (``pyproj.CRS.to_cf``: ``crs_wkt`` and the CF parameters), depth positive down; the map's
     own CRS string, origin and name as attributes of ``depth``, so it reads back in its frame.
     The map's error: ``depth_std`` (CF ``long_name``, ``standard_name`` "... standard_error",
-    units m) named by depth's CF ``ancillary_variables``, and the correlation length as depth's
-    attribute ``error_correlation_length_m``.
+    units m) named by depth's CF ``ancillary_variables``, the correlation length and the
+    Student-t tail as depth's attributes ``error_correlation_length_m`` and ``error_student_t_dof``.
 
     ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``; ``attrs`` adds
     global attributes, and its ``"depth"`` entry (a dict) attributes of the depth variable.

@@ -26,17 +26,19 @@ from tangraph.maps._common import (
     check_memory,
     checked_std,
     correlation_length_from,
+    error_dof_from,
     metric_crs,
     resolve_sign,
     std_factor,
 )
-from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, BathymetryMap
+from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, DOF_ATTRIBUTE, BathymetryMap
 
 __all__ = ["Raster", "open_raster", "raster_crs", "read_geotiff", "write_geotiff"]
 
 _DEPTH_TAGS = {"positive": "down", "standard_name": "sea_floor_depth_below_sea_surface", "units": "m"}
 #: the dataset tag of a tangraph GeoTIFF that holds the correlation length of the map's error
 _CORRELATION_TAG = "TANGRAPH_" + CORRELATION_ATTRIBUTE.upper()
+_DOF_TAG = "TANGRAPH_" + DOF_ATTRIBUTE.upper()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -190,16 +192,18 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
     if own and sign is None and own.get("positive") in ("down", "up"):
         attrs = {"positive": own["positive"]}
     depth = resolve_sign(values, attrs, variable, sign, str(path)) * values
-    std = length = None
+    std = length = dof = None
     if std_band is not None:
         band = raster.descriptions[std_band] or f"band {std_band + 1}"
         where = f"{path}: uncertainty band {band!r}"
         std = checked_std(raster.bands[std_band], depth, nodata=None, where=where,
                           factor=std_factor(raster.units[std_band], factor, where))
         length = correlation_length_from(tags, (_CORRELATION_TAG,), str(path))
+        dof = error_dof_from(tags, (_DOF_TAG,), str(path))
     return _grid_to_map(raster.y, raster.x, depth, geographic=geographic, crs=crs, cell=cell,
                         name=name or own.get("name") or path.stem, where=str(path), variable=variable,
-                        max_scale_error=max_scale_error, depth_std=std, correlation_length=length)
+                        max_scale_error=max_scale_error, depth_std=std, correlation_length=length,
+                        error_dof=dof)
 
 
 def _tangraph_description(text: str) -> dict:
@@ -214,8 +218,9 @@ def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
     """A float32 GeoTIFF (DEFLATE, floating-point predictor), north up, NaN no-data, the map's CRS
     and bounds as GDAL reads them; depth positive down in the band's metadata. A map with a
     ``depth_std`` gets a second band holding it (description ``depth_std``, ``long_name``
-    "standard deviation of the error of depth", units m) and its ``correlation_length`` the
-    dataset tag ``TANGRAPH_ERROR_CORRELATION_LENGTH_M``."""
+    "standard deviation of the error of depth", units m), its ``correlation_length`` and
+    ``error_dof`` the dataset tags ``TANGRAPH_ERROR_CORRELATION_LENGTH_M`` and
+    ``TANGRAPH_ERROR_STUDENT_T_DOF``."""
     import pyproj
     import rasterio
     from rasterio.transform import Affine
@@ -236,6 +241,8 @@ def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
     tags = {"TANGRAPH_NAME": bathymetry.name, "TANGRAPH_CRS": bathymetry.crs or ""}
     if bathymetry.correlation_length is not None:
         tags[_CORRELATION_TAG] = repr(bathymetry.correlation_length)
+    if bathymetry.error_dof is not None:
+        tags[_DOF_TAG] = repr(bathymetry.error_dof)
     with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(path, "w", **profile) as dst:
         dst.write(np.ascontiguousarray(np.stack(layers)[:, ::-1], dtype=np.float32))
         dst.set_band_description(1, "depth")

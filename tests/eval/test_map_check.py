@@ -93,3 +93,39 @@ def test_the_tail_of_the_scores_is_fitted_by_its_degrees_of_freedom(dof):
     gaussian = MapCheck(np.random.default_rng(8).standard_normal(4000), np.zeros(4000, int), ("n",), 50.0)
     assert gaussian.misfit_dof > 30
     assert np.isnan(MapCheck(np.zeros(0), np.zeros(0, int), (), 50.0).misfit_dof)
+
+
+def test_the_tail_is_the_maximum_likelihood_student_t_with_its_scale():
+    """Scores of a Student-t of scale 2: the fit is scipy's maximum-likelihood one (the slow
+    reference), its scale never below 1, and a Gaussian's tail is none (its scale the RMS)."""
+    from scipy import stats
+
+    scores = 2.0 * np.random.default_rng(9).standard_t(2.5, 3000)
+    scale, dof = MapCheck(scores, np.zeros(scores.size, int), ("t",), 50.0).tail()
+    ref_dof, _, ref_scale = stats.t.fit(scores, floc=0.0)
+    assert scale == pytest.approx(ref_scale, rel=2e-3) and dof == pytest.approx(ref_dof, rel=5e-3)
+    narrow = MapCheck(scores / 4, np.zeros(scores.size, int), ("t",), 50.0)
+    assert narrow.tail() == (1.0, pytest.approx(narrow.misfit_dof))
+    normal = np.random.default_rng(10).standard_normal(3000) * 1.5
+    gaussian = MapCheck(normal, np.zeros(normal.size, int), ("n",), 50.0)
+    assert gaussian.tail()[1] > 30
+    assert np.isnan(MapCheck(normal[:0], np.zeros(0, int), (), 50.0).tail()).all()
+
+
+def test_calibrate_error_gives_the_map_the_tail_its_check_lines_found():
+    from tangraph.eval.map_check import calibrate_error
+    from tangraph.gridding_surveys import grid_surveys
+
+    rng = np.random.default_rng(4)
+    surveys = [line_survey(seafloor, rng, lines=np.arange(10.0, 390.0, 6.0) + 2.0 * i) for i in range(2)]
+    grid = grid_surveys(surveys, cell=5.0)
+    scores = 1.5 * np.random.default_rng(11).standard_t(1.5, 500)
+    check = MapCheck(scores, np.zeros(scores.size, int), ("a",), 50.0)
+    heavy = calibrate_error(grid, check)
+    scale, dof = check.tail()
+    assert heavy.error_scale == scale < check.rms and heavy.error_dof == dof < 3
+    assert heavy.depth.error_dof == dof
+    np.testing.assert_allclose(heavy.depth.depth_std, scale * grid.depth.depth_std)
+    assert heavy.meta["check_lines"]["misfit_dof"] == pytest.approx(dof, abs=1e-4)
+    plain = calibrate_error(grid, MapCheck(3.0 * rng.standard_normal(500), np.zeros(500, int), ("a",), 50.0))
+    assert plain.error_dof is None and plain.depth.error_dof is None

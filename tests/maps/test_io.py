@@ -131,3 +131,24 @@ def test_missing_and_unreadable_files_are_named(tmp_path):
         read_map(bad_tif)
     with pytest.raises(MapFormatError, match="suffix '.dat'"):
         read_map(tmp_path / "x.dat")
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".tif", ".npz"])
+def test_the_tail_of_the_map_error_round_trips(tmp_path, suffix):
+    m = error_map().replace(error_dof=1.9)
+    back = read_map(write_map(m, tmp_path / f"m{suffix}"))
+    assert back.error_dof == 1.9
+    assert read_map(tmp_path / f"m{suffix}", uncertainty=False).error_dof is None
+    assert read_map(write_map(error_map(), tmp_path / f"plain{suffix}")).error_dof is None
+
+
+def test_a_bad_tail_of_the_map_error_is_refused_naming_the_file(tmp_path):
+    import xarray as xr
+
+    path = write_map(error_map().replace(error_dof=1.9), tmp_path / "m.nc")
+    with xr.open_dataset(path) as ds:
+        bad = ds.load()
+    bad["depth"].attrs["error_student_t_dof"] = -2.0
+    bad.to_netcdf(tmp_path / "bad.nc")
+    with pytest.raises(MapFormatError, match=r"bad.nc.*'error_student_t_dof'.*> 0, got -2.0"):
+        read_map(tmp_path / "bad.nc")

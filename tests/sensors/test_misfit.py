@@ -68,3 +68,19 @@ def test_the_navigation_model_refuses_bad_misfit_settings(field, value):
 def test_residuals_smaller_than_stated_do_not_make_the_soundings_more_precise():
     scale = MisfitScale.prior(2.0, 1e9).after(np.array([1.0]), np.array([50.0]), np.array([1.0]))
     assert scale.shape == 26.0 and scale.factor == 1.0
+
+
+def test_a_map_that_states_its_tail_gives_the_filters_their_prior():
+    """The map's ``error_dof`` (from its check lines) wins over the model's ``misfit_dof``, the
+    default for a map that states none, as a map's ``depth_std`` wins over ``map_std``."""
+    from tangraph.filters.model import FilterModel
+    from tangraph.maps import fractal
+
+    chart = fractal((20, 20), 5.0, rng=np.random.default_rng(0))
+    stating = chart.replace(error_dof=1.9)
+    plain = NavigationModel(sounding_std=0.3)
+    assert FilterModel.from_model(plain, chart).misfit_prior() is None
+    assert FilterModel.from_model(plain, stating).misfit_prior() == MisfitScale.prior(1.9, 200.0)
+    told = NavigationModel(sounding_std=0.3, misfit_dof=4.0, misfit_length=50.0)
+    assert FilterModel.from_model(told, chart).misfit_prior() == MisfitScale.prior(4.0, 50.0)
+    assert FilterModel.from_model(told, stating).misfit_prior() == MisfitScale.prior(1.9, 50.0)
