@@ -103,7 +103,8 @@ class MapCheck:
         scale never below 1 (a map is never made better than its gridding says: where the bulk
         of the scores is narrower, the degrees of freedom are fitted at scale 1). ``dof`` is
         ``inf`` when a Gaussian fits as well (the likelihood-ratio test of the Gaussian at 5 %,
-        on the boundary: half a chi-square(1), 2.71; the scale is then the RMS, at least 1);
+        on the boundary: half a chi-square(1), 2.71, at the scale kept; the scale is then the
+        RMS, at least 1);
         ``(NaN, NaN)`` with no window."""
         if not self.scores.size:
             return float("nan"), float("nan")
@@ -121,10 +122,12 @@ class MapCheck:
         gaussian = -float(np.sum(stats.norm.logpdf(scores, scale=max(self.rms, 1e-12))))
         if dof > 0.99 * _MAX_DOF or 2.0 * (gaussian - best.fun) < _GAUSSIAN_TEST:
             return max(1.0, self.rms), float("inf")
-        if scale < 1.0:  # the bulk better than stated: the tail at the stated scale
+        if scale < 1.0:  # the bulk better than stated: the tail at the stated scale, tested there
             unit = optimize.minimize_scalar(lambda x: cost(np.array([x, 0.0])), bounds=(low, high),
                                             method="bounded", options={"xatol": 1e-4})
             dof, scale = float(np.exp(unit.x)), 1.0
+            if 2.0 * (-float(np.sum(stats.norm.logpdf(scores))) - unit.fun) < _GAUSSIAN_TEST:
+                return 1.0, float("inf")
         if dof > 0.99 * _MAX_DOF:
             return max(1.0, self.rms), float("inf")
         return scale, dof
