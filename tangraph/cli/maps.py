@@ -136,7 +136,9 @@ def _grid_summary(grid, *, cell: float, fill: int, output: Path) -> str:
         f"({cell:g} m, {grid.statistic}); {grid.n_filled} more filled by --fill {fill}; "
         f"dropped {grid.n_dropped} without depth; "
         + (f"map error: std median {error['depth_std_m']['median']:.3f} m, max "
-           f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m; "
+           f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m"
+           + (f", a Student-t tail of {grid.error_dof:.3g} degrees of freedom" if grid.error_dof else "")
+           + ("" if "check_lines" in grid.meta else " (the gridding's own: --check-lines tests it)") + "; "
            if error else "map error: not told by these soundings (no depth_std written); ")
         + f"wrote {output}"
     )

@@ -258,6 +258,8 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     # one day off by 0.8 m over half the area: a tail heavier than a Gaussian's, kept in the file
     dof = float(out.split("Student-t of ")[2].split()[0])
     assert read_map(checked).error_dof == pytest.approx(dof, abs=0.006) and read_map(plain).error_dof is None
+    assert out.count("(the gridding's own: --check-lines tests it)") == 1  # the plain map's line only
+    assert f"a Student-t tail of {dof:.3g} degrees of freedom; wrote {checked}" in out
     # the same figures from `maps check`
     assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
     assert f"Student-t of scale {scale:.2f}" in capsys.readouterr().out
