@@ -147,6 +147,7 @@ class GraphNavigator:
         self.index = -1  # last ping processed
         self._key_pose = np.zeros(3)  # DR frame
         self._key_joint = np.zeros((5, 5))  # (pose in DR-frame world coordinates, c)
+        self._key_of = -1  # the key whose estimate _key_pose and _key_joint hold
         self.calibration = self.model.calibration_prior.copy()
         self.pose = np.full((n, 3), np.nan)
         self.covariance = np.full((n, 3, 3), np.nan)
@@ -254,8 +255,21 @@ class GraphNavigator:
                 online_fixes.tide_step(self, k)
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
                                                       break_std=extra))
-        self._update(k)
+        self._update(k, self._odometry_only(prev, extra, joint))
         self._rebase(k)
+
+    def _odometry_only(self, prev: int, extra: float, predicted: np.ndarray) -> np.ndarray | None:
+        """The new key's joint covariance with the calibration when the odometry from key ``prev``
+        is all the update adds (no fix, break, removal or tide): the ``predicted`` joint (the
+        latest key's carried by the increment) with the odometry factor's floors. If the update
+        relinearises no other variable (:meth:`_update` checks) it is iSAM2's marginal (a linear
+        chain grown by one between factor; marginalising old poses leaves it), for a fraction of
+        a joint marginal's cost. None otherwise."""
+        if extra > 0 or self._key_of != prev or self.tide or self._remove or self._new_factors.size() != 1:
+            return None
+        # between_noise's floors, isotropic in position: the same in the world as in the key's frame
+        floor = [self.graph.min_std**2, self.graph.min_std**2, self.graph.min_heading_std**2, 0.0, 0.0]
+        return predicted + np.diag(floor)
 
     def _grow_window(self, k: int) -> None:
         """The point-mass front end's next window: the pings after ``k``, or, when the window
@@ -298,7 +312,11 @@ class GraphNavigator:
     def _grown(self, fix: TerrainFix, laid, joint) -> TerrainFix:
         return online_fixes.grown(self, fix, laid, joint)
 
-    def _update(self, k: int) -> None:
+    def _update(self, k: int, propagated: np.ndarray | None = None) -> None:
+        """One iSAM2 update with the new factors; the estimate of key ``k`` and its joint
+        covariance with the calibration (``propagated``: that joint carried from the latest
+        key by :meth:`_odometry_only`, taken instead of the Bayes tree's joint marginal when the
+        update marked no variable but the two the odometry joins)."""
         started = _time.perf_counter()
         stamps = gtsam.FixedLagSmootherKeyTimestampMap()
         for key in self._new_values.keys():
@@ -321,18 +339,23 @@ class GraphNavigator:
         pose[2] = wrap_near(pose[2], self.survey.dr_pose[k, 2])
         if self.graph.calibrated:
             self.calibration = np.asarray(self.isam.calculateEstimateVector(CALIBRATION), float)
+        marked = self.smoother.getISAM2Result().getMarkedKeys()
+        if propagated is not None and set(marked) <= {self._key_of, k}:
+            self._key_joint = propagated  # the update marked only the two keys the odometry joins
+        elif self.graph.calibrated:
             # the key pose with the calibration (and the tide when held), one joint marginal
             keys = (k, CALIBRATION, self.tide_key) if self.tide else (k, CALIBRATION)
             marginal = self.isam.jointMarginalCovariance(gtsam.KeyVector(list(keys)))
             full = np.block([[marginal.at(a, b) for b in keys] for a in keys])
-            joint = full[:5, :5]
+            self._key_joint = joint_in_frame(pose[2], full[:5, :5])
             if self.tide:
                 self._tide_mean = float(self.isam.calculateEstimateVector(self.tide_key)[0])
                 self._tide_joint = joint_in_frame(pose[2], full)
         else:
             joint = np.zeros((5, 5))
             joint[:3, :3] = self.isam.marginalCovariance(k)
-        self._key_pose, self._key_joint = pose, joint_in_frame(pose[2], joint)
+            self._key_joint = joint_in_frame(pose[2], joint)
+        self._key_pose, self._key_of = pose, k
         self.update_times.append(_time.perf_counter() - started)
         self.pose[k], self.covariance[k] = self._world(self._key_pose, self._key_joint)
 

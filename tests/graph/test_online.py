@@ -283,3 +283,30 @@ def test_the_online_graph_learns_the_tide_from_its_windows(rough_map):
     model = dataclasses.replace(NavigationModel.from_survey(survey), tide=1.5, tide_std=0.0)
     known = navigate_online(survey, rough_map, GraphConfig().replace(front_end="pmf"), model=model)
     assert "tide" not in known.meta
+
+
+def test_a_key_added_by_odometry_alone_takes_the_propagated_marginal(small_survey, rough_map, monkeypatch):
+    """Where an update adds only the odometry into a key, its joint covariance with the
+    calibration is the latest key's carried by the increment, not the Bayes tree's joint marginal:
+    the same track and covariances as with the marginal at every key (to the relinearisation's
+    differences), for a fraction of the cost."""
+    config = GraphConfig().replace(key_interval=5.0)
+    used = []
+    real = GraphNavigator._odometry_only
+
+    def counted(self, prev, extra, predicted):
+        joint = real(self, prev, extra, predicted)
+        used.append(joint is not None)
+        return joint
+
+    monkeypatch.setattr(GraphNavigator, "_odometry_only", counted)
+    fast = GraphNavigator(small_survey, rough_map, config).run().track()
+    monkeypatch.setattr(GraphNavigator, "_odometry_only", lambda self, prev, extra, predicted: None)
+    exact = GraphNavigator(small_survey, rough_map, config).run().track()
+    assert fast.meta["n_fixes_accepted"] == exact.meta["n_fixes_accepted"] > 3
+    assert 0.5 < np.mean(used) < 1.0  # most keys carried, those with a fix from the Bayes tree
+    np.testing.assert_allclose(fast.pose, exact.pose, atol=1e-3)
+    std_fast = np.sqrt(np.trace(fast.covariance[:, :2, :2], axis1=1, axis2=2))
+    std_exact = np.sqrt(np.trace(exact.covariance[:, :2, :2], axis1=1, axis2=2))
+    np.testing.assert_allclose(std_fast, std_exact, rtol=1e-3)
+    assert np.any(std_fast != std_exact)  # carried, not asked of the Bayes tree, somewhere
