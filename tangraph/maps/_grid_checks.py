@@ -105,29 +105,29 @@ def check_depth_std(std, depth: np.ndarray, where: str) -> np.ndarray:
     return std
 
 
+def _positive(value, where: str, what: str) -> float:
+    """``value`` as a float if it is finite and > 0, else a one-line `MapFormatError` beginning
+    with ``where`` and saying ``what`` it must be."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if isinstance(value, bool) or not (math.isfinite(number) and number > 0):
+        shown = value.item() if isinstance(value, np.generic) else value
+        raise MapFormatError(f"{where} must be {what}, got {shown!r}")
+    return number
+
+
 def check_correlation_length(value, where: str) -> float:
     """``value`` as a float if it is a finite length > 0 (metres), else a one-line
     `MapFormatError` beginning with ``where``."""
-    try:
-        length = float(value)
-    except (TypeError, ValueError):
-        length = math.nan
-    if isinstance(value, bool) or not (math.isfinite(length) and length > 0):
-        raise MapFormatError(f"{where} must be a finite length > 0 m, got {value!r}")
-    return length
+    return _positive(value, where, "a finite length > 0 m")
 
 
 def check_error_dof(value, where: str) -> float:
     """``value`` as a float if it is a finite number of degrees of freedom > 0, else a one-line
     `MapFormatError` beginning with ``where``."""
-    try:
-        dof = float(value)
-    except (TypeError, ValueError):
-        dof = math.nan
-    if isinstance(value, bool) or not (math.isfinite(dof) and dof > 0):
-        shown = value.item() if isinstance(value, np.generic) else value
-        raise MapFormatError(f"{where} must be a finite number of degrees of freedom > 0, got {shown!r}")
-    return dof
+    return _positive(value, where, "a finite number of degrees of freedom > 0")
 
 
 def as_query(north, east) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
