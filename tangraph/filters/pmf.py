@@ -198,29 +198,39 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
 
 def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray):
     """Weigh every point by the ping; returns the predicted state's belief view, the update and
-    whether any point had the map under it."""
+    whether any point had the map under it. Points of zero density (``-inf``: they stay so
+    whatever the ping says) are not weighed: the other points' likelihoods are the same (a
+    point of zero weight counts for nothing in the sub-cloud means and exponents), their tide
+    means are kept."""
     if ping.n_soundings == 0:
         return None, None
-    points = state.points()
-    n_points = state.n * state.n
     log_mass = (state.log_density - np.max(state.log_density)).ravel()
+    live = np.flatnonzero(log_mass > -np.inf)
+    log_mass = log_mass[live]
     weights = np.exp(log_mass)
+    points = state.points()[live]
+    tide = state.tide.ravel()[live]
+    turn = state.nodes[live // (state.n * state.n), 1]
     resolution = float(np.trace(state.axes.T @ slope @ state.axes)) / 12.0
     update = model.terrain.evaluate(
-        points, state.tide.ravel(), state.tide_var, ping, np.repeat(state.nodes[:, 1], n_points),
-        weights=weights, scale=state.misfit, extra_variance=resolution,
+        points, tide, state.tide_var, ping, turn, weights=weights, scale=state.misfit,
+        extra_variance=resolution,
     )  # fmt: skip
     if np.all(np.isneginf(update.log_likelihood)):
         return None, None  # no point has the map under any sounding: no information
-    view = Belief(points, log_mass - np.log(weights.sum()), state.tide.ravel(), state.tide_var,
+    view = Belief(points, log_mass - np.log(weights.sum()), tide, state.tide_var,
                   np.empty((points.shape[0], 0)), np.empty(0))
     check = innovation(view, update, ping, model)
-    posterior = state.log_density + update.log_likelihood.reshape(state.log_density.shape)
-    _, log_total = log_normalise(posterior.ravel(), where=f"pmf ping {ping.index}")
-    state.log_density = posterior - log_total - np.log(state.cell_area)
-    state.tide = update.tide.reshape(state.tide.shape)
+    flat = state.log_density.ravel()
+    posterior = np.full(flat.shape, -np.inf)
+    posterior[live] = flat[live] + update.log_likelihood
+    _, log_total = log_normalise(posterior, where=f"pmf ping {ping.index}")
+    state.log_density = (posterior - log_total - np.log(state.cell_area)).reshape(state.log_density.shape)
+    new_tide = state.tide.ravel().copy()
+    new_tide[live] = update.tide
+    state.tide = new_tide.reshape(state.tide.shape)
     state.tide_var = update.tide_var
-    state.misfit = update.scale_after(np.exp(posterior.ravel() - np.max(posterior)))
+    state.misfit = update.scale_after(np.exp(posterior[live] - np.max(posterior)))
     return check, update
 
 
@@ -237,7 +247,7 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
     at the posterior the ping gives (adaptive Gauss-Hermite quadrature) and the ping weighed
     again, at most ``_MAX_REFINE`` times."""
     for attempt in range(_MAX_REFINE + 1):
-        trial = dataclasses.replace(state)  # fields are replaced, never changed in place
+        trial = state.copy()  # fields are replaced, never changed in place
         check, update = _update(trial, ping, model, slope)
         if update is None or attempt == _MAX_REFINE:
             return trial, check, update

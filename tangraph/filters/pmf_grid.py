@@ -8,8 +8,9 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
+import numba
 import numpy as np
 import scipy.fft
 from scipy import ndimage
@@ -28,6 +29,15 @@ __all__ = ["PointMass"]
 _EDGE_MASS = 1e-3
 # the density's std in grid spacings may drift this factor from the target before a re-grid
 _SPREAD_RATIO = 1.6
+
+
+# the fields each of PointMass's cached values is derived from
+_DEPENDS = {
+    "offsets": ("axes", "log_density"),
+    "masses": ("log_density",),
+    "member_moments": ("log_density", "nodes", "axes", "centres"),
+    "member_log_mass": ("log_density", "nodes", "axes"),
+}
 
 
 @dataclasses.dataclass(eq=False)
@@ -56,6 +66,31 @@ class PointMass:
     prior: tuple[np.ndarray, np.ndarray]
     placed: tuple[np.ndarray, np.ndarray]
     misfit: MisfitScale | None = None
+    # what the methods below derive from the fields (read-only arrays), each dropped when a field
+    # it depends on (_DEPENDS) is set: the fields are replaced, never changed in place
+    _cache: dict[str, np.ndarray | tuple[np.ndarray, ...]] = dataclasses.field(
+        default_factory=dict, init=False, repr=False)
+
+    def __setattr__(self, name: str, value) -> None:
+        object.__setattr__(self, name, value)
+        cache = self.__dict__.get("_cache")
+        if cache:
+            for key in [key for key in cache if name in _DEPENDS[key]]:
+                del cache[key]
+
+    def _cached(self, key: str, compute: Callable[[], Any]) -> Any:
+        if key not in self._cache:
+            value = compute()
+            for a in value if isinstance(value, tuple) else (value,):
+                a.setflags(write=False)
+            self._cache[key] = value
+        return self._cache[key]
+
+    def copy(self) -> PointMass:
+        """A copy whose fields can be replaced without changing this state."""
+        out = dataclasses.replace(self)
+        out._cache.update(self._cache)
+        return out
 
     @property
     def n(self) -> int:
@@ -63,9 +98,7 @@ class PointMass:
 
     def offsets(self) -> np.ndarray:
         """The grid's points relative to a member's centre, ``(n * n, 2)`` (row-major)."""
-        h = (self.n - 1) / 2.0
-        i, j = np.meshgrid(np.arange(self.n) - h, np.arange(self.n) - h, indexing="ij")
-        return np.column_stack([i.ravel(), j.ravel()]) @ self.axes.T
+        return self._cached("offsets", lambda: _offsets(self.n, self.axes))
 
     def points(self) -> np.ndarray:
         """Every member's points, ``(M * n * n, 2)``."""
@@ -77,20 +110,21 @@ class PointMass:
 
     def masses(self) -> np.ndarray:
         """Each point's probability, ``(M, n, n)`` (sums to 1)."""
+        return self._cached("masses", self._masses)
+
+    def _masses(self) -> np.ndarray:
         w = np.exp(self.log_density - np.max(self.log_density))
         return w / w.sum()
 
     def member_moments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Each member's mass ``(M,)``, mean ``(M, 2)`` and covariance ``(M, 2, 2)`` (of its
         points; zero-mass members: their centre and a zero covariance)."""
-        mass = self.masses().reshape(len(self.nodes), -1)
-        weight = mass.sum(axis=1)
-        offsets = self.offsets()
-        with np.errstate(invalid="ignore", divide="ignore"):
-            w = np.where(weight[:, None] > 0, mass / weight[:, None], 0.0)
-        local = w @ offsets
-        d = offsets[None] - local[:, None]
-        cov = np.einsum("mp,mpi,mpj->mij", w, d, d)
+        return self._cached("member_moments", self._member_moments)
+
+    def _member_moments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        m = len(self.nodes)
+        weight, local, cov = np.empty(m), np.empty((m, 2)), np.empty((m, 2, 2))
+        _moments_kernel(self.masses().reshape(m, -1), self.offsets(), weight, local, cov)
         return weight, self.centres + local, cov
 
     def within(self) -> np.ndarray:
@@ -109,6 +143,9 @@ class PointMass:
 
     def member_log_mass(self) -> np.ndarray:
         """Each member's log mass ``(M,)`` (computed in logs: no underflow however unlikely)."""
+        return self._cached("member_log_mass", self._member_log_mass)
+
+    def _member_log_mass(self) -> np.ndarray:
         flat = self.log_density.reshape(len(self.nodes), -1)
         top = np.max(flat, axis=1)
         safe = np.where(np.isfinite(top), top, 0.0)
@@ -119,6 +156,42 @@ class PointMass:
         """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the prior at
         placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`)."""
         return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior)[:2]
+
+
+@numba.njit(cache=True, nogil=True)
+def _moments_kernel(mass, offsets, weight, local, cov):
+    """Each member's mass ``weight[m]``, the mean ``local[m]`` of the grid's ``offsets (P, 2)``
+    under its points' ``mass (M, P)`` and their covariance ``cov[m]`` (0 for a member of no
+    mass)."""
+    for m in range(mass.shape[0]):
+        total = 0.0
+        for p in range(mass.shape[1]):
+            total += mass[m, p]
+        weight[m] = total
+        mean = np.zeros(2)
+        c = np.zeros(3)
+        if total > 0.0:
+            for p in range(mass.shape[1]):
+                w = mass[m, p] / total
+                mean[0] += w * offsets[p, 0]
+                mean[1] += w * offsets[p, 1]
+            for p in range(mass.shape[1]):
+                w = mass[m, p] / total
+                dn = offsets[p, 0] - mean[0]
+                de = offsets[p, 1] - mean[1]
+                c[0] += w * dn * dn
+                c[1] += w * dn * de
+                c[2] += w * de * de
+        local[m, 0], local[m, 1] = mean[0], mean[1]
+        cov[m, 0, 0], cov[m, 0, 1], cov[m, 1, 0], cov[m, 1, 1] = c[0], c[1], c[1], c[2]
+
+
+def _offsets(n: int, axes: np.ndarray) -> np.ndarray:
+    """The points of an ``n x n`` grid of steps ``axes (2, 2)`` relative to its centre, ``(n * n,
+    2)`` (row-major)."""
+    h = (n - 1) / 2.0
+    i, j = np.meshgrid(np.arange(n) - h, np.arange(n) - h, indexing="ij")
+    return np.column_stack([i.ravel(), j.ravel()]) @ axes.T
 
 
 def _gaussian_convolve(values: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -153,12 +226,13 @@ def _diffuse(state: PointMass) -> None:
     cov = inv @ state.pending @ inv.T
     top = np.max(state.log_density)
     p = np.exp(state.log_density - top)
-    smoothed = np.maximum(_gaussian_convolve(p, cov), 0.0)  # less round-off below zero
-    if state.tide_var > 0:
-        state.tide, state.tide_var = _mixed_tide(
-            smoothed, _gaussian_convolve(p * state.tide, cov), _gaussian_convolve(p * state.tide**2, cov),
-            state.tide_var,
-        )  # fmt: skip
+    if state.tide_var > 0:  # one transform of the density and its tide moments (the same values)
+        m = len(p)
+        out = _gaussian_convolve(np.concatenate([p, p * state.tide, p * state.tide**2]), cov)
+        smoothed = np.maximum(out[:m], 0.0)  # less round-off below zero
+        state.tide, state.tide_var = _mixed_tide(smoothed, out[m:2 * m], out[2 * m:], state.tide_var)
+    else:
+        smoothed = np.maximum(_gaussian_convolve(p, cov), 0.0)
     with np.errstate(divide="ignore"):
         state.log_density = np.where(smoothed > 1e-300, np.log(smoothed), -np.inf) + top
     state.pending = np.zeros((2, 2))
@@ -217,29 +291,36 @@ class _Grid:
 _SUPPORT_MASS = 1e-4
 
 
+def _held(size: np.ndarray, mass: np.ndarray, total: float) -> float:
+    """The smallest of ``size (P,)`` whose points of ``mass (P,)`` at that size or less hold all
+    but ``_SUPPORT_MASS`` of ``total``."""
+    order = np.argsort(size)
+    held = np.cumsum(mass[order])
+    at = min(int(np.searchsorted(held, (1.0 - _SUPPORT_MASS) * total)), size.size - 1)
+    return float(size[order][at])
+
+
 def _extent(offsets: np.ndarray, mass: np.ndarray) -> np.ndarray:
     """Per column of ``offsets (P, A)`` the smallest half-width holding all but
     ``_SUPPORT_MASS`` of ``mass (P,)``."""
-    out = np.empty(offsets.shape[1])
     total = mass.sum()
-    for a in range(offsets.shape[1]):
-        size = np.abs(offsets[:, a])
-        order = np.argsort(size)
-        held = np.cumsum(mass[order])
-        out[a] = size[order][min(np.searchsorted(held, (1.0 - _SUPPORT_MASS) * total), size.size - 1)]
-    return out
+    return np.array([_held(np.abs(offsets[:, a]), mass, total) for a in range(offsets.shape[1])])
 
 
 def _significant(state: PointMass) -> np.ndarray:
     """The half-widths in grid steps, per grid axis, that hold the density's support about
-    each member's mean."""
+    each member's mean (:func:`_extent` of the grid's rows and columns: a row's points share
+    their offset along the first axis, a column's along the second)."""
     i, j = np.meshgrid(np.arange(state.n), np.arange(state.n), indexing="ij")
     index = np.column_stack([i.ravel(), j.ravel()]).astype(np.float64)
-    mass = state.masses().reshape(len(state.nodes), -1)
+    masses = state.masses()
+    mass = masses.reshape(len(state.nodes), -1)
     weight = mass.sum(axis=1, keepdims=True)
     centre = (mass @ index) / np.where(weight > 0, weight, 1.0)
-    offsets = (index[None, :, :] - centre[:, None, :]).reshape(-1, 2)
-    return _extent(offsets, mass.ravel())
+    total = mass.sum()
+    line = np.arange(state.n, dtype=np.float64)
+    return np.array([_held(np.abs(line[None, :] - centre[:, a, None]).ravel(), held.ravel(), total)
+                     for a, held in enumerate((masses.sum(axis=2), masses.sum(axis=1)))])
 
 
 def _support(state: PointMass, centres: np.ndarray):
