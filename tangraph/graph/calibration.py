@@ -30,7 +30,7 @@ from functools import partial
 import gtsam
 import numpy as np
 
-from tangraph.geometry import from_dr_frame, rotation_matrix
+from tangraph.geometry import from_dr_frame, rotation_matrix, wrap_angle
 from tangraph.graph.factors import robust_noise
 
 __all__ = [
@@ -38,6 +38,7 @@ __all__ = [
     "MAP_OFFSET",
     "TIDE",
     "calibration_prior_factor",
+    "calibration_summary",
     "graph_calibration_std",
     "joint_in_frame",
     "position_tide_factor",
@@ -180,3 +181,21 @@ def calibration_prior_factor(mean, std) -> gtsam.NonlinearFactor:
     """The Gaussian prior of ``c = (k, b)``."""
     return gtsam.PriorFactorVector(CALIBRATION, np.asarray(mean, float),
                                    gtsam.noiseModel.Diagonal.Sigmas(np.asarray(std, float)))
+
+
+def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
+    """The calibration as a track reports it: ``speed_scale`` and ``heading_bias`` (the constant
+    errors) with their stds, and ``heading_error`` (DR minus true heading at ``pose``: the bias
+    plus the heading walk so far) with its std; ``joint (5, 5)`` is the covariance of the
+    DR-frame ``pose`` and the calibration."""
+    joint = np.asarray(joint, float)
+    error = float(wrap_angle(dr_heading - (pose[2] - calibration[1])))
+    grad = np.array([0.0, 0.0, -1.0, 0.0, 1.0])
+    return {
+        "speed_scale": float(calibration[0]),
+        "speed_scale_std": float(np.sqrt(max(joint[3, 3], 0.0))),
+        "heading_bias": float(calibration[1]),
+        "heading_bias_std": float(np.sqrt(max(joint[4, 4], 0.0))),
+        "heading_error": error,
+        "heading_error_std": float(np.sqrt(max(grad @ joint @ grad, 0.0))),
+    }

@@ -191,6 +191,17 @@ class OnlineConfig:
         :func:`tangraph.graph.online_fixes.tide_step`). It is for clean simulated data: shifted
         footprints and a wrong start make it fail where TAP holds (the robustness study), and
         on a recorded lake survey it converged on the map's noise (the caputh_replay study).
+    terrain : {"fixes", "soundings"}
+        What the online graph weighs of the terrain once it has found the vehicle: ``"fixes"``,
+        a window's fix (``front_end``) at every window end (default); ``"soundings"``, every
+        sounding (:mod:`tangraph.graph.online_terrain`): once the fix policy has used a fix and
+        is not lost, and while the map is near its tangent plane over the belief, the soundings
+        of each key's pings enter iSAM2 as one terrain factor on that key, the calibration and
+        the tide (a variable then), relinearised with them, and no window is made over those
+        pings; when the belief grows too wide for the linearisation or most of the pings stop
+        fitting the map, the windows and their fixes take over again. Only with ``front_end = "tap"``; the
+        batch smoother's forward pass always weighs fixes (``BatchConfig.smoother_terrain``
+        chooses its terrain).
     front_end_pings : int
         Pings per window of the point-mass front end, so only with ``front_end = "pmf"`` (another
         value with ``"tap"`` is refused: it would not be used; default 3: on three seeds each of
@@ -236,6 +247,7 @@ class OnlineConfig:
     """
 
     front_end: Literal["tap", "pmf"] = "tap"
+    terrain: Literal["fixes", "soundings"] = "fixes"
     front_end_pings: int = _FRONT_END_PINGS
     relinearize_threshold: float = 0.005
     relinearize_position: float = 1.0
@@ -247,6 +259,11 @@ class OnlineConfig:
 
     def __post_init__(self) -> None:
         _choice(self, "front_end", ("tap", "pmf"))
+        _choice(self, "terrain", ("fixes", "soundings"))
+        if self.terrain == "soundings" and self.front_end != "tap":
+            raise TangraphError("OnlineConfig: terrain = 'soundings' takes over from TAP windows once the "
+                                f"vehicle is found, not from front_end = {self.front_end!r}: set "
+                                "front_end = 'tap' or terrain = 'fixes'")
         _integer(self, "front_end_pings", 1)
         if self.front_end == "tap" and self.front_end_pings != _FRONT_END_PINGS:
             raise TangraphError(f"OnlineConfig: front_end_pings = {self.front_end_pings} is the point-mass "
@@ -259,6 +276,12 @@ class OnlineConfig:
         _probability(self, "confirm_probability", optional=True)
         _integer(self, "lost_windows", 1, optional=True)
         _integer(self, "relocalise_fixes", 1)
+
+    @property
+    def learns_tide(self) -> bool:
+        """Whether the online graph's terrain tells the tide (the point-mass front end's windows,
+        the soundings while tracking): it then holds the tide as a variable."""
+        return self.front_end == "pmf" or self.terrain == "soundings"
 
 
 @dataclasses.dataclass(frozen=True)

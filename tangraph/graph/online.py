@@ -33,11 +33,12 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.fix_records import FixRecord, FixStatus
-from tangraph.geometry import wrap_angle, wrap_near
+from tangraph.geometry import wrap_near
 from tangraph.graph import online_fixes
 from tangraph.graph.calibration import (
     CALIBRATION,
     TIDE,
+    calibration_summary,
     graph_calibration_std,
     joint_in_frame,
     to_world,
@@ -48,6 +49,7 @@ from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.fixes import FixOutcome, LostEpisode
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import take_window
+from tangraph.graph.online_terrain import OnlineTerrain
 from tangraph.graph.policy import FixPolicy, PolicyState
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import TerrainFix
@@ -105,16 +107,17 @@ class GraphNavigator:
         if c.online.front_end == "pmf":
             self._terrain = online_fixes.window_terrain(survey, bathymetry, self.model)
             self._window_start = 0  # the first ping of the front end's next window
-        # the point-mass front end's windows tell the tide too: the graph holds it (a constant,
-        # never marginalised), so what one window learnt of it sharpens the next
+        # the point-mass front end's windows (and the soundings while tracking) tell the tide too:
+        # the graph holds it (a constant, never marginalised), so what it learnt sharpens the next
         calibration_std = graph_calibration_std(self.model)
-        self.tide = c.online.front_end == "pmf" and calibration_std is not None and self.model.tide_std > 0
+        self.tide = c.online.learns_tide and calibration_std is not None and self.model.tide_std > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
         self._tide_mean = float(self.model.tide)
         self.tide_key = TIDE  # the tide's GTSAM key: a new one after each step of the tide
         self._faults: list[tuple[int, float]] = []  # the depth faults since the last ordinary window
         self.tide_steps: list[int] = []
         self._last_outcome: FixOutcome | None = None
+        self.terrain = OnlineTerrain.of(self) if c.online.terrain == "soundings" else None
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.zeros(n, bool)
         self._is_end[self.fix_ends] = True
@@ -248,7 +251,12 @@ class GraphNavigator:
         grows = self.config.online.front_end == "pmf" and self._is_end[k] and fix is None
         if grows:
             self.window_first[k] = self._window_start
-        extra = take_window(self, k, pose, joint, fix)
+        if self.terrain is not None:  # every sounding once the vehicle is found
+            self.terrain.key_step(self, prev, k)
+        window = self.terrain is None or fix is not None or self.terrain.window_allowed(self, k)
+        extra = take_window(self, k, pose, joint, fix) if window else 0.0
+        if window and self.terrain is not None and self._is_end[k]:
+            self.terrain.window_taken(k)
         if grows:
             self._grow_window(k)
             if self.tide:
@@ -408,6 +416,7 @@ class GraphNavigator:
             **({"tide": {"tide": self._tide_mean, "tide_std": float(np.sqrt(self._tide_joint[5, 5])),
                          "steps": list(self.tide_steps)}}
                if self.tide else {}),
+            **({"terrain": self.terrain.meta()} if self.terrain is not None else {}),
             "config": self.config.as_dict(),
             "model": self.model.as_dict(),
         }
@@ -429,24 +438,6 @@ class GraphNavigator:
         }
         return Track(time=self.survey.time[:done], pose=self.pose[:done], covariance=self.covariance[:done],
                      method="isam2", timings=timings, meta=self.meta(), fixes=tuple(self.fixes))
-
-
-def calibration_summary(calibration, joint, pose, dr_heading: float) -> dict:
-    """The calibration as a track reports it: ``speed_scale`` and ``heading_bias`` (the constant
-    errors) with their stds, and ``heading_error`` (DR minus true heading at ``pose``: the bias
-    plus the heading walk so far) with its std; ``joint (5, 5)`` is the covariance of the
-    DR-frame ``pose`` and the calibration."""
-    joint = np.asarray(joint, float)
-    error = float(wrap_angle(dr_heading - (pose[2] - calibration[1])))
-    grad = np.array([0.0, 0.0, -1.0, 0.0, 1.0])
-    return {
-        "speed_scale": float(calibration[0]),
-        "speed_scale_std": float(np.sqrt(max(joint[3, 3], 0.0))),
-        "heading_bias": float(calibration[1]),
-        "heading_bias_std": float(np.sqrt(max(joint[4, 4], 0.0))),
-        "heading_error": error,
-        "heading_error_std": float(np.sqrt(max(grad @ joint @ grad, 0.0))),
-    }
 
 
 def _translate(exc: Exception, graph: PoseGraph) -> Exception:

@@ -33,11 +33,11 @@ from tangraph.graph.batch import (
     marginals,
     metis_ordering,
 )
-from tangraph.graph.calibration import CALIBRATION, joint_in_frame
+from tangraph.graph.calibration import CALIBRATION, calibration_summary, joint_in_frame
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph
-from tangraph.graph.online import GraphNavigator, _translate, calibration_summary
+from tangraph.graph.online import GraphNavigator, _translate
 from tangraph.graph.robust import gnc
 from tangraph.graph.terrain_solve import terrain_solve
 from tangraph.maps.grid import BathymetryMap
@@ -310,6 +310,8 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     started = _time.perf_counter()
     if isinstance(config, GraphConfig) and config.online.front_end != "tap":  # the online graph's only
         config = config.replace(front_end="tap")
+    if isinstance(config, GraphConfig) and config.online.terrain != "fixes":  # so is its tracking
+        config = config.replace(terrain="fixes")
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
     forward = _time.perf_counter()
     config = nav.config

@@ -1,0 +1,230 @@
+"""Every sounding in the online graph once it has found the vehicle: a terrain factor per key.
+
+With ``GraphConfig.online.terrain = "soundings"`` the online navigator works in two modes, as
+terrain-aided navigation systems have since SITAN: TAP windows and the fix policy *acquire* the
+vehicle, and once it is found the navigator *tracks* it on every sounding.
+
+It tracks while the fix policy is not lost and has used a fix, and the map is near its tangent
+plane over the belief: over the key's position covariance the map's depth under the new pings'
+footprints departs from its linearisation by less than the soundings' noise
+(:func:`_nonlinearity`), so a Gauss-Newton step on them is sound. Then at each key step the
+soundings of the pings hung from the previous key (its own ping and those before the new key,
+less any ping a window's fix holds) enter iSAM2 as one factor on that key pose, the calibration
+and the tide. This is the batch smoother's terrain model (:mod:`tangraph.graph.terrain_factors`):
+every sounding's residual against the map's depth at its footprint, with the row-sum variance of
+the map's error and the white DR noise between the key and its ping. The factor is whitened
+and iSAM2 relinearises it with its variables. The soundings are judged once, as innovations of
+the prediction (:func:`~tangraph.graph.terrain_factors.gate`): each at ``SOUNDING_GATE`` sigma
+of the prediction's position and tide uncertainty, and each ping's soundings together at
+``terrain_factors.PING_PROBABILITY``. A ping that fits the map nowhere near the prediction (a fault of its
+depths or its footprints) is left out.
+
+The tide is a variable of the graph (its prior the model's), so the soundings' common offset
+is learnt, not taken as position. No window is made over pings a factor holds, and none after
+tracking that reaches back into them: no sounding is counted twice.
+
+Tracking ends when that departure grows beyond ``NONLINEAR_STOP`` times the noise (the terrain
+told too little to keep the belief narrow for it), or when more than half of the pings of
+``MISFIT_KEYS`` keys in a row fail the ping test (the prediction or the data is wrong). Then the
+windows, their fixes and the fix policy's lost test take over.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from typing import TYPE_CHECKING
+
+import gtsam
+import numpy as np
+
+from tangraph.fix_records import FixStatus
+from tangraph.graph.calibration import CALIBRATION, world_covariance
+from tangraph.graph.terrain_factors import PingTerrain, _evaluate, footprints, gate
+from tangraph.sensors import sounding_variances
+
+if TYPE_CHECKING:
+    from tangraph.graph.online import GraphNavigator
+
+__all__ = ["MISFIT_KEYS", "NONLINEAR_STOP", "SOUNDING_GATE", "OnlineTerrain"]
+
+#: Tracking ends when the map's departure from its tangent plane over the belief
+#: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
+NONLINEAR_STOP = 4.0
+#: Tracking ends when more than half of the pings of this many keys in a row fail the ping test.
+MISFIT_KEYS = 2
+#: A sounding beyond this many sigma of its innovation is left out (two-sided 0.999 of a normal).
+SOUNDING_GATE = 3.29
+_USED = (FixStatus.ACCEPTED, FixStatus.CONFIRMED)
+
+
+@dataclasses.dataclass
+class OnlineTerrain:
+    """The tracking state of one online run: every sounding's terrain variance ``variance (K,
+    B)``, whether it ``tracking`` now, the first ping no factor or window holds yet (``next_ping``),
+    the share of failed pings of the last keys, and counts for the track's meta."""
+
+    variance: np.ndarray
+    tracking: bool = False
+    next_ping: int = 0
+    failed: list[float] = dataclasses.field(default_factory=list)
+    factors: int = 0
+    pings: int = 0
+    soundings: int = 0
+    episodes: list[list[int]] = dataclasses.field(default_factory=list)
+    found: bool = False  # the fix policy has used a fix
+    _seen: int = 0  # fix records looked at for that
+
+    @classmethod
+    def of(cls, nav: GraphNavigator) -> OnlineTerrain:
+        return cls(sounding_variances(nav.survey, nav.bathymetry, nav.model))
+
+    def meta(self) -> dict:
+        """What ``Track.meta["terrain"]`` says: factors, pings and soundings used, and the
+        tracking episodes ``[first key, last key]``."""
+        return {"factors": self.factors, "pings": self.pings, "soundings": self.soundings,
+                "episodes": [list(e) for e in self.episodes]}
+
+    def window_allowed(self, nav: GraphNavigator, k: int) -> bool:
+        """Whether the window ending at ping ``k`` may be made: not while tracking, nor over
+        pings a terrain factor holds."""
+        return not self.tracking and nav.window_first.get(k, k) >= self.next_ping
+
+    def window_taken(self, k: int) -> None:
+        """The window ending at ping ``k`` was made: a later factor starts after it."""
+        self.next_ping = max(self.next_ping, k + 1)
+
+    def key_step(self, nav: GraphNavigator, prev: int, k: int) -> None:
+        """At the key step of ping ``k`` (``prev`` the latest key, its estimate current): decide
+        whether the navigator tracks, and if so add the factor of the pings hung from ``prev``
+        to the navigator's new factors."""
+        self.found = self.found or any(f.status in _USED for f in nav.fixes[self._seen:])
+        self._seen = len(nav.fixes)
+        first = max(prev, self.next_ping)
+        tide_known = nav.tide or nav.model.tide_std == 0
+        if nav.state.lost or not (self.found and tide_known) or first >= k:
+            self._stop()
+            return
+        pings = np.arange(first, k)
+        terrain = _terrain(nav, prev, pings, self.variance[pings])
+        bent = _nonlinearity(nav, terrain)
+        if not bent <= (NONLINEAR_STOP if self.tracking else 1.0):
+            self._stop()
+            return
+        if not self.tracking:
+            self.tracking = True
+            self.episodes.append([prev, prev])
+        self.next_ping = max(self.next_ping, k)
+        factor, failed = self._factor(nav, prev, pings, terrain)
+        self.failed = [*self.failed[-(MISFIT_KEYS - 1):], failed] if MISFIT_KEYS > 1 else [failed]
+        if factor is not None:
+            nav._new_factors.add(factor)
+            self.factors += 1
+        self.episodes[-1][1] = k
+        if len(self.failed) == MISFIT_KEYS and min(self.failed) > 0.5:
+            self._stop()
+
+    def _stop(self) -> None:
+        if self.tracking:
+            self.tracking = False
+            self.failed = []
+
+    def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain):
+        """The factor of the ``pings`` hung from key ``prev`` (None when no sounding passes)
+        and the share of those pings with soundings on the map that failed."""
+        tide, tide_var = _tide_belief(nav)
+        key = nav._key_pose[None]
+        at_key = nav._world(nav._key_pose, nav._key_joint)
+        prior = np.stack([(at_key if i == prev else nav.predicted(int(i)))[1] for i in pings])[:, :2, :2]
+        used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
+                    offset_variance=np.full(pings.size, tide_var))
+        residual, _, dr_variance, *_ = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
+                                                 jacobian=False)
+        seen = np.any(np.isfinite(residual), axis=1)
+        failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
+        if not used.any():
+            return None, failed
+        self.pings += int(np.any(used, axis=1).sum())
+        self.soundings += int(used.sum())
+        keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
+            + ([int(nav.tide_key)] if terrain.estimates_tide else [])
+        noise = gtsam.noiseModel.Unit.Create(int(used.sum()))
+        std = np.sqrt(terrain.variance + dr_variance)[used]  # the weights, fixed as the soundings
+        return gtsam.CustomFactor(noise, keys, functools.partial(_error, terrain, nav.bathymetry, used, std,
+                                                                 float(nav.model.tide))), failed
+
+
+def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain) -> float:
+    """How far the map departs from its tangent plane over the belief, against the soundings'
+    noise: the mean over the soundings on the map and the four points one std along the
+    principal axes of the key's world position covariance ``P`` of ``(h(f + d) - h(f) - g^T d)^2
+    / v``, at the footprints ``f`` of the prediction. At most 1, the Gauss-Newton step of the
+    terrain factor errs less than the soundings do; NaN with no sounding on the map."""
+    cov = world_covariance(nav._key_pose, nav._key_joint, nav.calibration, nav.origin)[:2, :2]
+    values, vectors = np.linalg.eigh(cov)
+    steps = (vectors * np.sqrt(np.maximum(values, 0.0))).T  # (2, 2): one std along each axis
+    north, east = footprints(terrain, nav.bathymetry, nav._key_pose[None], nav.calibration)
+    depth = nav.bathymetry.depth_at(north, east)
+    grad = nav.bathymetry.gradient_at(north, east)
+    parts = []
+    for d in (*steps, *-steps):
+        bent = nav.bathymetry.depth_at(north + d[0], east + d[1]) - depth - grad @ d
+        parts.append(bent**2 / terrain.variance)
+    bent = np.stack(parts)
+    ok = np.isfinite(bent)
+    return float(np.mean(bent[ok])) if ok.any() else float("nan")
+
+
+def _tide_belief(nav: GraphNavigator) -> tuple[float, float]:
+    """The tide's estimate and variance now: the graph's when it holds the tide, else the
+    model's (known)."""
+    if not nav.tide:
+        return float(nav.model.tide), 0.0
+    mean = float(nav.isam.calculateEstimateVector(nav.tide_key)[0])
+    return mean, float(nav.isam.marginalCovariance(nav.tide_key)[0, 0])
+
+
+def _terrain(nav: GraphNavigator, prev: int, pings: np.ndarray, variance: np.ndarray) -> PingTerrain:
+    """The pings hung from key ``prev`` (the key's own ping with no increment)."""
+    increment = nav._delta[pings].copy()
+    increment_cov = nav._delta_cov[pings].copy()
+    own = pings == prev
+    increment[own], increment_cov[own] = 0.0, 0.0
+    s = nav.survey
+    offsets = np.stack([s.beam_forward[pings], s.beam_starboard[pings]], axis=-1).astype(float)
+    tide_std = float(nav.model.tide_std) if nav.tide else 0.0
+    return PingTerrain(np.array([prev]), np.zeros(pings.size, np.int64), increment, increment_cov, offsets,
+                       np.asarray(s.beam_depth[pings], float), variance, nav.origin.copy(),
+                       nav.graph.calibrated, float(nav.model.tide), tide_std)
+
+
+def _error(terrain: PingTerrain, bathymetry, used: np.ndarray, std: np.ndarray, tide: float, factor, values,
+           jacobians):  # fmt: skip
+    """Whitened residuals ``r / std`` of the ``used`` soundings at the factor's values (the key
+    pose, then ``c`` and the tide when they are variables; ``std`` as the soundings were judged);
+    a sounding that has lost its map since it was judged counts as at the gate, with no
+    gradient."""
+    keys = factor.keys()
+    pose = values.atPose2(keys[0])
+    key = np.array([[pose.x(), pose.y(), pose.theta()]])
+    column = 1
+    calibration = np.zeros(2)
+    if terrain.calibrated:
+        calibration = values.atVector(keys[column])
+        column += 1
+    if terrain.estimates_tide:
+        tide = float(values.atVector(keys[column])[0])
+    residual, jac, *_ = _evaluate(terrain, bathymetry, key, calibration, tide)
+    r, j = residual[used], jac[used]
+    lost = ~np.isfinite(r) | ~np.all(np.isfinite(j), axis=-1)
+    error = np.where(lost, SOUNDING_GATE, r / np.where(lost, 1.0, std))
+    if jacobians is not None:
+        j = np.where(lost[:, None], 0.0, j / std[:, None])
+        jacobians[0] = j[:, :3]
+        at = 3
+        for i in range(1, len(keys)):
+            width = 2 if (terrain.calibrated and i == 1) else 1
+            jacobians[i] = j[:, at:at + width]
+            at += width
+    return error
+
