@@ -12,11 +12,12 @@ Gaussian in the calibration (``calibration_points`` per principal axis), each no
 its own position grid and a mass. Between pings a member's grid moves by its own calibrated
 increment ``R(-b) u / (1 + k)`` (the Lagrangian form: moving the points is exact); the white DR
 noise accumulates and is convolved in (FFT, in the grid's coordinates) once its std reaches half
-a grid spacing. A ping weighs every point of every member. The calibration's posterior is the
-Gaussian the nodes were placed with times the evidence since (each member's mass over its mass
-at placement), fitted as a quadratic at the nodes whose curvature is made a likelihood's
-(positive semi-definite): exact for a Gaussian evidence however narrow against the nodes, never
-wider than the prior, its mean kept among the nodes.
+a grid spacing. A ping weighs every point of every member (but those of zero density: they stay
+so whatever it says). The calibration's posterior is the Gaussian the nodes were placed with
+times the evidence since (each member's mass over its mass at placement), fitted as a quadratic
+at the nodes whose curvature is made a likelihood's (positive semi-definite): exact for a
+Gaussian evidence however narrow against the nodes, never wider than the prior, its mean kept
+among the nodes.
 
 **Re-gridding**: when a member's density reaches its grid's edge, or the density has grown or
 shrunk well away from its grid, every member is re-sampled (bilinear) onto a grid centred on its
@@ -197,8 +198,8 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
 
 
 def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray):
-    """Weigh every point by the ping; returns the predicted state's belief view, the update and
-    whether any point had the map under it. Points of zero density (``-inf``: they stay so
+    """Weigh every point by the ping; returns the ping's innovation check and the terrain update
+    (of the points weighed), or ``(None, None)``. Points of zero density (``-inf``: they stay so
     whatever the ping says) are not weighed: the other points' likelihoods are the same (a
     point of zero weight counts for nothing in the sub-cloud means and exponents), their tide
     means are kept."""
@@ -208,7 +209,7 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     live = np.flatnonzero(log_mass > -np.inf)
     log_mass = log_mass[live]
     weights = np.exp(log_mass)
-    points = state.points()[live]
+    points = np.take(state.points(), live, axis=0)
     tide = state.tide.ravel()[live]
     turn = state.nodes[live // (state.n * state.n), 1]
     resolution = float(np.trace(state.axes.T @ slope @ state.axes)) / 12.0
@@ -230,7 +231,8 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     new_tide[live] = update.tide
     state.tide = new_tide.reshape(state.tide.shape)
     state.tide_var = update.tide_var
-    state.misfit = update.scale_after(np.exp(posterior[live] - np.max(posterior)))
+    if update.scale is not None:  # (without a misfit scale there is nothing to update)
+        state.misfit = update.scale_after(np.exp(posterior[live] - np.max(posterior)))
     return check, update
 
 

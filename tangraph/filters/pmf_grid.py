@@ -7,6 +7,7 @@ See :mod:`tangraph.filters.pmf`.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +34,7 @@ _SPREAD_RATIO = 1.6
 
 # the fields each of PointMass's cached values is derived from
 _DEPENDS = {
-    "offsets": ("axes", "log_density"),
+    "offsets": ("axes",),  # and the grid's size: in its key
     "masses": ("log_density",),
     "member_moments": ("log_density", "nodes", "axes", "centres"),
     "member_log_mass": ("log_density", "nodes", "axes"),
@@ -75,7 +76,7 @@ class PointMass:
         object.__setattr__(self, name, value)
         cache = self.__dict__.get("_cache")
         if cache:
-            for key in [key for key in cache if name in _DEPENDS[key]]:
+            for key in [key for key in cache if name in _DEPENDS[key.partition(":")[0]]]:
                 del cache[key]
 
     def _cached(self, key: str, compute: Callable[[], Any]) -> Any:
@@ -98,11 +99,12 @@ class PointMass:
 
     def offsets(self) -> np.ndarray:
         """The grid's points relative to a member's centre, ``(n * n, 2)`` (row-major)."""
-        return self._cached("offsets", lambda: _offsets(self.n, self.axes))
+        return self._cached(f"offsets:{self.n}", lambda: _offsets(self.n, self.axes))
 
     def points(self) -> np.ndarray:
         """Every member's points, ``(M * n * n, 2)``."""
-        return (self.centres[:, None, :] + self.offsets()[None]).reshape(-1, 2)
+        offsets = self.offsets()  # (the same sums as broadcasting, a faster layout)
+        return np.tile(offsets, (len(self.centres), 1)) + np.repeat(self.centres, len(offsets), axis=0)
 
     @property
     def cell_area(self) -> float:
@@ -307,12 +309,20 @@ def _extent(offsets: np.ndarray, mass: np.ndarray) -> np.ndarray:
     return np.array([_held(np.abs(offsets[:, a]), mass, total) for a in range(offsets.shape[1])])
 
 
+@functools.lru_cache(maxsize=8)
+def _index(n: int) -> np.ndarray:
+    """The ``(i, j)`` of an ``n x n`` grid's points, ``(n * n, 2)`` (row-major; read-only)."""
+    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+    index = np.column_stack([i.ravel(), j.ravel()]).astype(np.float64)
+    index.setflags(write=False)
+    return index
+
+
 def _significant(state: PointMass) -> np.ndarray:
     """The half-widths in grid steps, per grid axis, that hold the density's support about
     each member's mean (:func:`_extent` of the grid's rows and columns: a row's points share
     their offset along the first axis, a column's along the second)."""
-    i, j = np.meshgrid(np.arange(state.n), np.arange(state.n), indexing="ij")
-    index = np.column_stack([i.ravel(), j.ravel()]).astype(np.float64)
+    index = _index(state.n)
     masses = state.masses()
     mass = masses.reshape(len(state.nodes), -1)
     weight = mass.sum(axis=1, keepdims=True)
