@@ -32,6 +32,7 @@ class FixStatus(enum.StrEnum):
     GIVEN_UP = "given up"  #: used, then removed: the navigator found the belief it was searched around wrong
     LEFT_WINDOW = "left window"  #: to be used late, but its key pose had left iSAM2's window: not added
     OUTLIER = "outlier"  #: the batch smoother's robust solve found it inconsistent with the rest
+    CHECKED = "checked"  #: made as a check while the online graph tracked on soundings: not used
 
     @property
     def says_lost(self) -> bool:

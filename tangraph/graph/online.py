@@ -253,10 +253,8 @@ class GraphNavigator:
             self.window_first[k] = self._window_start
         if self.terrain is not None:  # every sounding once the vehicle is found
             self.terrain.key_step(self, prev, k)
-        window = self.terrain is None or fix is not None or self.terrain.window_allowed(self, k)
+        window = self.terrain is None or fix is not None or self.terrain.window(self, k, pose, joint)
         extra = take_window(self, k, pose, joint, fix) if window else 0.0
-        if window and self.terrain is not None and self._is_end[k]:
-            self.terrain.window_taken(k)
         if grows:
             self._grow_window(k)
             if self.tide:

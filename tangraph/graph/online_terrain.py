@@ -24,9 +24,13 @@ is learnt, not taken as position. No window is made over pings a factor holds, a
 tracking that reaches back into them: no sounding is counted twice.
 
 Tracking ends when that departure grows beyond ``NONLINEAR_STOP`` times the noise (the terrain
-told too little to keep the belief narrow for it), or when more than half of the pings of
-``MISFIT_KEYS`` keys in a row fail the ping test (the prediction or the data is wrong). Then the
-windows, their fixes and the fix policy's lost test take over.
+told too little to keep the belief narrow for it), when more than half of the pings of
+``MISFIT_KEYS`` keys in a row fail the ping test (the prediction or the data is wrong), or when
+the TAP window searched at a window end as a check (never used: its pings are in the factors)
+says the prediction is wrong: beyond the gate, its best match at the search's edge, or
+precise and surprising (:meth:`OnlineTerrain.check`) twice in a row. A
+belief that the linearised soundings have led into a wrong basin still fits them, so this check
+is what finds it. Then the windows, their fixes and the fix policy's lost test take over.
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from typing import TYPE_CHECKING
 
 import gtsam
 import numpy as np
+from scipy import stats
 
 from tangraph.fix_records import FixStatus
 from tangraph.graph.calibration import CALIBRATION, world_covariance
@@ -46,13 +51,19 @@ from tangraph.sensors import sounding_variances
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
 
-__all__ = ["MISFIT_KEYS", "NONLINEAR_STOP", "SOUNDING_GATE", "OnlineTerrain"]
+__all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_STOP", "SOUNDING_GATE",
+           "OnlineTerrain"]
 
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
 NONLINEAR_STOP = 4.0
 #: Tracking ends when more than half of the pings of this many keys in a row fail the ping test.
 MISFIT_KEYS = 2
+#: Tracking ends after this many windows in a row whose check fix (used or not) is surprising to
+#: the prediction: its NIS beyond the ``chi2(2)`` quantile of ``CHECK_PROBABILITY``
+CHECK_WINDOWS = 2
+CHECK_PROBABILITY = 0.9
+_SURPRISE = float(stats.chi2.ppf(CHECK_PROBABILITY, 2))
 #: A sounding beyond this many sigma of its innovation is left out (two-sided 0.999 of a normal).
 SOUNDING_GATE = 3.29
 _USED = (FixStatus.ACCEPTED, FixStatus.CONFIRMED)
@@ -61,12 +72,15 @@ _USED = (FixStatus.ACCEPTED, FixStatus.CONFIRMED)
 @dataclasses.dataclass
 class OnlineTerrain:
     """The tracking state of one online run: every sounding's terrain variance ``variance (K,
-    B)``, whether it ``tracking`` now, the first ping no factor or window holds yet (``next_ping``),
+    B)``, whether it ``tracking`` now, the first ping no factor holds yet (``next_ping``: a window
+    may start there) and no window holds (``free_ping``: a factor may start there),
     the share of failed pings of the last keys, and counts for the track's meta."""
 
     variance: np.ndarray
     tracking: bool = False
     next_ping: int = 0
+    free_ping: int = 0
+    surprises: int = 0
     failed: list[float] = dataclasses.field(default_factory=list)
     factors: int = 0
     pings: int = 0
@@ -92,7 +106,34 @@ class OnlineTerrain:
 
     def window_taken(self, k: int) -> None:
         """The window ending at ping ``k`` was made: a later factor starts after it."""
-        self.next_ping = max(self.next_ping, k + 1)
+        self.free_ping = max(self.free_ping, k + 1)
+
+    def window(self, nav: GraphNavigator, k: int, pose, joint) -> bool:
+        """Whether the fix policy takes the window ending at ping ``k`` (DR-frame ``pose`` and
+        ``joint`` covariance predicted). While tracking it is searched and judged as a check
+        only (its pings are in the factors; recorded as ``CHECKED``), unless it says the
+        prediction is wrong: beyond the gate or its best match at the search's edge, or precise
+        and surprising (NIS beyond the ``chi2(2)`` quantile ``CHECK_PROBABILITY``) as the
+        ``CHECK_WINDOWS - 1`` checks before it were. Then tracking ends, the policy takes this
+        window (the one place its pings count twice: where the factors led the belief astray).
+        Otherwise, see
+        :meth:`window_allowed`."""
+        if not nav._is_end[k]:
+            return True
+        if not self.tracking:
+            allowed = self.window_allowed(nav, k)
+            if allowed:
+                self.window_taken(k)
+            return allowed
+        record = nav._judge(k, pose, joint, None).record
+        self.surprises = self.surprises + 1 if record.accepted and record.nis > _SURPRISE else 0
+        if record.status.says_lost or self.surprises >= CHECK_WINDOWS:
+            self._stop()
+            self.window_taken(k)
+            return True
+        nav.fixes.append(dataclasses.replace(record, status=FixStatus.CHECKED,
+                                             detail=f"{record.status.value}: {record.detail}".rstrip(": ")))
+        return False
 
     def key_step(self, nav: GraphNavigator, prev: int, k: int) -> None:
         """At the key step of ping ``k`` (``prev`` the latest key, its estimate current): decide
@@ -100,7 +141,7 @@ class OnlineTerrain:
         to the navigator's new factors."""
         self.found = self.found or any(f.status in _USED for f in nav.fixes[self._seen:])
         self._seen = len(nav.fixes)
-        first = max(prev, self.next_ping)
+        first = max(prev, self.free_ping)
         tide_known = nav.tide or nav.model.tide_std == 0
         if nav.state.lost or not (self.found and tide_known) or first >= k:
             self._stop()
@@ -114,7 +155,7 @@ class OnlineTerrain:
         if not self.tracking:
             self.tracking = True
             self.episodes.append([prev, prev])
-        self.next_ping = max(self.next_ping, k)
+        self.next_ping = self.free_ping = max(self.free_ping, k)
         factor, failed = self._factor(nav, prev, pings, terrain)
         self.failed = [*self.failed[-(MISFIT_KEYS - 1):], failed] if MISFIT_KEYS > 1 else [failed]
         if factor is not None:
@@ -125,9 +166,10 @@ class OnlineTerrain:
             self._stop()
 
     def _stop(self) -> None:
-        if self.tracking:
-            self.tracking = False
+        if self.tracking:  # tracking waits for a fix the policy uses after this
+            self.tracking = self.found = False
             self.failed = []
+            self.surprises = 0
 
     def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain):
         """The factor of the ``pings`` hung from key ``prev`` (None when no sounding passes)

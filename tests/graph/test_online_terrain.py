@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
+from tangraph.fix_records import FixStatus
 from tangraph.graph import GraphConfig, GraphNavigator, navigate_online, smooth_survey
 from tangraph.graph.calibration import CALIBRATION
 from tangraph.maps import BathymetryMap
@@ -64,11 +65,14 @@ def test_tracking_counts_no_sounding_twice_and_beats_the_fixes(tracked, small_su
     assert terrain is not None and terrain.factors > 10 and terrain.episodes
     track = nav.track()
     assert track.meta["terrain"]["pings"] > 0.5 * small_survey.n_pings
-    # every window made (a fix record) lies before the pings the factors hold began, or after
+    # every window the policy took lies before the pings the factors hold began; those made while
+    # tracking are checks, not used
     first_tracked = terrain.episodes[0][0]
+    checks = [r for r in track.fixes if r.status == FixStatus.CHECKED]
+    assert len(checks) > 10 and not any(r.accepted for r in checks)
     for record in track.fixes:
         if record.index > first_tracked:
-            assert nav.window_first[record.index] >= first_tracked
+            assert record.status == FixStatus.CHECKED
     fixes = navigate_online(small_survey, rough_map, GraphConfig())
     half = small_survey.n_pings // 2
     later = slice(half, None)
@@ -108,3 +112,22 @@ def test_the_smoother_weighs_fixes_and_the_point_mass_front_end_is_refused(small
     a = smooth_survey(small_survey, rough_map, SOUNDINGS)
     b = smooth_survey(small_survey, rough_map, GraphConfig())
     np.testing.assert_array_equal(a.pose, b.pose)
+
+
+def test_windows_may_overlap_each_other_but_not_the_tracked_pings():
+    from types import SimpleNamespace
+
+    from tangraph.graph.online_terrain import OnlineTerrain
+
+    nav = SimpleNamespace(window_first={19: 0, 29: 10, 39: 20, 49: 30})
+    terrain = OnlineTerrain(np.zeros((50, 1)))
+    terrain.window_taken(19)
+    assert terrain.window_allowed(nav, 29)  # TAP's windows overlap by design
+    assert terrain.free_ping == 20  # a factor starts after the windows' pings
+    terrain.next_ping = terrain.free_ping = 35  # a factor held the pings up to 34
+    assert not terrain.window_allowed(nav, 39)
+    assert not terrain.window_allowed(nav, 49)  # its first ping, 30, a factor holds
+    terrain.next_ping = 30
+    assert terrain.window_allowed(nav, 49)
+    terrain.tracking = True
+    assert not terrain.window_allowed(nav, 49)  # no window while tracking
