@@ -11,7 +11,6 @@ import functools
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-import numba
 import numpy as np
 import scipy.fft
 from scipy import ndimage
@@ -124,9 +123,16 @@ class PointMass:
         return self._cached("member_moments", self._member_moments)
 
     def _member_moments(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        m = len(self.nodes)
-        weight, local, cov = np.empty(m), np.empty((m, 2)), np.empty((m, 2, 2))
-        _moments_kernel(self.masses().reshape(m, -1), self.offsets(), weight, local, cov)
+        # numpy's sums, not a compiled pass: the start's isotropic density has a covariance whose
+        # principal axes (the grid's, at a re-grid) are chosen by its round-off
+        mass = self.masses().reshape(len(self.nodes), -1)
+        weight = mass.sum(axis=1)
+        offsets = self.offsets()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(weight[:, None] > 0, mass / weight[:, None], 0.0)
+        local = w @ offsets
+        d = offsets[None] - local[:, None]
+        cov = np.einsum("mp,mpi,mpj->mij", w, d, d)
         return weight, self.centres + local, cov
 
     def within(self) -> np.ndarray:
@@ -158,34 +164,6 @@ class PointMass:
         """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the prior at
         placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`)."""
         return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior)[:2]
-
-
-@numba.njit(cache=True, nogil=True)
-def _moments_kernel(mass, offsets, weight, local, cov):
-    """Each member's mass ``weight[m]``, the mean ``local[m]`` of the grid's ``offsets (P, 2)``
-    under its points' ``mass (M, P)`` and their covariance ``cov[m]`` (0 for a member of no
-    mass)."""
-    for m in range(mass.shape[0]):
-        total = 0.0
-        for p in range(mass.shape[1]):
-            total += mass[m, p]
-        weight[m] = total
-        mean = np.zeros(2)
-        c = np.zeros(3)
-        if total > 0.0:
-            for p in range(mass.shape[1]):
-                w = mass[m, p] / total
-                mean[0] += w * offsets[p, 0]
-                mean[1] += w * offsets[p, 1]
-            for p in range(mass.shape[1]):
-                w = mass[m, p] / total
-                dn = offsets[p, 0] - mean[0]
-                de = offsets[p, 1] - mean[1]
-                c[0] += w * dn * dn
-                c[1] += w * dn * de
-                c[2] += w * de * de
-        local[m, 0], local[m, 1] = mean[0], mean[1]
-        cov[m, 0, 0], cov[m, 0, 1], cov[m, 1, 0], cov[m, 1, 1] = c[0], c[1], c[1], c[2]
 
 
 def _offsets(n: int, axes: np.ndarray) -> np.ndarray:

@@ -1,7 +1,7 @@
 """The point-mass filter's shortcuts against the plain computations they replace: a ping weighs
-only the points of nonzero density (the same posterior as weighing every point), the members'
-moments in one compiled pass, the support from the grid's rows and columns, and the derived
-values a state caches (dropped when a field they come from is replaced)."""
+only the points of nonzero density (the same posterior as weighing every point), the support
+from the grid's rows and columns, and the derived values a state caches (the members' moments
+among them; dropped when a field they come from is replaced)."""
 
 from __future__ import annotations
 
