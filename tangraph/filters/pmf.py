@@ -198,11 +198,11 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
 
 
 def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray):
-    """Weigh every point by the ping; returns the ping's innovation check and the terrain update
-    (of the points weighed), or ``(None, None)``. Points of zero density (``-inf``: they stay so
-    whatever the ping says) are not weighed: the other points' likelihoods are the same (a
-    point of zero weight counts for nothing in the sub-cloud means and exponents), their tide
-    means are kept."""
+    """Weigh the state's points by the ping; returns the ping's innovation check and the terrain
+    update (of the points weighed), or ``(None, None)``. Points of zero density (``-inf``: they
+    stay so whatever the ping says) are not weighed: the other points' likelihoods are the same
+    as if they were (a point of zero weight counts for nothing in the sub-cloud means and
+    exponents), their tide means are kept."""
     if ping.n_soundings == 0:
         return None, None
     log_mass = (state.log_density - np.max(state.log_density)).ravel()
