@@ -194,14 +194,14 @@ class OnlineConfig:
     terrain : {"fixes", "soundings"}
         What the online graph weighs of the terrain once it has found the vehicle: ``"fixes"``,
         a window's fix (``front_end``) at every window end (default); ``"soundings"``, every
-        sounding (:mod:`tangraph.graph.online_terrain`): once the fix policy has used a fix and
-        is not lost, and while the map is near its tangent plane over the belief, the soundings
-        of each key's pings enter iSAM2 as one terrain factor on that key, the calibration and
-        the tide (a variable then), relinearised with them, and no window is made over those
-        pings; when the belief grows too wide for the linearisation or most of the pings stop
-        fitting the map, the windows and their fixes take over again. Only with ``front_end = "tap"``; the
-        batch smoother's forward pass always weighs fixes (``BatchConfig.smoother_terrain``
-        chooses its terrain).
+        sounding (:mod:`tangraph.graph.online_terrain`). Once the fix policy has used a fix and is
+        not lost, and while the map is near its tangent plane over the belief, the soundings of
+        each key's pings enter iSAM2 as one terrain factor on that key, the calibration and the
+        tide (a variable then), relinearised with them. The windows are then searched as checks
+        only (``FixStatus.CHECKED``), and the windows and their fixes take over again when a
+        check says the prediction is wrong, the belief grows too wide for the linearisation, or
+        most pings stop fitting the map. Only with ``front_end = "tap"``; the batch smoother's
+        forward pass always weighs fixes (``BatchConfig.smoother_terrain`` chooses its terrain).
     front_end_pings : int
         Pings per window of the point-mass front end, so only with ``front_end = "pmf"`` (another
         value with ``"tap"`` is refused: it would not be used; default 3: on three seeds each of

@@ -21,7 +21,9 @@ its actions on the graph and iSAM2.
 With ``GraphConfig.online.front_end = "pmf"`` a window's factor comes from the point-mass front end
 (:mod:`tangraph.graph.posterior_fix`) instead of TAP: its prior is the prediction jointly with
 the tide, which the graph then holds as a variable beside the calibration, its windows share no
-ping, and an ambiguous window is held and grown by the next pings.
+ping, and an ambiguous window is held and grown by the next pings. With
+``GraphConfig.online.terrain = "soundings"`` the navigator tracks on every sounding once it has
+found the vehicle (:mod:`tangraph.graph.online_terrain`).
 """
 
 from __future__ import annotations

@@ -4,10 +4,12 @@ With ``GraphConfig.online.terrain = "soundings"`` the online navigator works in 
 terrain-aided navigation systems have since SITAN: TAP windows and the fix policy *acquire* the
 vehicle, and once it is found the navigator *tracks* it on every sounding.
 
-It tracks while the fix policy is not lost and has used a fix, and the map is near its tangent
-plane over the belief: over the key's position covariance the map's depth under the new pings'
-footprints departs from its linearisation by less than the soundings' noise
-(:func:`_nonlinearity`), so a Gauss-Newton step on them is sound. Then at each key step the
+It tracks while the fix policy is not lost and has used a unimodal fix (one place fits the
+window: a fix the policy used as one of several would lead the linearised soundings into its
+basin), and the map is near its tangent plane over the belief: over the key's 2-sigma position
+ellipse the map's depth under the new pings' footprints departs from its linearisation by less
+than the soundings' noise (:func:`_nonlinearity`), so a Gauss-Newton step on them is sound.
+Then at each key step the
 soundings of the pings hung from the previous key (its own ping and those before the new key,
 less any ping a window's fix holds) enter iSAM2 as one factor on that key pose, the calibration
 and the tide. This is the batch smoother's terrain model (:mod:`tangraph.graph.terrain_factors`):
@@ -57,6 +59,9 @@ __all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_STOP"
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
 NONLINEAR_STOP = 4.0
+#: ... over the points this many stds along the principal axes of the belief (its 2-sigma ellipse:
+#: where the vehicle is, not only its centre)
+NONLINEAR_SIGMAS = 2.0
 #: Tracking ends when more than half of the pings of this many keys in a row fail the ping test.
 MISFIT_KEYS = 2
 #: Tracking ends after this many windows in a row whose check fix (used or not) is surprising to
@@ -86,8 +91,8 @@ class OnlineTerrain:
     pings: int = 0
     soundings: int = 0
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
-    found: bool = False  # the fix policy has used a fix
-    _seen: int = 0  # fix records looked at for that
+    found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
+    _judged: object = None  # the navigator's latest window outcome, looked at for that
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> OnlineTerrain:
@@ -139,8 +144,12 @@ class OnlineTerrain:
         """At the key step of ping ``k`` (``prev`` the latest key, its estimate current): decide
         whether the navigator tracks, and if so add the factor of the pings hung from ``prev``
         to the navigator's new factors."""
-        self.found = self.found or any(f.status in _USED for f in nav.fixes[self._seen:])
-        self._seen = len(nav.fixes)
+        judged = nav._last_outcome
+        if judged is not None and judged is not self._judged:  # the policy's latest window
+            self._judged = judged
+            fix = judged.fix
+            if judged.record.status in _USED and fix is not None and not fix.quality.multimodal:
+                self.found = True
         first = max(prev, self.free_ping)
         tide_known = nav.tide or nav.model.tide_std == 0
         if nav.state.lost or not (self.found and tide_known) or first >= k:
@@ -198,13 +207,13 @@ class OnlineTerrain:
 
 def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain) -> float:
     """How far the map departs from its tangent plane over the belief, against the soundings'
-    noise: the mean over the soundings on the map and the four points one std along the
-    principal axes of the key's world position covariance ``P`` of ``(h(f + d) - h(f) - g^T d)^2
-    / v``, at the footprints ``f`` of the prediction. At most 1, the Gauss-Newton step of the
+    noise: the mean over the soundings on the map and the four points ``NONLINEAR_SIGMAS`` stds
+    along the principal axes of the key's world position covariance ``P`` of ``(h(f + d) - h(f) -
+    g^T d)^2 / v``, at the footprints ``f`` of the prediction. At most 1, the Gauss-Newton step of the
     terrain factor errs less than the soundings do; NaN with no sounding on the map."""
     cov = world_covariance(nav._key_pose, nav._key_joint, nav.calibration, nav.origin)[:2, :2]
     values, vectors = np.linalg.eigh(cov)
-    steps = (vectors * np.sqrt(np.maximum(values, 0.0))).T  # (2, 2): one std along each axis
+    steps = (vectors * NONLINEAR_SIGMAS * np.sqrt(np.maximum(values, 0.0))).T  # (2, 2) along the axes
     north, east = footprints(terrain, nav.bathymetry, nav._key_pose[None], nav.calibration)
     depth = nav.bathymetry.depth_at(north, east)
     grad = nav.bathymetry.gradient_at(north, east)
