@@ -18,8 +18,12 @@ the map's error and the white DR noise between the key and its ping. The factor 
 and iSAM2 relinearises it with its variables. The soundings are judged once, as innovations of
 the prediction (:func:`~tangraph.graph.terrain_factors.gate`): each at ``SOUNDING_GATE`` sigma
 of the prediction's position and tide uncertainty, and each ping's soundings together at
-``terrain_factors.PING_PROBABILITY``. A ping that fits the map nowhere near the prediction (a fault of its
-depths or its footprints) is left out.
+``terrain_factors.PING_PROBABILITY``: a ping that fits the map nowhere near the prediction (a
+fault of its depths or its footprints) is left out. The factor's soundings are then judged
+together, as a fix is (:func:`_innovation`): when the shift of the footprints and the tide they
+pull for is beyond the fixes' gate against the prediction, none is used. A block of pings whose
+footprints are all misplaced the same way fits the map ping by ping nearly as well as the truth
+does, and only together tells.
 
 The tide is a variable of the graph (its prior the model's), so the soundings' common offset
 is learnt, not taken as position. No window is made over pings a factor holds, and none after
@@ -189,10 +193,15 @@ class OnlineTerrain:
         prior = np.stack([(at_key if i == prev else nav.predicted(int(i)))[1] for i in pings])[:, :2, :2]
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=np.full(pings.size, tide_var))
-        residual, _, dr_variance, *_ = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
-                                                 jacobian=False)
+        residual, _, dr_variance, grad, *_ = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
+                                                       jacobian=False)
         seen = np.any(np.isfinite(residual), axis=1)
         failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
+        if used.any():
+            weight = np.where(used, 1.0 / (terrain.variance + dr_variance), 0.0)
+            if _innovation(residual, grad, weight, prior[0], tide_var) > _gate(nav, 2 + (tide_var > 0)):
+                used[:] = False  # the soundings together pull the belief beyond its gate
+                failed = 1.0
         if not used.any():
             return None, failed
         self.pings += int(np.any(used, axis=1).sum())
@@ -200,9 +209,39 @@ class OnlineTerrain:
         keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
             + ([int(nav.tide_key)] if terrain.estimates_tide else [])
         noise = gtsam.noiseModel.Unit.Create(int(used.sum()))
-        std = np.sqrt(terrain.variance + dr_variance)[used]  # the weights, fixed as the soundings
-        return gtsam.CustomFactor(noise, keys, functools.partial(_error, terrain, nav.bathymetry, used, std,
-                                                                 float(nav.model.tide))), failed
+        std = np.sqrt(terrain.variance + dr_variance)[used]  # the weights, fixed as the soundings judged
+        error = functools.partial(_error, terrain, nav.bathymetry, used, std, float(nav.model.tide))
+        return gtsam.CustomFactor(noise, keys, error), failed
+
+
+def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
+    """The NIS of the shift of the footprints (and of the tide) that the soundings' residuals
+    ``(K, B)`` pull for, on the map gradients ``grad (K, B, 2)`` with ``weight`` their
+    precisions (0: not used), against the prediction's position covariance ``(2, 2)`` and tide
+    variance: with ``H = G^T W G`` and ``b = G^T W r`` (``G`` the gradient and, with an
+    uncertain tide, a column of ones), ``b^T (H P H + H)^+ b``, chi-square with as many
+    degrees of freedom as ``H`` has rank under the prediction. The fix gate of a window's
+    soundings taken together: a block of pings whose footprints are all misplaced the same way
+    fits the map, ping by ping, nearly as well as the truth does, and only together tell."""
+    g = grad.reshape(-1, 2)
+    if tide_var > 0:
+        g = np.column_stack([g, np.ones(len(g))])
+    w = weight.ravel()
+    r = np.where(w > 0, residual.ravel(), 0.0)
+    g = np.where(w[:, None] > 0, g, 0.0)
+    h = g.T @ (w[:, None] * g)
+    b = g.T @ (w * r)
+    prior = np.zeros((g.shape[1], g.shape[1]))
+    prior[:2, :2] = position_cov
+    if tide_var > 0:
+        prior[2, 2] = tide_var
+    return float(b @ np.linalg.pinv(h @ prior @ h + h, hermitian=True) @ b)
+
+
+def _gate(nav: GraphNavigator, dof: int) -> float:
+    """The ``chi2(dof)`` quantile of the fixes' gate probability (``FixConfig.gate_probability``;
+    0.999 without one)."""
+    return float(stats.chi2.ppf(nav.config.fixes.gate_probability or 0.999, dof))
 
 
 def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain) -> float:
@@ -278,4 +317,3 @@ def _error(terrain: PingTerrain, bathymetry, used: np.ndarray, std: np.ndarray, 
             jacobians[i] = j[:, at:at + width]
             at += width
     return error
-

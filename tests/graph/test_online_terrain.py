@@ -131,3 +131,32 @@ def test_windows_may_overlap_each_other_but_not_the_tracked_pings():
     assert terrain.window_allowed(nav, 49)
     terrain.tracking = True
     assert not terrain.window_allowed(nav, 49)  # no window while tracking
+
+
+def test_the_soundings_innovation_is_the_nis_of_the_shift_they_pull_for():
+    from tangraph.graph.online_terrain import _innovation
+
+    rng = np.random.default_rng(3)
+    grad = rng.normal(0.0, 0.1, (4, 30, 2))
+    weight = np.full((4, 30), 1.0 / 0.2**2)
+    shift = np.array([1.5, -0.5])
+    residual = grad @ shift  # soundings that fit the map moved by `shift`, no noise
+    prior = np.diag([0.5, 0.8]) ** 2
+    h = np.einsum("kbi,kb,kbj->ij", grad, weight, grad)
+    expected = shift @ np.linalg.solve(prior + np.linalg.inv(h), shift)
+    assert _innovation(residual, grad, weight, prior, 0.0) == pytest.approx(expected, rel=1e-9)
+    # a common offset the tide's uncertainty explains costs little; one it does not, a lot
+    offset = np.full(residual.shape, 1.0)
+    assert _innovation(offset, grad, weight, prior, 4.0) < 1.0
+    assert _innovation(offset, grad, weight, prior, 0.01) > 50.0
+
+
+def test_blocks_of_shifted_footprints_do_not_pull_the_tracking_off(small_survey, rough_map, tracked):
+    from tangraph.sim.faults import outlier_blocks
+
+    model = NavigationModel.from_survey(small_survey)
+    clean = rmse(tracked.track(), small_survey.true_pose)
+    for seed in (1, 2, 3):
+        shifted = outlier_blocks(small_survey, "footprint_shift", 0.2, rng=np.random.default_rng(seed))
+        track = navigate_online(shifted, rough_map, SOUNDINGS, model=model)
+        assert rmse(track, small_survey.true_pose) < 2.5 * clean  # measured: 1.3, 2.2, 1.5 x
