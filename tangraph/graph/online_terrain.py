@@ -51,7 +51,7 @@ from scipy import stats
 
 from tangraph.fix_records import FixStatus
 from tangraph.graph.calibration import CALIBRATION, world_covariance
-from tangraph.graph.terrain_factors import PingTerrain, _evaluate, footprints, gate
+from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
 from tangraph.sensors import sounding_variances
 
 if TYPE_CHECKING:
@@ -208,7 +208,12 @@ class OnlineTerrain:
         self.soundings += int(used.sum())
         keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
             + ([int(nav.tide_key)] if terrain.estimates_tide else [])
-        noise = gtsam.noiseModel.Unit.Create(int(used.sum()))
+        n = int(used.sum())
+        # whitened residuals beyond their chi-square quantile together (the factor relinearised far
+        # from where its soundings were judged) pull no further than that: Huber on the whole factor
+        threshold = float(np.sqrt(stats.chi2.ppf(PING_PROBABILITY, n)))
+        noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(threshold),
+                                               gtsam.noiseModel.Unit.Create(n))
         std = np.sqrt(terrain.variance + dr_variance)[used]  # the weights, fixed as the soundings judged
         error = functools.partial(_error, terrain, nav.bathymetry, used, std, float(nav.model.tide))
         return gtsam.CustomFactor(noise, keys, error), failed
