@@ -4,39 +4,46 @@ With ``GraphConfig.online.terrain = "soundings"`` the online navigator works in 
 terrain-aided navigation systems have since SITAN: TAP windows and the fix policy *acquire* the
 vehicle, and once it is found the navigator *tracks* it on every sounding.
 
-It tracks while the fix policy is not lost and has used a unimodal fix (one place fits the
-window: a fix the policy used as one of several would lead the linearised soundings into its
-basin), and the map is near its tangent plane over the belief: over the key's 2-sigma position
-ellipse the map's depth under the new pings' footprints departs from its linearisation by less
-than the soundings' noise (:func:`_nonlinearity`), so a Gauss-Newton step on them is sound.
-Then at each key step the
-soundings of the pings hung from the previous key (its own ping and those before the new key,
-less any ping a window's fix holds) enter iSAM2 as one factor on that key pose, the calibration
-and the tide. This is the batch smoother's terrain model (:mod:`tangraph.graph.terrain_factors`):
-every sounding's residual against the map's depth at its footprint, with the row-sum variance of
-the map's error and the white DR noise between the key and its ping. The factor is whitened
-and iSAM2 relinearises it with its variables. The soundings are judged once, as innovations of
-the prediction (:func:`~tangraph.graph.terrain_factors.gate`): each at ``SOUNDING_GATE`` sigma
-of the prediction's position and tide uncertainty, and each ping's soundings together at
-``terrain_factors.PING_PROBABILITY``: a ping that fits the map nowhere near the prediction (a
-fault of its depths or its footprints) is left out. The factor's soundings are then judged
-together, as a fix is (:func:`_innovation`): when the shift of the footprints and the tide they
-pull for is beyond the fixes' gate against the prediction, none is used. A block of pings whose
+**When it tracks.** The fix policy is not lost and has used a unimodal fix (a fix used as one of
+several places would lead the linearised soundings into its basin), and the map is near its
+tangent plane over the belief: over the key's 2-sigma position ellipse the map's depth under the
+new pings' footprints departs from its linearisation by less than the soundings' noise
+(:func:`_nonlinearity`), so a Gauss-Newton step on them is sound.
+
+**The factor.** At each key step the soundings of the pings hung from the previous key (its own
+ping and those before the new key, less any ping a window took) enter iSAM2 as one factor on
+that key pose, the calibration and the tide. This is the batch smoother's terrain model
+(:mod:`tangraph.graph.terrain_factors`): every sounding's residual against the map's depth at its
+footprint, with the row-sum variance of the map's error and the white DR noise between the key
+and its ping. The residuals are whitened with the variances they were judged with, and iSAM2
+relinearises the factor with its variables, under a Huber kernel at the chi-square quantile of
+its soundings (relinearised far from where they were judged, the factor pulls no further). The
+tide is a variable of the graph (its prior the model's), so the soundings' common offset is
+learnt, not taken as position.
+
+**The soundings judged** as innovations of the prediction, once: each at ``SOUNDING_GATE`` sigma
+of the prediction's position and tide uncertainty, each ping's together at
+``terrain_factors.PING_PROBABILITY`` (:func:`~tangraph.graph.terrain_factors.gate`: a ping that
+fits the map nowhere near the prediction, a fault of its depths or its footprints, is left
+out), and the key's together as a fix is (:func:`_innovation`): when the shift of the footprints
+and the tide they pull for is beyond the fixes' gate, none is used. A block of pings whose
 footprints are all misplaced the same way fits the map ping by ping nearly as well as the truth
 does, and only together tells.
 
-The tide is a variable of the graph (its prior the model's), so the soundings' common offset
-is learnt, not taken as position. No window is made over pings a factor holds, and none after
-tracking that reaches back into them: no sounding is counted twice.
+**No sounding counted twice.** No window is made over pings a factor holds, and a factor starts
+after the pings any window took. While tracking, the windows are searched and judged as checks
+only (``FixStatus.CHECKED``).
 
-Tracking ends when that departure grows beyond ``NONLINEAR_STOP`` times the noise (the terrain
-told too little to keep the belief narrow for it), when more than half of the pings of
-``MISFIT_KEYS`` keys in a row fail the ping test (the prediction or the data is wrong), or when
-the TAP window searched at a window end as a check (never used: its pings are in the factors)
-says the prediction is wrong: beyond the gate, its best match at the search's edge, or
-precise and surprising (:meth:`OnlineTerrain.check`) twice in a row. A
-belief that the linearised soundings have led into a wrong basin still fits them, so this check
-is what finds it. Then the windows, their fixes and the fix policy's lost test take over.
+**When tracking ends**, the windows, their fixes and the fix policy's lost test take over, and
+tracking waits for a new unimodal fix the policy uses:
+
+- a check says the prediction is wrong: beyond the gate, its best match at the search's edge, or
+  precise and surprising ``CHECK_WINDOWS`` times in a row (:meth:`OnlineTerrain.window`). A
+  belief the linearised soundings have led into a wrong basin still fits them; the check finds
+  it. The policy then takes that window (its pings are counted twice there);
+- the map's departure from its tangent plane grows beyond ``NONLINEAR_STOP`` times the noise (the
+  terrain told too little to keep the belief narrow for it);
+- more than half of the pings of ``MISFIT_KEYS`` keys in a row fail the ping test.
 """
 
 from __future__ import annotations
@@ -57,8 +64,8 @@ from tangraph.sensors import sounding_variances
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
 
-__all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_STOP", "SOUNDING_GATE",
-           "OnlineTerrain"]
+__all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_SIGMAS", "NONLINEAR_STOP",
+           "SOUNDING_GATE", "OnlineTerrain"]
 
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
@@ -125,8 +132,7 @@ class OnlineTerrain:
         and surprising (NIS beyond the ``chi2(2)`` quantile ``CHECK_PROBABILITY``) as the
         ``CHECK_WINDOWS - 1`` checks before it were. Then tracking ends, the policy takes this
         window (the one place its pings count twice: where the factors led the belief astray).
-        Otherwise, see
-        :meth:`window_allowed`."""
+        Otherwise, see :meth:`window_allowed`."""
         if not nav._is_end[k]:
             return True
         if not self.tracking:
@@ -179,7 +185,8 @@ class OnlineTerrain:
             self._stop()
 
     def _stop(self) -> None:
-        if self.tracking:  # tracking waits for a fix the policy uses after this
+        """End tracking (if it was on): it waits for a unimodal fix the policy uses after this."""
+        if self.tracking:
             self.tracking = self.found = False
             self.failed = []
             self.surprises = 0
