@@ -270,6 +270,90 @@ def test_the_misfit_scale_gives_the_student_t_of_its_formula(tide_var):
     np.testing.assert_allclose(update.count[ok], counts.sum(), rtol=1e-12)
 
 
+def test_a_scale_per_particle_multiplies_out_to_each_paths_batch_student_t():
+    """Each particle's own scale, updated ping by ping from its own residuals (the conjugate
+    gamma posterior), gives per particle the predictive densities whose product is the batch
+    Student-t of all its soundings at once: ``lgamma(a + N/2) - lgamma(a) + a log b - (a + N/2)
+    log(b + Q/2)`` with ``Q`` its whitened squares, ``N`` its count (the chain rule; no
+    forgetting, residuals large enough that the floor at the stated error never binds)."""
+    from math import lgamma
+
+    m, particles, offsets, depths, variance = _misfit_case(7)
+    particles = particles[:40]
+    likelihood = TerrainLikelihood(m, sigma=0.5)
+    rng = np.random.default_rng(7)
+    prior = MisfitScale.prior(3.0, 1e12)
+    scale = prior.spread(len(particles))
+    total, squares, count = np.zeros(len(particles)), np.zeros(len(particles)), 0.0
+    tide = np.zeros(len(particles))
+    for _ in range(6):
+        z = depths + rng.normal(0.0, 3.0, depths.size)  # soundings erring far beyond their statement
+        update = likelihood.ping_update(particles, offsets, z, tide, 0.0, variance=variance,
+                                        exponent=np.ones(depths.size), scale=scale)
+        r = likelihood.residuals(particles, offsets, z, tide)
+        assert np.all(np.isfinite(r))
+        total += update.log_likelihood
+        squares += np.sum(r**2 / variance[:, None], axis=0)
+        count += depths.size
+        scale = scale.after(update.quadratic, update.count, np.full(len(particles), 1.0))
+    a, b = prior.shape, prior.rate
+    want = lgamma(a + count / 2) - lgamma(a) + a * np.log(b) - (a + count / 2) * np.log(b + squares / 2)
+    np.testing.assert_allclose(total, want, rtol=1e-9)
+    np.testing.assert_allclose(scale.factor, (b + squares / 2) / (a + count / 2), rtol=1e-12)
+
+
+def test_a_particle_that_came_through_a_patch_has_learnt_its_error_where_the_cloud_has_not():
+    """Two particles: one at the truth, where the seafloor changed since the map into the depths
+    the map has at the other (a patch), which holds nearly all the weight and fits them within
+    their statement. The
+    cloud's shared scale learns from where the weight is and stays near 1, so the truth keeps
+    most of the Gaussian's penalty; the truth's own scale learns the patch's error, and a fresh
+    ping then costs it less than half of that penalty."""
+    m, _, offsets, depths, variance = _misfit_case(6)
+    rng = np.random.default_rng(6)
+    truth, rival = np.array([200.0, 200.0]), np.array([210.0, 205.0])
+    likelihood = TerrainLikelihood(m, sigma=0.5)
+    where = np.stack([truth, rival])
+    weights = np.array([1e-6, 1.0 - 1e-6])
+    shared, own = MisfitScale.prior(4.0, 1e9), MisfitScale.prior(4.0, 1e9).spread(2)
+    rival_depths = m.depth_at(rival[0] + offsets[:, 0], rival[1] + offsets[:, 1])
+
+    def ping():  # the seafloor changed under the truth into depths the map has at the rival
+        return rival_depths + np.sqrt(variance) * rng.standard_normal(depths.size)
+
+    for _ in range(8):
+        z = ping()
+        for name in ("shared", "own"):
+            scale = shared if name == "shared" else own
+            update = likelihood.ping_update(where, offsets, z, np.zeros(2), 0.0, weights=weights,
+                                            variance=variance, exponent=np.ones(depths.size), scale=scale)
+            posterior = weights * np.exp(update.log_likelihood - update.log_likelihood.max())
+            scale = scale.after(update.quadratic, update.count, posterior)
+            shared, own = (scale, own) if name == "shared" else (shared, scale)
+    assert shared.factor < 1.5 and own.factor[0] > 5.0
+    z = ping()
+    kw = dict(weights=weights, variance=variance, exponent=np.ones(depths.size))
+    gaussian = likelihood.ping_update(where, offsets, z, np.zeros(2), 0.0, **kw).log_likelihood
+    by_cloud = likelihood.ping_update(where, offsets, z, np.zeros(2), 0.0, scale=shared, **kw).log_likelihood
+    by_own = likelihood.ping_update(where, offsets, z, np.zeros(2), 0.0, scale=own, **kw).log_likelihood
+    assert gaussian[1] - gaussian[0] > 20
+    assert by_cloud[1] - by_cloud[0] > 0.7 * (gaussian[1] - gaussian[0])
+    assert by_own[1] - by_own[0] < 0.5 * (gaussian[1] - gaussian[0])  # (a wider density's own cost stays)
+
+
+def test_a_scale_per_particle_follows_its_particle_through_resampling():
+    m, particles, offsets, depths, _ = _misfit_case(5)
+    model = FilterModel.from_model(navigation(multibeam_survey(m, seed=0, pings=3), misfit_dof=3.0), m)
+    belief = model_belief(np.array([200.0, 200.0]), model, 5, rng=np.random.default_rng(0))
+    assert belief.misfit is not None and belief.misfit.per_candidate
+    learnt = belief.misfit.after(np.arange(5.0) * 10, np.full(5, 2.0), np.ones(5))
+    taken = belief.replace(misfit=learnt).take(np.array([4, 4, 0]))
+    np.testing.assert_allclose(taken.misfit.factor, learnt.factor[[4, 4, 0]])
+    with pytest.raises(TangraphError, match="not one per particle"):
+        TerrainLikelihood(m, sigma=0.5).ping_update(particles[:4], offsets, depths, np.zeros(4), 0.0,
+                                                    scale=learnt)
+
+
 @pytest.mark.parametrize("tide_var", [0.0, 4.0])
 def test_a_sure_misfit_scale_of_one_is_the_gaussian_likelihood(tide_var):
     m, particles, offsets, depths, variance = _misfit_case(5)
