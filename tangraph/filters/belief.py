@@ -53,8 +53,8 @@ class Belief:
     ``calibration (N, 2)`` each particle's constant DR errors ``(k, b)`` (speed scale, heading
     error in rad, DR minus true; None: zeros); ``held`` a batch fix waiting to be confirmed
     (TERCOM-PF, :func:`tangraph.filters.fixes.decide_fix`; resampling takes its anchor along);
-    ``misfit`` the local misfit scale, one per particle or one the cloud shares
-    (:mod:`tangraph.sensors.misfit`; None: the stated errors trusted).
+    ``misfit`` the local misfit scale the cloud shares (:mod:`tangraph.sensors.misfit`; None:
+    the stated errors trusted).
     """
 
     particles: np.ndarray
@@ -122,7 +122,6 @@ class Belief:
             history=self.history[index] if self.history.shape[1] else np.empty((n, 0)),
             calibration=self.calibration[index],
             held=None if self.held is None else self.held.take(index),
-            misfit=None if self.misfit is None else self.misfit.take(index),
         )
 
     def replace(self, **changes) -> Belief:
@@ -204,10 +203,8 @@ def model_belief(
     history_length: int = 0,
 ) -> Belief:  # fmt: skip
     """The start cloud of a model: ``n`` particles around ``centre`` with the model's
-    ``initial_position_std`` (or ``std``), tide prior and calibration priors, and each particle
-    the misfit scale's prior to learn from its own path (:mod:`tangraph.sensors.misfit`)."""
+    ``initial_position_std`` (or ``std``), tide prior and calibration priors."""
     nav = model.navigation
-    misfit = model.misfit_prior()
     return initial_belief(
         centre,
         nav.initial_position_std if std is None else std,
@@ -218,7 +215,7 @@ def model_belief(
         history_length=history_length,
         calibration=nav.calibration_prior,
         calibration_std=nav.calibration_std,
-    ).replace(misfit=None if misfit is None else misfit.spread(n))
+    ).replace(misfit=model.misfit_prior())
 
 
 @numba.njit(cache=True, nogil=True)

@@ -145,7 +145,6 @@ def ipf_step(
             child_update.log_likelihood - update.log_likelihood[ancestors],
             where=f"ping {ping.index} (IPF children)",
         ).replace(particles=children.particles, calibration=children.calibration, tide=child_update.tide)
-        new = new.replace(misfit=child_update.scale_after(new.weights))  # the children's own scales
     except FilterDivergence:
         new = uniform  # no child on the map: keep the copies
     mean, cov = weighted_moments(new)

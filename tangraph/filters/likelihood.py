@@ -25,9 +25,8 @@ soundings' precisions ``l_b = a_b / v_b``:
   (tempering stages, IPF children) so that their likelihood ratios are of one function.
 
 - **a misfit scale of its own** (:mod:`tangraph.sensors.misfit`): given a ``Gamma(shape, rate)``
-  on the precision factor shared by the ping's soundings (the cloud's, or each particle's own),
-  the quadratic ``Q`` above (the tide integrated out at the scale's estimate ``rate / shape``)
-  enters the Student-t
+  on the precision factor shared by the ping's soundings, the quadratic ``Q`` above (the tide
+  integrated out at the scale's estimate ``rate / shape``) enters the Student-t
   ``lgamma(shape + n/2) - lgamma(shape) + shape log(rate) - (shape + n/2) log(rate + Q/2)``
   with ``n`` the particle's summed expected squares ``a_b c_b``; a sounding without a map depth
   under a particle adds to its ``Q`` the sub-cloud's weighted mean of ``a_b r^2 / v_b`` and to its
@@ -145,15 +144,15 @@ def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offs
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
-def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var, student, shape,
-                   rate, count_weight, log_likelihood, tide_shift, total_precision, residual_sum, mapped,
+def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var, shape, rate,
+                   count_weight, log_likelihood, tide_shift, total_precision, residual_sum, mapped,
                    quadratic, effective):  # fmt: skip
     """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift,
     summed precision, sum of residuals and count of soundings with the map under it, whitened
     residual sum (at scale 1) and effective count, from the residuals ``(B, N)`` (NaN: no map)
-    and the normalised ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``; ``student``: each
-    particle's misfit scale ``Gamma(shape[p], rate[p])`` is integrated out (Student-t), else
-    the scale is 1. See the module docstring."""
+    and the normalised ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``; ``shape > 0``: the
+    misfit scale's ``Gamma(shape, rate)`` is integrated out (Student-t), else the scale is 1.
+    See the module docstring."""
     nb, n = residual.shape
     s1 = np.zeros(n)
     s2 = np.zeros(n)
@@ -191,7 +190,7 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 exponent[b] = spread / (spread + 2.0 * map_variance[b])
         lam = exponent[b] * precision[b]
         imputed = lam * square / total  # with a misfit scale: the sub-cloud's mean square
-        if count < n and not student:  # some particles have no map here: the sub-cloud's mean likelihood
+        if count < n and shape <= 0.0:  # some particles have no map here: the sub-cloud's mean likelihood
             top = -np.inf
             for p in range(n):
                 r = residual[b, p]
@@ -214,19 +213,19 @@ def _update_kernel(residual, weights, precision, map_variance, exponent, given, 
                 effective[p] += exponent[b] * count_weight[b]
             else:
                 missing[p] += imputed
-                if student:
+                if shape > 0.0:
                     effective[p] += exponent[b] * count_weight[b]
-    _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, student, shape, rate,
-                 log_likelihood, tide_shift, total_precision, quadratic)
+    _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
+                 tide_shift, total_precision, quadratic)
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy", inline="always")
-def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, student, shape, rate,
-                 log_likelihood, tide_shift, total_precision, quadratic):  # fmt: skip
+def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
+                 tide_shift, total_precision, quadratic):  # fmt: skip
     """Every particle's likelihood, tide shift, summed precision and whitened residual sum from its
     sums over the soundings (:func:`_update_kernel`)."""
+    scale = rate / shape if shape > 0.0 else 1.0
     for p in range(s1.size):
-        scale = rate[p] / shape[p] if student else 1.0
         if not any_map:
             log_likelihood[p] = -np.inf
             tide_shift[p] = 0.0
@@ -242,28 +241,14 @@ def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, student, 
             q = s2[p] - gain * s1[p] * s1[p] / scale
             log_det = -0.5 * np.log1p(tide_var * big_l[p] / scale)
             tide_shift[p] = gain * s1[p] / scale
-        if student:  # missing[p]: the sub-clouds' mean squares of the soundings it has no map under
+        if shape > 0.0:  # missing[p]: the sub-clouds' mean squares of the soundings it has no map under
             q += missing[p]
             half = 0.5 * effective[p]
-            a, c = shape[p], rate[p]
-            log_likelihood[p] = math.lgamma(a + half) - math.lgamma(a) + a * np.log(c) \
-                - (a + half) * np.log(c + 0.5 * q) + log_det
+            log_likelihood[p] = math.lgamma(shape + half) - math.lgamma(shape) + shape * np.log(rate) \
+                - (shape + half) * np.log(rate + 0.5 * q) + log_det
         else:  # missing[p]: the sub-clouds' mean log likelihoods
             log_likelihood[p] = -0.5 * q + log_det + missing[p]
         quadratic[p] = q
-
-
-def _per_particle(scale, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """The misfit scale's ``(shape, rate)`` for each of ``n`` particles (a shared one repeated;
-    ones without a scale)."""
-    if scale is None:
-        return np.ones(n), np.ones(n)
-    try:
-        return (np.ascontiguousarray(np.broadcast_to(scale.shape, (n,)), dtype=np.float64),
-                np.ascontiguousarray(np.broadcast_to(scale.rate, (n,)), dtype=np.float64))
-    except ValueError:
-        raise TangraphError(f"the misfit scale holds {np.size(scale.shape)} candidates' scales, "
-                            f"not one per particle ({n})") from None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -397,8 +382,7 @@ class TerrainLikelihood:
             The exponents of an earlier evaluation of the same ping (default: from this cloud).
         scale : tangraph.sensors.MisfitScale, optional
             The local misfit scale to integrate out (a Student-t likelihood,
-            :mod:`tangraph.sensors.misfit`), shared or one per particle; None: the variances as
-            stated (Gaussian).
+            :mod:`tangraph.sensors.misfit`); None: the variances as stated (Gaussian).
         counts : (B,), optional
             Each sounding's expected whitened square (:func:`tangraph.sensors.misfit_counts`;
             default 1), summed into the effective counts the scale is updated with.
@@ -444,10 +428,9 @@ class TerrainLikelihood:
         log_likelihood, shift, total = np.empty(n), np.empty(n), np.empty(n)
         residual_sum, count = np.zeros(n), np.zeros(n)
         quadratic, effective = np.empty(n), np.zeros(n)
-        shape, rate = _per_particle(scale, n)
-        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, scale is not None, shape, rate,
-                       np.ascontiguousarray(c), log_likelihood, shift, total, residual_sum, count,
-                       quadratic, effective)
+        shape, rate = (0.0, 1.0) if scale is None else (float(scale.shape), float(scale.rate))
+        _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, shape, rate, np.ascontiguousarray(c),
+                       log_likelihood, shift, total, residual_sum, count, quadratic, effective)
         with np.errstate(invalid="ignore", divide="ignore"):
             predicted = np.where(count > 0, np.mean(depths) - residual_sum / count, np.nan)
         new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0

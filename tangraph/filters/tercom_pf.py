@@ -129,7 +129,7 @@ def _draw(centre: np.ndarray, covariance: np.ndarray, n: int, rng: np.random.Gen
 
 def _redrawn(belief: Belief, centre: np.ndarray, covariance: np.ndarray, rng: np.random.Generator) -> Belief:
     """The belief with its positions re-drawn from ``N(centre, covariance)``, equally weighted
-    (each particle keeps its calibration, tide and misfit scale)."""
+    (each particle keeps its calibration and tide)."""
     n = belief.n_particles
     return belief.replace(particles=_draw(centre, covariance, n, rng), log_weights=np.full(n, -np.log(n)))
 

@@ -20,26 +20,13 @@ whitened residual sum ``Q`` and (effective) count ``n`` have the multivariate St
 (up to constants shared by every candidate position), whose slope in ``Q`` at the expected
 ``Q = n rate / shape`` is the Gaussian's at the current scale ``rate / shape``: where the map
 errs as stated the likelihood is the Gaussian one, where the residuals grow it flattens. After
-the ping the scale's posterior is ``Gamma(shape + n/2, rate + Q/2)``: each particle's own
-(below), or for a scale shared by all candidates (the point-mass filter's grid) averaged over
-their posterior (the assumed-density approximation that the scale and the position are
-independent given the past). Along the track the scale forgets
+the ping the scale's posterior is ``Gamma(shape + n/2, rate + Q/2)``, averaged over the
+filter's posterior cloud (one scale shared by the cloud: the assumed-density approximation that
+the scale and the position are independent given the past). Along the track the scale forgets
 towards its prior as the vehicle leaves the patch: over a distance ``d`` the excess of both
 parameters over the prior's is multiplied by ``exp(-d / length)`` (an exponential forgetting of
 the gamma statistics, as the variational adaptive Kalman filter of Särkkä & Nummenmaa 2009
 does in time).
-
-**One scale per particle** (:meth:`MisfitScale.spread`). A cloud-shared scale is learnt from
-the cloud's posterior: a cloud that has moved to where a patch's wrong depths fit sees small
-residuals there and never learns the patch's error. A particle filter instead gives each particle
-the gamma posterior of its own path's residuals, carried through resampling with the particle
-(:meth:`MisfitScale.take`): given the path the scale is conjugate, so integrating it out particle
-by particle is the exact marginal (a Rao-Blackwellised Student-t, up to the floor below, the
-forgetting and the tide taken at the scale's estimate), and a particle that reached the truth
-through a patch has learnt that patch's error while one that fits its wrong depths has not. A
-grid (the point-mass filter) keeps the shared scale: its points have no paths. (Where the whole
-cloud has moved to where the wrong depths fit, no particle is left at the truth to learn
-it: on the simulated patch-error surveys the two forms end alike.)
 
 **Never better than stated.** The scale's estimate ``rate / shape`` is kept at 1 or more: residuals
 smaller than the stated errors do not make the soundings more precise than the map and the
@@ -83,24 +70,15 @@ class MisfitScale:
     1.0
     """
 
-    shape: float | np.ndarray
-    rate: float | np.ndarray
+    shape: float
+    rate: float
     dof: float
     length: float
 
     def __post_init__(self) -> None:
-        for name in ("dof", "length"):
+        for name in ("shape", "rate", "dof", "length"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise TangraphError(f"MisfitScale.{name} must be a finite number > 0, got {value!r}")
-        for name in ("shape", "rate"):
-            value = getattr(self, name)
-            if isinstance(value, np.ndarray):
-                if value.ndim != 1 or value.shape != np.shape(self.shape) or not (
-                        np.all(np.isfinite(value)) and np.all(value > 0)):
-                    raise TangraphError(f"MisfitScale.{name} must be finite numbers > 0, one per "
-                                        f"candidate as shape, got an array of shape {value.shape}")
-            elif not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise TangraphError(f"MisfitScale.{name} must be a finite number > 0, got {value!r}")
 
     @classmethod
@@ -110,28 +88,9 @@ class MisfitScale:
         return cls(float(dof) / 2.0, float(dof) / 2.0, float(dof), float(length))
 
     @property
-    def factor(self) -> float | np.ndarray:
-        """The current estimate of ``kappa``, ``rate / shape`` (1: the map errs as stated); one
-        per candidate for a scale of each."""
+    def factor(self) -> float:
+        """The current estimate of ``kappa``, ``rate / shape`` (1: the map errs as stated)."""
         return self.rate / self.shape
-
-    @property
-    def per_candidate(self) -> bool:
-        """Whether each candidate (particle) has a scale of its own (:meth:`spread`)."""
-        return isinstance(self.shape, np.ndarray)
-
-    def spread(self, n: int) -> MisfitScale:
-        """This scale given to each of ``n`` candidates, to be learnt from each one's own
-        residuals (module docstring, "One scale per particle")."""
-        return dataclasses.replace(self, shape=np.full(n, float(np.mean(self.shape))),
-                                   rate=np.full(n, float(np.mean(self.rate))))
-
-    def take(self, index: np.ndarray) -> MisfitScale:
-        """The scales of the candidates ``index`` (a resampling's); a shared scale unchanged."""
-        if not self.per_candidate:
-            return self
-        return dataclasses.replace(self, shape=np.asarray(self.shape)[index],
-                                   rate=np.asarray(self.rate)[index])
 
     def forget(self, distance: float) -> MisfitScale:
         """The scale after the vehicle moved ``distance`` m: the excess of its parameters over
@@ -143,18 +102,12 @@ class MisfitScale:
 
     def after(self, quadratic: np.ndarray, count: np.ndarray, weights: np.ndarray) -> MisfitScale:
         """The scale after a ping whose candidates (particles, grid points) have whitened
-        residual sums ``quadratic (N,)`` (at scale 1) and effective counts ``count (N,)``: a
-        scale of each candidate takes its own (``weights`` unused; a NaN entry leaves it
-        unchanged); a shared one their average over the posterior ``weights (N,)`` (normalised
-        here; NaN entries and zero weights are left out; unchanged when no candidate of
-        positive weight has one). The estimate is never below 1 (module docstring)."""
+        residual sums ``quadratic (N,)`` (at scale 1) and effective counts ``count (N,)``,
+        averaged over their posterior ``weights (N,)`` (normalised here; NaN entries and
+        zero weights are left out), its estimate never below 1 (module docstring). Unchanged
+        when no candidate of positive weight has one."""
         q = np.asarray(quadratic, dtype=np.float64)
         c = np.asarray(count, dtype=np.float64)
-        if self.per_candidate:
-            ok = np.isfinite(q) & np.isfinite(c)
-            each = np.where(ok, self.shape + 0.5 * np.where(ok, c, 0.0), self.shape)
-            rate = np.where(ok, np.maximum(self.rate + 0.5 * np.where(ok, q, 0.0), each), self.rate)
-            return dataclasses.replace(self, shape=each, rate=rate)
         w = np.asarray(weights, dtype=np.float64)
         ok = np.isfinite(q) & np.isfinite(c) & np.isfinite(w) & (w > 0)
         total = float(w[ok].sum())

@@ -59,28 +59,6 @@ def test_bad_scales_are_refused(field, value):
         MisfitScale(**fields)
 
 
-def test_each_candidates_scale_learns_from_its_own_residuals_and_is_forgotten_alike():
-    """A scale per candidate takes each one's residuals (the weights do not mix them), a NaN
-    leaves its candidate as it was, the floor at the stated error holds for each, and the
-    forgetting shrinks every one towards the prior."""
-    each = MisfitScale.prior(2.0, 50.0).spread(3)
-    assert each.per_candidate and not MisfitScale.prior(2.0, 50.0).per_candidate
-    later = each.after(np.array([90.0, np.nan, 1.0]), np.full(3, 10.0), np.array([0.0, 1.0, 0.0]))
-    np.testing.assert_allclose(later.shape, [6.0, 1.0, 6.0])
-    np.testing.assert_allclose(later.rate, [46.0, 1.0, 6.0])
-    np.testing.assert_allclose(later.factor, [46.0 / 6.0, 1.0, 1.0])
-    one = later.forget(50.0)
-    np.testing.assert_allclose(one.shape, 1.0 + (later.shape - 1.0) / math.e)
-    np.testing.assert_allclose(later.take(np.array([0, 0])).rate, [46.0, 46.0])
-
-
-@pytest.mark.parametrize("rate", [np.array([1.0, -1.0]), np.array([1.0, np.nan]), np.ones(3),
-                                  np.ones((2, 1))])
-def test_bad_scales_per_candidate_are_refused(rate):
-    with pytest.raises(TangraphError, match="MisfitScale.rate must be finite numbers > 0, one per candidate"):
-        MisfitScale(np.ones(2), rate, 2.0, 10.0)
-
-
 @pytest.mark.parametrize("field, value", [("misfit_dof", -1.0), ("misfit_length", 0.0)])
 def test_the_navigation_model_refuses_bad_misfit_settings(field, value):
     with pytest.raises(TangraphError, match=f"NavigationModel.{field}"):
