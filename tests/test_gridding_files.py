@@ -47,3 +47,22 @@ def test_grid_files_names_its_keywords_or_the_callers_options(tmp_path):
             assert str(err.value) == message
     grid, check = grid_files([xyz], tmp_path / "xyz.nc", cell=10.0, sign="depth", position_std=0.5)
     assert check is None and grid.mean.name == "xyz" and grid.meta["position_std"] == 0.5
+    assert grid.meta["check_lines_skipped"] == "x y z text has no tracks to hold out"
+    assert "check_lines_skipped" not in grid_files([xyz], tmp_path / "xyz.nc", cell=10.0, sign="depth",
+                                                   check_lines=False)[0].meta
+
+
+def test_a_map_of_surveys_is_checked_by_its_check_lines_unless_told_not_to(tmp_path):
+    """Checked wherever it can be (the same map as asked for), else the gridding's own error with
+    the reason in its meta; asked for where it cannot be made, an error."""
+    pts = random_soundings(n=300)
+    plain = write_survey(nadir_survey(pts, origin=(0, 0)), tmp_path / "plain.nc")
+    out = tmp_path / "out.nc"
+    grid, check = grid_files([plain], out, cell=10.0)  # one scattered survey: no lines to hold out
+    assert check is None and "check_lines_skipped" in grid.meta
+    unchecked, _ = grid_files([plain], out, cell=10.0, check_lines=False)
+    np.testing.assert_array_equal(grid.depth.depth_std, unchecked.depth.depth_std)
+    with pytest.raises(TangraphError):
+        grid_files([plain], out, cell=10.0, check_lines=True, lines=True)
+    grid, check = grid_files([plain], out, cell=10.0, use_dr=True)
+    assert check is None and "dead reckoning" in grid.meta["check_lines_skipped"]

@@ -117,6 +117,9 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
         tail = ("a Gaussian tail" if grid.error_dof is None else
                 f"the tail of a Student-t of {grid.error_dof:.3g} degrees of freedom (error_dof)")
         print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}, {tail}")
+    elif "check_lines_skipped" in grid.meta:
+        print(f"check lines: not made ({grid.meta['check_lines_skipped']}); the map states the gridding's "
+              "own error")
     write_sounding_grid(grid, args.output, overwrite=args.force)
     print(_grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
 
@@ -138,7 +141,7 @@ def _grid_summary(grid, *, cell: float, fill: int, output: Path) -> str:
         + (f"map error: std median {error['depth_std_m']['median']:.3f} m, max "
            f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m"
            + (f", a Student-t tail of {grid.error_dof:.3g} degrees of freedom" if grid.error_dof else "")
-           + ("" if "check_lines" in grid.meta else " (the gridding's own: --check-lines tests it)") + "; "
+           + ("" if "check_lines" in grid.meta else " (the gridding's own, not checked)") + "; "
            if error else "map error: not told by these soundings (no depth_std written); ")
         + f"wrote {output}"
     )
@@ -246,7 +249,7 @@ def _add_grid(maps_sub) -> None:
         "reference track (GPS or truth) and put in the frame (CRS, origin) of the first, or of one "
         "x y z text file, into a map: median or mean, count and std per cell, and the map's error "
         "(depth_std per cell: the standard error of a measured cell, growing with the distance to "
-        "the data in a filled one; a correlation length).",
+        "the data in a filled one; a correlation length), checked by the surveys' check lines.",
     )
     p.add_argument("inputs", type=Path, nargs="+", metavar="INPUT",
                    help="survey files (.nc), or one x/east y/north z text file")
@@ -256,9 +259,12 @@ def _add_grid(maps_sub) -> None:
         help="place survey soundings at the dead reckoning (for surveys without a reference track)",
     )
     p.add_argument(
-        "--check-lines", action="store_true",
-        help="survey files only: hold out each survey, grid the others, and scale depth_std by the RMS "
-        "of the held-out windows' standardised mean residuals when above 1 (see 'maps check')",
+        "--check-lines", action=argparse.BooleanOptionalAction, default=None,
+        help="survey files: hold out each survey (a single one: each of its lines), grid the others, "
+        "and give the map the error the held-out windows find: depth_std scaled by their RMS when above "
+        "1, or by a Student-t's scale with its degrees of freedom (error_dof) for a heavier tail (see "
+        "'maps check'). Default: wherever it can be made (else the map keeps the gridding's error and "
+        "says why); --check-lines: an error where it cannot; --no-check-lines: never",
     )
     _check_line_options(p, "--check-lines: ")
     p.add_argument(

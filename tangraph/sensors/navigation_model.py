@@ -81,8 +81,8 @@ class NavigationModel:
         soundings err beyond the stated sounding and map errors as a variable shared along the
         track, with the tail of a Student-t of ``misfit_dof`` degrees of freedom, forgotten over
         ``misfit_length`` m (a patch of the map that errs beyond its statement). A map that
-        states its tail (``BathymetryMap.error_dof``, from its check lines: ``tangraph maps grid
-        --check-lines``) gives its own; ``misfit_dof`` is the default for a map that states
+        states its tail (``BathymetryMap.error_dof``, from its check lines, which ``tangraph maps
+        grid`` makes by default) gives its own; ``misfit_dof`` is the default for a map that states
         none; at 0 (the default) the stated errors are trusted everywhere (a Gaussian likelihood).
         The factor graph's fixes are not affected: each TAP window scales its fix by its own
         residual variance.

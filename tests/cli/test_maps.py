@@ -244,11 +244,16 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
                         beam_forward=np.zeros((k, 3)), beam_starboard=np.tile([-2.0, 0, 2], (k, 1)),
                         beam_depth=depth, true_pose=pose)
         paths.append(str(write_survey(survey, tmp_path / f"day{day}.nc")))
-    plain, checked = tmp_path / "plain.nc", tmp_path / "checked.nc"
-    assert main(["maps", "grid", *paths, "--cell", "5", "-o", str(plain)]) == 0
+    plain, checked, default = tmp_path / "plain.nc", tmp_path / "checked.nc", tmp_path / "default.nc"
+    assert main(["maps", "grid", *paths, "--cell", "5", "--no-check-lines", "-o", str(plain)]) == 0
     assert main(["maps", "grid", *paths, "--cell", "5", "--check-lines", "--sounding-std", "0.05",
                  "-o", str(checked)]) == 0
     out = capsys.readouterr().out
+    # checked by default: the same map as asked for
+    assert main(["maps", "grid", *paths, "--cell", "5", "--sounding-std", "0.05", "-o", str(default)]) == 0
+    np.testing.assert_array_equal(read_map(default).depth_std, read_map(checked).depth_std)
+    assert read_map(default).error_dof == read_map(checked).error_dof
+    capsys.readouterr()
     assert "check lines: " in out and "depth_std scaled by" in out
     scale = float(out.split("depth_std scaled by ")[1].split(",")[0])
     assert scale > 2.0
@@ -258,7 +263,7 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     # one day off by 0.8 m over half the area: a tail heavier than a Gaussian's, kept in the file
     dof = float(out.split("Student-t of ")[2].split()[0])
     assert read_map(checked).error_dof == pytest.approx(dof, abs=0.006) and read_map(plain).error_dof is None
-    assert out.count("(the gridding's own: --check-lines tests it)") == 1  # the plain map's line only
+    assert out.count("(the gridding's own, not checked)") == 1  # the plain map's line only
     assert f"a Student-t tail of {dof:.3g} degrees of freedom; wrote {checked}" in out
     # the same figures from `maps check`
     assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
@@ -273,11 +278,21 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     assert main(["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5", "--check-lines",
                  "-o", str(tmp_path / "x.nc")]) == 2
     assert "--check-lines and --lines need survey files" in capsys.readouterr().err
+    assert main(["maps", "grid", str(xyz), "--sign", "depth", "--cell", "5",
+                 "-o", str(tmp_path / "x.nc")]) == 0
+    assert "check lines: not made (x y z text has no tracks to hold out)" in capsys.readouterr().out
     # one survey whose lines, 5 m apart, do not overlap in the map's cells: nothing to check with
     assert main(["maps", "grid", paths[0], "--cell", "5", "--check-lines", "--lines",
                  "-o", str(tmp_path / "one.nc")]) == 2
     assert "the check lines scored 0 windows" in capsys.readouterr().err
     assert not (tmp_path / "one.nc").exists()
+    # by default its lines are tried, and the map keeps the gridding's error, saying why
+    assert main(["maps", "grid", paths[0], "--cell", "5", "-o", str(tmp_path / "one.nc")]) == 0
+    out = capsys.readouterr().out
+    assert "check lines: not made (calibrate_error: the check lines scored 0 windows" in out
+    with xr.open_dataset(tmp_path / "one.nc") as ds:
+        skipped = json.loads(ds.attrs["tangraph_meta"])["check_lines_skipped"]
+    assert "the check lines scored 0 windows" in skipped
 
 
 def test_cli_grids_surveys_end_to_end(tmp_path, capsys):
@@ -287,9 +302,10 @@ def test_cli_grids_surveys_end_to_end(tmp_path, capsys):
     b = write_survey(surveys[1], tmp_path / "b.nc")
     out = tmp_path / "map.nc"
     assert main(["maps", "grid", str(a), str(b), "--cell", "5", "--fill", "2", "-o", str(out)]) == 0
-    line = capsys.readouterr().out.strip()
+    check, line = capsys.readouterr().out.strip().split("\n")  # the check lines' line, then the map's
+    assert check.startswith("check lines: 50 windows of 50 m")
     assert line.startswith("gridded ") and "median" in line and f"wrote {out}" in line
-    assert "\n" not in line and "more filled by --fill 2" in line
+    assert "more filled by --fill 2" in line
     grid = read_map(out)
     assert grid.crs == m.crs and grid.origin == m.origin and grid.cell_size == (5.0, 5.0)
     with xr.open_dataset(out) as ds:
