@@ -16,10 +16,25 @@ Each ping (SEEDS.md section 3):
    particle's last ``L`` predicted depths and the last ``L`` measured ones; ``f`` is
    ``exp(kernel_constant * rho)`` (``kernel="exponential"``, the paper's) or
    ``((1 + rho) / 2) ** kernel_constant`` (``"power"``); an undefined rho (a constant sequence)
-   counts as 0;
+   counts as 0; with ``signal_gate`` (default) the constant is multiplied by the share of the
+   measured sequence's variance that is terrain, not noise (:func:`signal_share`);
 5. estimate (weighted mean and covariance), then resample when ESS < ``ess_threshold * N``
    (default 1.0: every ping, as the paper). The histories follow the particles through
    resampling (indexed by the resampling indices).
+
+**The signal gate.** A correlation between two depth sequences says where the vehicle is only
+as far as the sequences follow the terrain. Over a flat seafloor the measured depths along ``L``
+pings vary by no more than their noise (the soundings' own and the map's error under them,
+the terrain measurement model's variances), every particle's correlation is noise, and
+``exp(c rho)`` multiplies the weights by a random factor at every ping: the cloud collapses onto
+whichever particles the noise favours and reports it with confidence (on Lake Caputh's flat
+shelf, a 7-minute run with a DR 0.2 m off ended 15 m off with an ANEES of 75; without the
+correction, 4 m with an ANEES of 0.3). The gate weighs the correlation by ``S / (S + N)``,
+``S`` the measured sequence's variance beyond the noise ``N`` of one ping's mean depth: 1 where
+the terrain dominates (the paper's sparse soundings over a varied chart), 0 where the sequence
+is noise, as MBARI's modified weighting gives the terrain likelihood its exponent
+(:func:`tangraph.sensors.information_exponent`). ``signal_gate=False`` keeps the paper's kernel
+as published.
 
 The paper gives no particle count, kernel constant or window for its Table 1; the defaults here
 (1000 particles, ``exp(2 rho)``, ``L = 10``) are choices to sweep (the null scatter of rho over 10
@@ -48,7 +63,7 @@ from tangraph.survey import Survey
 from tangraph.track import Track
 from tangraph.validation import check_count, check_number
 
-__all__ = ["SJCPFConfig", "correlation_log_weight", "sjcpf", "sjcpf_step"]
+__all__ = ["SJCPFConfig", "correlation_log_weight", "signal_share", "sjcpf", "sjcpf_step"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +85,9 @@ class SJCPFConfig(ParticleConfig):
         ``f(rho) = exp(c rho)`` or ``((1 + rho) / 2) ** c``.
     kernel_constant : float
         The kernel's ``c`` (>= 0; 0 turns the correction off).
+    signal_gate : bool
+        Multiply ``c`` by the share of the measured depths' variance over the window that is
+        terrain, not noise (module docstring; False: the paper's kernel as published).
     """
 
     n_particles: int = 1000
@@ -80,6 +98,7 @@ class SJCPFConfig(ParticleConfig):
     correlation: Correlation = Correlation.PEARSON
     kernel: Literal["exponential", "power"] = "exponential"
     kernel_constant: float = 2.0
+    signal_gate: bool = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -87,6 +106,9 @@ class SJCPFConfig(ParticleConfig):
             check_number(self, "jitter_std")
         check_number(self, "jitter_fraction")
         check_number(self, "kernel_constant")
+        if not isinstance(self.signal_gate, (bool, np.bool_)):
+            raise TangraphError(f"SJCPFConfig.signal_gate must be true or false, got {self.signal_gate!r}")
+        object.__setattr__(self, "signal_gate", bool(self.signal_gate))
         check_count(self, "window", low=3)
         if self.kernel not in ("exponential", "power"):
             raise TangraphError(f"SJCPFConfig.kernel must be exponential or power, got {self.kernel!r}")
@@ -114,6 +136,34 @@ def correlation_log_weight(rho: np.ndarray, kernel: str, constant: float) -> np.
         return constant * np.log(np.clip((1.0 + rho) / 2.0, 0.0, 1.0))
 
 
+def signal_share(measured: np.ndarray, noise: float) -> float:
+    """``S / (S + N)``: the share of the variance of the ``measured (L,)`` depth sequence that
+    is terrain, ``S`` its sample variance less ``N = noise`` (the variance of one element's
+    error; m^2), at least 0; 1 with no noise (module docstring).
+
+    Examples
+    --------
+    >>> round(signal_share(np.array([10.0, 12.0, 14.0, 16.0]), 0.0), 6)
+    1.0
+    >>> signal_share(np.array([10.0, 10.1, 9.9, 10.0]), 0.04)  # flat: the noise alone
+    0.0
+    >>> round(signal_share(np.array([10.0, 12.0, 14.0, 16.0]), 6.0 + 2.0 / 3.0), 6)
+    0.0
+    """
+    if noise <= 0:
+        return 1.0
+    s = max(float(np.var(measured, ddof=1)) - noise, 0.0)
+    return s / (s + noise)
+
+
+def _ping_noise(ping: Ping, model: FilterModel) -> float:
+    """The variance (m^2) of the error of a ping's mean depth against the map at the truth: its
+    soundings' variances (noise and the map error they share) over their count."""
+    if ping.variance is None:
+        return model.terrain.sounding_std**2 / max(ping.n_soundings, 1)
+    return float(np.mean(ping.variance)) / max(ping.n_soundings, 1)
+
+
 def _push(history: np.ndarray, column: np.ndarray) -> np.ndarray:
     return np.concatenate([history[..., 1:], column[..., None]], axis=-1)
 
@@ -136,7 +186,10 @@ def sjcpf_step(
         )
         if weighted.n_history >= config.window and config.kernel_constant > 0:
             rho = correlate_rows(weighted.history, weighted.measured, config.correlation)
-            log_f = correlation_log_weight(rho, config.kernel, config.kernel_constant)
+            constant = config.kernel_constant
+            if config.signal_gate:
+                constant *= signal_share(weighted.measured, _ping_noise(ping, model))
+            log_f = correlation_log_weight(rho, config.kernel, constant)
             weighted = reweight(weighted, log_f, where=f"ping {ping.index} (correlation)")
     mean, cov = weighted_moments(weighted)
     new, index, ess = resample_if_needed(weighted, config, rng=rng, model=model)
