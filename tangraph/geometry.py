@@ -215,16 +215,22 @@ def mahalanobis2(error, cov) -> np.ndarray:
     return np.einsum("...i,...i->...", e, x)
 
 
-def gate_threshold(probability: float | None) -> float:
-    """The ``chi2(2)`` quantile of a gate on a squared Mahalanobis distance in the plane
-    (``-2 log(1 - p)``, exact for two degrees of freedom); inf without a gate (None).
+def gate_threshold(probability: float | None, dof: int = 2) -> float:
+    """The ``chi2(dof)`` quantile of a gate on a squared Mahalanobis distance (in the plane by
+    default: ``-2 log(1 - p)``, exact for two degrees of freedom); inf without a gate (None).
 
     Examples
     --------
-    >>> round(gate_threshold(0.999), 3), gate_threshold(None)
-    (13.816, inf)
+    >>> round(gate_threshold(0.999), 3), gate_threshold(None), round(gate_threshold(0.999, 3), 3)
+    (13.816, inf, 16.266)
     """
-    return math.inf if probability is None else float(-2.0 * math.log1p(-float(probability)))
+    if probability is None:
+        return math.inf
+    if dof == 2:
+        return float(-2.0 * math.log1p(-float(probability)))
+    from scipy import stats  # only for a gate of other than two degrees of freedom
+
+    return float(stats.chi2.ppf(float(probability), dof))
 
 
 def is_precise(covariance, half_width: float, sigmas: float, share: float = 0.5) -> bool:

@@ -57,6 +57,7 @@ import numpy as np
 from scipy import stats
 
 from tangraph.fix_records import FixStatus
+from tangraph.geometry import gate_threshold
 from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
 from tangraph.sensors import sounding_variances
@@ -206,7 +207,8 @@ class OnlineTerrain:
         failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
         if used.any():
             weight = np.where(used, 1.0 / (terrain.variance + dr_variance), 0.0)
-            if _innovation(residual, grad, weight, prior[0], tide_var) > _gate(nav, 2 + (tide_var > 0)):
+            gate_nis = gate_threshold(nav.config.fixes.gate_probability or 0.999, 2 + int(tide_var > 0))
+            if _innovation(residual, grad, weight, prior[0], tide_var) > gate_nis:
                 used[:] = False  # the soundings together pull the belief beyond its gate
                 failed = 1.0
         if not used.any():
@@ -248,12 +250,6 @@ def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
     if tide_var > 0:
         prior[2, 2] = tide_var
     return float(b @ np.linalg.pinv(h @ prior @ h + h, hermitian=True) @ b)
-
-
-def _gate(nav: GraphNavigator, dof: int) -> float:
-    """The ``chi2(dof)`` quantile of the fixes' gate probability (``FixConfig.gate_probability``;
-    0.999 without one)."""
-    return float(stats.chi2.ppf(nav.config.fixes.gate_probability or 0.999, dof))
 
 
 def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain) -> float:
