@@ -16,8 +16,8 @@ Each ping (SEEDS.md section 3):
    particle's last ``L`` predicted depths and the last ``L`` measured ones; ``f`` is
    ``exp(kernel_constant * rho)`` (``kernel="exponential"``, the paper's) or
    ``((1 + rho) / 2) ** kernel_constant`` (``"power"``); an undefined rho (a constant sequence)
-   counts as 0; with ``signal_gate`` (default) the constant is multiplied by the correlation
-   the truth can reach with the measured sequence, 0 where it is noise (:func:`signal_share`);
+   counts as 0; with ``signal_gate`` (default) the constant is multiplied by the share of the
+   measured sequence's variance that is terrain, not noise (:func:`signal_share`);
 5. estimate (weighted mean and covariance), then resample when ESS < ``ess_threshold * N``
    (default 1.0: every ping, as the paper). The histories follow the particles through
    resampling (indexed by the resampling indices).
@@ -88,9 +88,8 @@ class SJCPFConfig(ParticleConfig):
     kernel_constant : float
         The kernel's ``c`` (>= 0; 0 turns the correction off).
     signal_gate : bool
-        Multiply ``c`` by the correlation the truth's own predicted depths can reach with the
-        measured ones over the window, 0 where they vary by no more than their noise (module
-        docstring; False: the paper's kernel as published).
+        Multiply ``c`` by the share of the measured depths' variance over the window that is
+        terrain, not noise (module docstring; False: the paper's kernel as published).
     """
 
     n_particles: int = 1000
