@@ -24,19 +24,17 @@ Each ping (SEEDS.md section 3):
 
 **The signal gate.** A correlation between two depth sequences says where the vehicle is only
 as far as the sequences follow the terrain. Over a flat seafloor the measured depths along ``L``
-pings vary by no more than their noise, every particle's correlation is noise, and
+pings vary by no more than their noise (the soundings' own and the map's error under them,
+the terrain measurement model's variances), every particle's correlation is noise, and
 ``exp(c rho)`` multiplies the weights by a random factor at every ping: the cloud collapses onto
 whichever particles the noise favours and reports it with confidence (on Lake Caputh's flat
 shelf, a 7-minute run with a DR 0.2 m off ended 15 m off with an ANEES of 75; without the
-correction, 4 m with an ANEES of 0.3). The gate weighs the kernel by the correlation the
-truth's own predicted depths can reach with the measured ones,
-``S / sqrt((S + N_z) (S + N_h))``: ``S`` the measured sequence's variance beyond ``N_z``, the
-sounding noise of one ping's mean depth (its soundings' noise over their count), and ``N_h``
-the map's error in the mean map depth under a ping (its soundings' ``map_variance``, shared
-by them, so not averaged down). It is 1 where the terrain dominates (the paper's sparse
-soundings over a varied chart) and 0 where the sequence is noise, as MBARI's modified weighting
-gives the terrain likelihood its exponent (:func:`tangraph.sensors.information_exponent`).
-``signal_gate=False`` keeps the paper's kernel as published.
+correction, 4 m with an ANEES of 0.3). The gate weighs the correlation by ``S / (S + N)``,
+``S`` the measured sequence's variance beyond the noise ``N`` of one ping's mean depth: 1 where
+the terrain dominates (the paper's sparse soundings over a varied chart), 0 where the sequence
+is noise, as MBARI's modified weighting gives the terrain likelihood its exponent
+(:func:`tangraph.sensors.information_exponent`). ``signal_gate=False`` keeps the paper's kernel
+as published.
 
 The paper gives no particle count, kernel constant or window for its Table 1; the defaults here
 (1000 particles, ``exp(2 rho)``, ``L = 10``) are choices to sweep (the null scatter of rho over 10
@@ -138,42 +136,32 @@ def correlation_log_weight(rho: np.ndarray, kernel: str, constant: float) -> np.
         return constant * np.log(np.clip((1.0 + rho) / 2.0, 0.0, 1.0))
 
 
-def signal_share(measured: np.ndarray, noise: float, map_noise: float = 0.0) -> float:
-    """The correlation the truth's depths can reach with the ``measured (L,)`` sequence, the gate
-    of the kernel (module docstring): ``S / sqrt((S + noise) (S + map_noise))``, ``S`` the
-    sequence's sample variance less ``noise`` (the variance of one element's sounding noise;
-    at least 0) and ``map_noise`` the variance of the map's error in one element of the truth's
-    predicted sequence (m^2); 1 with no noise at all.
+def signal_share(measured: np.ndarray, noise: float) -> float:
+    """``S / (S + N)``: the share of the variance of the ``measured (L,)`` depth sequence that
+    is terrain, ``S`` its sample variance less ``N = noise`` (the variance of one element's
+    error; m^2), at least 0; 1 with no noise (module docstring).
 
     Examples
     --------
-    >>> signal_share(np.array([10.0, 12.0, 14.0, 16.0]), 0.0)
+    >>> round(signal_share(np.array([10.0, 12.0, 14.0, 16.0]), 0.0), 6)
     1.0
     >>> signal_share(np.array([10.0, 10.1, 9.9, 10.0]), 0.04)  # flat: the noise alone
     0.0
-    >>> ramp = np.arange(10.0)
-    >>> round(signal_share(ramp, float(np.var(ramp, ddof=1)) / 4), 6)  # a quarter of it sounding noise
-    0.866025
-    >>> round(signal_share(ramp, 0.0, float(np.var(ramp, ddof=1)) / 3), 6)  # the map error: 3 / 4
-    0.866025
+    >>> round(signal_share(np.array([10.0, 12.0, 14.0, 16.0]), 6.0 + 2.0 / 3.0), 6)
+    0.0
     """
-    variance = float(np.var(measured, ddof=1))
-    if noise <= 0 and map_noise <= 0:
+    if noise <= 0:
         return 1.0
-    s = max(variance - noise, 0.0)
-    if s <= 0:
-        return 0.0
-    return s / float(np.sqrt((s + noise) * (s + map_noise)))
+    s = max(float(np.var(measured, ddof=1)) - noise, 0.0)
+    return s / (s + noise)
 
 
-def _ping_noise(ping: Ping, model: FilterModel) -> tuple[float, float]:
-    """The variances (m^2) of a ping's mean depth's sounding noise (its soundings' own noise over
-    their count) and of the map's error in the mean map depth under it (shared by the ping's
-    soundings, so not averaged down)."""
-    n = max(ping.n_soundings, 1)
-    noise = model.navigation.sounding_std**2 if ping.variance is not None else model.terrain.sounding_std**2
-    map_noise = float(np.mean(ping.map_variance)) if ping.map_variance is not None else 0.0
-    return noise / n, map_noise
+def _ping_noise(ping: Ping, model: FilterModel) -> float:
+    """The variance (m^2) of the error of a ping's mean depth against the map at the truth: its
+    soundings' variances (noise and the map error they share) over their count."""
+    if ping.variance is None:
+        return model.terrain.sounding_std**2 / max(ping.n_soundings, 1)
+    return float(np.mean(ping.variance)) / max(ping.n_soundings, 1)
 
 
 def _push(history: np.ndarray, column: np.ndarray) -> np.ndarray:
@@ -200,7 +188,7 @@ def sjcpf_step(
             rho = correlate_rows(weighted.history, weighted.measured, config.correlation)
             constant = config.kernel_constant
             if config.signal_gate:
-                constant *= signal_share(weighted.measured, *_ping_noise(ping, model))
+                constant *= signal_share(weighted.measured, _ping_noise(ping, model))
             log_f = correlation_log_weight(rho, config.kernel, constant)
             weighted = reweight(weighted, log_f, where=f"ping {ping.index} (correlation)")
     mean, cov = weighted_moments(weighted)
