@@ -19,7 +19,8 @@ times itself plus white noise, and turned back into the world with the DR headin
 
 (``J d = (-d_east, d_north)`` is ``d`` turned 90 degrees to starboard, ``d R(psi) / d psi =
 R(psi) J``), where ``s`` is the speed scale, ``b`` the heading bias, ``w_k`` the heading
-walk (``w_0 = 0``, ``w_{k+1} = w_k + N(0, heading_walk^2 dt_k)``), ``n_k`` the white heading error
+walk (``w_0 = 0``, ``w_{k+1} = w_k + N(0, heading_walk^2 dt_k + heading_turn_std^2 |dpsi_k| / pi)``,
+``dpsi_k`` the true heading's turn), ``n_k`` the white heading error
 of ping ``k`` (``N(0, heading_noise^2)``, fresh at every ping) and ``v_k ~ N(0, speed_noise^2
 dt_k^2 I)`` (isotropic, so its rotation does not matter). Terms of second order (``s e``,
 ``e v``, ``e^2``) are dropped. The state of ping ``k`` is ``(dp_k, w_k, n_k, s, b, tide)``; the
@@ -89,7 +90,9 @@ from typing import Any, Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.geometry import wrap_angle
 from tangraph.maps.grid import BathymetryMap
+from tangraph.sensors.dead_reckoning import walk_variance
 from tangraph.sensors.navigation_model import KNOWN_STD, NavigationModel
 from tangraph.sensors.terrain import MapError, map_error
 from tangraph.survey import Survey
@@ -261,7 +264,7 @@ class _Layout:
     @classmethod
     def of(cls, model: NavigationModel) -> _Layout:
         names = ["north", "east"]
-        if model.heading_walk > 0:
+        if model.heading_walk > 0 or model.heading_turn_std > 0:
             names.append("walk")
         if model.heading_noise > 0:
             names.append("white")
@@ -292,11 +295,12 @@ class _Layout:
             v[self.tide] = model.tide_std**2
         return v
 
-    def scale(self, model: NavigationModel, time: np.ndarray) -> np.ndarray:
-        """A natural unit of every state (its prior std, or the walk's std at the end)."""
+    def scale(self, model: NavigationModel, walk: np.ndarray) -> np.ndarray:
+        """A natural unit of every state (its prior std, or the walk's std at the end, from the
+        walk's variances ``walk`` of every step)."""
         s = np.sqrt(self.prior_variance(model))
         if self.walk is not None:
-            s[self.walk] = model.heading_walk * np.sqrt(max(float(time[-1] - time[0]), 1e-9))
+            s[self.walk] = np.sqrt(max(float(np.sum(walk)), 1e-18))
         return s
 
 
@@ -315,7 +319,8 @@ def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tup
     q = np.zeros((m, n, n))
     q[:, 0, 0] = q[:, 1, 1] = (model.speed_noise * dt) ** 2
     if layout.walk is not None:
-        q[:, layout.walk, layout.walk] = model.heading_walk**2 * dt
+        turned = wrap_angle(np.diff(truth[:, 2]))
+        q[:, layout.walk, layout.walk] = walk_variance(model.heading_walk, model.heading_turn_std, dt, turned)
     if layout.white is not None:
         f[:, layout.white, layout.white] = 0.0
         q[:, layout.white, layout.white] = model.heading_noise**2
@@ -426,8 +431,8 @@ def _scaled_model(survey: Survey, model: NavigationModel,
     """The linearised model's ``(scale, f, q, p0)`` in units of each state's natural spread
     (``dp`` over the start's std, ``s`` over its prior std, ...): ``scale (n,)`` the units, ``f``
     and ``q (K, n, n)`` the transitions and their noise, ``p0 (n, n)`` the prior."""
-    scale = layout.scale(model, survey.time)
     f, q = _transitions(survey, model, layout)
+    scale = layout.scale(model, q[:, layout.walk, layout.walk] if layout.walk is not None else np.zeros(0))
     f = f / scale[:, None] * scale[None, :]
     q = q / np.outer(scale, scale)
     p0 = np.diag(layout.prior_variance(model)) / np.outer(scale, scale)

@@ -172,7 +172,7 @@ def mle_filter(
             step = rotate(-x[3], ping.increment) / (1.0 + x[2])
             x[:2] += step
             shift += step
-            walk = navigation.heading_walk**2 * ping.dt
+            walk = motion.walk_variance(ping)
             noise = motion.noise_covariance(ping)
             p = _propagate(p, step, x[2], noise, walk)
             d = _propagate(d, step, x[2], noise, walk)

@@ -15,7 +15,9 @@ integrates ``(1 + k)`` times the true body velocity with the heading ``psi + b``
 true displacement up to the white errors), ``R(a)`` the rotation by ``a`` clockwise from north,
 ``v_k ~ N(0, Q_k)`` with ``Q_k = (speed_noise dt)^2 I + heading_noise^2 u_k^perp u_k^perp^T +
 floor^2 I`` (the white DVL noise over the interval ``dt``, the white heading error turning the
-step, and the config's optional floor) and ``w_k ~ N(0, heading_walk^2 dt)``.
+step, and the config's optional floor) and ``w_k ~ N(0, heading_walk^2 dt + heading_turn_std^2
+|dpsi_k| / pi)``, ``dpsi_k`` the DR heading's turn over the step
+(:func:`~tangraph.sensors.dead_reckoning.walk_variance`).
 
 **Measurement**: the ``B`` soundings of ping ``k`` (offsets ``o_b`` from the vehicle,
 world-aligned by the dead-reckoned heading: ``R(-b) o_b`` are the true offsets) measure
@@ -45,9 +47,10 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import TerrainLikelihood
-from tangraph.geometry import rotate
+from tangraph.geometry import rotate, wrap_angle
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
+from tangraph.sensors.dead_reckoning import walk_variance
 from tangraph.sensors.misfit import MisfitScale, misfit_counts
 from tangraph.survey import Survey
 
@@ -59,8 +62,9 @@ class Ping:
     """What a filter step needs of ping ``index``: the dead-reckoned ``increment (2,)`` from the
     previous ping (zero and ``first`` True at ping 0), the world-aligned ``offsets (B, 2)`` of
     its finite soundings from the dead-reckoned position, their ``depths (B,)``, the time
-    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0), and the
-    terrain measurement model's ``variance (B,)`` of each sounding and ``map_variance (B,)`` of
+    ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0), the DR
+    heading's ``turn`` (rad, wrapped) since the previous ping, and the terrain measurement
+    model's ``variance (B,)`` of each sounding and ``map_variance (B,)`` of
     the map's error under it (:func:`tangraph.sensors.sounding_variances`; None: the filter
     model's sounding std and a perfect map).
 
@@ -83,6 +87,7 @@ class Ping:
     dt: float = 1.0
     variance: np.ndarray | None = None
     map_variance: np.ndarray | None = None
+    turn: float = 0.0
 
     def __post_init__(self) -> None:
         try:
@@ -143,6 +148,14 @@ class Ping:
         if not (np.isfinite(dt) and dt >= 0):
             raise TangraphError(f"Ping {index}: dt must be a finite number >= 0, got {self.dt!r}")
         object.__setattr__(self, "dt", dt)
+        try:
+            turn = float(self.turn)
+        except (TypeError, ValueError):
+            turn = np.nan
+        if not (np.isfinite(turn) and abs(turn) <= np.pi):
+            raise TangraphError(f"Ping {index}: turn must be a finite angle in [-pi, pi] rad, "
+                                f"got {self.turn!r}")
+        object.__setattr__(self, "turn", turn)
 
     @property
     def n_soundings(self) -> int:
@@ -165,6 +178,7 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
         map_variance = sounding_map_variances(survey, bathymetry, model)
         if map_variance is None:
             map_variance = np.zeros(north.shape)
+    turned = wrap_angle(np.diff(dr[:, 2]))
     pings = []
     for k in range(survey.n_pings):
         keep = valid[k]
@@ -172,6 +186,7 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
         increment = dr[k, :2] - dr[k - 1, :2] if k > 0 else np.zeros(2)
         dt = float(survey.time[k] - survey.time[k - 1]) if k > 0 else 0.0
         pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt,
+                          turn=float(turned[k - 1]) if k > 0 else 0.0,
                           variance=None if variance is None else variance[k, keep],
                           map_variance=None if map_variance is None else map_variance[k, keep]))
     return pings
@@ -192,6 +207,9 @@ class MotionModel:
     floor : float
         Extra white noise (m per ping and axis): an algorithm setting (a roughening floor), 0 by
         default.
+    heading_turn_std : float
+        Std of the heading error's change over a turn of 180 deg, rad: ``b`` walks with the
+        angle the DR heading turns too (:meth:`walk_variance`).
 
     Examples
     --------
@@ -205,11 +223,17 @@ class MotionModel:
     heading_noise: float = 0.0
     heading_walk: float = 0.0
     floor: float = 0.0
+    heading_turn_std: float = 0.0
 
     @classmethod
     def from_model(cls, model: NavigationModel, floor: float = 0.0) -> MotionModel:
         """The white DR errors of a navigation model (plus a floor)."""
-        return cls(model.speed_noise, model.heading_noise, model.heading_walk, float(floor))
+        return cls(model.speed_noise, model.heading_noise, model.heading_walk, float(floor),
+                   model.heading_turn_std)
+
+    def walk_variance(self, ping: Ping) -> float:
+        """Variance (rad^2) the heading error's walk gains over the ping's step."""
+        return float(walk_variance(self.heading_walk, self.heading_turn_std, ping.dt, ping.turn))
 
     def noise_covariance(self, ping: Ping, extra_std: float = 0.0) -> np.ndarray:
         """World-frame covariance ``(2, 2)`` of the white position error over the ping's step
@@ -242,8 +266,10 @@ class MotionModel:
         else:
             noise = noise @ np.linalg.cholesky(cov + 1e-12 * np.eye(2)).T
         moved = particles + step + noise
-        if self.heading_walk > 0 and ping.dt > 0:
-            walk = self.heading_walk * np.sqrt(ping.dt) * rng.standard_normal(particles.shape[0])
+        if (self.heading_walk > 0 and ping.dt > 0) or (self.heading_turn_std > 0 and ping.turn != 0):
+            turning = self.heading_turn_std > 0
+            std = np.sqrt(self.walk_variance(ping)) if turning else self.heading_walk * np.sqrt(ping.dt)
+            walk = std * rng.standard_normal(particles.shape[0])
             calibration = np.column_stack([k, b + walk])
         return moved, calibration
 

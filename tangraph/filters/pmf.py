@@ -191,7 +191,7 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     step = rotate(-state.nodes[:, 1], np.broadcast_to(ping.increment, state.centres.shape))
     state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
     state.pending = state.pending + model.motion.noise_covariance(ping)
-    state.walk += model.motion.heading_walk**2 * ping.dt
+    state.walk += model.motion.walk_variance(ping)
     inv = np.linalg.inv(state.axes)
     if np.max(np.linalg.eigvalsh(inv @ state.pending @ inv.T)) >= 0.25:
         _diffuse(state)

@@ -4,7 +4,10 @@ Positions are ``(north, east)`` in metres, heading ``psi`` in radians clockwise 
 body frame is x forward, y starboard; a pose is ``(north, east, psi)``. ``R(psi)`` below turns
 a body vector ``(forward, starboard)`` into ``(north, east)``.
 
-The DR heading is the true heading plus an error ``bias + walk + white``. Over each interval
+The DR heading is the true heading plus an error ``bias + walk + white``. The walk grows with
+time and, where the heading error depends on the heading itself (a magnetic compass's
+deviation, the crab angle a current gives a DR that runs along the heading), with the angle
+turned: :func:`walk_variance`. Over each interval
 ``[t_k, t_k+1)`` the true body-frame velocity (from the true pose difference, so sideslip is
 kept) is measured by the DVL with a scale factor and white noise, or, while the DVL has lost
 bottom lock, by the INS alone with a velocity error that walks from zero since the dropout
@@ -28,6 +31,7 @@ __all__ = [
     "odometry",
     "rotation_matrix",
     "simulate_dead_reckoning",
+    "walk_variance",
 ]
 
 
@@ -42,6 +46,12 @@ class DeadReckoningModel:
     heading_walk : float
         Random walk of the heading error, rad/sqrt(s): its variance grows by
         ``heading_walk**2`` per second (from zero at the start).
+    heading_turn_std : float
+        Std of the heading error's change over a turn of 180 deg, rad: a heading error that
+        depends on the heading (a magnetic compass's deviation, ``A sin(psi + phi)``, gives
+        ``sqrt(2) A``; so does the crab angle of a current for a DR that runs along the heading)
+        walks with the angle turned, its variance growing by ``heading_turn_std**2 / pi`` per
+        radian (:func:`walk_variance`). 0: the heading error does not depend on the heading.
     heading_noise : float
         White heading error of each sample, rad (std).
     speed_scale : float
@@ -75,6 +85,7 @@ class DeadReckoningModel:
     heading_noise: float = 0.0
     speed_scale: float = 0.0
     speed_noise: float = 0.0
+    heading_turn_std: float = 0.0
     dropout_rate: float = 0.0
     dropout_duration: float = 0.0
     dropout_speed_noise: float = 0.0
@@ -83,7 +94,7 @@ class DeadReckoningModel:
     def __post_init__(self) -> None:
         check_number(self, "heading_bias", low=None)
         check_number(self, "speed_scale", low=-1.0, open_low=True)
-        for name in ("heading_walk", "heading_noise", "speed_noise", "dropout_rate",
+        for name in ("heading_walk", "heading_turn_std", "heading_noise", "speed_noise", "dropout_rate",
                      "dropout_duration", "dropout_speed_noise", "start_position_std"):
             check_number(self, name)
         if self.dropout_rate > 0 and self.dropout_duration <= 0:
@@ -132,6 +143,22 @@ class DeadReckoning:
             a.setflags(write=False)
             object.__setattr__(self, name, a)
         object.__setattr__(self, "n_dropouts", int(self.n_dropouts))
+
+
+def walk_variance(heading_walk: float, heading_turn_std: float, dt, turn):
+    """Variance (rad^2) the heading error's walk gains over intervals of ``dt`` (s) in which the
+    heading turns by ``turn`` (rad, either sign): ``heading_walk**2 dt + heading_turn_std**2
+    |turn| / pi``. The one place every estimator, the bound and the simulator take it from.
+
+    Examples
+    --------
+    >>> float(walk_variance(0.0, 0.1, 10.0, -np.pi))  # a U-turn: the turn std's square
+    0.010000000000000002
+    """
+    variance = heading_walk**2 * np.asarray(dt, dtype=np.float64)
+    if heading_turn_std > 0:
+        variance = variance + heading_turn_std**2 / np.pi * np.abs(np.asarray(turn, dtype=np.float64))
+    return variance
 
 
 def _check_track(time, pose, pose_name: str) -> tuple[np.ndarray, np.ndarray]:
@@ -212,7 +239,12 @@ def simulate_dead_reckoning(time, true_pose, model: DeadReckoningModel, *,
     k = t.size
     dt = np.diff(t)
     valid, n_dropouts = _dropouts(t, model, rng)
-    walk = np.concatenate([[0.0], np.cumsum(model.heading_walk * np.sqrt(dt) * rng.standard_normal(k - 1))])
+    if model.heading_turn_std > 0:
+        turned = wrap_angle(np.diff(pose[:, 2]))
+        step_std = np.sqrt(walk_variance(model.heading_walk, model.heading_turn_std, dt, turned))
+    else:
+        step_std = model.heading_walk * np.sqrt(dt)
+    walk = np.concatenate([[0.0], np.cumsum(step_std * rng.standard_normal(k - 1))])
     heading_error = (model.heading_bias + wrap_angle(start[2] - pose[0, 2]) + walk
                      + model.heading_noise * rng.standard_normal(k))
     body = rotate(-pose[:-1, 2], np.diff(pose[:, :2], axis=0))  # true (forward, starboard) steps
@@ -284,7 +316,8 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
     -----
     Terms: white DVL noise, ``speed_noise**2 * sum(dt**2)`` on each axis (lock intervals);
     the INS velocity walk over dropouts (with the part accumulated before ``i``); the heading
-    walk and white heading noise *relative to pose i*, each rotating the later steps.
+    walk (:func:`walk_variance`, its turn part from the headings of ``dr_pose``) and white
+    heading noise *relative to pose i*, each rotating the later steps.
     A constant heading bias rotates all DR poses alike, so it cancels exactly in an increment
     in the frame of DR pose ``i``; the speed scale is constant too. Neither is random within
     a run. ``include_bias=True`` adds them as variances anyway, ``heading_bias**2 * d**2``
@@ -321,7 +354,7 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
             model.speed_noise**2 * np.sum(np.where(lock[k], dtw**2, 0.0), axis=1)
             + model.dropout_speed_noise**2 * _ins_walk(t, lock, ii, jj, k, inside)
         )[:, None, None]
-        cov += _heading_terms(model, t, pose, ii, jj, k, inside & (p > 0), dtw)
+        cov += _heading_terms(model, pose, ii, jj, k, inside & (p > 0), dtw)
         to_i = rotation_matrix(-pose[ii, 2])  # world -> frame of pose i
         cov[:, :2, :2] = to_i @ cov[:, :2, :2] @ np.swapaxes(to_i, 1, 2)
         cov[:, :2, 2] = np.einsum("nab,nb->na", to_i, cov[:, :2, 2])
@@ -334,18 +367,20 @@ def increment_covariance(model: DeadReckoningModel, time, dr_pose, i, j, *, dvl_
     return cov.reshape(*shape, 3, 3)
 
 
-def _heading_terms(model, t, pose, ii, jj, k, later, dtw) -> np.ndarray:
+def _heading_terms(model, pose, ii, jj, k, later, dtw) -> np.ndarray:
     """World-frame covariance from the heading walk and white heading noise relative to pose i."""
     step = np.diff(pose[:, :2], axis=0)
     c = np.where(later[..., None], np.column_stack([-step[:, 1], step[:, 0]])[k], 0.0)  # d step/d psi
     tail = np.cumsum(c[:, ::-1], axis=1)[:, ::-1]  # sum over p' >= p
     after = np.concatenate([tail[:, 1:], np.zeros_like(tail[:, :1])], axis=1)  # p' > p
-    q, s2 = model.heading_walk**2, model.heading_noise**2
+    s2 = model.heading_noise**2
+    turned = wrap_angle(np.diff(pose[:, 2]))[k] if model.heading_turn_std > 0 else 0.0
+    q = np.where(dtw > 0, walk_variance(model.heading_walk, model.heading_turn_std, dtw, turned), 0.0)
     cov = np.zeros((ii.size, 3, 3))
     # A walk step in interval m turns every later step of the window (and psi_j).
-    cov[:, :2, :2] = q * np.einsum("np,npa,npb->nab", dtw, after, after)
-    cov[:, :2, 2] = q * np.einsum("np,npa->na", dtw, after)
-    cov[:, 2, 2] = q * (t[jj] - t[ii])
+    cov[:, :2, :2] = np.einsum("np,npa,npb->nab", q, after, after)
+    cov[:, :2, 2] = np.einsum("np,npa->na", q, after)
+    cov[:, 2, 2] = np.sum(q, axis=1)
     # White noise at each later sample turns its own step; that of pose i turns them all back.
     total = tail[:, 0]
     cov[:, :2, :2] += s2 * (np.einsum("npa,npb->nab", c, c) + total[:, :, None] * total[:, None, :])

@@ -39,7 +39,7 @@ __all__ = ["KNOWN_STD", "NavigationModel", "load_navigation_model", "survey_navi
 KNOWN_STD = 1e-6
 
 _KERNELS = ("huber", "cauchy", "none")
-_ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk")
+_ANGLES = ("heading_bias", "heading_bias_std", "heading_noise", "heading_walk", "heading_turn_std")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -54,6 +54,13 @@ class NavigationModel:
         White heading error of each sample, rad.
     heading_walk : float
         Random walk of the heading error, rad/sqrt(s).
+    heading_turn_std : float
+        Std (rad) of the heading error's change over a turn of 180 deg: the part of the heading
+        error that depends on the heading (a magnetic compass's deviation ``A sin(psi + phi)``
+        gives ``sqrt(2) A``; the crab angle a current gives a DR that runs along the heading
+        does the same), walked with the angle turned
+        (:func:`~tangraph.sensors.dead_reckoning.walk_variance`). 0 (default): a heading error
+        that does not depend on the heading (a gyrocompass, an INS).
     dropout_speed_noise : float
         INS velocity random walk while the DVL has lost bottom lock, m/s/sqrt(s).
     speed_scale, speed_scale_std : float
@@ -124,6 +131,7 @@ class NavigationModel:
     speed_noise: float = 0.05
     heading_noise: float = 0.0
     heading_walk: float = 0.0
+    heading_turn_std: float = 0.0
     dropout_speed_noise: float = 0.0
     speed_scale: float = 0.0
     speed_scale_std: float = 0.02
@@ -145,9 +153,9 @@ class NavigationModel:
     odometry_min_heading_std: float = 1e-4
 
     def __post_init__(self) -> None:
-        for name in ("speed_noise", "heading_noise", "heading_walk", "dropout_speed_noise",
-                     "map_std", "map_correlation_length", "tide_std", "map_offset_std", "speed_scale_std",
-                     "heading_bias_std"):
+        for name in ("speed_noise", "heading_noise", "heading_walk", "heading_turn_std",
+                     "dropout_speed_noise", "map_std", "map_correlation_length", "tide_std",
+                     "map_offset_std", "speed_scale_std", "heading_bias_std"):
             _number(self, name, low=0.0)
         _number(self, "misfit_dof", low=0.0)
         for name in ("initial_position_std", "sounding_std", "misfit_length"):
@@ -167,8 +175,8 @@ class NavigationModel:
     def dead_reckoning(self) -> DeadReckoningModel:
         """The white part of the DR error model (constant errors zero): the noise of an increment
         of the *calibrated* dead reckoning (:func:`~tangraph.sensors.increment_covariance`)."""
-        return DeadReckoningModel(heading_walk=self.heading_walk, heading_noise=self.heading_noise,
-                                  speed_noise=self.speed_noise,
+        return DeadReckoningModel(heading_walk=self.heading_walk, heading_turn_std=self.heading_turn_std,
+                                  heading_noise=self.heading_noise, speed_noise=self.speed_noise,
                                   dropout_speed_noise=self.dropout_speed_noise)
 
     @property
@@ -207,7 +215,8 @@ class NavigationModel:
         default = cls()
         fields = {
             "speed_noise": dr.speed_noise, "heading_noise": dr.heading_noise,
-            "heading_walk": dr.heading_walk, "dropout_speed_noise": dr.dropout_speed_noise,
+            "heading_walk": dr.heading_walk, "heading_turn_std": dr.heading_turn_std,
+            "dropout_speed_noise": dr.dropout_speed_noise,
             "speed_scale_std": max(default.speed_scale_std, abs(dr.speed_scale)),
             "heading_bias_std": max(default.heading_bias_std, abs(dr.heading_bias)),
             "initial_position_std": max(dr.start_position_std, 0.1),

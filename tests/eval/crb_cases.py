@@ -7,6 +7,7 @@ import numpy as np
 
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel
+from tangraph.sensors.dead_reckoning import walk_variance
 from tangraph.survey import Survey
 
 SLOPE = (0.04, -0.03)  # d depth / d north, d depth / d east
@@ -68,7 +69,9 @@ def _design(survey: Survey, model: NavigationModel):
     k = t.size
     d, dt = np.diff(truth[:, :2], axis=0), np.diff(t)
     var = [model.initial_position_std**2] * 2 + list(model.calibration_std**2) + [model.tide_std**2]
-    var += list(np.column_stack([(model.speed_noise * dt) ** 2] * 2 + [model.heading_walk**2 * dt]).ravel())
+    turned = np.angle(np.exp(1j * np.diff(truth[:, 2])))
+    walk = walk_variance(model.heading_walk, model.heading_turn_std, dt, turned)
+    var += list(np.column_stack([(model.speed_noise * dt) ** 2] * 2 + [walk]).ravel())
     var += [model.heading_noise**2] * k
     eye = np.eye(len(var))
     white = 5 + 3 * (k - 1)

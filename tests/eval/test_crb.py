@@ -21,6 +21,7 @@ from tangraph.sensors import (
     map_error,
     simulate_dead_reckoning,
 )
+from tangraph.sensors.dead_reckoning import walk_variance
 from tangraph.survey import Survey
 from tests.eval.crb_cases import MODEL, SLOPE, _design, _jd, _seabed, _soundings, _survey
 
@@ -52,7 +53,8 @@ def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationMod
     for m in range(k - 1):
         add(("v_n", m), (model.speed_noise * dt[m]) ** 2)
         add(("v_e", m), (model.speed_noise * dt[m]) ** 2)
-        add(("u", m), model.heading_walk**2 * dt[m])
+        add(("u", m), float(walk_variance(model.heading_walk, model.heading_turn_std, dt[m],
+                                          np.angle(np.exp(1j * (truth[m + 1, 2] - truth[m, 2]))))))
     for m in range(k):
         add(("n", m), model.heading_noise**2)
     col = {name: i for i, name in enumerate(names)}
@@ -100,7 +102,9 @@ def _close(got, want, rtol=1e-8):
 
 
 @pytest.mark.parametrize("model", [MODEL, MODEL.replace(heading_noise=0.0, heading_walk=0.0, speed_noise=0.0),
-                                   MODEL.replace(tide_std=0.0)], ids=["all-noises", "no-white", "tide-known"])
+                                   MODEL.replace(tide_std=0.0), MODEL.replace(heading_turn_std=0.05),
+                                   MODEL.replace(heading_walk=0.0, heading_turn_std=0.05)],
+                         ids=["all-noises", "no-white", "tide-known", "turning-walk", "turn-walk-only"])
 def test_bound_equals_a_dense_batch_solve_on_a_planar_seabed(model):
     survey, seabed = _survey(), _seabed()
     used, _ = _soundings(survey, seabed)

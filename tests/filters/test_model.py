@@ -63,6 +63,25 @@ def test_motion_noise_is_the_model_s_white_dr_errors():
 def test_motion_model_from_the_navigation_model():
     nav = NavigationModel(speed_noise=0.2, heading_noise=0.01, heading_walk=0.003)
     assert MotionModel.from_model(nav, floor=0.5) == MotionModel(0.2, 0.01, 0.003, 0.5)
+    turning = nav.replace(heading_turn_std=0.05)
+    assert MotionModel.from_model(turning).heading_turn_std == 0.05
+
+
+def test_the_heading_error_walks_with_the_angle_turned():
+    """A turn of 90 deg walks b by heading_turn_std^2 / 2 on top of the time walk; a ping that
+    does not turn walks it by the time alone, and a model without the turn term ignores turns."""
+    n = 20000
+    model = MotionModel(speed_noise=0.0, heading_walk=0.01, heading_turn_std=0.1)
+    turning = Ping(1, np.array([10.0, 0.0]), np.zeros((0, 2)), np.zeros(0), dt=4.0, turn=-np.pi / 2)
+    straight = Ping(1, np.array([10.0, 0.0]), np.zeros((0, 2)), np.zeros(0), dt=4.0)
+    tolerance = 4 * np.sqrt(0.5 / n)
+    for p, variance in ((turning, 0.01**2 * 4.0 + 0.1**2 / 2), (straight, 0.01**2 * 4.0)):
+        _, cal = model.predict(np.zeros((n, 2)), np.zeros((n, 2)), p, rng=np.random.default_rng(2))
+        assert model.walk_variance(p) == pytest.approx(variance)
+        np.testing.assert_allclose(cal[:, 1].std(), np.sqrt(variance), rtol=tolerance)
+    _, cal = MotionModel(speed_noise=0.0, heading_walk=0.01).predict(
+        np.zeros((n, 2)), np.zeros((n, 2)), turning, rng=np.random.default_rng(2))
+    np.testing.assert_allclose(cal[:, 1].std(), 0.01 * 2.0, rtol=tolerance)
 
 
 def test_known_tide_is_the_plain_gaussian_likelihood():
@@ -136,6 +155,8 @@ def test_survey_pings_drop_nan_soundings_and_keep_empty_pings():
     assert pings[0].first and not pings[1].first
     np.testing.assert_allclose(pings[2].increment, s.dr_pose[2, :2] - s.dr_pose[1, :2])
     assert pings[0].dt == 0.0 and pings[2].dt == pytest.approx(s.time[2] - s.time[1])
+    turned = np.angle(np.exp(1j * np.diff(s.dr_pose[:, 2])))
+    np.testing.assert_allclose([p.turn for p in pings], np.r_[0.0, turned], atol=1e-12)
 
 
 def test_nan_soundings_are_skipped():
@@ -165,6 +186,8 @@ def test_nan_soundings_are_skipped():
         ({"depths": np.array([1.0, np.inf, 2.0])}, "depths must be finite or NaN, got inf"),
         ({"increment": np.zeros(3)}, r"increment must be a finite \(2,\) array"),
         ({"increment": np.array([np.nan, 0.0])}, r"increment must be a finite \(2,\) array"),
+        ({"turn": 4.0}, r"turn must be a finite angle in \[-pi, pi\] rad, got 4.0"),
+        ({"turn": "left"}, r"turn must be a finite angle in \[-pi, pi\] rad, got 'left'"),
     ],
 )
 def test_a_bad_ping_is_refused(fields, message):

@@ -13,6 +13,7 @@ from tangraph.sensors import (
     odometry,
     simulate_dead_reckoning,
 )
+from tangraph.sensors.dead_reckoning import walk_variance
 
 
 def straight_north(k: int = 101, dt: float = 1.0, speed: float = 1.0):
@@ -176,6 +177,47 @@ def test_increment_covariance_matches_monte_carlo():
         # Off-diagonal: standard error of a sample covariance, sqrt((s_a s_b + s_ab^2) / (R - 1)).
         se = np.sqrt((np.outer(var, var) + cov[n] ** 2) / (runs - 1))
         assert np.all(np.abs(sample - cov[n]) < 4 * se + 0.02 * np.sqrt(np.outer(var, var)))
+
+
+def zigzag_track(k: int = 161):
+    """Legs of 20 s at 1.2 m/s, each turning 135 deg in one sample, alternately either way."""
+    t = np.arange(k, dtype=float)
+    psi = np.radians(135.0) * (np.arange(k) // 20 % 2)
+    north = np.r_[0.0, np.cumsum(1.2 * np.cos(psi[:-1]))]
+    east = np.r_[0.0, np.cumsum(1.2 * np.sin(psi[:-1]))]
+    return t, np.column_stack([north, east, psi])
+
+
+def test_the_heading_error_walks_with_the_angle_turned():
+    """The walk's variance is heading_walk^2 t plus heading_turn_std^2 / pi per radian turned."""
+    runs = 2000
+    t, truth = zigzag_track()
+    model = DeadReckoningModel(heading_walk=0.002, heading_turn_std=0.05)
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(15).spawn(runs)]
+    err = np.array([simulate_dead_reckoning(t, truth, model, rng=r).heading_error[[19, 21, -1]]
+                    for r in rngs])
+    turns = np.array([0, 1, 8]) * np.radians(135.0)
+    expected = 0.002**2 * t[[19, 21, -1]] + 0.05**2 / np.pi * turns
+    assert np.all(np.abs(err.var(axis=0, ddof=1) / expected - 1) < mc_tolerance(runs))
+    np.testing.assert_allclose(walk_variance(0.002, 0.05, t[[19, 21, -1]], turns), expected)
+
+
+def test_increment_covariance_of_a_turning_walk_matches_monte_carlo():
+    runs = 3000
+    t, truth = zigzag_track()
+    model = DeadReckoningModel(speed_noise=0.02, heading_turn_std=0.05, heading_noise=0.005)
+    i, j = np.array([0, 10, 30]), np.array([160, 50, 31])
+    rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(16).spawn(runs)]
+    truth_odo = odometry(truth, i, j)
+    err = np.array([odometry(simulate_dead_reckoning(t, truth, model, rng=r).pose, i, j) - truth_odo
+                    for r in rngs])
+    cov = increment_covariance(model, t, truth, i, j)
+    straight = increment_covariance(model.__class__(speed_noise=0.02, heading_noise=0.005), t, truth, i, j)
+    assert cov[0, 2, 2] > 10 * straight[0, 2, 2]  # the turns dominate: the test can tell
+    for n in range(i.size):
+        sample = np.cov(err[:, n].T)
+        var = np.diag(cov[n])
+        assert np.all(np.abs(np.diag(sample) / var - 1) < mc_tolerance(runs) + 0.02)  # + linearisation
 
 
 def test_increment_covariance_with_dvl_dropouts_whitens_the_errors():

@@ -36,6 +36,15 @@ def test_from_dead_reckoning_takes_white_errors_and_turns_constants_into_priors(
     np.testing.assert_allclose(model.calibration_std, [0.03, np.deg2rad(3.5)])
     assert model.dead_reckoning.speed_scale == 0.0 and model.dead_reckoning.heading_bias == 0.0
     assert NavigationModel.from_dead_reckoning(dr, speed_noise=0.2).speed_noise == 0.2
+    compass = NavigationModel.from_dead_reckoning(dr.__class__(heading_turn_std=0.07))
+    assert compass.heading_turn_std == 0.07 and compass.dead_reckoning.heading_turn_std == 0.07
+
+
+def test_the_heading_errors_turn_part_in_degrees_and_its_errors(tmp_path):
+    model = NavigationModel.from_mapping({"heading_turn_std_deg": 4.0})
+    assert model.heading_turn_std == pytest.approx(np.deg2rad(4.0))
+    with pytest.raises(TangraphError, match="NavigationModel.heading_turn_std must be >= 0"):
+        NavigationModel(heading_turn_std=-0.1)
 
 
 def test_from_survey_needs_the_settings():
