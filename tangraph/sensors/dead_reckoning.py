@@ -52,6 +52,13 @@ class DeadReckoningModel:
         ``sqrt(2) A``; so does the crab angle of a current for a DR that runs along the heading)
         walks with the angle turned, its variance growing by ``heading_turn_std**2 / pi`` per
         radian (:func:`walk_variance`). 0: the heading error does not depend on the heading.
+    heading_deviation, heading_deviation_phase : float
+        A magnetic compass's deviation, rad: the heading error gains ``heading_deviation *
+        sin(psi + heading_deviation_phase)`` at the true heading ``psi`` (hard iron: a
+        semicircular deviation curve, the same at every return to a heading). The estimators do
+        not know the curve; they model it as a walk with the angle turned of
+        ``heading_turn_std = sqrt(2) heading_deviation``
+        (:meth:`~tangraph.sensors.NavigationModel.from_dead_reckoning`).
     heading_noise : float
         White heading error of each sample, rad (std).
     speed_scale : float
@@ -90,12 +97,15 @@ class DeadReckoningModel:
     dropout_duration: float = 0.0
     dropout_speed_noise: float = 0.0
     start_position_std: float = 0.0
+    heading_deviation: float = 0.0
+    heading_deviation_phase: float = 0.0
 
     def __post_init__(self) -> None:
         check_number(self, "heading_bias", low=None)
+        check_number(self, "heading_deviation_phase", low=None)
         check_number(self, "speed_scale", low=-1.0, open_low=True)
-        for name in ("heading_walk", "heading_turn_std", "heading_noise", "speed_noise", "dropout_rate",
-                     "dropout_duration", "dropout_speed_noise", "start_position_std"):
+        for name in ("heading_walk", "heading_turn_std", "heading_deviation", "heading_noise", "speed_noise",
+                     "dropout_rate", "dropout_duration", "dropout_speed_noise", "start_position_std"):
             check_number(self, name)
         if self.dropout_rate > 0 and self.dropout_duration <= 0:
             raise TangraphError(
@@ -247,6 +257,9 @@ def simulate_dead_reckoning(time, true_pose, model: DeadReckoningModel, *,
     walk = np.concatenate([[0.0], np.cumsum(step_std * rng.standard_normal(k - 1))])
     heading_error = (model.heading_bias + wrap_angle(start[2] - pose[0, 2]) + walk
                      + model.heading_noise * rng.standard_normal(k))
+    if model.heading_deviation > 0:  # the curve at the true heading: no draw
+        deviation = model.heading_deviation * np.sin(pose[:, 2] + model.heading_deviation_phase)
+        heading_error = heading_error + deviation
     body = rotate(-pose[:-1, 2], np.diff(pose[:, :2], axis=0))  # true (forward, starboard) steps
     lock = valid[:-1, None]
     dvl = (1.0 + model.speed_scale) * body + model.speed_noise * dt[:, None] * rng.standard_normal((k - 1, 2))

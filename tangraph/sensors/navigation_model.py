@@ -208,14 +208,17 @@ class NavigationModel:
         """The model of a :class:`DeadReckoningModel` (a simulated DR's settings): its white errors
         as they are, its constant errors as priors of mean zero whose std is the larger of the
         stated default and the magnitude of the simulated error (the simulated values are the
-        unknown truth, not the estimators' knowledge), and the start uncertainty its
+        unknown truth, not the estimators' knowledge), a compass deviation curve as the walk
+        with the angle turned it gives (``heading_turn_std = sqrt(2) heading_deviation``: the
+        estimators know its size, not its curve), and the start uncertainty its
         ``start_position_std`` (at least 0.1 m). ``overrides`` replace any field."""
         if not isinstance(dr, DeadReckoningModel):
             raise TangraphError(f"dead-reckoning model must be a DeadReckoningModel, got {type(dr).__name__}")
         default = cls()
         fields = {
             "speed_noise": dr.speed_noise, "heading_noise": dr.heading_noise,
-            "heading_walk": dr.heading_walk, "heading_turn_std": dr.heading_turn_std,
+            "heading_walk": dr.heading_walk,
+            "heading_turn_std": max(dr.heading_turn_std, math.sqrt(2.0) * dr.heading_deviation),
             "dropout_speed_noise": dr.dropout_speed_noise,
             "speed_scale_std": max(default.speed_scale_std, abs(dr.speed_scale)),
             "heading_bias_std": max(default.heading_bias_std, abs(dr.heading_bias)),

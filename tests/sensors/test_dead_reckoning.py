@@ -9,6 +9,7 @@ from tangraph.errors import TangraphError
 from tangraph.sensors import (
     DeadReckoning,
     DeadReckoningModel,
+    NavigationModel,
     increment_covariance,
     odometry,
     simulate_dead_reckoning,
@@ -200,6 +201,22 @@ def test_the_heading_error_walks_with_the_angle_turned():
     expected = 0.002**2 * t[[19, 21, -1]] + 0.05**2 / np.pi * turns
     assert np.all(np.abs(err.var(axis=0, ddof=1) / expected - 1) < mc_tolerance(runs))
     np.testing.assert_allclose(walk_variance(0.002, 0.05, t[[19, 21, -1]], turns), expected)
+
+
+def test_a_compass_deviation_curve_is_the_same_at_every_return_to_a_heading():
+    t, truth = zigzag_track()
+    model = DeadReckoningModel(heading_bias=0.01, heading_deviation=0.05, heading_deviation_phase=0.3)
+    dr = simulate_dead_reckoning(t, truth, model, rng=np.random.default_rng(0))
+    np.testing.assert_allclose(dr.heading_error, 0.01 + 0.05 * np.sin(truth[:, 2] + 0.3), atol=1e-12)
+    # the walk the estimators are given for it: over a U-turn from a heading drawn at random
+    # the curve changes by sqrt(2) A in RMS, as the walk of heading_turn_std over pi
+    model = NavigationModel.from_dead_reckoning(DeadReckoningModel(heading_deviation=0.05))
+    psi = np.linspace(0.0, 2 * np.pi, 3601)[:-1]
+    change = 0.05 * (np.sin(psi + np.pi) - np.sin(psi))
+    assert model.heading_turn_std == pytest.approx(np.sqrt(np.mean(change**2)), rel=1e-9)
+    assert walk_variance(0.0, model.heading_turn_std, 1.0, np.pi) == pytest.approx(np.mean(change**2))
+    with pytest.raises(TangraphError, match="DeadReckoningModel.heading_deviation must be >= 0"):
+        DeadReckoningModel(heading_deviation=-0.01)
 
 
 def test_increment_covariance_of_a_turning_walk_matches_monte_carlo():
