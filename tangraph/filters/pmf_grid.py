@@ -358,11 +358,13 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
         node_base = log_weight
         prior = (own_mean, own_cov)
         placed = (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0)))
-        # the members' mean positions regressed on their nodes: the position's sensitivity
+        # the members' mean positions regressed on the calibration now: their covariance with
+        # the nodes over the calibration's variance, the heading walk since the placement
+        # included (it has not moved the positions yet, so it dilutes what a node says of them)
         d_theta = state.nodes - own_mean
         d_x = means - weight @ means
         c_xt = (d_x * weight[:, None]).T @ d_theta
-        gain = c_xt @ np.linalg.pinv(own_cov - np.diag([0.0, state.walk]), rcond=1e-9)
+        gain = c_xt @ np.linalg.pinv(own_cov, rcond=1e-9)
         live_var = np.maximum(np.diag(cal_cov), 1e-30)
         distance = ((nodes[:, None, :] - state.nodes[None]) ** 2 / live_var).sum(axis=2)
         distance[:, ~live] = np.inf
