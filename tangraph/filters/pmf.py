@@ -27,7 +27,13 @@ mass (so a second mode is not cut off). The calibration's nodes are re-placed th
 its posterior has moved from their placement: the Gauss-Hermite rule of the posterior (its
 heading error grown by the heading walk since the last placement), each new node given the
 position density of the nearest old member shifted by the regression of the members' mean
-positions on their nodes (the posterior's position sensitivity to the calibration). When one
+positions on the calibration (the posterior's position sensitivity to it, the walk since the
+placement counted in the calibration's spread). The bank is for constant errors and a slow
+walk: a heading error that may change by degrees at every turn (``heading_turn_std``) spreads
+the nodes degrees apart after each turn, and their members' positions part by tens of metres
+along the next line, between which the bank holds no point; where the terrain cannot choose
+among them (a flat, poorly mapped shelf) it picks one with confidence. A particle filter
+follows such a heading error (the caputh_replay study). When one
 ping's evidence differs by more than ``_SHARP`` nats between the nodes and is Gaussian in the
 calibration, the predicted state's nodes are first re-placed at the posterior it gives and the
 ping weighed again (adaptive Gauss-Hermite quadrature). The tide posteriors of points mixed by
