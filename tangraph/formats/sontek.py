@@ -226,7 +226,9 @@ def import_sontek_sum(
     dr_heading : {"boat", "compass"}
         The dead reckoning's velocity: the exported boat velocity (``"boat"``: speed along
         ``Boat Direction``), or the boat speed along the compass heading (``"compass"``: the
-        heading's real errors and the boat's sideslip enter the DR).
+        heading's real errors and the boat's sideslip enter the DR; both change with the
+        heading, so navigate it with a model whose ``heading_turn_std`` says by how much, as
+        the caputh_replay study's ``[navigation.compass]`` does).
     declination_deg : float
         Magnetic declination, added to the compass heading to make it true; the heading is then
         turned to the grid north of ``crs`` (at Lake Caputh, true north lies 1.6 deg clockwise
