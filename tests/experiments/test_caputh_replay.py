@@ -33,3 +33,28 @@ def test_the_study_refuses_a_folder_without_the_data(tmp_path, capsys):
     with pytest.raises(SystemExit):
         study.main(["--data", str(tmp_path), "--out", str(tmp_path / "out")])
     assert "holds no Lake Caputh data" in capsys.readouterr().err
+
+
+def test_scores_count_the_poses_confidently_wrong_that_were_not_flagged_lost():
+    from tangraph.track import Track
+
+    study = load_experiment("caputh_replay")
+    survey = _survey()
+    pose = survey.true_pose.copy()
+    pose[100:, 0] += 10.0  # half the track 10 m off, with a std of 1 m (and the GPS's 1.5 m)
+    track = Track(time=survey.time, pose=pose, covariance=np.tile(np.eye(3), (200, 1, 1)))
+    assert study.scores(track, survey, 1.5)["confident_wrong"] == pytest.approx(0.5)
+    flagged = Track(time=survey.time, pose=pose, covariance=track.covariance,
+                    meta={"lost_steps": list(range(150, 200))})
+    assert study.scores(flagged, survey, 1.5)["confident_wrong"] == pytest.approx(0.25)
+    assert study.scores(track, survey, 10.0)["confident_wrong"] == 0.0  # within the GPS's error
+
+
+def test_the_map_error_goals_are_checked_on_the_long_runs_with_spoiled_and_compass_drs():
+    study = load_experiment("caputh_replay")
+    row = {"run": "r", "method": "pf", "duration_min": 97.0, "median": 14.0, "dr_median": 73.0,
+           "anees": 4.0, "confident_wrong": 0.02}
+    lines = study.map_error_goals([{**row, "case": "compass"}, {**row, "case": "boat"},
+                                   {**row, "case": "compass", "duration_min": 7.0}])
+    assert lines == ["- r compass pf: median 14.00 m (met, <= 36.50 m); ANEES 4.00 (missed, <= 3.00); "
+                     "confidently wrong 2.00 % (met, <= 5.00 %)"]
