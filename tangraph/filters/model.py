@@ -17,7 +17,7 @@ true displacement up to the white errors), ``R(a)`` the rotation by ``a`` clockw
 floor^2 I`` (the white DVL noise over the interval ``dt``, the white heading error turning the
 step, and the config's optional floor) and ``w_k ~ N(0, heading_walk^2 dt + heading_turn_std^2
 |dpsi_k| / pi)``, ``dpsi_k`` the DR heading's turn over the step
-(:func:`~tangraph.sensors.dead_reckoning.walk_variance`).
+(:func:`~tangraph.sensors.walk_variance`).
 
 **Measurement**: the ``B`` soundings of ping ``k`` (offsets ``o_b`` from the vehicle,
 world-aligned by the dead-reckoned heading: ``R(-b) o_b`` are the true offsets) measure

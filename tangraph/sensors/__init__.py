@@ -7,6 +7,7 @@ from tangraph.sensors.dead_reckoning import (
     odometry,
     rotation_matrix,
     simulate_dead_reckoning,
+    walk_variance,
 )
 from tangraph.sensors.matern import matern_correlation, matern_field
 from tangraph.sensors.misfit import MisfitScale, misfit_counts
@@ -66,4 +67,5 @@ __all__ = [
     "sounding_variances",
     "survey_map_error",
     "survey_navigation_model",
+    "walk_variance",
 ]

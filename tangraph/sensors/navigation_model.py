@@ -59,7 +59,7 @@ class NavigationModel:
         error that depends on the heading (a magnetic compass's deviation ``A sin(psi + phi)``
         gives ``sqrt(2) A``; the crab angle a current gives a DR that runs along the heading
         does the same), walked with the angle turned
-        (:func:`~tangraph.sensors.dead_reckoning.walk_variance`). 0 (default): a heading error
+        (:func:`~tangraph.sensors.walk_variance`). 0 (default): a heading error
         that does not depend on the heading (a gyrocompass, an INS).
     dropout_speed_noise : float
         INS velocity random walk while the DVL has lost bottom lock, m/s/sqrt(s).
