@@ -26,9 +26,8 @@ the step's ``ess`` is that cloud's (after the children's re-weighting: the weigh
 Monte Carlo error depends on). If no child can be weighted (every child off the map) the step
 falls back to plain copies.
 
-The children's calibrations ``(k, b)`` are their parents' previous ones moved as the shrinkage
-kernel (:func:`~tangraph.filters.steps.shrink_calibration`) moves their predicted ones, before
-they are redrawn (so the heading walk of the step is drawn once for a child). A ping whose
+The children's calibrations ``(k, b)`` are their parents' moved by the shrinkage kernel
+(:func:`~tangraph.filters.steps.shrink_calibration`) before they are redrawn. A ping whose
 likelihood is too peaked for the cloud (the ESS after it below ``tempering_ess`` times the ESS
 before, ``tempering`` on) is a tempered bootstrap update instead (:func:`~tangraph.filters.steps.measure`,
 then resampling if needed as the bootstrap PF; ``info["tempered"]`` True): the auxiliary redraw
@@ -134,13 +133,10 @@ def ipf_step(
         )
         return StepResult(uniform, mean, cov, ess, resampled=True, info=info, innovation=check)
     # the children: their parents' previous states with the calibrations moved by the kernel
-    # (conditional on the parents' predicted positions, which the moments are of), redrawn; the
-    # kernel's move is laid on the parent's previous calibration, so the heading walk the
-    # parent took at this ping is drawn afresh for the child, not twice
+    # (conditional on the parents' predicted positions, which the moments are of), redrawn
     floor = _kernel_floor(model, config)
     shrunk = shrink_calibration(uniform, moments, config.kernel_bandwidth, floor, rng=rng)
-    previous = belief.take(ancestors)
-    previous = previous.replace(calibration=previous.calibration + (shrunk.calibration - uniform.calibration))
+    previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
     children = predict(previous, ping, model, rng=rng)
     child_update = evaluate(children, ping, model, exponent=update.exponent)
     try:

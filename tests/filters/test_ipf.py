@@ -112,22 +112,3 @@ def test_ipf_records_the_ess_of_the_cloud_it_returns():
     assert result.ess == pytest.approx(1.0 / np.sum(w**2))
     assert result.ess < 300 * (1 - 1e-6)  # the children's weights are not equal
     np.testing.assert_allclose(result.mean, w @ result.belief.particles)
-
-
-def test_ipf_children_draw_the_steps_heading_walk_once():
-    """A child is its parent's previous state moved again: the heading error's walk of the step
-    (here a U-turn's, of variance 0.1^2) is drawn once for it, as for its parent, not on top of
-    the parent's own."""
-    n = 4000
-    config = IPFConfig(n_particles=n, ess_threshold=1.0, tempering=False)
-    nav = navigation(SURVEY, sounding_std=50.0, initial_position_std=15.0, heading_turn_std=0.1)
-    model = FilterModel.from_model(nav, MAP)  # the soundings hardly weigh: every particle redrawn
-    p = survey_pings(SURVEY)[1]
-    ping = type(p)(p.index, p.increment, p.offsets, p.depths, dt=p.dt, turn=np.pi)
-    belief = initial_belief(SURVEY.dr_pose[0, :2], 15.0, n, rng=np.random.default_rng(0),
-                            calibration=(0.0, 0.0), calibration_std=(0.02, 0.0))
-    result = ipf_step(belief, ping, model, config, rng=np.random.default_rng(3))
-    assert result.resampled and result.info["auxiliary"]
-    b, w = result.belief.calibration[:, 1], result.belief.weights
-    variance = np.sum(w * (b - np.sum(w * b)) ** 2)
-    assert variance == pytest.approx(0.1**2, rel=4 * np.sqrt(2 / n) + 0.05)  # + the kernel's part
