@@ -133,7 +133,11 @@ def ipf_step(
         )
         return StepResult(uniform, mean, cov, ess, resampled=True, info=info, innovation=check)
     # the children: their parents' previous states with the calibrations moved by the kernel
-    # (conditional on the parents' predicted positions, which the moments are of), redrawn
+    # (conditional on the parents' predicted positions, which the moments are of), redrawn. The
+    # parents' calibrations are those after this step's heading walk, which the redraw draws
+    # again: a child's walk is doubled. Drawing it once (a15f770, reverted) cost wang2019 15 % of
+    # RMSE and took its mean final NEES from 2.3 to 228 over 20 runs: the doubled walk is the
+    # cloud's only roughening in heading, and stays until a principled one replaces it.
     floor = _kernel_floor(model, config)
     shrunk = shrink_calibration(uniform, moments, config.kernel_bandwidth, floor, rng=rng)
     previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
