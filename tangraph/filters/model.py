@@ -266,9 +266,11 @@ class MotionModel:
         else:
             noise = noise @ np.linalg.cholesky(cov + 1e-12 * np.eye(2)).T
         moved = particles + step + noise
-        if (self.heading_walk > 0 and ping.dt > 0) or (self.heading_turn_std > 0 and ping.turn != 0):
-            turning = self.heading_turn_std > 0
-            std = np.sqrt(self.walk_variance(ping)) if turning else self.heading_walk * np.sqrt(ping.dt)
+        variance = self.walk_variance(ping)
+        if variance > 0:
+            # (the time walk's std written as it always was: seeded runs without a turn walk draw
+            # the same numbers to the last bit)
+            std = np.sqrt(variance) if self.heading_turn_std > 0 else self.heading_walk * np.sqrt(ping.dt)
             walk = std * rng.standard_normal(particles.shape[0])
             calibration = np.column_stack([k, b + walk])
         return moved, calibration
