@@ -577,6 +577,7 @@ def main(argv=None) -> int:
                     for name, s in march.items()},
         "check_lines": check_lines(cfg, args.data, bathymetry, march),
         "run_offsets": run_offsets(cfg, args.data, bathymetry, march),
+        "map_drift": {k: v for k, v in grid.meta.get("check_lines", {}).items() if k.startswith("drift_")},
     }
     if cfg["graph"].get("batch", {}).get("smoother_terrain") == "field" and "smoother" in args.methods:
         checks["refined_map"] = refined_map_check(cfg, args.data, bathymetry, march)
@@ -607,6 +608,7 @@ def main(argv=None) -> int:
         f"Command: `{command}` at commit {_commit()}; settings `{args.config.name}`; "
         f"filters: {seeds} seeds from root seed {args.seed}.", "", markdown(rows), "",
         "Goals (runs of at least 30 min):", *goals(rows), "",
+        *_drift_line(checks["map_drift"], cfg),
         *_refined_table(checks.get("refined_map")),
     ])
     (args.out / "summary.md").write_text(text)
@@ -617,6 +619,18 @@ def main(argv=None) -> int:
     print(json.dumps(checks, indent=1))
     print("figures: " + ", ".join(str(p) for p in pictures))
     return 0
+
+
+def _drift_line(drift: dict, cfg: dict) -> list[str]:
+    """The drift the map's check lines found against the one the navigation models state."""
+    if not drift:
+        return []
+    stated = {source: (table.get("tide_drift_std", 0.0), table.get("tide_drift_time", 0.0))
+              for source, table in cfg["navigation"].items()}
+    said = ", ".join(f"{source}: {a:g} m over {b:g} s" for source, (a, b) in stated.items())
+    return [f"The map's check lines (each January run held out): the depths drift by "
+            f"{drift['drift_std']:.3f} m over {drift['drift_time']:.0f} s (the windows' own error "
+            f"{drift['drift_scale']:.2f} of the stated); the navigation models state {said}.", ""]
 
 
 if __name__ == "__main__":

@@ -117,11 +117,22 @@ def cmd_maps_grid(args: argparse.Namespace) -> None:
         tail = ("a Gaussian tail" if grid.error_dof is None else
                 f"the tail of a Student-t of {grid.error_dof:.3g} degrees of freedom (error_dof)")
         print(f"check lines: {check.summary()}; depth_std scaled by {grid.error_scale:.2f}, {tail}")
+        print(f"check lines: {_drift_line(check)}")
     elif "check_lines_skipped" in grid.meta:
         print(f"check lines: not made ({grid.meta['check_lines_skipped']}); the map states the gridding's "
               "own error")
     write_sounding_grid(grid, args.output, overwrite=args.force)
     print(_grid_summary(grid, cell=args.cell, fill=args.fill, output=args.output))
+
+
+def _drift_line(check) -> str:
+    """What the check lines say of the depths' drift (:meth:`~tangraph.eval.map_check.MapCheck.drift`)."""
+    drift = check.drift()
+    if not np.isfinite(drift["std"]):
+        return "drift: too few windows to tell"
+    return (f"drift: the held-out depths drift from the map's by {drift['std']:.3g} m, forgotten over about "
+            f"{drift['time']:.3g} s (a navigation model's tide_drift_std, tide_drift_time), the windows' "
+            f"own error at {drift['scale']:.2f} times the stated")
 
 
 def _option(keyword: str) -> str:
@@ -163,6 +174,7 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
     for row in check.per_survey():
         print(f"{row['survey']},{row['windows']},{row['rms']:.3f},{row['robust']:.3f},{row['share_beyond_3']:.3f}")
     print(f"all: {check.summary()}")
+    print(_drift_line(check))
 
 
 # -- the parsers --------------------------------------------------------------------------------

@@ -423,7 +423,11 @@ def _check_arguments(survey: Survey, bathymetry: BathymetryMap, model: Navigatio
         raise TangraphError(f"posterior_crb: kind must be one of {_KINDS}, got {kind!r}")
     if model.dropout_speed_noise > 0:
         logger.info("posterior_crb: DVL dropouts are not modelled (the survey does not record them)")
-
+    if model.tide_drift_std > 0:
+        raise TangraphError(f"posterior_crb: the bound holds the tide constant, but the model's tide drifts "
+                            f"(tide_drift_std = {model.tide_drift_std:g} m): not modelled yet; "
+                            "model.replace(tide_drift_std=0.0) gives the bound of a constant tide, which "
+                            "knows more than the survey can")
 
 
 def _scaled_model(survey: Survey, model: NavigationModel,

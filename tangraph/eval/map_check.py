@@ -44,7 +44,7 @@ from typing import Literal, cast
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.eval.windows import window_scores
+from tangraph.eval.windows import window_residuals, window_scores
 from tangraph.geometry import wrap_angle
 from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.survey import Survey
@@ -67,6 +67,9 @@ class MapCheck:
     survey: np.ndarray
     names: tuple[str, ...]
     window: float
+    time: np.ndarray | None = None  #: each window's mean time (s), with ``mean`` and ``variance``
+    mean: np.ndarray | None = None  #: each window's mean residual (m), its survey's median removed
+    variance: np.ndarray | None = None  #: the variance (m^2) the stated errors give ``mean``
 
     @property
     def windows(self) -> int:
@@ -132,12 +135,64 @@ class MapCheck:
             return max(1.0, self.rms), float("inf")
         return scale, dof
 
+    def drift(self, *, max_lag: int = 12) -> dict[str, float]:
+        """How the held-out surveys' window mean residuals drift along their tracks: ``m_i`` and
+        ``m_j``, ``l`` windows apart in one survey, differ by
+
+            ``E[(m_i - m_j)^2] = c^2 (v_i + v_j) + 2 s^2 (1 - exp(-|t_i - t_j| / T))``,
+
+        the map's error at a scale ``c`` of its stated variances ``v`` (independent from window to
+        window: the part the gridding states) and an offset of std ``s`` shared by windows less
+        than about ``T`` seconds apart (an error of the map that holds over a stretch of track,
+        the water level, the sound speed). For each lag ``l`` up to ``max_lag`` the pairs' mean
+        square is taken robustly (their median ``|m_i - m_j|`` over the Gaussian 0.6745, as
+        :attr:`robust`: the map's heavy-tailed patches do not pass for a drift) and ``(c^2, s^2,
+        T)`` are fitted to the lags by least squares in relative error. Returns ``scale`` (``c``),
+        ``std`` (``s``, m) and ``time`` (``T``, s), the ``NavigationModel.tide_drift_std`` and
+        ``tide_drift_time`` the check lines support, and ``walk`` (m per sqrt(s)), how fast the
+        drift parts windows at first, ``sqrt(2 s^2 / T)`` (the figure that is well determined
+        when ``T`` is not: a drift slower than the surveys' windows span). NaN without the
+        windows' times or with fewer than 10 pairs at each of three lags."""
+        nan = {"scale": float("nan"), "std": float("nan"), "time": float("nan"), "walk": float("nan")}
+        if self.time is None or self.mean is None or self.variance is None:
+            return nan
+        from scipy.optimize import least_squares
+
+        rows = []
+        for lag in range(1, max_lag + 1):
+            gap, step, stated = [], [], []
+            for i in np.unique(self.survey):
+                own = self.survey == i
+                t, m, v = self.time[own], self.mean[own], self.variance[own]
+                if t.size > lag:
+                    gap.append(np.abs(t[lag:] - t[:-lag]))
+                    step.append(np.abs(m[lag:] - m[:-lag]))
+                    stated.append(v[lag:] + v[:-lag])
+            if gap and sum(g.size for g in gap) >= 10:
+                rows.append((np.median(np.concatenate(gap)), (np.median(np.concatenate(step)) / 0.6745) ** 2,
+                             np.median(np.concatenate(stated))))
+        if len(rows) < 3:
+            return nan
+        gap_s, square, stated_v = (np.array(c) for c in zip(*rows, strict=True))
+
+        def misfit(x: np.ndarray) -> np.ndarray:
+            c2, s2, log_t = x
+            return (c2 * stated_v + 2.0 * s2 * -np.expm1(-gap_s / np.exp(log_t))) / square - 1.0
+
+        span = (np.log(2.0 * gap_s.min()), np.log(1e3 * gap_s.max()))  # a drift spans windows
+        start = np.array([0.5 * square.min() / stated_v.mean(), 0.5 * square.max(), np.log(np.median(gap_s))])
+        fit = least_squares(misfit, start, bounds=([0.0, 0.0, span[0]], [np.inf, np.inf, span[1]]))
+        c2, s2, log_t = fit.x
+        return {"scale": float(np.sqrt(c2)), "std": float(np.sqrt(s2)), "time": float(np.exp(log_t)),
+                "walk": float(np.sqrt(2.0 * s2 / np.exp(log_t)))}
+
     def per_survey(self) -> list[dict]:
         """One row per held-out survey: name, windows, RMS, robust scale, share beyond 3."""
         rows = []
         for i, name in enumerate(self.names):
             part = dataclasses.replace(self, scores=self.scores[self.survey == i],
-                                       survey=self.survey[self.survey == i])
+                                       survey=self.survey[self.survey == i], time=None, mean=None,
+                                       variance=None)
             rows.append({"survey": name, "windows": part.windows, "rms": part.rms,
                          "robust": part.robust, "share_beyond_3": part.share_beyond_3})
         return rows
@@ -231,7 +286,8 @@ def check_map_error(
                             f"gridded), got {len(surveys)}{hint}")
     names = tuple(names)
     model = NavigationModel() if model is None else model
-    scores, owner = [], []
+    columns: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    owner = []
     for i, held in enumerate(surveys):
         if held.true_pose is None:
             raise TangraphError(f"check_map_error: survey {names[i]!r} has no reference track (true_pose)")
@@ -239,12 +295,14 @@ def check_map_error(
         bathymetry = grid_surveys(others, cell=cell, fill=fill,
                                   statistic=cast(Literal["mean", "median"], statistic),
                                   name=f"without {names[i]}", position_std=position_std).depth
-        s = window_scores(in_map_frame(held, bathymetry), bathymetry, model, window=window)
-        scores.append(s)
-        owner.append(np.full(s.size, i))
+        part = window_residuals(in_map_frame(held, bathymetry), bathymetry, model, window=window)
+        columns.append(part)
+        owner.append(np.full(part[0].size, i))
         if progress is not None:
             progress(i + 1, len(surveys))
-    return MapCheck(np.concatenate(scores), np.concatenate(owner), names, float(window))
+    time, mean, variance = (np.concatenate([c[k] for c in columns]) for k in range(3))
+    return MapCheck(mean / np.sqrt(variance), np.concatenate(owner), names, float(window), time, mean,
+                    variance)
 
 
 def calibrate_error(grid, check: MapCheck):
@@ -268,5 +326,8 @@ def calibrate_error(grid, check: MapCheck):
     figures = {"windows": check.windows, "window_m": check.window, "rms": round(check.rms, 4),
                "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4),
                "misfit_dof": round(dof, 4), "scale": round(scale, 4)}
+    drift = check.drift()
+    if np.isfinite(drift["walk"]):
+        figures |= {"drift_" + k: round(v, 6) for k, v in drift.items()}
     return dataclasses.replace(grid, error_scale=scale, error_dof=dof if np.isfinite(dof) else None,
                                meta={**grid.meta, "check_lines": figures})

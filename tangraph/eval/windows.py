@@ -15,7 +15,7 @@ from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.sensors.terrain import MapError, map_error, shared_among
 from tangraph.survey import Survey
 
-__all__ = ["MIN_SOUNDINGS", "window_scores"]
+__all__ = ["MIN_SOUNDINGS", "window_residuals", "window_scores"]
 
 MIN_SOUNDINGS = 10  #: a window with fewer soundings on the map is not scored
 
@@ -29,6 +29,18 @@ def window_scores(
     ``bathymetry`` in consecutive windows of ``window`` m of track ; windows
     with fewer than ``MIN_SOUNDINGS`` soundings on the map are left out (the statistics are
     those of :mod:`tangraph.eval.map_check`'s module docstring)."""
+    _, mean, variance = window_residuals(survey, bathymetry, model, window=window, error=error,
+                                         poses=poses, used=used)
+    return mean / np.sqrt(variance)
+
+
+def window_residuals(
+    survey: Survey, bathymetry: BathymetryMap, model: NavigationModel, *, window: float,
+    error: MapError | None = None, poses=None, used=None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The windows of :func:`window_scores` before they are standardised: each window's mean
+    time (s), mean residual (m, the survey's median residual removed) and the variance the
+    sounding noise and the map's stated error give that mean (m^2)."""
     if poses is None and survey.true_pose is None:
         name = survey.meta.get("name", "")
         raise TangraphError(f"survey {name!r}: no reference track (true_pose) to check the map with")
@@ -38,11 +50,11 @@ def window_scores(
     residual = survey.beam_depth - bathymetry.depth_at(north, east)
     ok = np.isfinite(residual) & (True if used is None else np.asarray(used, bool))
     if not ok.any():
-        return np.empty(0)
+        return np.empty(0), np.empty(0), np.empty(0)
     residual = residual - np.median(residual[ok])
     step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
     block = np.floor(np.concatenate([[0.0], np.cumsum(step)]) / window).astype(np.int64)
-    scores = []
+    rows_out = []
     for b in np.unique(block):
         rows = block == b
         use = ok & rows[:, None]
@@ -56,5 +68,8 @@ def window_scores(
             a = np.where(np.isfinite(a), a, part.typical_std)
             variance += float(np.sum(a * a))
         variance += float(np.sum(shared_among(pn, pe, error)))
-        scores.append(np.mean(residual[use]) / np.sqrt(variance / n**2))
-    return np.asarray(scores)
+        rows_out.append((float(np.mean(survey.time[rows])), float(np.mean(residual[use])), variance / n**2))
+    if not rows_out:
+        return np.empty(0), np.empty(0), np.empty(0)
+    table = np.asarray(rows_out)
+    return table[:, 0], table[:, 1], table[:, 2]

@@ -211,7 +211,7 @@ def model_belief(
         n,
         rng=rng,
         tide=nav.tide,
-        tide_var=nav.tide_std**2,
+        tide_var=nav.tide_variance,
         history_length=history_length,
         calibration=nav.calibration_prior,
         calibration_std=nav.calibration_std,

@@ -387,6 +387,17 @@ class FilterModel:
             navigation,
         )
 
+    def tide_predict(self, tide, tide_var: float, ping: Ping):
+        """The tide posterior ``N(tide, tide_var)`` (``tide`` an array or a number) carried to
+        ``ping`` through the navigation model's drift: its departure from the prior mean kept by
+        ``NavigationModel.tide_memory(dt)``, its variance reverting to ``tide_variance``
+        (unchanged at the first ping and without a drift)."""
+        nav = self.navigation
+        keep = 1.0 if ping.first else nav.tide_memory(ping.dt)
+        if keep == 1.0:
+            return tide, tide_var
+        return nav.tide + keep * (tide - nav.tide), keep**2 * tide_var + (1.0 - keep**2) * nav.tide_variance
+
     def misfit_prior(self) -> MisfitScale | None:
         """The local misfit scale a run starts from: the Student-t tail the map states (its
         ``error_dof``), else the navigation model's ``misfit_dof``, forgotten over its

@@ -187,7 +187,7 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     area = float(abs(np.linalg.det(axes)))
     return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
                      density - log_total - np.log(area), np.full(density.shape, navigation.tide),
-                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
+                     navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
                      (cal_mean, cal_std))
 
 
@@ -198,6 +198,7 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
     state.pending = state.pending + model.motion.noise_covariance(ping)
     state.walk += model.motion.walk_variance(ping)
+    state.tide, state.tide_var = model.tide_predict(state.tide, state.tide_var, ping)
     inv = np.linalg.inv(state.axes)
     if np.max(np.linalg.eigvalsh(inv @ state.pending @ inv.T)) >= 0.25:
         _diffuse(state)
@@ -301,7 +302,7 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
     area = float(abs(np.linalg.det(axes))) * n * n
     return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
                      np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
-                     navigation.tide_std**2, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
+                     navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
                      (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit)
 
 

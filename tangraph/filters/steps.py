@@ -127,12 +127,14 @@ Step = Callable[..., StepResult]
 
 def predict(belief: Belief, ping: Ping, model: FilterModel, *, rng: np.random.Generator,
             extra_std: float = 0.0) -> Belief:  # fmt: skip
-    """The belief moved through the motion model (positions and calibrations)."""
+    """The belief moved through the motion model (positions and calibrations), its tide
+    posterior through the tide's drift."""
     assert belief.calibration is not None  # Belief.__post_init__ fills it
     particles, calibration = model.motion.predict(
         belief.particles, belief.calibration, ping, rng=rng, extra_std=extra_std
     )
-    return belief.replace(particles=particles, calibration=calibration)
+    tide, tide_var = model.tide_predict(belief.tide, belief.tide_var, ping)
+    return belief.replace(particles=particles, calibration=calibration, tide=tide, tide_var=tide_var)
 
 
 def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> TerrainUpdate:

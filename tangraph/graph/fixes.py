@@ -13,18 +13,28 @@ from typing import TypeVar
 
 import numpy as np
 
+from tangraph.errors import TangraphError
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import check_fix_covariance, nis
 from tangraph.maps.grid import BathymetryMap
-from tangraph.matching import MatchingError, TapFix, TerrainFix, shape_covariance, tap_fix_patch, window_patch
-from tangraph.sensors import DeadReckoningModel
+from tangraph.matching import (
+    Criterion,
+    MatchingError,
+    TapFix,
+    TerrainFix,
+    shape_covariance,
+    tap_fix_patch,
+    window_patch,
+)
+from tangraph.sensors import DeadReckoningModel, NavigationModel
 from tangraph.survey import Survey
 
 __all__ = [
     "FixOutcome",
     "LostEpisode",
+    "check_tide_drift",
     "fix_name",
     "judge_fix",
     "make_fix",
@@ -32,6 +42,28 @@ __all__ = [
     "search_step",
     "window_noise",
 ]
+
+
+def check_tide_drift(config: GraphConfig, model: NavigationModel) -> NavigationModel:
+    """``model``, unless the graph would hold the tide constant while the model says it drifts
+    (``tide_drift_std > 0``): refused, naming the setting that settles it, are TAP windows
+    whose criterion takes the depths as reduced to the map's datum (``msd``, ``mad``), and the
+    one tide variable of the online graph's point-mass front end, its tracking on soundings and
+    the smoother's terrain on soundings or with the map's error field."""
+    if model.tide_drift_std <= 0:
+        return model
+    drift = f"the navigation model's tide drifts (tide_drift_std = {model.tide_drift_std:g} m)"
+    criterion = config.fixes.tap.criterion
+    if criterion in (Criterion.MSD, Criterion.MAD):
+        raise TangraphError(f"graph: TAP criterion {criterion.value!r} takes the depths as reduced to the "
+                            f"map's datum, but {drift}: use criterion 'mle' (each window's tide estimated)")
+    held = [f"{name} = {value!r}" for name, value, default in
+            (("front_end", config.online.front_end, "tap"), ("terrain", config.online.terrain, "fixes"),
+             ("smoother_terrain", config.batch.smoother_terrain, "fixes")) if value != default]
+    if held:
+        raise TangraphError(f"graph: {', '.join(held)} holds one tide for the whole survey, but {drift}: "
+                            "use the TAP fixes (the defaults), whose windows estimate their own tide")
+    return model
 
 
 #: A terrain fix of either front end (:class:`~tangraph.matching.TerrainFix`), kept as its own type.

@@ -48,7 +48,7 @@ from tangraph.graph.calibration import (
 )
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, propagate_joint
-from tangraph.graph.fixes import FixOutcome, LostEpisode
+from tangraph.graph.fixes import FixOutcome, LostEpisode, check_tide_drift
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import take_window
 from tangraph.graph.online_terrain import OnlineTerrain
@@ -94,7 +94,7 @@ class GraphNavigator:
         self.config = config or GraphConfig()
         if not isinstance(self.config, GraphConfig):
             raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
-        self.model = survey_navigation_model(survey, model, where="graph")
+        self.model = check_tide_drift(self.config, survey_navigation_model(survey, model, where="graph"))
         self.white = self.model.dead_reckoning
         # the map error each sounding shares with the survey's others: it widens every fix
         self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)

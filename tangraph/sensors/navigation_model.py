@@ -95,6 +95,20 @@ class NavigationModel:
         residual variance.
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
+    tide_drift_std, tide_drift_time : float
+        The drift of the tide (m, s): the offset between the survey's depths and the map's
+        wanders about its prior by a Gauss-Markov process of this std, forgetting over this
+        time (the map's error that holds over a stretch of track, the water level between gauge
+        readings, the sound speed). A drifting offset is estimated with the position instead of
+        taken for the map's error, which would count an error that holds for hundreds of
+        metres once per correlation length. The check lines of a map measure both
+        (``tangraph maps grid``; :meth:`tangraph.eval.MapCheck.drift`). 0 (default):
+        the tide is constant over the survey. The filters' tide posterior reverts to the prior
+        mean by ``exp(-dt / tide_drift_time)`` between pings and its variance to ``tide_std^2 +
+        tide_drift_std^2``: exact for a datum that is known (``tide_std`` small against the
+        drift); an uncertain datum's estimate is forgotten over the drift's time too. The
+        factor graph's fixes then take each window's tide from its soundings (criterion
+        ``mle``).
     map_offset_std : float
         Std (m, per axis) of the map's horizontal offset against the survey's frame, one for the
         whole survey: the earlier surveys' position error that their runs share (a DGPS of a
@@ -145,6 +159,8 @@ class NavigationModel:
     misfit_length: float = 200.0
     tide: float = 0.0
     tide_std: float = 3.0
+    tide_drift_std: float = 0.0
+    tide_drift_time: float = 0.0
     map_offset_std: float = 0.0
     robust_kernel: str = "huber"
     robust_parameter: float = 2.45
@@ -155,6 +171,7 @@ class NavigationModel:
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "heading_turn_std",
                      "dropout_speed_noise", "map_std", "map_correlation_length", "tide_std",
+                     "tide_drift_std", "tide_drift_time",
                      "map_offset_std", "speed_scale_std", "heading_bias_std"):
             _number(self, name, low=0.0)
         _number(self, "misfit_dof", low=0.0)
@@ -166,6 +183,10 @@ class NavigationModel:
         for name in ("robust_parameter", "odometry_min_std", "odometry_min_heading_std"):
             _number(self, name, low=0.0, open_low=True)
         _number(self, "fix_inflation", low=1.0)
+        if self.tide_drift_std > 0 and not self.tide_drift_time > 0:
+            raise TangraphError(f"NavigationModel.tide_drift_time must be > 0 s with tide_drift_std = "
+                                f"{self.tide_drift_std:g} m (how long the tide's drift takes to forget), "
+                                f"got {self.tide_drift_time!r}")
         if self.robust_kernel not in _KERNELS:
             raise TangraphError(f"NavigationModel.robust_kernel must be one of {', '.join(_KERNELS)}, "
                                 f"got {self.robust_kernel!r}")
@@ -188,6 +209,17 @@ class NavigationModel:
     def calibration_std(self) -> np.ndarray:
         """Prior std ``(k, b)`` of the constant DR errors."""
         return np.array([self.speed_scale_std, self.heading_bias_std])
+
+    @property
+    def tide_variance(self) -> float:
+        """Variance (m^2) of the tide about its prior mean at any time: the prior's and the
+        drift's."""
+        return self.tide_std**2 + self.tide_drift_std**2
+
+    def tide_memory(self, dt: float) -> float:
+        """How much of the tide's departure from its prior mean is kept after ``dt`` s of drift,
+        ``exp(-dt / tide_drift_time)`` (1 without a drift)."""
+        return math.exp(-dt / self.tide_drift_time) if self.tide_drift_std > 0 else 1.0
 
     @property
     def measurement_std(self) -> float:
@@ -231,7 +263,9 @@ class NavigationModel:
         """The model of a simulated survey, from the settings it records (``meta["settings"]``):
         the DR as :meth:`from_dead_reckoning`; ``sounding_std`` 1.5 times the sonar's
         ``depth_noise`` (the margin covers map interpolation and attitude errors), at least 0.2 m;
-        the tide prior of mean zero and std 3 m. ``overrides`` replace any field.
+        the tide prior of mean zero and std 3 m, drifting as the sonar's ``tide_drift_std``
+        and ``tide_drift_time`` say.
+        ``overrides`` replace any field.
 
         Raises
         ------
@@ -261,6 +295,11 @@ class NavigationModel:
                 terrain["sounding_std"] = max(1.5 * noise, 0.2)
         except (KeyError, TypeError, ValueError):
             pass
+        sonar = settings.get("sonar")
+        drift = [sonar.get(k, 0.0) if isinstance(sonar, dict) else 0.0
+                 for k in ("tide_drift_std", "tide_drift_time")]
+        if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in drift):
+            terrain["tide_drift_std"], terrain["tide_drift_time"] = float(drift[0]), float(drift[1])
         return cls.from_dead_reckoning(dr, **(terrain | overrides))
 
     @classmethod

@@ -62,6 +62,10 @@ class MultibeamConfig:
     attitude_noise : float
         Std of an unmodelled roll and pitch error per ping, rad: the rays are cast with it,
         the soundings are reduced without it.
+    tide_drift_std, tide_drift_time : float
+        The tide's drift (m, s): the simulated survey's depths differ from the map's by ``tide``
+        plus a Gauss-Markov offset of this std that forgets over this time
+        (``NavigationModel.tide_drift_std``); 0: none.
 
     Examples
     --------
@@ -84,6 +88,8 @@ class MultibeamConfig:
     max_range: float = np.inf
     tide: float = 0.0
     attitude_noise: float = 0.0
+    tide_drift_std: float = 0.0
+    tide_drift_time: float = 0.0
 
     def __post_init__(self) -> None:
         n = self.n_beams
@@ -97,6 +103,7 @@ class MultibeamConfig:
         check_number(self, "tide", low=None)
         for name in ("range_noise", "depth_noise", "outlier_std", "attitude_noise"):
             check_number(self, name)
+        _check_drift(self)
         for name in ("outlier_rate", "missing_rate"):
             check_number(self, name, high=1.0)
 
@@ -115,10 +122,20 @@ class MultibeamConfig:
         return cls(n_beams=60, swath=float(np.deg2rad(120.0)), ping_rate=0.2, depth_noise=0.5)
 
 
+def _check_drift(config) -> None:
+    """The tide's drift of a sonar config: both >= 0, its time > 0 where it has a std."""
+    check_number(config, "tide_drift_std")
+    check_number(config, "tide_drift_time")
+    if config.tide_drift_std > 0 and not config.tide_drift_time > 0:
+        raise TangraphError(f"{type(config).__name__}.tide_drift_time must be > 0 s with tide_drift_std = "
+                            f"{config.tide_drift_std:g} m, got {config.tide_drift_time!r}")
+
+
 @dataclasses.dataclass(frozen=True)
 class SingleBeamConfig:
     """A single vertical beam (altimeter / echo sounder): ``ping_rate`` (Hz), ``depth_noise``
-    (m std), ``tide`` (m, as in :class:`MultibeamConfig`), ``max_range`` (m).
+    (m std), ``tide`` (m, as in :class:`MultibeamConfig`), ``max_range`` (m), ``tide_drift_std``
+    (m) and ``tide_drift_time`` (s, as in :class:`MultibeamConfig`).
 
     Examples
     --------
@@ -130,10 +147,13 @@ class SingleBeamConfig:
     depth_noise: float = 0.0
     tide: float = 0.0
     max_range: float = np.inf
+    tide_drift_std: float = 0.0
+    tide_drift_time: float = 0.0
 
     def __post_init__(self) -> None:
         check_number(self, "ping_rate", open_low=True)
         check_number(self, "depth_noise")
+        _check_drift(self)
         check_number(self, "tide", low=None)
         check_number(self, "max_range", open_low=True, allow_inf=True)
 

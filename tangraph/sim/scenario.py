@@ -364,6 +364,10 @@ def simulate_run(
     dr = simulate_dead_reckoning(time, true_pose, scenario.dead_reckoning, rng=rng)
     vehicle_depth = np.full(time.size, scenario.vehicle_depth)
     pings = simulate_pings(raycasting_scene(seafloor), true_pose, vehicle_depth, scenario.sonar, rng=rng)
+    depth = pings.beam_depth
+    sonar = scenario.sonar
+    if sonar.tide_drift_std > 0:  # drawn last: a survey without a drift draws what it always did
+        depth = depth + _tide_drift(time, sonar.tide_drift_std, sonar.tide_drift_time, rng)[:, None]
     import tangraph
     from tangraph.map_frame import map_identity
 
@@ -391,11 +395,23 @@ def simulate_run(
         vehicle_depth=vehicle_depth,
         beam_forward=pings.beam_forward,
         beam_starboard=pings.beam_starboard,
-        beam_depth=pings.beam_depth,
+        beam_depth=depth,
         true_pose=true_pose,
         meta=meta,
     )
     return Simulation(survey, estimators_map, world)
+
+
+def _tide_drift(time: np.ndarray, std: float, forget: float, rng: np.random.Generator) -> np.ndarray:
+    """A Gauss-Markov offset of ``std`` m forgetting over ``forget`` s at ``time (K,)``, started
+    from its stationary law: the tide's drift on top of the sonar's ``tide``."""
+    keep = np.exp(-np.diff(time) / forget)
+    draws = rng.standard_normal(time.size)
+    drift = np.empty(time.size)
+    drift[0] = std * draws[0]
+    for k in range(1, time.size):
+        drift[k] = keep[k - 1] * drift[k - 1] + std * np.sqrt(1.0 - keep[k - 1] ** 2) * draws[k]
+    return drift
 
 
 def _rms(error: np.ndarray) -> float:

@@ -302,8 +302,9 @@ def test_cli_grids_surveys_end_to_end(tmp_path, capsys):
     b = write_survey(surveys[1], tmp_path / "b.nc")
     out = tmp_path / "map.nc"
     assert main(["maps", "grid", str(a), str(b), "--cell", "5", "--fill", "2", "-o", str(out)]) == 0
-    check, line = capsys.readouterr().out.strip().split("\n")  # the check lines' line, then the map's
+    check, drift, line = capsys.readouterr().out.strip().split("\n")  # the check lines', the map's
     assert check.startswith("check lines: 50 windows of 50 m")
+    assert drift.startswith("check lines: drift: ")
     assert line.startswith("gridded ") and "median" in line and f"wrote {out}" in line
     assert "more filled by --fill 2" in line
     grid = read_map(out)

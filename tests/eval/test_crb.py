@@ -225,6 +225,8 @@ def test_bad_inputs_name_the_problem():
         posterior_crb(survey, seabed, MODEL, kind="ekf")
     with pytest.raises(TangraphError, match="position_cov must be"):
         CramerRaoBound(np.zeros((3, 2)), np.eye(2), 0.0, "filter")
+    with pytest.raises(TangraphError, match=r"the model's tide drifts \(tide_drift_std = 0.2 m\)"):
+        posterior_crb(survey, seabed, MODEL.replace(tide_drift_std=0.2, tide_drift_time=100.0))
 
 
 @pytest.mark.slow

@@ -129,3 +129,52 @@ def test_calibrate_error_gives_the_map_the_tail_its_check_lines_found():
     assert heavy.meta["check_lines"]["misfit_dof"] == pytest.approx(dof, abs=1e-4)
     plain = calibrate_error(grid, MapCheck(3.0 * rng.standard_normal(500), np.zeros(500, int), ("a",), 50.0))
     assert plain.error_dof is None and plain.depth.error_dof is None
+
+
+def planted_windows(walk: float, rng, surveys: int = 6, windows: int = 60, spacing: float = 60.0,
+                    time_constant: float = np.inf):
+    """Check-line windows whose mean residuals are a map error of stated variance 0.01 m^2 at a
+    scale of 1.3 (1 % of them a patch ten times worse) plus a drift: a random walk of ``walk``
+    m/sqrt(s), or with a finite ``time_constant`` (s) the Gauss-Markov offset of that initial
+    walk (std ``walk sqrt(time_constant / 2)``)."""
+    time = np.tile(np.arange(windows) * spacing, surveys)
+    owner = np.repeat(np.arange(surveys), windows)
+    variance = np.full(time.size, 0.01)
+    worse = np.where(rng.random(time.size) < 0.01, 10.0, 1.0)
+    error = 1.3 * 0.1 * rng.standard_normal(time.size) * worse
+    phi = np.exp(-spacing / time_constant)
+    step = walk * np.sqrt(spacing if np.isinf(time_constant) else (1 - phi**2) * time_constant / 2.0)
+    drift = []
+    for _ in range(surveys):
+        d = np.empty(windows)
+        d[0] = 0.0 if np.isinf(time_constant) else walk * np.sqrt(time_constant / 2.0) * rng.standard_normal()
+        for k in range(1, windows):
+            d[k] = phi * d[k - 1] + step * rng.standard_normal()
+        drift.append(d)
+    mean = error + np.concatenate(drift)
+    return MapCheck(mean / np.sqrt(variance), owner, tuple(f"s{i}" for i in range(surveys)), 50.0, time,
+                    mean, variance)
+
+
+@pytest.mark.parametrize("walk", [0.0, 0.005, 0.02])
+def test_the_check_lines_measure_how_fast_the_tide_drifts(walk):
+    checks = [planted_windows(walk, np.random.default_rng(seed)) for seed in range(20)]
+    estimates = np.array([check.drift()["walk"] for check in checks])
+    # over 20 independent checks: centred on the planted walk (none: a few mm per sqrt(s))
+    assert abs(np.median(estimates) - walk) < 0.2 * walk + 0.003
+    assert np.all(estimates >= 0.0)
+
+
+def test_the_check_lines_measure_a_drift_that_forgets():
+    checks = [planted_windows(0.02, np.random.default_rng(seed), time_constant=300.0) for seed in range(20)]
+    fits = [check.drift() for check in checks]
+    walk, std, time = (np.median([f[k] for f in fits]) for k in ("walk", "std", "time"))
+    assert walk == pytest.approx(0.02, rel=0.2)
+    assert std == pytest.approx(0.02 * np.sqrt(150.0), rel=0.2)
+    assert time == pytest.approx(300.0, rel=0.35)
+    assert np.median([f["scale"] for f in fits]) == pytest.approx(1.3, rel=0.3)
+
+
+def test_a_check_without_its_windows_times_has_no_drift():
+    check = MapCheck(np.zeros(3), np.zeros(3, int), ("a",), 50.0)
+    assert all(np.isnan(v) for v in check.drift().values())

@@ -10,9 +10,10 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.graph import FixStatus, GraphConfig
-from tangraph.graph.fixes import judge_fix, search_half_width, search_step
+from tangraph.graph.fixes import check_tide_drift, judge_fix, search_half_width, search_step
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching import TapConfig, tap_fix
+from tangraph.sensors import NavigationModel
 
 CONFIG = GraphConfig(key_interval=20.0)
 
@@ -63,3 +64,23 @@ def test_a_misfit_window_is_refused_and_named(small_survey, rough_map):
     assert outcome.record.status is FixStatus.MISFIT and "5.0 x the model's" in outcome.record.detail
     assert judge_fix(fix, small_survey.true_pose[59], np.eye(3), CONFIG, 30.0,
                      noise=fix.sigma).record.status is not FixStatus.MISFIT
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"tap": TapConfig(criterion="msd")}, "criterion 'msd' takes the depths as reduced"),
+    ({"tap": TapConfig(criterion="mad")}, "criterion 'mad'"),
+    ({"front_end": "pmf"}, "front_end = 'pmf' holds one tide"),
+    ({"smoother_terrain": "field"}, "smoother_terrain = 'field' holds one tide"),
+])
+def test_a_graph_that_holds_the_tide_constant_refuses_a_drifting_one(changes, message, small_survey,
+                                                                   rough_map):
+    config = GraphConfig().replace(**changes)
+    drifting = NavigationModel(tide_drift_std=0.2, tide_drift_time=200.0)
+    check_tide_drift(config, NavigationModel())  # a constant tide: every setting holds
+    assert check_tide_drift(GraphConfig(), drifting) is drifting  # the defaults estimate each window's tide
+    with pytest.raises(TangraphError, match=message):
+        check_tide_drift(config, drifting)
+    with pytest.raises(TangraphError, match="tide_drift_std = 0.2 m"):  # where the graph starts
+        from tangraph.graph import navigate_online
+
+        navigate_online(small_survey, rough_map, config, model=drifting)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from tangraph.cli import main
+from tangraph.errors import TangraphError
 from tangraph.maps import BathymetryMap
 from tangraph.sim.scenario import ScenarioError, list_scenarios, load_scenario, simulate
 from tangraph.survey import read_survey
@@ -129,3 +130,30 @@ def test_simulate_cli_writes_the_prior_map_of_a_seafloor_that_is_not_the_map(tmp
     survey_on_map(survey, bathymetry)  # the map its estimators navigate on: accepted
     assert main(["simulate", "demo-map-error", "-o", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
+
+
+def test_a_drifting_tide_moves_every_sounding_of_a_ping_alike_and_nothing_else():
+    scenario = load_scenario("han2020")
+    line = {"kind": "line", "start": [1000.0, 100.0], "heading_deg": 90.0, "speed": 2.0, "duration": 900.0}
+    still = dataclasses.replace(scenario, trajectory=line)
+    std, forget = 0.3, 50.0
+    drifting = dataclasses.replace(still, sonar=dataclasses.replace(still.sonar, tide_drift_std=std,
+                                                                    tide_drift_time=forget))
+    a = simulate(still, rng=np.random.default_rng(3), bathymetry=flat_map(), seed=3)
+    b = simulate(drifting, rng=np.random.default_rng(3), bathymetry=flat_map(), seed=3)
+    np.testing.assert_array_equal(a.dr_pose, b.dr_pose)  # the drift is drawn last
+    drift = (b.beam_depth - a.beam_depth)
+    np.testing.assert_allclose(drift, np.broadcast_to(drift[:, :1], drift.shape), atol=1e-9)  # one per ping
+    d = drift[:, 0]
+    keep = np.exp(-np.diff(b.time) / forget)
+    innovations = (d[1:] - keep * d[:-1]) / (std * np.sqrt(1.0 - keep**2))
+    n = innovations.size  # standardised innovations of the Gauss-Markov process: chi-square(n) / n
+    assert abs(np.mean(innovations**2) - 1.0) < 4.0 * np.sqrt(2.0 / n)
+    assert abs(np.mean(innovations)) < 4.0 / np.sqrt(n)
+    from tangraph.sensors import NavigationModel
+
+    model = NavigationModel.from_survey(b)
+    assert (model.tide_drift_std, model.tide_drift_time) == (std, forget)
+    assert NavigationModel.from_survey(a).tide_drift_std == 0.0
+    with pytest.raises(TangraphError, match="tide_drift_time must be > 0 s with tide_drift_std = 0.3 m"):
+        dataclasses.replace(still.sonar, tide_drift_std=std)
