@@ -58,3 +58,20 @@ def test_the_map_error_goals_are_checked_on_the_long_runs_with_spoiled_and_compa
                                    {**row, "case": "compass", "duration_min": 7.0}])
     assert lines == ["- r compass pf: median 14.00 m (met, <= 36.50 m); ANEES 4.00 (missed, <= 3.00); "
                      "confidently wrong 2.00 % (met, <= 5.00 %)"]
+
+
+@pytest.mark.parametrize("name", ["config.toml", "config_turn_walk.toml", "config_check_lines.toml",
+                                  "config_tracking.toml", "config_front_end.toml", "config_field.toml",
+                                  "config_field_offset.toml"])
+def test_every_configuration_gives_models_the_graph_accepts(name):
+    from tangraph.graph.fixes import check_tide_drift
+
+    study = load_experiment("caputh_replay")
+    cfg = study.load_config(study.HERE / name)
+    for source in ("boat", "compass"):
+        model, graph = study.estimator(cfg, source, "smoother")
+        assert check_tide_drift(graph, model) is model
+    if name == "config.toml":  # the map's check lines measured the drift it states
+        assert model.tide_drift_std == 0.2 and model.tide_drift_time == 170.0
+        line = study._drift_line({"drift_std": 0.196, "drift_time": 172.0, "drift_scale": 0.0}, cfg)[0]
+        assert "drift by 0.196 m over 172 s" in line and "compass: 0.2 m over 170 s" in line
