@@ -103,13 +103,13 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     run = _survey(config, rng)
     survey, bathymetry = run.survey, run.bathymetry
     model = NavigationModel.from_survey(survey, **config.get("model", {}))
+    bound = {kind: bound_rmse(posterior_crb(survey, bathymetry, model, kind=kind))
+             for kind in ("smoother", "filter")}
     # the physical limit: the same bound with the soundings' simulated noise (the model's
-    # sounding_std has a margin of 1.5 over it, NavigationModel.from_survey); none for a drifting
-    # tide, which the bound does not model (posterior_crb refuses it)
+    # sounding_std has a margin of 1.5 over it, NavigationModel.from_survey)
     noise = dataclasses.replace(model, sounding_std=float(survey.meta["settings"]["sonar"]["depth_noise"]))
-    bound, limit = ({kind: bound_rmse(posterior_crb(survey, bathymetry, m, kind=kind))
-                     if model.tide_drift_std == 0 else float("nan") for kind in ("smoother", "filter")}
-                    for m in (model, noise))
+    limit = {kind: bound_rmse(posterior_crb(survey, bathymetry, noise, kind=kind))
+             for kind in ("smoother", "filter")}
     truth_scale = float(survey.meta["settings"]["dead_reckoning"]["speed_scale"])
     truth_heading = float(survey.dr_pose[-1, 2] - survey.true_pose[-1, 2])
     rows = []

@@ -23,10 +23,12 @@ walk (``w_0 = 0``, ``w_{k+1} = w_k + N(0, heading_walk^2 dt_k + heading_turn_std
 ``dpsi_k`` the true heading's turn), ``n_k`` the white heading error
 of ping ``k`` (``N(0, heading_noise^2)``, fresh at every ping) and ``v_k ~ N(0, speed_noise^2
 dt_k^2 I)`` (isotropic, so its rotation does not matter). Terms of second order (``s e``,
-``e v``, ``e^2``) are dropped. The state of ping ``k`` is ``(dp_k, w_k, n_k, s, b, tide)``; the
-walk and white states are left out when their std is zero, the tide when its prior std is zero.
-The prior at the first ping is ``dp_0 ~ N(0, initial_position_std^2 I)``, ``s``, ``b`` and the tide
-of their prior stds, ``w_0 = 0``.
+``e v``, ``e^2``) are dropped. The tide of ping ``k`` is ``tide + x_k``: a constant and its drift
+``x_k`` (``NavigationModel.tide_drift_std`` ``S``, ``tide_drift_time`` ``T``: ``x_0 ~ N(0, S^2)``,
+``x_{k+1} = a_k x_k + N(0, (1 - a_k^2) S^2)``, ``a_k = exp(-dt_k / T)``). The state of ping ``k``
+is ``(dp_k, w_k, n_k, s, b, tide, x_k)``; the walk, white and drift states are left out when
+their std is zero, the tide when its prior std is zero. The prior at the first ping is ``dp_0 ~
+N(0, initial_position_std^2 I)``, ``s``, ``b`` and the tide of their prior stds, ``w_0 = 0``.
 
 The soundings
 -------------
@@ -35,7 +37,7 @@ A sounding of ping ``k`` with body offset ``o`` lies at ``r = R(psi_k) o`` from 
 at its true footprint ``q = p_k + r``: ``h`` the map, ``d`` the map's error, ``e ~ N(0,
 sounding_std^2)``. Laid from the DR pose it would be at ``q + dp_k + e_k J r``, so its residual
 ``z - map`` has, with ``g`` the map gradient at the TRUE footprint, the Jacobian ``-g`` on
-``dp_k``, ``-g . J r`` on each of ``b``, ``w_k``, ``n_k``, ``1`` on the tide, ``0`` on ``s`` and
+``dp_k``, ``-g . J r`` on each of ``b``, ``w_k``, ``n_k``, ``1`` on the tide and ``x_k``, ``0`` on ``s`` and
 ``+1`` on ``d(q)``. Soundings without a depth (NaN) or whose true footprint is off the map (NaN
 gradient) are left out. The ``B`` soundings of a ping give the state an information of rank at
 most 4 (in the features ``g_n, g_e, g . J r, 1``).
@@ -252,7 +254,8 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
 # -- the linearised model ------------------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class _Layout:
-    """Indices of the error state: ``dp`` (0, 1), then walk, white, scale, bias, tide if present."""
+    """Indices of the error state: ``dp`` (0, 1), then walk, white, scale, bias, tide, the tide's
+    drift if present."""
 
     n: int
     walk: int | None
@@ -260,6 +263,7 @@ class _Layout:
     speed_scale: int
     heading_bias: int
     tide: int | None
+    drift: int | None = None
 
     @classmethod
     def of(cls, model: NavigationModel) -> _Layout:
@@ -271,9 +275,12 @@ class _Layout:
         names += ["scale", "bias"]
         if model.tide_std > 0:
             names.append("tide")
+        if model.tide_drift_std > 0:
+            names.append("drift")
         where = {name: i for i, name in enumerate(names)}
         return cls(n=len(names), walk=where.get("walk"), white=where.get("white"),
-                   speed_scale=where["scale"], heading_bias=where["bias"], tide=where.get("tide"))
+                   speed_scale=where["scale"], heading_bias=where["bias"], tide=where.get("tide"),
+                   drift=where.get("drift"))
 
     @property
     def calibration(self) -> list[int]:
@@ -293,6 +300,8 @@ class _Layout:
         v[self.heading_bias] = max(model.heading_bias_std, KNOWN_STD) ** 2
         if self.tide is not None:
             v[self.tide] = model.tide_std**2
+        if self.drift is not None:
+            v[self.drift] = model.tide_drift_std**2
         return v
 
     def scale(self, model: NavigationModel, walk: np.ndarray) -> np.ndarray:
@@ -324,6 +333,10 @@ def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tup
     if layout.white is not None:
         f[:, layout.white, layout.white] = 0.0
         q[:, layout.white, layout.white] = model.heading_noise**2
+    if layout.drift is not None:
+        keep = np.exp(-dt / model.tide_drift_time)
+        f[:, layout.drift, layout.drift] = keep
+        q[:, layout.drift, layout.drift] = (1.0 - keep**2) * model.tide_drift_std**2
     return f, q
 
 
@@ -350,8 +363,9 @@ def _sounding_jacobian(layout: _Layout) -> np.ndarray:
     jacobian = np.zeros((layout.n, 4))
     jacobian[0, 0] = jacobian[1, 1] = -1.0
     jacobian[layout.heading, 2] = -1.0
-    if layout.tide is not None:
-        jacobian[layout.tide, 3] = 1.0
+    for i in (layout.tide, layout.drift):
+        if i is not None:
+            jacobian[i, 3] = 1.0
     return jacobian
 
 
@@ -423,11 +437,6 @@ def _check_arguments(survey: Survey, bathymetry: BathymetryMap, model: Navigatio
         raise TangraphError(f"posterior_crb: kind must be one of {_KINDS}, got {kind!r}")
     if model.dropout_speed_noise > 0:
         logger.info("posterior_crb: DVL dropouts are not modelled (the survey does not record them)")
-    if model.tide_drift_std > 0:
-        raise TangraphError(f"posterior_crb: the bound holds the tide constant, but the model's tide drifts "
-                            f"(tide_drift_std = {model.tide_drift_std:g} m): not modelled yet; "
-                            "model.replace(tide_drift_std=0.0) gives the bound of a constant tide, which "
-                            "knows more than the survey can")
 
 
 def _scaled_model(survey: Survey, model: NavigationModel,

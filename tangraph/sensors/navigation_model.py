@@ -108,7 +108,8 @@ class NavigationModel:
         tide_drift_std^2``: exact for a datum that is known (``tide_std`` small against the
         drift); an uncertain datum's estimate is forgotten over the drift's time too. The
         factor graph's fixes then take each window's tide from its soundings (criterion
-        ``mle``).
+        ``mle``); the bound (:func:`~tangraph.eval.posterior_crb`) holds the drift exactly,
+        beside the constant tide.
     map_offset_std : float
         Std (m, per axis) of the map's horizontal offset against the survey's frame, one for the
         whole survey: the earlier surveys' position error that their runs share (a DGPS of a

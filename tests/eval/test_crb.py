@@ -57,6 +57,9 @@ def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationMod
                                           np.angle(np.exp(1j * (truth[m + 1, 2] - truth[m, 2]))))))
     for m in range(k):
         add(("n", m), model.heading_noise**2)
+    keep = np.exp(-dt / model.tide_drift_time) if model.tide_drift_std > 0 else np.zeros(k - 1)
+    for m in range(k):  # the tide's drift: x_0 and the innovations of x_m
+        add(("x", m), model.tide_drift_std**2 * (1.0 if m == 0 else 1.0 - keep[m - 1] ** 2))
     col = {name: i for i, name in enumerate(names)}
     n_par = len(names)
 
@@ -77,12 +80,16 @@ def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationMod
         walk = walk + unit(("u", m))
         a.append(dp)
         e.append(heading + walk + unit(("n", m + 1)))
+    drift = [unit(("x", 0))]
+    for m in range(k - 1):
+        drift.append(keep[m] * drift[-1] + unit(("x", m + 1)))
     used, turn = _soundings(survey, seabed)
     g = np.array(SLOPE)
     prior = np.diag(1.0 / np.array(var))
     info_by_ping = []
     for i in range(k):
-        rows = [-(g @ a[i]) - turn[i, j] * e[i] + unit("tide") for j in np.flatnonzero(used[i])]
+        rows = [-(g @ a[i]) - turn[i, j] * e[i] + unit("tide") + drift[i]
+                for j in np.flatnonzero(used[i])]
         h = np.array(rows).reshape(-1, n_par)
         info_by_ping.append(h.T @ h / model.measurement_std**2)
     total = prior + sum(info_by_ping)
@@ -103,8 +110,11 @@ def _close(got, want, rtol=1e-8):
 
 @pytest.mark.parametrize("model", [MODEL, MODEL.replace(heading_noise=0.0, heading_walk=0.0, speed_noise=0.0),
                                    MODEL.replace(tide_std=0.0), MODEL.replace(heading_turn_std=0.05),
-                                   MODEL.replace(heading_walk=0.0, heading_turn_std=0.05)],
-                         ids=["all-noises", "no-white", "tide-known", "turning-walk", "turn-walk-only"])
+                                   MODEL.replace(heading_walk=0.0, heading_turn_std=0.05),
+                                   MODEL.replace(tide_drift_std=0.3, tide_drift_time=20.0),
+                                   MODEL.replace(tide_std=0.0, tide_drift_std=0.3, tide_drift_time=20.0)],
+                         ids=["all-noises", "no-white", "tide-known", "turning-walk", "turn-walk-only",
+                              "tide-drift", "drift-only"])
 def test_bound_equals_a_dense_batch_solve_on_a_planar_seabed(model):
     survey, seabed = _survey(), _seabed()
     used, _ = _soundings(survey, seabed)
@@ -225,8 +235,6 @@ def test_bad_inputs_name_the_problem():
         posterior_crb(survey, seabed, MODEL, kind="ekf")
     with pytest.raises(TangraphError, match="position_cov must be"):
         CramerRaoBound(np.zeros((3, 2)), np.eye(2), 0.0, "filter")
-    with pytest.raises(TangraphError, match=r"the model's tide drifts \(tide_drift_std = 0.2 m\)"):
-        posterior_crb(survey, seabed, MODEL.replace(tide_drift_std=0.2, tide_drift_time=100.0))
 
 
 @pytest.mark.slow
@@ -345,3 +353,20 @@ def test_a_map_that_says_it_is_exact_overrides_the_models_default():
     want = posterior_crb(survey, seabed, MODEL)
     assert not got.map_error
     np.testing.assert_array_equal(got.position_cov, want.position_cov)
+
+
+@pytest.mark.parametrize("kind", ["smoother", "filter"])
+def test_the_field_bound_carries_the_tides_drift_as_the_plain_one_does(kind):
+    # a map error too small to matter: the field's solve with the drift per ping equals the
+    # Kalman/RTS bound (itself equal to the dense batch solve above), above the constant tide's
+    survey, seabed = _survey(), _seabed()
+    drifting = MODEL.replace(tide_drift_std=0.3, tide_drift_time=20.0)
+    plain = posterior_crb(survey, seabed, drifting, kind=kind)
+    tiny = drifting.replace(map_std=1e-4, map_correlation_length=30.0)
+    field = posterior_crb(survey, seabed, tiny, kind=kind)
+    assert field.map_error and not plain.map_error
+    np.testing.assert_allclose(field.position_cov, plain.position_cov, rtol=0,
+                               atol=1e-6 * plain.position_cov.max())
+    constant = posterior_crb(survey, seabed, MODEL, kind=kind)
+    assert np.all(np.trace(plain.position_cov, axis1=1, axis2=2)
+                  >= np.trace(constant.position_cov, axis1=1, axis2=2) - 1e-9)
