@@ -172,10 +172,11 @@ def attempt_fix(
     try:
         shared, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
         if calibration is None:
-            fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error)
+            fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error,
+                          drift=None if model is None else model.tide_drift)
         else:
             fix = _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error,
-                                  calibration, model.dead_reckoning)
+                                  calibration, model)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
         return None, FixRecord.of(index, None, FixStatus.MATCH_FAILED, np.nan, half_width, str(exc))
@@ -185,14 +186,14 @@ def attempt_fix(
 
 
 def _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error, calibration,
-                    white) -> TapFix:
+                    model) -> TapFix:
     """The TAP fix of a window laid with the calibrated DR, grown by the laying's uncertainty."""
     mean, cov = calibration
     poses, jac = calibrated_window(survey, index, window, mean)
     patch = window_patch(survey, index, window, min_soundings=config.min_soundings, poses=poses,
-                         shared=shared, error=error)
+                         shared=shared, error=error, drift=model.tide_drift)
     fix = tap_fix_patch(patch, bathymetry, config, prior=prior)
-    grown = fix.covariance + shape_covariance(survey, white, fix.first, fix.index, jac, cov)
+    grown = fix.covariance + shape_covariance(survey, model.dead_reckoning, fix.first, fix.index, jac, cov)
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))
 
 

@@ -125,7 +125,7 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list
         try:
             fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
                            poses=pose[window], first=window.start, shared=nav.shared_map_variance,
-                           error=nav.map_error)
+                           error=nav.map_error, drift=nav.model.tide_drift)
             laid = None if window.start < 0 else frame_poses(pose[window], solution.calibration, nav.origin)
             # laid with the smoothed calibration: the model's noise is the misfit reference
             outcome = judge_fix(nav._grown(fix, laid, joint), pose[end], cov[end], config, half_width,

@@ -32,7 +32,9 @@ class Patch:
     survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none), and
     ``error`` the map's error (:class:`tangraph.sensors.MapError`; None: none), from which what
     the window's own soundings share is computed where the fix is made
-    (:func:`tangraph.sensors.shared_quadratic`).
+    (:func:`tangraph.sensors.shared_quadratic`). ``drift (P, P)``: the covariance of the tide's
+    drift between the window's pings (``first`` to ``reference``; None: a constant tide), an
+    error every sounding of a ping shares.
     """
 
     offsets: np.ndarray
@@ -45,6 +47,7 @@ class Patch:
     n_dropped: int
     shared: np.ndarray | None = None
     error: MapError | None = None
+    drift: np.ndarray | None = None
 
     @property
     def n_soundings(self) -> int:
@@ -56,13 +59,14 @@ class Patch:
 
 
 def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None,
-                 shared=None, error=None) -> Patch:
+                 shared=None, error=None, drift: tuple[float, float] | None = None) -> Patch:
     """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted),
     laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
     window's footprints are computed. ``shared (K, B)``: the survey's soundings' shared map
     error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's;
     ``error``: the map's error (:func:`tangraph.sensors.map_error`), kept (:attr:`Patch.error`)
-    unless it is zero.
+    unless it is zero; ``drift``: the tide's drift ``(std, time)`` (m, s;
+    ``NavigationModel.tide_drift``), whose covariance between the window's pings is kept.
 
     Raises
     ------
@@ -105,7 +109,13 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         n_dropped=int((~keep).sum()),
         shared=None if shared is None else np.asarray(shared, float)[window][keep],
         error=None if error is None or error.is_zero else error,
+        drift=None if drift is None else _drift_covariance(survey.time[window], *drift),
     )
+
+
+def _drift_covariance(time: np.ndarray, std: float, forget: float) -> np.ndarray:
+    """``std^2 exp(-|t_i - t_j| / forget)`` between the pings at ``time (P,)``."""
+    return std**2 * np.exp(-np.abs(time[:, None] - time[None, :]) / forget)
 
 
 def calibrated_window(survey: Survey, end: int, n_pings: int, calibration) -> tuple[np.ndarray, np.ndarray]:

@@ -26,6 +26,14 @@ whose gradients differ share map error that cancels in the fix, which a row-sum 
 count as if it added up), and which the sharing of its map error with other windows and passes
 does not change.
 
+The tide's drift (``NavigationModel.tide_drift``): the window's tide is its mean, and the drift's
+change along the window, which every sounding of a ping shares, moves the least-squares fix; the
+fix's covariance is at least the least-squares one with the drift's covariance between the
+window's pings (a sandwich on the map gradients, ``covariances["map"]``). The regions keep the
+window's own likelihood: widened by the drift's mean generalised eigenvalue, as by the window's
+own map error, they refused most windows of a simulated survey whose tide drifts and of Lake
+Caputh's, and the online graph's fixes fell from 245 to 53 in four runs (12.3 against 7.5 m).
+
 A candidate is valid when every sounding of the window has a map depth there; a prior off the
 map is searched around like any other (the window may reach the map's data from there).
 
@@ -47,7 +55,13 @@ from tangraph.geometry import rotate as _rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.matching.patch import MatchingError, Patch, window_patch
 from tangraph.matching.search import CandidateGrid, CriterionSums, criterion_sums
-from tangraph.matching.tap_noise import _gradient, _map_sandwich, _variance_inflation, _window_sandwich
+from tangraph.matching.tap_noise import (
+    _drift_sandwich,
+    _gradient,
+    _map_sandwich,
+    _variance_inflation,
+    _window_sandwich,
+)
 from tangraph.matching.tap_regions import (
     _covariances,
     _jackknife,
@@ -111,13 +125,16 @@ def tap_fix(
     prior=None,
     shared=None,
     error=None,
+    drift: tuple[float, float] | None = None,
 ) -> TapFix:
     """A fix of the window of ``n_pings`` pings ending at ``end``, searched around ``prior``
     (default: the dead-reckoned position of ping ``end``); ``shared (K, B)``: the survey's
     shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
     map), which widen the fix, and ``error`` the map's error
     (:func:`tangraph.sensors.map_error`), whose part shared among the window's own soundings
-    widens its regions.
+    widens its regions; ``drift``: the tide's drift ``(std, time)``
+    (``NavigationModel.tide_drift``), whose change within the window widens the fix and its
+    regions.
 
     Raises
     ------
@@ -126,7 +143,8 @@ def tap_fix(
         sounding on the map.
     """
     config = config or TapConfig()
-    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared, error=error)
+    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared, error=error,
+                         drift=drift)
     return tap_fix_patch(patch, bathymetry, config, prior=prior)
 
 
@@ -186,20 +204,24 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = _residual_variance(q_min, n)
-    has_error = patch.shared is not None or patch.error is not None
+    has_error = patch.shared is not None or patch.error is not None or patch.drift is not None
     gradient = _gradient(bathymetry, patch, position) if has_error else None
     within = _window_sandwich(gradient, s2, patch, position)
     if within is not None:  # the map error the window's own soundings share shapes its likelihood
         inflation = max(inflation, within)
     shared = _map_sandwich(gradient, s2, patch.shared)
-    regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
     )
+    regions = _regions(q, sums.rss_fixed_tide(tide)[k_h], q_min, n, inflation, config.alpha, step)
     covariance = covariances[config.covariance]
     if shared is not None:
         covariances["map"] = shared[1]
-        covariance = _larger(covariance, shared[1])
+    drift = _drift_sandwich(gradient, s2, patch)
+    if drift is not None:  # the least-squares fix's covariance with the tide's drift besides
+        covariances["map"] = (drift[1] if shared is None else shared[1]) + drift[0]
+    if "map" in covariances:
+        covariance = _larger(covariance, covariances["map"])
     if config.jackknife:
         jack = _jackknife(bathymetry, patch, grid, i, j, step)
         if jack is not None:

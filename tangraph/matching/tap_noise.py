@@ -114,3 +114,24 @@ def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
     sandwich = inverse @ ((g * (s2 + shared[ok])[:, None]).T @ g) @ inverse
     ratio = float(np.trace(information @ sandwich) / (2.0 * s2))
     return max(ratio, 1.0), 0.5 * (sandwich + sandwich.T)
+
+
+def _drift_sandwich(g, s2, patch) -> tuple[np.ndarray, np.ndarray] | None:
+    """How the tide's drift within the window widens its fix: every sounding of a ping shares
+    the drift (``patch.drift``, between the window's pings), whose window mean the tide takes
+    and whose change along the window the least-squares fix reads as position. Returns the
+    covariance it adds to the least-squares fix, ``I^-1 H^T C H I^-1`` (``H`` the per-ping sums
+    of the gradients with their mean removed, ``I`` their information), and the fix's
+    covariance without it, ``s^2 I^-1``; None without a drift or a gradient."""
+    if g is None or patch.drift is None:
+        return None
+    ok = np.all(np.isfinite(g), axis=1)
+    centred = _centred(g, ok)
+    if centred is None:
+        return None
+    g, information = centred
+    per_ping = np.zeros((patch.drift.shape[0], 2))
+    np.add.at(per_ping, patch.ping[ok] - patch.first, g)
+    inverse = np.linalg.inv(information)
+    added = inverse @ (per_ping.T @ patch.drift @ per_ping) @ inverse
+    return 0.5 * (added + added.T), s2 * inverse

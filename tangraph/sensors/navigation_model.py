@@ -108,8 +108,8 @@ class NavigationModel:
         tide_drift_std^2``: exact for a datum that is known (``tide_std`` small against the
         drift); an uncertain datum's estimate is forgotten over the drift's time too. The
         factor graph's fixes then take each window's tide from its soundings (criterion
-        ``mle``); the bound (:func:`~tangraph.eval.posterior_crb`) holds the drift exactly,
-        beside the constant tide.
+        ``mle``) and are widened by the drift along their window; the bound
+        (:func:`~tangraph.eval.posterior_crb`) holds the drift exactly, beside the constant tide.
     map_offset_std : float
         Std (m, per axis) of the map's horizontal offset against the survey's frame, one for the
         whole survey: the earlier surveys' position error that their runs share (a DGPS of a
@@ -216,6 +216,11 @@ class NavigationModel:
         """Variance (m^2) of the tide about its prior mean at any time: the prior's and the
         drift's."""
         return self.tide_std**2 + self.tide_drift_std**2
+
+    @property
+    def tide_drift(self) -> tuple[float, float] | None:
+        """``(tide_drift_std, tide_drift_time)``, or None for a constant tide."""
+        return (self.tide_drift_std, self.tide_drift_time) if self.tide_drift_std > 0 else None
 
     def tide_memory(self, dt: float) -> float:
         """How much of the tide's departure from its prior mean is kept after ``dt`` s of drift,
