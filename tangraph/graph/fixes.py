@@ -35,6 +35,7 @@ __all__ = [
     "FixOutcome",
     "LostEpisode",
     "check_tide_drift",
+    "fix_drift",
     "fix_name",
     "judge_fix",
     "make_fix",
@@ -64,6 +65,22 @@ def check_tide_drift(config: GraphConfig, model: NavigationModel) -> NavigationM
         raise TangraphError(f"graph: {', '.join(held)} holds one tide for the whole survey, but {drift}: "
                             "use the TAP fixes (the defaults), whose windows estimate their own tide")
     return model
+
+
+def fix_drift(model: NavigationModel, config: GraphConfig, time: np.ndarray) -> tuple[float, float] | None:
+    """The tide's drift ``(std, time)`` a fix's window is widened by: the model's, its variance
+    grown by what the graph's other fixes share of it, the row sum ``sum_j exp(-|j| s / T)`` =
+    ``coth(s / 2T)`` of the drift's correlation over fixes every ``s`` seconds (``config``'s fix
+    spacing at the survey's median ping interval ``time``), as the terrain model counts the
+    map error the soundings share: each fix is added to the graph on its own, and neighbouring
+    windows read the same drift (None: a constant tide)."""
+    drift = model.tide_drift
+    if drift is None:
+        return None
+    std, forget = drift
+    step = config.spacing * float(np.median(np.diff(time))) if time.size > 1 else forget
+    shared = 1.0 / np.tanh(step / (2.0 * forget)) if step > 0 else 1.0
+    return std * float(np.sqrt(shared)), forget
 
 
 #: A terrain fix of either front end (:class:`~tangraph.matching.TerrainFix`), kept as its own type.

@@ -84,3 +84,15 @@ def test_a_graph_that_holds_the_tide_constant_refuses_a_drifting_one(changes, me
         from tangraph.graph import navigate_online
 
         navigate_online(small_survey, rough_map, config, model=drifting)
+
+
+def test_a_fix_is_widened_by_the_drift_the_graphs_other_fixes_share():
+    from tangraph.graph.fixes import fix_drift
+
+    time = np.arange(0.0, 1000.0, 2.0)  # a ping every 2 s
+    config = GraphConfig().replace(fix_spacing=10)  # a fix every 20 s
+    assert fix_drift(NavigationModel(), config, time) is None
+    std, forget = fix_drift(NavigationModel(tide_drift_std=0.3, tide_drift_time=100.0), config, time)
+    lags = np.arange(-200, 201) * 20.0
+    assert forget == 100.0
+    assert std**2 == pytest.approx(0.09 * np.sum(np.exp(-np.abs(lags) / 100.0)), rel=1e-9)
