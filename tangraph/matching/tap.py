@@ -133,8 +133,8 @@ def tap_fix(
     map), which widen the fix, and ``error`` the map's error
     (:func:`tangraph.sensors.map_error`), whose part shared among the window's own soundings
     widens its regions; ``drift``: the tide's drift ``(std, time)``
-    (``NavigationModel.tide_drift``), whose change within the window widens the fix and its
-    regions.
+    (``NavigationModel.tide_drift``), whose change within the window widens the fix's
+    covariance.
 
     Raises
     ------
