@@ -334,7 +334,7 @@ def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tup
         f[:, layout.white, layout.white] = 0.0
         q[:, layout.white, layout.white] = model.heading_noise**2
     if layout.drift is not None:
-        keep = np.exp(-dt / model.tide_drift_time)
+        keep = model.tide_memory(dt)
         f[:, layout.drift, layout.drift] = keep
         q[:, layout.drift, layout.drift] = (1.0 - keep**2) * model.tide_drift_std**2
     return f, q

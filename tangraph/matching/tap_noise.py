@@ -67,14 +67,18 @@ def _gradient(bathymetry, patch, position) -> np.ndarray:
     return bathymetry.gradient_at(position[0] + patch.offsets[:, 0], position[1] + patch.offsets[:, 1])
 
 
-def _centred(g: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """The gradients ``g[ok]`` with their mean removed (the tide estimated with the fix) and their
-    information ``g^T g``; None with fewer than 3 or when it is singular."""
+def _centred(g: np.ndarray | None, ok=True) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The finite gradients ``g`` (where also ``ok``) with their mean removed (the tide estimated
+    with the fix), their information ``g^T g`` and the rows kept; None without gradients, with
+    fewer than 3 or when the information is singular."""
+    if g is None:
+        return None
+    ok = np.all(np.isfinite(g), axis=1) & ok
     if ok.sum() < 3:
         return None
     g = g[ok] - g[ok].mean(axis=0)
     information = g.T @ g
-    return None if np.linalg.cond(information) > 1e12 else (g, information)
+    return None if np.linalg.cond(information) > 1e12 else (g, information, ok)
 
 
 def _window_sandwich(g, s2, patch, position) -> float | None:
@@ -83,13 +87,10 @@ def _window_sandwich(g, s2, patch, position) -> float | None:
     error (the exact quadratic form :func:`tangraph.sensors.shared_quadratic` of the map
     gradients at the soundings placed at ``position``, the tide's mean removed) over the one
     without, at least 1; None without a map error or a gradient."""
-    if g is None or patch.error is None:
-        return None
-    ok = np.all(np.isfinite(g), axis=1)
-    centred = _centred(g, ok)
+    centred = None if patch.error is None else _centred(g)
     if centred is None:
         return None
-    g, information = centred
+    g, information, ok = centred
     from tangraph.sensors.terrain import shared_quadratic
 
     offsets = patch.offsets[ok]
@@ -103,13 +104,10 @@ def _map_sandwich(g, s2, shared) -> tuple[float, np.ndarray] | None:
     ``s^2 + shared_b`` (a sandwich on the gradients, the tide's mean removed) and its ratio to
     the one with ``s^2`` alone (the mean of their generalised eigenvalues); None without a map
     error or a gradient."""
-    if g is None or shared is None or not np.any(shared > 0):
-        return None
-    ok = np.all(np.isfinite(g), axis=1) & np.isfinite(shared)
-    centred = _centred(g, ok)
+    centred = None if shared is None or not np.any(shared > 0) else _centred(g, np.isfinite(shared))
     if centred is None:
         return None
-    g, information = centred
+    g, information, ok = centred
     inverse = np.linalg.inv(information)
     sandwich = inverse @ ((g * (s2 + shared[ok])[:, None]).T @ g) @ inverse
     ratio = float(np.trace(information @ sandwich) / (2.0 * s2))
@@ -123,13 +121,10 @@ def _drift_sandwich(g, s2, patch) -> tuple[np.ndarray, np.ndarray] | None:
     covariance it adds to the least-squares fix, ``I^-1 H^T C H I^-1`` (``H`` the per-ping sums
     of the gradients with their mean removed, ``I`` their information), and the fix's
     covariance without it, ``s^2 I^-1``; None without a drift or a gradient."""
-    if g is None or patch.drift is None:
-        return None
-    ok = np.all(np.isfinite(g), axis=1)
-    centred = _centred(g, ok)
+    centred = None if patch.drift is None else _centred(g)
     if centred is None:
         return None
-    g, information = centred
+    g, information, ok = centred
     per_ping = np.zeros((patch.drift.shape[0], 2))
     np.add.at(per_ping, patch.ping[ok] - patch.first, g)
     inverse = np.linalg.inv(information)

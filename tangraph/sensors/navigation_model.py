@@ -222,10 +222,13 @@ class NavigationModel:
         """``(tide_drift_std, tide_drift_time)``, or None for a constant tide."""
         return (self.tide_drift_std, self.tide_drift_time) if self.tide_drift_std > 0 else None
 
-    def tide_memory(self, dt: float) -> float:
-        """How much of the tide's departure from its prior mean is kept after ``dt`` s of drift,
-        ``exp(-dt / tide_drift_time)`` (1 without a drift)."""
-        return math.exp(-dt / self.tide_drift_time) if self.tide_drift_std > 0 else 1.0
+    def tide_memory(self, dt: Any) -> Any:
+        """How much of the tide's departure from its prior mean is kept after ``dt`` s (a number or
+        an array) of drift, ``exp(-dt / tide_drift_time)`` (1 without a drift)."""
+        if self.tide_drift_std <= 0:
+            return np.ones_like(dt, dtype=np.float64) if np.ndim(dt) else 1.0
+        keep = np.exp(-np.asarray(dt, dtype=np.float64) / self.tide_drift_time)
+        return keep if np.ndim(dt) else float(keep)
 
     @property
     def measurement_std(self) -> float:
