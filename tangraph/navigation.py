@@ -146,7 +146,7 @@ def navigate(
 
     method = _method(method)
     survey = survey_on_map(survey, bathymetry, other_map=other_map)
-    model = survey_navigation_model(survey, model)
+    model = survey_navigation_model(survey, model, bathymetry=bathymetry)
     return _estimate(method, survey, bathymetry, config, model, rng, progress)
 
 

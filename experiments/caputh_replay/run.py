@@ -625,12 +625,18 @@ def _drift_line(drift: dict, cfg: dict) -> list[str]:
     """The drift the map's check lines found against the one the navigation models state."""
     if not drift:
         return []
-    stated = {source: (table.get("tide_drift_std", 0.0), table.get("tide_drift_time", 0.0))
+    stated = {source: (table.get("tide_drift_std"), table.get("tide_drift_time", 0.0))
               for source, table in cfg["navigation"].items()}
-    said = ", ".join(f"{source}: {a:g} m over {b:g} s" for source, (a, b) in stated.items())
+    said = ", ".join(f"{source}: the map's" if a is None else f"{source}: {a:g} m over {b:g} s" if a > 0
+                     else f"{source}: none" for source, (a, b) in stated.items())
+    from tangraph.eval.map_check import DRIFT_P_VALUE
+
+    p = drift.get("drift_p_value", float("nan"))
+    kept = "states it" if p < DRIFT_P_VALUE else "does not state it"
     return [f"The map's check lines (each January run held out): the depths drift by "
             f"{drift['drift_std']:.3f} m over {drift['drift_time']:.0f} s (the windows' own error "
-            f"{drift['drift_scale']:.2f} of the stated); the navigation models state {said}.", ""]
+            f"{drift['drift_scale']:.2f} of the stated; F test against none p = {p:.2g}: the map {kept}); "
+            f"the navigation models state {said}.", ""]
 
 
 if __name__ == "__main__":

@@ -132,7 +132,8 @@ def _drift_line(check) -> str:
         return "drift: too few windows to tell"
     return (f"drift: the held-out depths drift from the map's by {drift['std']:.3g} m, forgotten over about "
             f"{drift['time']:.3g} s (a navigation model's tide_drift_std, tide_drift_time), the windows' "
-            f"own error at {drift['scale']:.2f} times the stated")
+            f"own error at {drift['scale']:.2f} times the stated; F test against none p = "
+            f"{drift['p_value']:.2g}")
 
 
 def _option(keyword: str) -> str:
@@ -152,6 +153,8 @@ def _grid_summary(grid, *, cell: float, fill: int, output: Path) -> str:
         + (f"map error: std median {error['depth_std_m']['median']:.3f} m, max "
            f"{error['depth_std_m']['max']:.3f} m, correlation length {error['correlation_length_m']:g} m"
            + (f", a Student-t tail of {grid.error_dof:.3g} degrees of freedom" if grid.error_dof else "")
+           + (f", a drift along a track of {grid.error_drift[0]:.3g} m over {grid.error_drift[1]:.3g} s"
+              if grid.error_drift else "")
            + ("" if "check_lines" in grid.meta else " (the gridding's own, not checked)") + "; "
            if error else "map error: not told by these soundings (no depth_std written); ")
         + f"wrote {output}"

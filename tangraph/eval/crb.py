@@ -185,7 +185,7 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
         it (:func:`tangraph.sensors.map_error`).
     model : NavigationModel
         The DR errors, start uncertainty, sounding noise, map error and tide prior (see the module
-        notes for the linearised model and its signs).
+        notes for the linearised model and its signs), with the map's tide drift as every estimator's.
     kind : {"smoother", "filter"}
         ``"smoother"``: the bound given the whole survey (the inverse of the full information);
         ``"filter"``: the recursive bound given the pings up to each one, the limit of an online
@@ -236,6 +236,7 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
     ([2.68, 11.64], True)
     """
     _check_arguments(survey, bathymetry, model, kind)
+    model = model.with_map(bathymetry)  # NavigationModel.with_map
     layout = _Layout.of(model)
     scale, f, q, p0 = _scaled_model(survey, model, layout)
     features, n_soundings = _sounding_features(survey, bathymetry, order)
@@ -275,7 +276,7 @@ class _Layout:
         names += ["scale", "bias"]
         if model.tide_std > 0:
             names.append("tide")
-        if model.tide_drift_std > 0:
+        if model.tide_drift is not None:
             names.append("drift")
         where = {name: i for i, name in enumerate(names)}
         return cls(n=len(names), walk=where.get("walk"), white=where.get("white"),
@@ -301,7 +302,7 @@ class _Layout:
         if self.tide is not None:
             v[self.tide] = model.tide_std**2
         if self.drift is not None:
-            v[self.drift] = model.tide_drift_std**2
+            v[self.drift] = (model.tide_drift or (0.0, 1.0))[0] ** 2
         return v
 
     def scale(self, model: NavigationModel, walk: np.ndarray) -> np.ndarray:
@@ -336,7 +337,7 @@ def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tup
     if layout.drift is not None:
         keep = model.tide_memory(dt)
         f[:, layout.drift, layout.drift] = keep
-        q[:, layout.drift, layout.drift] = (1.0 - keep**2) * model.tide_drift_std**2
+        q[:, layout.drift, layout.drift] = (1.0 - keep**2) * (model.tide_drift or (0.0, 1.0))[0] ** 2
     return f, q
 
 

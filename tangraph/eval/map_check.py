@@ -52,6 +52,7 @@ from tangraph.survey import Survey
 __all__ = ["MapCheck", "calibrate_error", "check_map_error", "survey_lines", "window_scores"]
 
 MIN_WINDOWS = 10  # a calibration rests on at least this many windows
+DRIFT_P_VALUE = 0.01  # a map states the drift its check lines found when the F test gives less
 _MAX_DOF = 100.0  # a Student-t of more degrees of freedom than this is a Gaussian here
 _GAUSSIAN_TEST = 2.705543454095404  # 2 log-likelihood ratio of the Student-t over the Gaussian, at 5 %
 TURN = np.deg2rad(30.0)  # a line ends where the course has turned this far from its start
@@ -151,11 +152,15 @@ class MapCheck:
         ``std`` (``s``, m) and ``time`` (``T``, s), the ``NavigationModel.tide_drift_std`` and
         ``tide_drift_time`` the check lines support, and ``walk`` (m per sqrt(s)), how fast the
         drift parts windows at first, ``sqrt(2 s^2 / T)`` (the figure that is well determined
-        when ``T`` is not: a drift slower than the surveys' windows span). NaN without the
-        windows' times or with fewer than 10 pairs at each of three lags."""
-        nan = {"scale": float("nan"), "std": float("nan"), "time": float("nan"), "walk": float("nan")}
+        when ``T`` is not: a drift slower than the surveys' windows span), and ``p_value``, the F
+        test of the fit against the map's error alone (``s = 0``; small: the lags need the drift).
+        NaN without the windows' times or with fewer than 10 pairs at each of three lags (four
+        for ``p_value``)."""
+        nan = {"scale": float("nan"), "std": float("nan"), "time": float("nan"), "walk": float("nan"),
+               "p_value": float("nan")}
         if self.time is None or self.mean is None or self.variance is None:
             return nan
+        from scipy import stats
         from scipy.optimize import least_squares
 
         rows = []
@@ -183,8 +188,13 @@ class MapCheck:
         start = np.array([0.5 * square.min() / stated_v.mean(), 0.5 * square.max(), np.log(np.median(gap_s))])
         fit = least_squares(misfit, start, bounds=([0.0, 0.0, span[0]], [np.inf, np.inf, span[1]]))
         c2, s2, log_t = fit.x
+        ratio = stated_v / square  # the map's error alone: its best c^2, in closed form
+        alone = float(np.sum((np.sum(ratio) / np.sum(ratio**2) * ratio - 1.0) ** 2))
+        full, dof = 2.0 * float(fit.cost), gap_s.size - 3
+        p_value = float("nan") if dof < 1 else 0.0 if full <= 0 else \
+            float(stats.f.sf(max(alone - full, 0.0) / 2.0 / (full / dof), 2, dof))
         return {"scale": float(np.sqrt(c2)), "std": float(np.sqrt(s2)), "time": float(np.exp(log_t)),
-                "walk": float(np.sqrt(2.0 * s2 / np.exp(log_t)))}
+                "walk": float(np.sqrt(2.0 * s2 / np.exp(log_t))), "p_value": p_value}
 
     def per_survey(self) -> list[dict]:
         """One row per held-out survey: name, windows, RMS, robust scale, share beyond 3."""
@@ -309,7 +319,9 @@ def calibrate_error(grid, check: MapCheck):
     """The :class:`~tangraph.maps.SoundingGrid` ``grid`` with the error its check lines found:
     the Student-t that fits their scores best (:meth:`MapCheck.tail`), its scale the grid's
     ``error_scale`` and its degrees of freedom the ``error_dof`` (None, with the RMS as the
-    scale, when a Gaussian fits as well), the check's figures kept in its ``meta["check_lines"]``.
+    scale, when a Gaussian fits as well), its ``error_drift`` the drift along a track
+    (:meth:`MapCheck.drift`'s ``(std, time)``, when its F test's p-value is below
+    ``DRIFT_P_VALUE``; else None), the check's figures kept in its ``meta["check_lines"]``.
 
     Raises
     ------
@@ -323,11 +335,13 @@ def calibrate_error(grid, check: MapCheck):
             f"than {MIN_WINDOWS}: too few to calibrate the map's error with (surveys that overlap more, or "
             "a shorter window)")
     scale, dof = check.tail()
+    drift = check.drift()
     figures = {"windows": check.windows, "window_m": check.window, "rms": round(check.rms, 4),
                "robust": round(check.robust, 4), "share_beyond_3": round(check.share_beyond_3, 4),
                "misfit_dof": round(dof, 4), "scale": round(scale, 4)}
-    drift = check.drift()
     if np.isfinite(drift["walk"]):
         figures |= {"drift_" + k: round(v, 6) for k, v in drift.items()}
+    drifts = drift["p_value"] < DRIFT_P_VALUE and drift["std"] > 0
     return dataclasses.replace(grid, error_scale=scale, error_dof=dof if np.isfinite(dof) else None,
+                               error_drift=(drift["std"], drift["time"]) if drifts else None,
                                meta={**grid.meta, "check_lines": figures})

@@ -17,6 +17,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.model import FilterModel
+from tangraph.filters.tide import TideDrift, update_drift
 from tangraph.sensors.misfit import MisfitScale
 from tangraph.validation import check_count, check_number
 
@@ -54,7 +55,8 @@ class Belief:
     error in rad, DR minus true; None: zeros); ``held`` a batch fix waiting to be confirmed
     (TERCOM-PF, :func:`tangraph.filters.fixes.decide_fix`; resampling takes its anchor along);
     ``misfit`` the local misfit scale the cloud shares (:mod:`tangraph.sensors.misfit`; None:
-    the stated errors trusted).
+    the stated errors trusted); ``tide_drift`` the drifting part of the tide posterior
+    (:mod:`tangraph.filters.tide`; None: a constant tide).
     """
 
     particles: np.ndarray
@@ -68,6 +70,7 @@ class Belief:
     calibration: np.ndarray | None = None
     held: HeldFix | None = None
     misfit: MisfitScale | None = None
+    tide_drift: TideDrift | None = None
 
     def __post_init__(self) -> None:
         if self.calibration is None:
@@ -97,6 +100,9 @@ class Belief:
                 f"Belief.measured must have shape ({length},) as history's (N, L), got {self.measured.shape}"
             )
         check_number(self, "tide_var")
+        if self.tide_drift is not None and np.shape(self.tide_drift.mean) != (n,):
+            raise TangraphError(f"Belief.tide_drift.mean must have shape ({n},) as particles, got "
+                                f"{np.shape(self.tide_drift.mean)}")
         check_count(self, "n_history", low=0)
         if self.n_history > length:
             raise TangraphError(f"Belief.n_history must be <= L = {length}, got {self.n_history!r}")
@@ -122,7 +128,15 @@ class Belief:
             history=self.history[index] if self.history.shape[1] else np.empty((n, 0)),
             calibration=self.calibration[index],
             held=None if self.held is None else self.held.take(index),
+            tide_drift=None if self.tide_drift is None else self.tide_drift.take(index),
         )
+
+    def tide_updated(self, update) -> Belief:
+        """The belief with the tide posterior of a ping's terrain ``update``
+        (:class:`~tangraph.filters.likelihood.PingLikelihood`'s ``tide``, ``tide_var``), its
+        drifting part following (:func:`~tangraph.filters.tide.update_drift`)."""
+        drift = update_drift(self.tide_drift, self.tide, self.tide_var, update.tide, update.tide_var)
+        return self.replace(tide=update.tide, tide_var=update.tide_var, tide_drift=drift)
 
     def replace(self, **changes) -> Belief:
         """A copy with some fields changed (new arrays are made read-only; no other checks, as
@@ -215,7 +229,7 @@ def model_belief(
         history_length=history_length,
         calibration=nav.calibration_prior,
         calibration_std=nav.calibration_std,
-    ).replace(misfit=model.misfit_prior())
+    ).replace(misfit=model.misfit_prior(), tide_drift=TideDrift.start(nav, n))
 
 
 @numba.njit(cache=True, nogil=True)

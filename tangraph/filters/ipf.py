@@ -113,8 +113,7 @@ def ipf_step(
         return StepResult(moved, mean, cov, effective_sample_size(moved.weights), innovation=check,
                           counts={"n_gated": 1})
     weighted = reweight(moved, update.log_likelihood, where=f"ping {ping.index}")
-    weighted = weighted.replace(tide=update.tide, tide_var=update.tide_var,
-                                misfit=update.scale_after(weighted.weights))
+    weighted = weighted.tide_updated(update).replace(misfit=update.scale_after(weighted.weights))
     if _needs_tempering(moved, weighted, update, config):
         return _tempered(moved, ping, model, config, update, rng)
     ess = effective_sample_size(weighted.weights)
@@ -143,12 +142,14 @@ def ipf_step(
     previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
     children = predict(previous, ping, model, rng=rng)
     child_update = evaluate(children, ping, model, exponent=update.exponent)
+    measured = children.tide_updated(child_update)
     try:
         new = reweight(
             uniform,
             child_update.log_likelihood - update.log_likelihood[ancestors],
             where=f"ping {ping.index} (IPF children)",
-        ).replace(particles=children.particles, calibration=children.calibration, tide=child_update.tide)
+        ).replace(particles=children.particles, calibration=children.calibration, tide=measured.tide,
+                  tide_drift=measured.tide_drift)
     except FilterDivergence:
         new = uniform  # no child on the map: keep the copies
     mean, cov = weighted_moments(new)

@@ -150,7 +150,7 @@ def mle_filter(
 
     check_run_inputs(survey, bathymetry, rng, where="mle", rng_optional=True)
     config = config or MLEConfig()
-    navigation = survey_navigation_model(survey, model, where="mle")
+    navigation = survey_navigation_model(survey, model, where="mle", bathymetry=bathymetry)
     motion = MotionModel.from_model(navigation)
     k_total = survey.n_pings
     x = np.array([*survey.dr_pose[0, :2], *navigation.calibration_prior], float)  # (north, east, k, b)

@@ -31,7 +31,9 @@ data is no evidence) and raises each sounding's term to MBARI's exponent (little
 where the cloud's predicted depths do not spread beyond the map's error). With ``tide_std = 0``
 the tide is known; with ``tide_std > 0`` the tide has a Gaussian prior ``N(tide, tide_std^2)``
 and each particle carries its conjugate posterior ``N(m, v)`` (Rao-Blackwellised): the weight is
-the predictive density of the ping and the posterior is updated in closed form. The white
+the predictive density of the ping and the posterior is updated in closed form; with a
+drifting tide the posterior is of the datum and the drift together (:mod:`tangraph.filters.tide`).
+The white
 heading error of a ping's own DR heading stays in its soundings' offsets (not modelled: a few
 centimetres across a swath for a tenth of a degree). Constants shared by all particles are
 dropped: weights are normalised.
@@ -386,17 +388,6 @@ class FilterModel:
                          navigation.sounding_std),
             navigation,
         )
-
-    def tide_predict(self, tide, tide_var: float, ping: Ping):
-        """The tide posterior ``N(tide, tide_var)`` (``tide`` an array or a number) carried to
-        ``ping`` through the navigation model's drift: its departure from the prior mean kept by
-        ``NavigationModel.tide_memory(dt)``, its variance reverting to ``tide_variance``
-        (unchanged at the first ping and without a drift)."""
-        nav = self.navigation
-        keep = 1.0 if ping.first else nav.tide_memory(ping.dt)
-        if keep == 1.0:
-            return tide, tide_var
-        return nav.tide + keep * (tide - nav.tide), keep**2 * tide_var + (1.0 - keep**2) * nav.tide_variance
 
     def misfit_prior(self) -> MisfitScale | None:
         """The local misfit scale a run starts from: the Student-t tail the map states (its

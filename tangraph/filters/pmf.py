@@ -4,7 +4,8 @@ No particles: the density of the vehicle's position is held as its values on a r
 ``n x n`` grid (Bergman's point-mass filter), every grid point weighed by the same terrain
 likelihood as the particle filters (:mod:`tangraph.filters.likelihood`: the map's error, no map
 is no evidence, MBARI's exponents, the tide marginalised exactly: each point carries its
-Gaussian tide posterior). It is deterministic and keeps a multimodal density as it is.
+Gaussian tide posterior, of the datum and its drift with a drifting tide, :mod:`tangraph.filters.tide`).
+It is deterministic and keeps a multimodal density as it is.
 
 **The DR's constant errors** ``(k, b)`` (speed scale, heading error) are handled by a bank: the
 joint density of ``(position, k, b)`` is held at the nodes of a product Gauss-Hermite rule of a
@@ -82,6 +83,7 @@ from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_
 from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _regrid
 from tangraph.filters.runner import check_run_inputs, step_timings
 from tangraph.filters.steps import _chi2_quantile, innovation
+from tangraph.filters.tide import TideDrift, predict_tide, update_drift
 from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
@@ -188,7 +190,7 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
                      density - log_total - np.log(area), np.full(density.shape, navigation.tide),
                      navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
-                     (cal_mean, cal_std))
+                     (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape))
 
 
 def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
@@ -198,7 +200,8 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
     state.pending = state.pending + model.motion.noise_covariance(ping)
     state.walk += model.motion.walk_variance(ping)
-    state.tide, state.tide_var = model.tide_predict(state.tide, state.tide_var, ping)
+    state.tide, state.tide_var, state.tide_drift = predict_tide(state.tide, state.tide_var, state.tide_drift,
+                                                                model.navigation, ping)
     inv = np.linalg.inv(state.axes)
     if np.max(np.linalg.eigvalsh(inv @ state.pending @ inv.T)) >= 0.25:
         _diffuse(state)
@@ -234,10 +237,11 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     posterior[live] = flat[live] + update.log_likelihood
     _, log_total = log_normalise(posterior, where=f"pmf ping {ping.index}")
     state.log_density = (posterior - log_total - np.log(state.cell_area)).reshape(state.log_density.shape)
-    new_tide = state.tide.ravel().copy()
-    new_tide[live] = update.tide
-    state.tide = new_tide.reshape(state.tide.shape)
-    state.tide_var = update.tide_var
+    flat_tide = state.tide.ravel().copy()
+    flat_tide[live] = update.tide
+    new_tide = flat_tide.reshape(state.tide.shape)
+    state.tide_drift = update_drift(state.tide_drift, state.tide, state.tide_var, new_tide, update.tide_var)
+    state.tide, state.tide_var = new_tide, update.tide_var
     if update.scale is not None:  # (without a misfit scale there is nothing to update)
         state.misfit = update.scale_after(np.exp(posterior[live] - np.max(posterior)))
     return check, update
@@ -303,7 +307,8 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
     return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
                      np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
                      navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
-                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit)
+                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit,
+                     TideDrift.start(navigation, (1, n, n)))
 
 
 @dataclasses.dataclass(eq=False)
@@ -434,7 +439,7 @@ def point_mass_filter(
 
     check_run_inputs(survey, bathymetry, rng, where="pmf", rng_optional=True)
     config = config or PMFConfig()
-    navigation = survey_navigation_model(survey, model, where="pmf")
+    navigation = survey_navigation_model(survey, model, where="pmf", bathymetry=bathymetry)
     _check_memory(config, survey.beam_depth.shape[1])
     filter_model = FilterModel.from_model(navigation, bathymetry)
     grid = _Grid(config, config.min_spacing)

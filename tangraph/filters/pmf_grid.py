@@ -17,6 +17,7 @@ from scipy import ndimage
 
 from tangraph.filters.likelihood import log_normalise
 from tangraph.filters.pmf_bank import _evidence_fit, _log_gaussian, _place_nodes
+from tangraph.filters.tide import TideDrift
 from tangraph.sensors.misfit import MisfitScale
 
 if TYPE_CHECKING:
@@ -52,7 +53,8 @@ class PointMass:
     nodes were placed) times the evidence since: each member's log mass less ``node_base (M,)``,
     its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on;
     ``misfit`` the local misfit scale the density shares (:mod:`tangraph.sensors.misfit`; None:
-    the stated errors trusted)."""
+    the stated errors trusted); ``tide_drift`` the drifting part of the points' tide posteriors
+    (:mod:`tangraph.filters.tide`, its mean ``(M, n, n)``; None: a constant tide)."""
 
     nodes: np.ndarray
     node_base: np.ndarray
@@ -66,6 +68,7 @@ class PointMass:
     prior: tuple[np.ndarray, np.ndarray]
     placed: tuple[np.ndarray, np.ndarray]
     misfit: MisfitScale | None = None
+    tide_drift: TideDrift | None = None
     # what the methods below derive from the fields (read-only arrays), each dropped when a field
     # it depends on (_DEPENDS) is set: the fields are replaced, never changed in place
     _cache: dict[str, np.ndarray | tuple[np.ndarray, ...]] = dataclasses.field(
@@ -187,17 +190,26 @@ def _gaussian_convolve(values: np.ndarray, cov: np.ndarray) -> np.ndarray:
     return scipy.fft.irfft2(f * kernel, s=(size, size), axes=(1, 2))[:, :n, :n]
 
 
-def _mixed_tide(mass: np.ndarray, first: np.ndarray, second: np.ndarray, tide_var: float):
+def _point_means(state: PointMass) -> list[np.ndarray]:
+    """The per-point means of the tide posterior: the tide's (and its drifting part's)."""
+    return [state.tide] + ([] if state.tide_drift is None else [state.tide_drift.mean])
+
+
+def _mixed_tide(mass: np.ndarray, firsts: list[np.ndarray], seconds: dict) -> tuple[list, dict]:
     """The tide posterior of points whose density ``mass`` mixes points of tide means whose
-    mass-weighted first and second moments are ``first``, ``second`` (same shape): each point's
-    mean and the one variance of the filter (the variance within plus the mass-weighted spread
-    between the mixed means)."""
+    mass-weighted first moments are ``firsts`` and second moments ``seconds[(a, b)]`` (same
+    shape): each point's means and what the one covariance of the filter gains (the
+    mass-weighted spread between the mixed means, ``[(a, b)]``)."""
     live = mass > 1e-300
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tide = np.where(live, first / mass, 0.0)
-        spread = np.where(live, np.maximum(second / mass - tide**2, 0.0), 0.0)
     total = mass.sum()
-    return tide, tide_var + (float(np.sum(mass * spread) / total) if total > 0 else 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        means = [np.where(live, f / mass, 0.0) for f in firsts]
+        spread = {}
+        for (a, b), second in seconds.items():
+            s = np.where(live, second / mass - means[a] * means[b], 0.0)
+            s = np.maximum(s, 0.0) if a == b else s
+            spread[a, b] = float(np.sum(mass * s) / total) if total > 0 else 0.0
+    return means, spread
 
 
 def _diffuse(state: PointMass) -> None:
@@ -207,10 +219,18 @@ def _diffuse(state: PointMass) -> None:
     top = np.max(state.log_density)
     p = np.exp(state.log_density - top)
     if state.tide_var > 0:  # one transform of the density and its tide moments (the same values)
-        m = len(p)
-        out = _gaussian_convolve(np.concatenate([p, p * state.tide, p * state.tide**2]), cov)
-        smoothed = np.maximum(out[:m], 0.0)  # less round-off below zero
-        state.tide, state.tide_var = _mixed_tide(smoothed, out[m:2 * m], out[2 * m:], state.tide_var)
+        means = _point_means(state)
+        pairs = [(a, b) for a in range(len(means)) for b in range(a, len(means))]
+        out = _gaussian_convolve(np.concatenate([p, *(p * t for t in means),
+                                                 *(p * means[a] * means[b] for a, b in pairs)]), cov)
+        out = out.reshape(1 + len(means) + len(pairs), *p.shape)
+        smoothed = np.maximum(out[0], 0.0)  # less round-off below zero
+        mixed, spread = _mixed_tide(smoothed, list(out[1:1 + len(means)]),
+                                    dict(zip(pairs, out[1 + len(means):], strict=True)))
+        state.tide, state.tide_var = mixed[0], state.tide_var + spread[0, 0]
+        if state.tide_drift is not None:
+            drift = state.tide_drift
+            state.tide_drift = TideDrift(mixed[1], drift.cross + spread[0, 1], drift.var + spread[1, 1])
     else:
         smoothed = np.maximum(_gaussian_convolve(p, cov), 0.0)
     with np.errstate(divide="ignore"):
@@ -323,13 +343,14 @@ def _support(state: PointMass, centres: np.ndarray):
 
 def _sample(state: PointMass, member: int | np.integer, points: np.ndarray) -> tuple[np.ndarray, ...]:
     """Member ``member``'s density (relative to the state's largest value) at world ``points
-    (P, 2)`` and its mass-weighted tide mean there (bilinear; zero outside its grid)."""
+    (P, 2)`` and its mass-weighted tide means there (:func:`_point_means`; bilinear; zero
+    outside its grid)."""
     inv = np.linalg.inv(state.axes)
     h = (state.n - 1) / 2.0
     q = ((points - state.centres[member]) @ inv.T + h).T
     p = np.exp(state.log_density[member] - np.max(state.log_density))
-    t = state.tide[member]
-    return tuple(ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0) for v in (p, p * t))
+    return tuple(ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0)
+                 for v in (p, *(p * t[member] for t in _point_means(state))))
 
 
 def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, target=None) -> PointMass:
@@ -375,23 +396,29 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
     i, j = np.meshgrid(np.arange(grid.n) - h, np.arange(grid.n) - h, indexing="ij")
     offsets = np.column_stack([i.ravel(), j.ravel()]) @ axes.T
     shape = (len(nodes), grid.n, grid.n)
-    mass, first = np.empty(shape), np.empty(shape)
+    point_means = _point_means(state)
+    mass, firsts = np.empty(shape), [np.empty(shape) for _ in point_means]
     for m, src in enumerate(source):
-        value, t1 = _sample(state, src, new_centres[m] - shift[m] + offsets)
+        value, *moments = _sample(state, src, new_centres[m] - shift[m] + offsets)
         total = value.sum()
         if total <= 0:  # a member whose density missed its new grid: its mean point
-            value, t1 = np.zeros_like(value), np.zeros_like(value)
-            value[value.size // 2], t1[value.size // 2] = 1.0, state.tide[src].mean()
+            value, moments = np.zeros_like(value), [np.zeros_like(value) for _ in point_means]
+            value[value.size // 2] = 1.0
+            for t1, t in zip(moments, point_means, strict=True):
+                t1[value.size // 2] = t[src].mean()
             total = 1.0
         scale = np.exp(log_weight[m] - np.max(log_weight)) / total
-        mass[m], first[m] = value.reshape(shape[1:]) * scale, t1.reshape(shape[1:]) * scale
+        mass[m] = value.reshape(shape[1:]) * scale
+        for first, t1 in zip(firsts, moments, strict=True):
+            first[m] = t1.reshape(shape[1:]) * scale
     # re-sampling only reads the density between points: the tide means are interpolated (their
     # spread between neighbours is not a mixture: it would widen the tide at every re-grid)
     with np.errstate(divide="ignore", invalid="ignore"):
-        tide = np.where(mass > 1e-300, first / mass, 0.0)
+        tide, *drift = (np.where(mass > 1e-300, first / mass, 0.0) for first in firsts)
         density = np.log(mass)
     area = float(abs(np.linalg.det(axes)))
     _, log_total = log_normalise(density.ravel(), where="pmf")
     return PointMass(nodes, node_base, new_centres, axes, density - log_total - np.log(area), tide,
                      state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, prior, placed,
-                     state.misfit)
+                     state.misfit, None if state.tide_drift is None else
+                     dataclasses.replace(state.tide_drift, mean=drift[0]))

@@ -294,7 +294,7 @@ def run_particle_filter(
 
     check_run_inputs(survey, bathymetry, rng, where=method)
     seed = rng_seed(rng)
-    navigation = survey_navigation_model(survey, model, where=method)
+    navigation = survey_navigation_model(survey, model, where=method, bathymetry=bathymetry)
     filter_model = FilterModel.from_model(navigation, bathymetry, config)
     pings = survey_pings(survey, bathymetry, navigation)
     belief = model_belief(

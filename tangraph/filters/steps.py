@@ -32,6 +32,7 @@ from tangraph.filters.config import ParticleConfig
 from tangraph.filters.likelihood import OffMap, PingLikelihood, effective_sample_size, log_normalise
 from tangraph.filters.model import FilterModel, Ping, TerrainUpdate
 from tangraph.filters.resampling import Resampler, resample
+from tangraph.filters.tide import predict_tide
 from tangraph.fix_records import FixRecord
 
 __all__ = [
@@ -133,8 +134,10 @@ def predict(belief: Belief, ping: Ping, model: FilterModel, *, rng: np.random.Ge
     particles, calibration = model.motion.predict(
         belief.particles, belief.calibration, ping, rng=rng, extra_std=extra_std
     )
-    tide, tide_var = model.tide_predict(belief.tide, belief.tide_var, ping)
-    return belief.replace(particles=particles, calibration=calibration, tide=tide, tide_var=tide_var)
+    tide, tide_var, drift = predict_tide(belief.tide, belief.tide_var, belief.tide_drift, model.navigation,
+                                         ping)
+    return belief.replace(particles=particles, calibration=calibration, tide=tide, tide_var=tide_var,
+                          tide_drift=drift)
 
 
 def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> TerrainUpdate:
@@ -266,8 +269,7 @@ def measure(
         floor = np.concatenate([[1e-6, 1e-6], _kernel_floor(model, config)])  # type: ignore[arg-type]
         current = shrink_state(resampled, moments, config.kernel_bandwidth, floor, rng=rng)  # type: ignore[union-attr,arg-type]
         update = evaluate(current, ping, model, exponent=update.exponent)
-    new = weighted.replace(tide=update.tide, tide_var=update.tide_var,
-                           misfit=update.scale_after(weighted.weights))
+    new = weighted.tide_updated(update).replace(misfit=update.scale_after(weighted.weights))
     return Measurement(new, update, first, tuple(exponents), tuple(stage_ess))
 
 

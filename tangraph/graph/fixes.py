@@ -51,9 +51,10 @@ def check_tide_drift(config: GraphConfig, model: NavigationModel) -> NavigationM
     whose criterion takes the depths as reduced to the map's datum (``msd``, ``mad``), and the
     one tide variable of the online graph's point-mass front end, its tracking on soundings and
     the smoother's terrain on soundings or with the map's error field."""
-    if model.tide_drift_std <= 0:
+    if model.tide_drift is None:
         return model
-    drift = f"the navigation model's tide drifts (tide_drift_std = {model.tide_drift_std:g} m)"
+    drift = (f"the navigation model's tide drifts (tide_drift_std = {model.tide_drift[0]:g} m: its own, "
+             "or the map's error_drift)")
     criterion = config.fixes.tap.criterion
     if criterion in (Criterion.MSD, Criterion.MAD):
         raise TangraphError(f"graph: TAP criterion {criterion.value!r} takes the depths as reduced to the "

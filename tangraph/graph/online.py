@@ -94,7 +94,8 @@ class GraphNavigator:
         self.config = config or GraphConfig()
         if not isinstance(self.config, GraphConfig):
             raise TangraphError(f"config must be a GraphConfig, got {type(self.config).__name__}")
-        self.model = check_tide_drift(self.config, survey_navigation_model(survey, model, where="graph"))
+        self.model = check_tide_drift(self.config, survey_navigation_model(survey, model, where="graph",
+                                                                           bathymetry=bathymetry))
         self.white = self.model.dead_reckoning
         # the map error each sounding shares with the survey's others: it widens every fix
         self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)
@@ -121,10 +122,8 @@ class GraphNavigator:
         self._last_outcome: FixOutcome | None = None
         self.terrain = OnlineTerrain.of(self) if c.online.terrain == "soundings" else None
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
-        self._is_end = np.zeros(n, bool)
-        self._is_end[self.fix_ends] = True
-        self._is_key = np.zeros(n, bool)
-        self._is_key[self.keys] = True
+        self._is_end = np.isin(np.arange(n), self.fix_ends)
+        self._is_key = np.isin(np.arange(n), self.keys)
         # The previous key of every ping, and the DR increment (and covariance) from it.
         self._prev_key = self.keys[np.searchsorted(self.keys, np.arange(n), side="right") - 1]
         self._prev_key[self.keys[1:]] = self.keys[:-1]

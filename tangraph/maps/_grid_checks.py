@@ -124,6 +124,16 @@ def check_correlation_length(value, where: str) -> float:
     return _positive(value, where, "a finite length > 0 m")
 
 
+def check_error_drift(value, where: str) -> tuple[float, float]:
+    """``value`` as ``(std m, time s)`` if it is two finite numbers > 0, else a one-line
+    `MapFormatError` beginning with ``where``."""
+    parts = np.ravel(np.asarray(value if not isinstance(value, str) else value.split(), dtype=object))
+    if parts.size != 2:
+        raise MapFormatError(f"{where} must be two numbers (std in m, time in s), got {value!r}")
+    return (_positive(parts[0], f"{where} std", "a finite std > 0 m"),
+            _positive(parts[1], f"{where} time", "a finite time > 0 s"))
+
+
 def check_error_dof(value, where: str) -> float:
     """``value`` as a float if it is a finite number of degrees of freedom > 0, else a one-line
     `MapFormatError` beginning with ``where``."""

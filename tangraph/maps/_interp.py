@@ -136,3 +136,14 @@ def gradient_kernel(depth, north0, east0, inv_dn, inv_de, qn, qe, order, out, gr
             out[k] = np.nan
             grad[k, 0] = np.nan
             grad[k, 1] = np.nan
+
+
+def box_mean(layer: np.ndarray, kn: int, ke: int) -> np.ndarray:
+    """Mean of the data cells in a ``kn`` x ``ke`` box around each cell (NaN stays NaN)."""
+    from scipy.ndimage import uniform_filter
+
+    valid = np.isfinite(layer)
+    total = uniform_filter(np.where(valid, layer, 0.0), size=(kn, ke), mode="nearest")
+    weight = uniform_filter(valid.astype(float), size=(kn, ke), mode="nearest")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(valid, total / weight, np.nan)

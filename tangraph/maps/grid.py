@@ -16,9 +16,10 @@ from tangraph.maps._grid_checks import (
     check_correlation_length,
     check_depth_std,
     check_error_dof,
+    check_error_drift,
     check_projected,
 )
-from tangraph.maps._interp import depth_kernel, gradient_kernel
+from tangraph.maps._interp import box_mean, depth_kernel, gradient_kernel
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -31,6 +32,8 @@ Order = Literal[1, 3]
 CORRELATION_ATTRIBUTE = "error_correlation_length_m"
 #: the attribute (of depth) that holds the degrees of freedom of the map error's Student-t tail
 DOF_ATTRIBUTE = "error_student_t_dof"
+#: the attribute (of depth) that holds the error's drift along a track, ``[std m, time s]``
+DRIFT_ATTRIBUTE = "error_drift_std_m_time_s"
 #: CF attributes of the error layer
 DEPTH_STD_ATTRS = {
     "long_name": "standard deviation of the error of depth",
@@ -68,6 +71,12 @@ class BathymetryMap:
         lines measure it: :func:`tangraph.eval.map_check.calibrate_error`); the filters' local
         misfit scale takes its prior from it (:mod:`tangraph.sensors.misfit`). None: a Gaussian
         error, as stated everywhere.
+    error_drift : (float, float), optional
+        ``(std m, time s)``: the depths a survey measures drift from the map's along its track by a
+        Gauss-Markov offset of this std that forgets over this time (the check lines measure it,
+        :meth:`tangraph.eval.map_check.MapCheck.drift`); a navigation model that states no drift
+        of its own takes this one (:meth:`tangraph.sensors.NavigationModel.with_map`). None: not
+        known.
 
     Notes
     -----
@@ -100,6 +109,7 @@ class BathymetryMap:
     depth_std: np.ndarray | None = None
     correlation_length: float | None = None
     error_dof: float | None = None
+    error_drift: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         where = f"map {self.name!r}"
@@ -126,11 +136,10 @@ class BathymetryMap:
         if self.depth_std is not None:
             depth_std = check_depth_std(self.depth_std, depth, f"{where}: depth_std")
             depth_std.setflags(write=False)
-        if self.correlation_length is not None:
-            length = check_correlation_length(self.correlation_length, f"{where}: correlation_length")
-            object.__setattr__(self, "correlation_length", length)
-        if self.error_dof is not None:
-            object.__setattr__(self, "error_dof", check_error_dof(self.error_dof, f"{where}: error_dof"))
+        for field, check in (("correlation_length", check_correlation_length), ("error_dof", check_error_dof),
+                             ("error_drift", check_error_drift)):  # the error's scalar statements
+            if getattr(self, field) is not None:
+                object.__setattr__(self, field, check(getattr(self, field), f"{where}: {field}"))
         for a in (north, east, depth):
             a.setflags(write=False)
         object.__setattr__(self, "depth_std", depth_std)
@@ -180,11 +189,14 @@ class BathymetryMap:
             text += f", correlation_length={self.correlation_length:g} m"
         if self.error_dof is not None:
             text += f", error_dof={self.error_dof:.3g}"
+        if self.error_drift is not None:
+            text += f", error_drift=({self.error_drift[0]:.3g} m, {self.error_drift[1]:.3g} s)"
         return text
 
     def error_summary(self) -> dict:
         """The error layer's figures as data: ``depth_std_m`` (median and max over the cells
-        with data), ``correlation_length_m`` and ``error_dof``, each only if the map has it
+        with data), ``correlation_length_m``, ``error_dof`` and ``error_drift`` (``std_m``,
+        ``time_s``), each only if the map has it
         (``{}`` if none).
 
         Examples
@@ -203,6 +215,8 @@ class BathymetryMap:
             summary["correlation_length_m"] = self.correlation_length
         if self.error_dof is not None:
             summary["error_dof"] = self.error_dof
+        if self.error_drift is not None:
+            summary["error_drift"] = {"std_m": self.error_drift[0], "time_s": self.error_drift[1]}
         return summary
 
     # -- queries --------------------------------------------------------------------------
@@ -290,9 +304,9 @@ class BathymetryMap:
     def replace(self, **changes) -> BathymetryMap:
         """A copy with some fields changed (validated again).
 
-        ``depth_std``, ``correlation_length`` and ``error_dof`` travel unchanged unless given; a
-        new grid shape needs its own ``depth_std`` (or ``depth_std=None``), and new depths where the
-        old layer is NaN are refused until one is given.
+        ``depth_std``, ``correlation_length``, ``error_dof`` and ``error_drift`` travel unchanged
+        unless given; a new grid shape needs its own ``depth_std`` (or ``depth_std=None``), and new
+        depths where the old layer is NaN are refused until one is given.
         """
         if self.depth_std is not None and "depth_std" not in changes and "depth" in changes:
             shape = np.shape(changes["depth"])
@@ -362,8 +376,8 @@ class BathymetryMap:
         ke = max(1, round(de_new / de))
         if kn == 1 and ke == 1:
             return self
-        std = None if self.depth_std is None else _box_mean(self.depth_std, kn, ke)
-        return self.replace(depth=_box_mean(self.depth, kn, ke), depth_std=std)
+        std = None if self.depth_std is None else box_mean(self.depth_std, kn, ke)
+        return self.replace(depth=box_mean(self.depth, kn, ke), depth_std=std)
 
     # -- xarray ---------------------------------------------------------------------------
     def to_xarray(self) -> xr.DataArray:
@@ -419,6 +433,8 @@ class BathymetryMap:
             depth.attrs[CORRELATION_ATTRIBUTE] = self.correlation_length
         if self.error_dof is not None:
             depth.attrs[DOF_ATTRIBUTE] = self.error_dof
+        if self.error_drift is not None:
+            depth.attrs[DRIFT_ATTRIBUTE] = np.array(self.error_drift)
         if self.depth_std is not None:
             depth.attrs["ancillary_variables"] = "depth_std"
             variables["depth_std"] = depth.copy(data=np.array(self.depth_std)).rename("depth_std")
@@ -475,15 +491,6 @@ class BathymetryMap:
             depth_std=std,
             correlation_length=da.attrs.get(CORRELATION_ATTRIBUTE),
             error_dof=da.attrs.get(DOF_ATTRIBUTE),
+            error_drift=da.attrs.get(DRIFT_ATTRIBUTE),
         )
 
-
-def _box_mean(layer: np.ndarray, kn: int, ke: int) -> np.ndarray:
-    """Mean of the data cells in a ``kn`` x ``ke`` box around each cell (NaN stays NaN)."""
-    from scipy.ndimage import uniform_filter
-
-    valid = np.isfinite(layer)
-    total = uniform_filter(np.where(valid, layer, 0.0), size=(kn, ke), mode="nearest")
-    weight = uniform_filter(valid.astype(float), size=(kn, ke), mode="nearest")
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(valid, total / weight, np.nan)

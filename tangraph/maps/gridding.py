@@ -21,7 +21,7 @@ from typing import Any, Literal, cast
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.maps._grid_checks import cell_axis, check_cell
+from tangraph.maps._grid_checks import cell_axis, check_cell, check_error_drift
 from tangraph.maps.grid import BathymetryMap
 from tangraph.maps.gridding_error import gridded_error
 
@@ -55,7 +55,8 @@ class SoundingGrid:
     which :attr:`depth` carries as its ``depth_std`` (times ``error_scale``: 1, or the factor
     check lines found, :func:`tangraph.eval.map_check.calibrate_error`) and
     ``correlation_length``; ``error_dof`` is the Student-t tail the check lines found (None:
-    Gaussian), the map's ``error_dof``.
+    Gaussian), the map's ``error_dof``, and ``error_drift`` the drift along a track they found
+    (``(std m, time s)``; None: none found), the map's ``error_drift``.
     """
 
     mean: BathymetryMap
@@ -68,12 +69,15 @@ class SoundingGrid:
     meta: dict[str, Any] = dataclasses.field(default_factory=dict)
     error_scale: float = 1.0
     error_dof: float | None = None
+    error_drift: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.error_scale) and self.error_scale > 0):
             raise TangraphError(f"error_scale must be a finite number > 0, got {self.error_scale!r}")
         if self.error_dof is not None and not (math.isfinite(self.error_dof) and self.error_dof > 0):
             raise TangraphError(f"error_dof must be a finite number > 0 or None, got {self.error_dof!r}")
+        if self.error_drift is not None:
+            object.__setattr__(self, "error_drift", check_error_drift(self.error_drift, "error_drift"))
         count = np.array(self.count, dtype=np.int64)
         std = np.array(self.std, dtype=np.float64)
         if count.shape != self.mean.shape or std.shape != self.mean.shape:
@@ -114,13 +118,14 @@ class SoundingGrid:
     def depth(self) -> BathymetryMap:
         """The map: ``statistic`` per cell, empty cells holding the gap fill's depth (if any),
         with the error layer of :attr:`error` (``depth_std`` times ``error_scale``,
-        ``correlation_length``) and ``error_dof``."""
+        ``correlation_length``), ``error_dof`` and ``error_drift``."""
         layer = self.mean.depth if self.statistic == "mean" else cast(np.ndarray, self.median)
         if self.gap_fill is not None:
             layer = np.where(self.count > 0, layer, self.gap_fill)
         std = self.error.depth_std
         return self.mean.replace(depth=layer, depth_std=None if std is None else std * self.error_scale,
-                                 correlation_length=self.error.correlation_length, error_dof=self.error_dof)
+                                 correlation_length=self.error.correlation_length, error_dof=self.error_dof,
+                                 error_drift=self.error_drift)
 
 
 # -- block reduce -----------------------------------------------------------------------------

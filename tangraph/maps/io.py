@@ -6,9 +6,9 @@ and leaves a `BathymetryMap` in a local metric frame: geographic grids are proje
 first cell centre (tangraph's own files keep the origin they were written with). GeoTIFFs go
 through rasterio (GDAL, :mod:`tangraph.maps.raster`), BAG and S-102 too
 (:mod:`tangraph.maps.hydro`); NetCDF maps are written with projected ``x``/``y`` and a CF
-``grid_mapping``, so GDAL, GMT and QGIS place them. The map's error (``depth_std``,
-``correlation_length``; ``error_dof`` in NetCDF, GeoTIFF, NPZ) is written by every writer (XYZ:
-a fourth column) and read from every file with one: an uncertainty variable or band, BAG's and S-102's.
+``grid_mapping``, so GDAL, GMT and QGIS place them. The map's error (``depth_std``, ``correlation_length``;
+``error_dof``, ``error_drift`` in NetCDF, GeoTIFF, NPZ) is written by every writer (XYZ: a fourth
+column) and read from every file with one: an uncertainty variable or band, BAG's and S-102's.
 Depth is positive down; a file that stores elevation says so in its metadata, or the caller
 says so with ``sign=``; a file where neither tells, or whose data contradict the guess from
 its names, is refused.
@@ -292,14 +292,14 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None, 
         _check_plausible(depth, f"{path}:depth", "depth")
         key = _npz_uncertainty_key(data, "depth", uncertainty, path)
         std, length = _npz_error(data, key, depth, scale, nodata, path, uncertainty)
-        dof = None if uncertainty is False else error_dof_from(data, ("error_dof",), str(path))
+        dof, drift = (None, None) if uncertainty is False else (
+            error_dof_from(data, ("error_dof",), str(path)), data.get("error_drift"))
         try:
             m = BathymetryMap(
                 north=data["north"], east=data["east"], depth=depth,
                 crs=str(data["crs"]) if "crs" in data and str(data["crs"]) else None,
                 origin=tuple(data.get("origin", (0.0, 0.0))), name=name or str(data.get("name", path.stem)),
-                depth_std=std, correlation_length=length, error_dof=dof,
-            )
+                depth_std=std, correlation_length=length, error_dof=dof, error_drift=drift)
         except MapFormatError as exc:
             raise MapFormatError(f"{path}: {exc}") from None
         return m.resample(cell) if cell is not None else m
@@ -326,9 +326,9 @@ def read_npz(path, *, variable=None, sign=None, crs=None, cell=None, name=None, 
 
 def write_npz(bathymetry: BathymetryMap, path: Path) -> None:
     """tangraph's own ``.npz``: ``north``, ``east``, ``depth``, ``crs``, ``origin``, ``name``, and
-    ``depth_std``, ``correlation_length``, ``error_dof`` where the map has them."""
+    ``depth_std``, ``correlation_length``, ``error_dof``, ``error_drift`` where the map has them."""
     error: dict[str, Any] = {k: np.asarray(v, np.float64) for k in ("depth_std", "correlation_length",
-                             "error_dof") if (v := getattr(bathymetry, k)) is not None}
+                             "error_dof", "error_drift") if (v := getattr(bathymetry, k)) is not None}
     with open(path, "wb") as f:
         np.savez_compressed(f, north=bathymetry.north, east=bathymetry.east, depth=bathymetry.depth,
                             crs=np.str_(bathymetry.crs or ""), origin=np.asarray(bathymetry.origin),

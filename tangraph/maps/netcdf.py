@@ -29,7 +29,13 @@ from tangraph.maps._common import (
     std_factor,
     unit_factor,
 )
-from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, DOF_ATTRIBUTE, BathymetryMap
+from tangraph.maps.grid import (
+    CORRELATION_ATTRIBUTE,
+    DEPTH_STD_ATTRS,
+    DOF_ATTRIBUTE,
+    DRIFT_ATTRIBUTE,
+    BathymetryMap,
+)
 from tangraph.outputs import write_atomically
 
 __all__ = ["NETCDF_SUFFIXES", "read_netcdf", "write_netcdf", "write_sounding_grid"]
@@ -211,7 +217,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         std_name = _netcdf_uncertainty(ds, variable, uncertainty, path)
         if tuple(var.dims) == ("north", "east") and "positive" in var.attrs:  # tangraph's own, older
             depth = var.copy(deep=False)
-            error_attributes = (CORRELATION_ATTRIBUTE, DOF_ATTRIBUTE)
+            error_attributes = (CORRELATION_ATTRIBUTE, DOF_ATTRIBUTE, DRIFT_ATTRIBUTE)
             dropped = ("ancillary_variables",) + (error_attributes if uncertainty is False else ())
             depth.attrs = {k: v for k, v in var.attrs.items() if k not in dropped}
             source = depth if std_name is None else xr.Dataset(
@@ -254,11 +260,16 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
         origin = None  # tangraph's own maps keep their origin
         if not geographic and {"origin_northing", "origin_easting"} <= var.attrs.keys():
             origin = (float(var.attrs["origin_northing"]), float(var.attrs["origin_easting"]))
-        return _grid_to_map(
+        m = _grid_to_map(
             y, x, factor * values, geographic=geographic, crs=the_crs, cell=cell, origin=origin,
             name=name or str(var.attrs.get("name", "")) or path.stem, where=where, variable=variable,
             max_scale_error=max_scale_error, depth_std=std, correlation_length=length, error_dof=dof,
         )
+        drift = None if uncertainty is False else var.attrs.get(DRIFT_ATTRIBUTE)
+        try:
+            return m if drift is None else m.replace(error_drift=drift)
+        except MapFormatError as exc:
+            raise MapFormatError(f"{where}: attribute {DRIFT_ATTRIBUTE!r}: {exc}") from None
 
 
 def _axis_factor(attrs: dict, where: str, axis: str) -> float:
@@ -275,7 +286,8 @@ def write_netcdf(bathymetry: BathymetryMap, path: Path, extra: dict[str, tuple] 
     own CRS string, origin and name as attributes of ``depth``, so it reads back in its frame.
     The map's error: ``depth_std`` (CF ``long_name``, ``standard_name`` "... standard_error",
     units m) named by depth's CF ``ancillary_variables``, the correlation length and the
-    Student-t tail as depth's attributes ``error_correlation_length_m`` and ``error_student_t_dof``.
+    Student-t tail as depth's attributes ``error_correlation_length_m`` and ``error_student_t_dof``,
+    the drift along a track as ``error_drift_std_m_time_s``.
 
     ``extra`` adds per-cell variables: ``{name: (array (ny, nx), attrs)}``; ``attrs`` adds
     global attributes, and its ``"depth"`` entry (a dict) attributes of the depth variable.

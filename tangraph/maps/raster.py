@@ -31,7 +31,13 @@ from tangraph.maps._common import (
     resolve_sign,
     std_factor,
 )
-from tangraph.maps.grid import CORRELATION_ATTRIBUTE, DEPTH_STD_ATTRS, DOF_ATTRIBUTE, BathymetryMap
+from tangraph.maps.grid import (
+    CORRELATION_ATTRIBUTE,
+    DEPTH_STD_ATTRS,
+    DOF_ATTRIBUTE,
+    DRIFT_ATTRIBUTE,
+    BathymetryMap,
+)
 
 __all__ = ["Raster", "open_raster", "raster_crs", "read_geotiff", "write_geotiff"]
 
@@ -39,6 +45,7 @@ _DEPTH_TAGS = {"positive": "down", "standard_name": "sea_floor_depth_below_sea_s
 #: the dataset tag of a tangraph GeoTIFF that holds the correlation length of the map's error
 _CORRELATION_TAG = "TANGRAPH_" + CORRELATION_ATTRIBUTE.upper()
 _DOF_TAG = "TANGRAPH_" + DOF_ATTRIBUTE.upper()
+_DRIFT_TAG = "TANGRAPH_" + DRIFT_ATTRIBUTE.upper()
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -200,10 +207,16 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
                           factor=std_factor(raster.units[std_band], factor, where))
         length = correlation_length_from(tags, (_CORRELATION_TAG,), str(path))
         dof = error_dof_from(tags, (_DOF_TAG,), str(path))
-    return _grid_to_map(raster.y, raster.x, depth, geographic=geographic, crs=crs, cell=cell,
-                        name=name or own.get("name") or path.stem, where=str(path), variable=variable,
-                        max_scale_error=max_scale_error, depth_std=std, correlation_length=length,
-                        error_dof=dof)
+    m = _grid_to_map(raster.y, raster.x, depth, geographic=geographic, crs=crs, cell=cell,
+                     name=name or own.get("name") or path.stem, where=str(path), variable=variable,
+                     max_scale_error=max_scale_error, depth_std=std, correlation_length=length,
+                     error_dof=dof)
+    if uncertainty is False or not tags.get(_DRIFT_TAG, "").strip():
+        return m
+    try:
+        return m.replace(error_drift=tags[_DRIFT_TAG])
+    except MapFormatError as exc:
+        raise MapFormatError(f"{path}: tag {_DRIFT_TAG!r}: {exc}") from None
 
 
 def _tangraph_description(text: str) -> dict:
@@ -220,7 +233,8 @@ def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
     ``depth_std`` gets a second band holding it (description ``depth_std``, ``long_name``
     "standard deviation of the error of depth", units m), its ``correlation_length`` and
     ``error_dof`` the dataset tags ``TANGRAPH_ERROR_CORRELATION_LENGTH_M`` and
-    ``TANGRAPH_ERROR_STUDENT_T_DOF``."""
+    ``TANGRAPH_ERROR_STUDENT_T_DOF``, its ``error_drift`` ``TANGRAPH_ERROR_DRIFT_STD_M_TIME_S``
+    (``"std time"``)."""
     import pyproj
     import rasterio
     from rasterio.transform import Affine
@@ -243,6 +257,8 @@ def write_geotiff(bathymetry: BathymetryMap, path: Path) -> None:
         tags[_CORRELATION_TAG] = repr(bathymetry.correlation_length)
     if bathymetry.error_dof is not None:
         tags[_DOF_TAG] = repr(bathymetry.error_dof)
+    if bathymetry.error_drift is not None:
+        tags[_DRIFT_TAG] = " ".join(repr(v) for v in bathymetry.error_drift)
     with rasterio.Env(GDAL_PAM_ENABLED="NO"), rasterio.open(path, "w", **profile) as dst:
         dst.write(np.ascontiguousarray(np.stack(layers)[:, ::-1], dtype=np.float32))
         dst.set_band_description(1, "depth")

@@ -96,20 +96,20 @@ class NavigationModel:
     tide, tide_std : float
         Prior mean and std (m) of the tide, ``measured = map + tide``.
     tide_drift_std, tide_drift_time : float
-        The drift of the tide (m, s): the offset between the survey's depths and the map's
-        wanders about its prior by a Gauss-Markov process of this std, forgetting over this
-        time (the map's error that holds over a stretch of track, the water level between gauge
-        readings, the sound speed). A drifting offset is estimated with the position instead of
-        taken for the map's error, which would count an error that holds for hundreds of
-        metres once per correlation length. The check lines of a map measure both
-        (``tangraph maps grid``; :meth:`tangraph.eval.MapCheck.drift`). 0 (default):
-        the tide is constant over the survey. The filters' tide posterior reverts to the prior
-        mean by ``exp(-dt / tide_drift_time)`` between pings and its variance to ``tide_std^2 +
-        tide_drift_std^2``: exact for a datum that is known (``tide_std`` small against the
-        drift); an uncertain datum's estimate is forgotten over the drift's time too. The
-        factor graph's fixes then take each window's tide from its soundings (criterion
-        ``mle``) and are widened by the drift along their window; the bound
-        (:func:`~tangraph.eval.posterior_crb`) holds the drift exactly, beside the constant tide.
+        The drift of the tide (m, s; ``tide_drift_std`` None by default: the drift the map states,
+        else none, :meth:`with_map`; 0: a constant tide whatever the map states): the offset between
+        the survey's depths and the map's wanders about its prior by a Gauss-Markov process of this
+        std, forgetting over this time (the map's error that holds over a stretch of track, the
+        water level between gauge readings, the sound speed). A drifting offset is estimated with
+        the position instead of taken for the map's error, which would count an error that holds for
+        hundreds of metres once per correlation length. The check lines of a map measure both
+        (``tangraph maps grid``; :meth:`tangraph.eval.MapCheck.drift`), and a map that states its
+        drift gives it to a model that states none (:meth:`with_map`). The filters hold the datum
+        and the drift about it together (:mod:`tangraph.filters.tide`): a datum known only to metres
+        is learnt once and kept while the drift is followed. The factor graph's fixes then take each
+        window's tide from its soundings (criterion ``mle``) and are widened by the drift along
+        their window; the bound (:func:`~tangraph.eval.posterior_crb`) holds the drift exactly,
+        beside the constant tide.
     map_offset_std : float
         Std (m, per axis) of the map's horizontal offset against the survey's frame, one for the
         whole survey: the earlier surveys' position error that their runs share (a DGPS of a
@@ -160,7 +160,7 @@ class NavigationModel:
     misfit_length: float = 200.0
     tide: float = 0.0
     tide_std: float = 3.0
-    tide_drift_std: float = 0.0
+    tide_drift_std: float | None = None
     tide_drift_time: float = 0.0
     map_offset_std: float = 0.0
     robust_kernel: str = "huber"
@@ -172,10 +172,12 @@ class NavigationModel:
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "heading_turn_std",
                      "dropout_speed_noise", "map_std", "map_correlation_length", "tide_std",
-                     "tide_drift_std", "tide_drift_time",
+                     "tide_drift_time",
                      "map_offset_std", "speed_scale_std", "heading_bias_std"):
             _number(self, name, low=0.0)
         _number(self, "misfit_dof", low=0.0)
+        if self.tide_drift_std is not None:
+            _number(self, "tide_drift_std", low=0.0)
         for name in ("initial_position_std", "sounding_std", "misfit_length"):
             _number(self, name, low=0.0, open_low=True)
         _number(self, "speed_scale", low=-0.5, high=0.5)
@@ -184,7 +186,7 @@ class NavigationModel:
         for name in ("robust_parameter", "odometry_min_std", "odometry_min_heading_std"):
             _number(self, name, low=0.0, open_low=True)
         _number(self, "fix_inflation", low=1.0)
-        if self.tide_drift_std > 0 and not self.tide_drift_time > 0:
+        if (self.tide_drift_std or 0.0) > 0 and not self.tide_drift_time > 0:
             raise TangraphError(f"NavigationModel.tide_drift_time must be > 0 s with tide_drift_std = "
                                 f"{self.tide_drift_std:g} m (how long the tide's drift takes to forget), "
                                 f"got {self.tide_drift_time!r}")
@@ -215,17 +217,18 @@ class NavigationModel:
     def tide_variance(self) -> float:
         """Variance (m^2) of the tide about its prior mean at any time: the prior's and the
         drift's."""
-        return self.tide_std**2 + self.tide_drift_std**2
+        return self.tide_std**2 + (self.tide_drift_std or 0.0) ** 2
 
     @property
     def tide_drift(self) -> tuple[float, float] | None:
         """``(tide_drift_std, tide_drift_time)``, or None for a constant tide."""
-        return (self.tide_drift_std, self.tide_drift_time) if self.tide_drift_std > 0 else None
+        std = self.tide_drift_std or 0.0
+        return (std, self.tide_drift_time) if std > 0 else None
 
     def tide_memory(self, dt: Any) -> Any:
         """How much of the tide's departure from its prior mean is kept after ``dt`` s (a number or
         an array) of drift, ``exp(-dt / tide_drift_time)`` (1 without a drift)."""
-        if self.tide_drift_std <= 0:
+        if self.tide_drift is None:
             return np.ones_like(dt, dtype=np.float64) if np.ndim(dt) else 1.0
         keep = np.exp(-np.asarray(dt, dtype=np.float64) / self.tide_drift_time)
         return keep if np.ndim(dt) else float(keep)
@@ -239,9 +242,20 @@ class NavigationModel:
         """A copy with some fields changed (checked again)."""
         return dataclasses.replace(self, **changes)
 
-    def as_dict(self) -> dict[str, float | str]:
+    def with_map(self, bathymetry: Any) -> NavigationModel:
+        """The model an estimator navigates ``bathymetry`` with: its own tide drift where it states
+        one (``tide_drift_std`` not None; 0: a constant tide), else the drift the map states
+        (``BathymetryMap.error_drift``, which ``tangraph maps grid`` measures on its check
+        lines), else a constant tide."""
+        drift = getattr(bathymetry, "error_drift", None)
+        if self.tide_drift_std is not None or drift is None:
+            return self
+        return self.replace(tide_drift_std=float(drift[0]), tide_drift_time=float(drift[1]))
+
+    def as_dict(self) -> dict[str, float | str | None]:
         """JSON-ready form, kept in a track's metadata."""
-        return {k: v if isinstance(v, str) else float(v) for k, v in dataclasses.asdict(self).items()}
+        return {k: v if v is None or isinstance(v, str) else float(v)
+                for k, v in dataclasses.asdict(self).items()}
 
     # -- construction --------------------------------------------------------------------------
     @classmethod
@@ -342,9 +356,10 @@ class NavigationModel:
             raise TangraphError(f"{where}: {exc}") from None
 
 
-def survey_navigation_model(survey: Any, model: NavigationModel | None, *,
-                            where: str = "") -> NavigationModel:
-    """``model``, or if None the model of a simulated survey (:meth:`NavigationModel.from_survey`):
+def survey_navigation_model(survey: Any, model: NavigationModel | None, *, where: str = "",
+                            bathymetry: Any = None) -> NavigationModel:
+    """``model``, or if None the model of a simulated survey (:meth:`NavigationModel.from_survey`),
+    with the tide drift ``bathymetry`` states if it states none (:meth:`NavigationModel.with_map`):
     the one place every estimator resolves its model.
 
     Raises
@@ -356,14 +371,14 @@ def survey_navigation_model(survey: Any, model: NavigationModel | None, *,
     prefix = f"{where}: " if where else ""
     if model is None:
         try:
-            return NavigationModel.from_survey(survey)
+            model = NavigationModel.from_survey(survey)
         except TangraphError as exc:
             raise TangraphError(f"{prefix}{exc}") from None
     if not isinstance(model, NavigationModel):
         raise TangraphError(
             f"{prefix}model must be a tangraph.sensors.NavigationModel (or None), got {type(model).__name__}"
         )
-    return model
+    return model.with_map(bathymetry)
 
 
 def load_navigation_model(path: str | os.PathLike) -> NavigationModel:

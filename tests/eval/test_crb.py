@@ -57,9 +57,10 @@ def _batch_reference(survey: Survey, seabed: BathymetryMap, model: NavigationMod
                                           np.angle(np.exp(1j * (truth[m + 1, 2] - truth[m, 2]))))))
     for m in range(k):
         add(("n", m), model.heading_noise**2)
-    keep = np.exp(-dt / model.tide_drift_time) if model.tide_drift_std > 0 else np.zeros(k - 1)
+    drift = model.tide_drift_std or 0.0
+    keep = np.exp(-dt / model.tide_drift_time) if drift > 0 else np.zeros(k - 1)
     for m in range(k):  # the tide's drift: x_0 and the innovations of x_m
-        add(("x", m), model.tide_drift_std**2 * (1.0 if m == 0 else 1.0 - keep[m - 1] ** 2))
+        add(("x", m), drift**2 * (1.0 if m == 0 else 1.0 - keep[m - 1] ** 2))
     col = {name: i for i, name in enumerate(names)}
     n_par = len(names)
 

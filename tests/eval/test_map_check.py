@@ -178,3 +178,29 @@ def test_the_check_lines_measure_a_drift_that_forgets():
 def test_a_check_without_its_windows_times_has_no_drift():
     check = MapCheck(np.zeros(3), np.zeros(3, int), ("a",), 50.0)
     assert all(np.isnan(v) for v in check.drift().values())
+
+
+def test_the_drifts_f_test_tells_a_drift_from_none():
+    """Over 20 independent checks each: no drift is never stated at the 1 % level, a drift the
+    size of Lake Caputh's (0.02 m/sqrt(s) at first, forgotten over 300 s) always."""
+    none = [planted_windows(0.0, np.random.default_rng(seed)).drift()["p_value"] for seed in range(20)]
+    drifting = [planted_windows(0.02, np.random.default_rng(seed), time_constant=300.0).drift()["p_value"]
+                for seed in range(20)]
+    assert min(none) > 0.01 and max(drifting) < 0.01
+
+
+def test_calibrate_error_gives_the_map_the_drift_its_check_lines_found():
+    from tangraph.eval.map_check import DRIFT_P_VALUE, calibrate_error
+    from tangraph.gridding_surveys import grid_surveys
+
+    rng = np.random.default_rng(4)
+    surveys = [line_survey(seafloor, rng, lines=np.arange(10.0, 390.0, 6.0) + 2.0 * i) for i in range(2)]
+    grid = grid_surveys(surveys, cell=5.0)
+    check = planted_windows(0.02, np.random.default_rng(3), time_constant=300.0)
+    drift = check.drift()
+    assert drift["p_value"] < DRIFT_P_VALUE
+    drifting = calibrate_error(grid, check)
+    assert drifting.error_drift == (drift["std"], drift["time"]) == drifting.depth.error_drift
+    assert drifting.meta["check_lines"]["drift_p_value"] == pytest.approx(drift["p_value"], abs=1e-6)
+    steady = calibrate_error(grid, planted_windows(0.0, np.random.default_rng(3)))
+    assert steady.error_drift is None and steady.depth.error_drift is None

@@ -96,3 +96,29 @@ def test_a_fix_is_widened_by_the_drift_the_graphs_other_fixes_share():
     lags = np.arange(-200, 201) * 20.0
     assert forget == 100.0
     assert std**2 == pytest.approx(0.09 * np.sum(np.exp(-np.abs(lags) / 100.0)), rel=1e-9)
+
+
+def test_a_map_that_states_its_drift_gives_it_to_a_model_that_states_none(small_survey, rough_map):
+    from tangraph.eval import posterior_crb
+    from tangraph.navigation import navigate
+
+    model = NavigationModel.from_survey(small_survey)
+    drifting_map = rough_map.replace(error_drift=(0.2, 150.0))
+    stated = model.with_map(drifting_map)
+    assert stated.tide_drift == (0.2, 150.0) and model.with_map(rough_map) is model
+    own = model.replace(tide_drift_std=0.1, tide_drift_time=50.0)
+    assert own.with_map(drifting_map) is own  # a model's own drift is kept
+    assert model.replace(tide_drift_std=0.0).with_map(drifting_map).tide_drift is None  # and its "none"
+    # every estimator and the bound take the map's as if the model stated it
+    for method in ("isam2", "pf"):
+        from_map = navigate(small_survey, drifting_map, method, rng=np.random.default_rng(0), model=model)
+        told = navigate(small_survey, rough_map, method, rng=np.random.default_rng(0), model=stated)
+        np.testing.assert_array_equal(from_map.pose, told.pose)
+        plain = navigate(small_survey, rough_map, method, rng=np.random.default_rng(0), model=model)
+        assert not np.array_equal(plain.pose, told.pose)
+    bound = posterior_crb(small_survey, drifting_map, model, kind="filter")
+    np.testing.assert_array_equal(bound.position_cov, posterior_crb(small_survey, rough_map, stated,
+                                                                    kind="filter").position_cov)
+    with pytest.raises(TangraphError, match="map's error_drift"):
+        navigate(small_survey, drifting_map, "isam2", GraphConfig().replace(tap=TapConfig(criterion="msd")),
+                 model=model)

@@ -152,3 +152,40 @@ def test_a_bad_tail_of_the_map_error_is_refused_naming_the_file(tmp_path):
     bad.to_netcdf(tmp_path / "bad.nc")
     with pytest.raises(MapFormatError, match=r"bad.nc.*'error_student_t_dof'.*> 0, got -2.0"):
         read_map(tmp_path / "bad.nc")
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".tif", ".npz"])
+def test_the_drift_of_the_map_error_round_trips(tmp_path, suffix):
+    m = error_map().replace(error_drift=(0.196, 172.0))
+    back = read_map(write_map(m, tmp_path / f"m{suffix}"))
+    assert back.error_drift == (0.196, 172.0)
+    assert back.error_summary()["error_drift"] == {"std_m": 0.196, "time_s": 172.0}
+    assert read_map(tmp_path / f"m{suffix}", uncertainty=False).error_drift is None
+    assert read_map(write_map(error_map(), tmp_path / f"plain{suffix}")).error_drift is None
+    without_std = m.replace(depth_std=None)  # a drift needs no per-cell error to be stated
+    assert read_map(write_map(without_std, tmp_path / f"bare{suffix}")).error_drift == (0.196, 172.0)
+
+
+@pytest.mark.parametrize("value, message", [
+    ((0.2,), r"error_drift must be two numbers \(std in m, time in s\), got \(0.2,\)"),
+    ((-0.2, 100.0), "error_drift std must be a finite std > 0 m, got -0.2"),
+    ((0.2, 0.0), "error_drift time must be a finite time > 0 s, got 0.0"),
+    ((float("nan"), 100.0), "error_drift std must be a finite std > 0 m, got nan"),
+    ("a b", "error_drift std must be a finite std > 0 m, got 'a'"),
+])
+def test_a_bad_drift_of_the_map_error_is_refused_naming_the_map(value, message):
+    with pytest.raises(MapFormatError, match=r"map 'prior': " + message):
+        error_map().replace(error_drift=value)
+
+
+def test_a_bad_drift_in_a_file_is_refused_naming_the_file_and_attribute(tmp_path):
+    import xarray as xr
+
+    path = write_map(error_map().replace(error_drift=(0.2, 100.0)), tmp_path / "m.nc")
+    with xr.open_dataset(path) as ds:
+        bad = ds.load()
+    bad["depth"].attrs["error_drift_std_m_time_s"] = np.array([0.2, -5.0])
+    bad.to_netcdf(tmp_path / "bad.nc")
+    with pytest.raises(MapFormatError, match=r"bad.nc.*'error_drift_std_m_time_s'.*time must be a finite "
+                                             r"time > 0 s, got -5.0"):
+        read_map(tmp_path / "bad.nc")
