@@ -144,3 +144,40 @@ def test_the_tide_posterior_follows_a_drifting_tide_within_its_stated_variance(t
     low, high = stats.chi2.ppf([0.005, 0.995], runs) / runs  # the mean NEES's 99 % band
     assert low <= nees.mean() <= high
     assert tide_nees(0.0, runs, tide_std).mean() > 5.0 * high  # a constant tide claims what it does not know
+
+
+def test_the_point_mass_filter_mixes_and_regrids_the_datum_and_the_drift_together():
+    """Convolving the DR noise into the density mixes neighbouring points' tide posteriors: the
+    mass-weighted first and second moments of the offset and of its drift (their cross moment
+    too) are kept, the spread of the mixed means going into the shared covariance; a re-grid
+    interpolates both means (a constant stays that constant)."""
+    from tangraph.filters.pmf import PMFConfig, _start
+    from tangraph.filters.pmf_grid import _diffuse, _Grid, _regrid
+
+    nav = NavigationModel(tide_std=2.0, tide_drift_std=DRIFT, tide_drift_time=FORGET, speed_scale_std=0.0,
+                          heading_bias_std=0.0, initial_position_std=20.0)
+    config = PMFConfig()
+    grid = _Grid(config, config.min_spacing)
+    state = _start(nav, np.array([250.0, 250.0]), grid, config)
+    i, j = np.meshgrid(np.arange(state.n), np.arange(state.n), indexing="ij")  # means that vary smoothly
+    state.tide = (1.0 + 0.05 * i - 0.02 * j)[None]
+    state.tide_drift = TideDrift((0.03 * j - 0.1)[None], 0.02, 0.05)
+    state.tide_var = 0.3
+
+    def moments(s):
+        p = np.exp(s.log_density - s.log_density.max())
+        w = p / p.sum()
+        t, d = s.tide, s.tide_drift.mean
+        return np.array([np.sum(w * t), np.sum(w * d), s.tide_var + np.sum(w * t * t),
+                         s.tide_drift.var + np.sum(w * d * d), s.tide_drift.cross + np.sum(w * t * d)])
+
+    before = moments(state)
+    state.pending = np.diag([9.0, 4.0])  # a few grid spacings: the means mix
+    _diffuse(state)
+    np.testing.assert_allclose(moments(state), before, rtol=1e-6, atol=1e-9)
+    assert state.tide_var > 0.3 and state.tide_drift.var > 0.05
+    state.tide_drift = TideDrift(np.full(state.tide.shape, 0.7), state.tide_drift.cross, state.tide_drift.var)
+    moved = _regrid(state, grid, config, estimate=False)
+    live = np.exp(moved.log_density) > 1e-12
+    np.testing.assert_allclose(moved.tide_drift.mean[live], 0.7, rtol=1e-9)
+    assert moved.tide_drift.var == state.tide_drift.var
