@@ -68,6 +68,8 @@ def _info_lines(r: dict) -> list[str]:
              ] if "depth_std_m" in r else []
     error += [f"correlation length {r['correlation_length_m']:g} m"] if "correlation_length_m" in r else []
     error += [f"a Student-t tail of {r['error_dof']:.3g} degrees of freedom"] if "error_dof" in r else []
+    drift = r.get("error_drift")
+    error += [f"a track drift of {drift['std_m']:.3g} m over {drift['time_s']:.3g} s"] if drift else []
     lines.append(f"map error    {'; '.join(error) or 'not in the map (the model states its map std)'}")
     return lines
 

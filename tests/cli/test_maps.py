@@ -357,3 +357,13 @@ def test_cli_user_errors_are_one_line_and_status_2(tmp_path, capsys):
     assert "(10 m, mean)" in capsys.readouterr().out
     with xr.open_dataset(out_xyz) as ds:
         np.testing.assert_array_equal(ds["depth"].values, ds["mean"].values)
+
+
+def test_maps_info_says_the_drift_a_map_states(tmp_path, capsys):
+    m = BathymetryMap(north=np.arange(20.0) * 5, east=np.arange(30.0) * 5, depth=np.full((20, 30), 12.0),
+                      error_drift=(0.196, 172.0))
+    path = write_map(m, tmp_path / "drifting.nc")
+    assert main(["maps", "info", str(path)]) == 0
+    assert "a track drift of 0.196 m over 172 s" in capsys.readouterr().out
+    assert main(["maps", "info", str(path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["error_drift"] == {"std_m": 0.196, "time_s": 172.0}
