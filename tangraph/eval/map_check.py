@@ -191,8 +191,9 @@ class MapCheck:
         ratio = stated_v / square  # the map's error alone: its best c^2, in closed form
         alone = float(np.sum((np.sum(ratio) / np.sum(ratio**2) * ratio - 1.0) ** 2))
         full, dof = 2.0 * float(fit.cost), gap_s.size - 3
-        p_value = float("nan") if dof < 1 else 0.0 if full <= 0 else \
-            float(stats.f.sf(max(alone - full, 0.0) / 2.0 / (full / dof), 2, dof))
+        gain = max(alone - full, 0.0)  # what the drift explains
+        p_value = float("nan") if dof < 1 else float(gain <= 0) if full <= 0 else \
+            float(stats.f.sf(gain / 2.0 / (full / dof), 2, dof))
         return {"scale": float(np.sqrt(c2)), "std": float(np.sqrt(s2)), "time": float(np.exp(log_t)),
                 "walk": float(np.sqrt(2.0 * s2 / np.exp(log_t))), "p_value": p_value}
 
