@@ -367,3 +367,33 @@ def test_maps_info_says_the_drift_a_map_states(tmp_path, capsys):
     assert "a track drift of 0.196 m over 172 s" in capsys.readouterr().out
     assert main(["maps", "info", str(path), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["error_drift"] == {"std_m": 0.196, "time_s": 172.0}
+
+
+@pytest.mark.parametrize("drift", [0.0, 0.3])
+def test_maps_grid_gives_the_map_the_drift_its_check_lines_find(tmp_path, capsys, drift):
+    """Three days of lines over one seafloor whose depths drift along each day's track by a
+    Gauss-Markov offset (``drift`` m, forgotten over 150 s): the gridded map states the drift
+    when there is one (its size within a third), and none when there is none."""
+    from tests.eval.line_cases import line_survey, seafloor
+
+    rng = np.random.default_rng(5)
+    paths = []
+    for day in range(3):
+        survey = line_survey(seafloor, rng, lines=np.arange(10.0, 390.0, 18.0) + 6.0 * day, name=f"day{day}")
+        keep = np.exp(-1.0 / 150.0)  # a ping a second
+        offset = np.empty(survey.n_pings)
+        offset[0] = drift * rng.standard_normal()
+        for k in range(1, offset.size):
+            offset[k] = keep * offset[k - 1] + drift * np.sqrt(1 - keep**2) * rng.standard_normal()
+        survey = survey.replace(beam_depth=survey.beam_depth + offset[:, None])
+        paths.append(str(write_survey(survey, tmp_path / f"day{day}.nc")))
+    out = tmp_path / "map.nc"
+    assert main(["maps", "grid", *paths, "--cell", "5", "--fill", "2", "--sounding-std", "0.1",
+                 "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    stated = read_map(out).error_drift
+    if drift:
+        assert stated is not None and stated[0] == pytest.approx(drift, rel=1 / 3)
+        assert f"a drift along a track of {stated[0]:.3g} m" in printed
+    else:
+        assert stated is None and "a drift along a track" not in printed
