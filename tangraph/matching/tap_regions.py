@@ -140,19 +140,23 @@ def _jackknife(bathymetry, patch, grid, i, j, step, reach: int = 20) -> np.ndarr
 
 def _larger(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """The smallest covariance at least as large as ``a`` and as ``b`` in every direction of
-    ``a``'s generalised eigenvectors (``a`` where ``b`` is smaller everywhere; ``a`` if it is not
-    positive definite or either is not finite: an infinite one says the window is
+    their generalised eigenvectors (``a`` where ``b`` is smaller everywhere), taken in the
+    whitening of whichever is positive definite (a region's covariance is singular when the
+    window's likelihood is flat along an axis of the search: then ``b`` where it is larger); the
+    sum when neither is; ``a`` if either is not finite (an infinite one says the window is
     uninformative)."""
     if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
         return a
-    try:
-        low = np.linalg.cholesky(a)
-    except np.linalg.LinAlgError:
-        return a
-    inv = np.linalg.inv(low)
-    w, v = np.linalg.eigh(inv @ b @ inv.T)
-    out = low @ (v * np.maximum(w, 1.0)) @ v.T @ low.T
-    return 0.5 * (out + out.T)
+    for base, other in ((a, b), (b, a)):
+        try:
+            low = np.linalg.cholesky(base)
+        except np.linalg.LinAlgError:
+            continue
+        inv = np.linalg.inv(low)
+        w, v = np.linalg.eigh(inv @ other @ inv.T)
+        out = low @ (v * np.maximum(w, 1.0)) @ v.T @ low.T
+        return 0.5 * (out + out.T)
+    return a + b
 
 
 def _crlb(bathymetry, patch, position, s2) -> np.ndarray:
