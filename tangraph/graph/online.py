@@ -48,7 +48,7 @@ from tangraph.graph.calibration import (
 )
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, propagate_joint
-from tangraph.graph.fixes import FixOutcome, LostEpisode, check_tide_drift
+from tangraph.graph.fixes import FixOutcome, LostEpisode, check_tide_drift, fix_drift
 from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
 from tangraph.graph.lost import take_window
 from tangraph.graph.online_terrain import OnlineTerrain
@@ -97,6 +97,7 @@ class GraphNavigator:
         self.model = check_tide_drift(self.config, survey_navigation_model(survey, model, where="graph",
                                                                            bathymetry=bathymetry))
         self.white = self.model.dead_reckoning
+        self.fix_drift = fix_drift(self.model, self.config, survey.time)  # what widens each fix's window
         # the map error each sounding shares with the survey's others: it widens every fix
         self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)
         c = self.config

@@ -26,7 +26,6 @@ from tangraph.graph.fixes import (
     FixOutcome,
     FixStatus,
     failed,
-    fix_drift,
     fix_name,
     judge_fix,
     make_fix,
@@ -82,7 +81,7 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
         else:
             made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
                             poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,
-                            error=nav.map_error, drift=fix_drift(nav.model, nav.config, nav.survey.time))
+                            error=nav.map_error, drift=nav.fix_drift)
     except MatchingError as exc:
         return failed(k, exc, half_width)
     finally:

@@ -35,7 +35,7 @@ from tangraph.graph.batch import (
 )
 from tangraph.graph.calibration import CALIBRATION, calibration_summary, joint_in_frame
 from tangraph.graph.config import GraphConfig
-from tangraph.graph.fixes import failed, fix_drift, judge_fix, make_fix, search_half_width
+from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
 from tangraph.graph.keyposes import PoseGraph
 from tangraph.graph.online import GraphNavigator, _translate
 from tangraph.graph.robust import gnc
@@ -125,7 +125,7 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list
         try:
             fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
                            poses=pose[window], first=window.start, shared=nav.shared_map_variance,
-                           error=nav.map_error, drift=fix_drift(nav.model, config, nav.survey.time))
+                           error=nav.map_error, drift=nav.fix_drift)
             laid = None if window.start < 0 else frame_poses(pose[window], solution.calibration, nav.origin)
             # laid with the smoothed calibration: the model's noise is the misfit reference
             outcome = judge_fix(nav._grown(fix, laid, joint), pose[end], cov[end], config, half_width,
