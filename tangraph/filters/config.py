@@ -106,6 +106,14 @@ class ParticleConfig:
         and covariance before resampling (for the calibration: conditional on the position, by
         linear regression), ``e`` standard normal. The cloud's mean and covariance are kept (in
         expectation); 0 turns it off.
+    kernel_ess : float
+        The kernel moves the calibrations only after a resampling whose ESS before it was below
+        ``kernel_ess * n_particles``: a cloud resampled while its weights were still even (a
+        filter that resamples at every ping, ``ess_threshold = 1``) has not degenerated, and
+        re-drawing each particle's calibration towards the cloud's at every ping walks the
+        constant errors by about ``1 - a`` of their spread per ping, a walk the model does not
+        have (on Lake Caputh's compass DR a heading error of a few degrees walked to 100 deg
+        and the cloud left the map).
     kernel_floor : float
         Floor of the kernel's calibration spread, a fraction of the prior std of ``k`` and ``b``
         (keeps a cloud that has collapsed onto one value from staying there).
@@ -127,6 +135,7 @@ class ParticleConfig:
     ess_threshold: float = 0.5
     process_floor: float = 0.0
     kernel_bandwidth: float = 0.3
+    kernel_ess: float = 0.5
     kernel_floor: float = 1e-3
     tempering: bool = True
     tempering_ess: float = 0.5
@@ -138,6 +147,7 @@ class ParticleConfig:
         check_number(self, "ess_threshold", high=1.0)
         check_number(self, "process_floor")
         check_number(self, "kernel_bandwidth", high=1.0)
+        check_number(self, "kernel_ess", open_low=True, high=1.0)
         check_number(self, "kernel_floor")
         object.__setattr__(self, "tempering", bool(self.tempering))
         check_number(self, "tempering_ess", open_low=True, high=1.0)

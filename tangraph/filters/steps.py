@@ -293,12 +293,14 @@ def resample_if_needed(
 ) -> tuple[Belief, np.ndarray | None, float]:
     """Resample when ESS < ``ess_threshold * N``; returns the belief, the indices kept (None if
     it did not resample) and the ESS before. With a ``model``, the resampled calibrations are
-    moved by :func:`shrink_calibration` (``config.kernel_bandwidth``)."""
+    moved by :func:`shrink_calibration` (``config.kernel_bandwidth``) when the cloud had
+    degenerated (ESS < ``kernel_ess * N``)."""
     ess = effective_sample_size(belief.weights)
     if ess < config.ess_threshold * belief.n_particles:
-        moments = state_moments(belief) if model is not None else None
+        degenerate = model is not None and ess < config.kernel_ess * belief.n_particles
+        moments = state_moments(belief) if degenerate else None
         new, index = resample_belief(belief, config.resampler, rng=rng)
-        if model is not None:
+        if degenerate:
             new = shrink_calibration(
                 new, moments, config.kernel_bandwidth, _kernel_floor(model, config), rng=rng  # type: ignore[arg-type]
             )

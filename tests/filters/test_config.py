@@ -33,6 +33,8 @@ def test_bad_particle_count_is_named(value):
         (PFConfig, "kernel_bandwidth", np.nan),
         (PFConfig, "kernel_bandwidth", 1.5),
         (PFConfig, "kernel_floor", -1.0),
+        (PFConfig, "kernel_ess", 0.0),
+        (SJCPFConfig, "kernel_ess", 1.5),
         (PFConfig, "max_stages", 0),
         (FilterHealth, "lost_alpha", 0.0),
         (FilterHealth, "lost_pings", 0),

@@ -17,6 +17,7 @@ from tangraph.filters import (
     PFConfig,
     SJCPFConfig,
     TercomPFConfig,
+    steps,
 )
 from tangraph.filters.belief import calibration_estimate, initial_belief, model_belief, state_moments
 from tangraph.filters.ipf import ipf_step
@@ -145,3 +146,30 @@ def test_the_calibration_kernel_keeps_the_cloud_s_moments():
     assert not np.allclose(moved.calibration, belief.calibration)
     estimate = calibration_estimate(moved)
     assert estimate["speed_scale_std"] == pytest.approx(np.sqrt(cov[2, 2]), rel=0.01)
+
+
+def test_the_calibration_kernel_moves_a_degenerate_cloud_only():
+    """A cloud resampled at every ping while its weights are still even keeps each particle's
+    calibration (the resampling copies them); one that has degenerated (ESS below ``kernel_ess``
+    of N) has them moved by the kernel."""
+    rng = np.random.default_rng(3)
+    n = 2000
+    belief = initial_belief([0.0, 0.0], 1.0, n, rng=rng).replace(
+        calibration=rng.normal(0.0, [0.02, 0.05], (n, 2)))
+    model = FilterModel.from_model(MODEL, MAP)
+    every_ping = SJCPFConfig(n_particles=n)
+    assert every_ping.ess_threshold == 1.0 and every_ping.kernel_ess == 0.5
+    start = belief.calibration.copy()
+    current = belief
+    for _ in range(200):  # even weights: resampled (ess_threshold 1) but never degenerate
+        weights = np.exp(0.01 * rng.standard_normal(n))
+        current = current.replace(log_weights=np.log(weights / weights.sum()))
+        current, index, ess = steps.resample_if_needed(current, every_ping, rng=rng, model=model)
+        assert index is not None and ess > 0.99 * n
+        start = start[index]
+        np.testing.assert_array_equal(current.calibration, start)
+    log_weights = np.where(np.arange(n) < n // 10, 0.0, -50.0)  # ESS n / 10: degenerate
+    degenerate = belief.replace(log_weights=log_weights - np.log(n // 10))
+    moved, index, ess = steps.resample_if_needed(degenerate, every_ping, rng=rng, model=model)
+    assert ess < 0.5 * n and index is not None
+    assert not np.allclose(moved.calibration, belief.calibration[index])
