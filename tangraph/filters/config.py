@@ -100,20 +100,24 @@ class ParticleConfig:
         roughening floor; 0 by default (the model's noise is the process noise).
     kernel_bandwidth : float
         ``h`` of the Liu-West shrinkage kernel that moves the calibration ``(k, b)`` after every
-        resampling (and the whole state between tempering stages), so that the constant errors do
+        resampling (at most: see ``kernel_ess``; and the whole state between tempering stages),
+        so that the constant errors do
         not collapse onto the few values drawn at the start: a particle's state ``s`` becomes
         ``a s + (1 - a) m + h L e``, ``a = sqrt(1 - h^2)``, ``m`` and ``L L^T`` the weighted mean
         and covariance before resampling (for the calibration: conditional on the position, by
         linear regression), ``e`` standard normal. The cloud's mean and covariance are kept (in
         expectation); 0 turns it off.
     kernel_ess : float
-        The kernel moves the calibrations only after a resampling whose ESS before it was below
-        ``kernel_ess * n_particles``: a cloud resampled while its weights were still even (a
-        filter that resamples at every ping, ``ess_threshold = 1``) has not degenerated, and
-        re-drawing each particle's calibration towards the cloud's at every ping walks the
-        constant errors by about ``1 - a`` of their spread per ping, a walk the model does not
-        have (on Lake Caputh's compass DR a heading error of a few degrees walked to 100 deg
-        and the cloud left the map).
+        The kernel has its full ``kernel_bandwidth`` after a resampling whose weights held at
+        least as much as a cloud of ESS ``kernel_ess * n_particles``; after one whose weights
+        were more even, its variance ``h^2`` is scaled by their squared coefficient of variation
+        ``N / ESS - 1`` over that cloud's ``1 / kernel_ess - 1``
+        (:func:`~tangraph.filters.steps.kernel_bandwidth`). A filter that resamples at every
+        ping (``ess_threshold = 1``) then moves the calibrations by as much in all as one that
+        resamples at ``kernel_ess``; at the full bandwidth at every ping, it re-drew each
+        particle's calibration towards the cloud's every ``1 / (1 - a)`` pings, a walk of the
+        constant errors the model does not have (on Lake Caputh's compass DR a heading error of
+        a few degrees walked to 100 deg and the cloud left the map).
     kernel_floor : float
         Floor of the kernel's calibration spread, a fraction of the prior std of ``k`` and ``b``
         (keeps a cloud that has collapsed onto one value from staying there).

@@ -52,6 +52,7 @@ from tangraph.filters.steps import (
     evaluate,
     gated,
     innovation,
+    kernel_bandwidth,
     measure,
     predict,
     resample_if_needed,
@@ -121,6 +122,7 @@ def ipf_step(
         mean, cov = weighted_moments(weighted)
         return StepResult(weighted, mean, cov, ess, innovation=check)
     moments = state_moments(weighted)
+    bandwidth = kernel_bandwidth(config, ess, belief.n_particles)
     ancestors = resample(weighted.weights, config.resampler, rng=rng)
     parents, copies = np.unique(ancestors, return_counts=True)
     uniform = weighted.take(ancestors)
@@ -128,7 +130,7 @@ def ipf_step(
         mean, cov = weighted_moments(weighted)
         info = {"parents": parents, "copies": copies, "ancestors": ancestors, "auxiliary": False}
         uniform = shrink_calibration(
-            uniform, moments, config.kernel_bandwidth, _kernel_floor(model, config), rng=rng
+            uniform, moments, bandwidth, _kernel_floor(model, config), rng=rng
         )
         return StepResult(uniform, mean, cov, ess, resampled=True, info=info, innovation=check)
     # the children: their parents' previous states with the calibrations moved by the kernel
@@ -138,7 +140,7 @@ def ipf_step(
     # RMSE and took its mean final NEES from 2.3 to 228 over 20 runs: the doubled walk is the
     # cloud's only roughening in heading, and stays until a principled one replaces it.
     floor = _kernel_floor(model, config)
-    shrunk = shrink_calibration(uniform, moments, config.kernel_bandwidth, floor, rng=rng)
+    shrunk = shrink_calibration(uniform, moments, bandwidth, floor, rng=rng)
     previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
     children = predict(previous, ping, model, rng=rng)
     child_update = evaluate(children, ping, model, exponent=update.exponent)

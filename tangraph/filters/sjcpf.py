@@ -21,8 +21,9 @@ Each ping (SEEDS.md section 3):
 5. estimate (weighted mean and covariance), then resample when ESS < ``ess_threshold * N``
    (default 1.0: every ping, as the paper). The histories follow the particles through
    resampling (indexed by the resampling indices). The calibration kernel moves the DR's
-   constant errors only when the cloud had degenerated (``kernel_ess``, as the PF's): run
-   at every ping it walked the compass DR's heading error on Lake Caputh to 100 deg.
+   constant errors in proportion to what each ping's weights told (``kernel_ess``): at its
+   full bandwidth at every ping it walked the compass DR's heading error on Lake Caputh to
+   100 deg.
 
 **The signal gate.** A correlation between two depth sequences says where the vehicle is only
 as far as the sequences follow the terrain. Over a flat seafloor the measured depths along ``L``

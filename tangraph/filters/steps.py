@@ -44,6 +44,7 @@ __all__ = [
     "gated",
     "innovation",
     "jitter",
+    "kernel_bandwidth",
     "measure",
     "predict",
     "resample_belief",
@@ -293,19 +294,39 @@ def resample_if_needed(
 ) -> tuple[Belief, np.ndarray | None, float]:
     """Resample when ESS < ``ess_threshold * N``; returns the belief, the indices kept (None if
     it did not resample) and the ESS before. With a ``model``, the resampled calibrations are
-    moved by :func:`shrink_calibration` (``config.kernel_bandwidth``) when the cloud had
-    degenerated (ESS < ``kernel_ess * N``)."""
+    moved by :func:`shrink_calibration` at :func:`kernel_bandwidth`."""
     ess = effective_sample_size(belief.weights)
     if ess < config.ess_threshold * belief.n_particles:
-        degenerate = model is not None and ess < config.kernel_ess * belief.n_particles
-        moments = state_moments(belief) if degenerate else None
+        bandwidth = kernel_bandwidth(config, ess, belief.n_particles) if model is not None else 0.0
+        moments = state_moments(belief) if bandwidth > 0 else None
         new, index = resample_belief(belief, config.resampler, rng=rng)
-        if degenerate:
+        if bandwidth > 0:
             new = shrink_calibration(
-                new, moments, config.kernel_bandwidth, _kernel_floor(model, config), rng=rng  # type: ignore[arg-type]
+                new, moments, bandwidth, _kernel_floor(model, config), rng=rng  # type: ignore[arg-type]
             )
         return new, index, ess
     return belief, None, ess
+
+
+def kernel_bandwidth(config: ParticleConfig, ess: float, n: int) -> float:
+    """The calibration kernel's ``h`` after a resampling of ``n`` particles whose ESS was
+    ``ess``: ``config.kernel_bandwidth`` when the weights held at least as much as a cloud of
+    ESS ``kernel_ess * n``, else its variance ``h^2`` scaled by their squared coefficient of
+    variation ``n / ess - 1`` over that cloud's ``1 / kernel_ess - 1`` (the variance the kernel
+    adds is in proportion to what the weights told, whatever the resampling schedule: a
+    filter that resamples at every ping adds it in small steps that sum to a PF's).
+
+    >>> from tangraph.filters import PFConfig
+    >>> kernel_bandwidth(PFConfig(), 400.0, 1000), kernel_bandwidth(PFConfig(), 1000.0, 1000)
+    (0.3, 0.0)
+    >>> round(kernel_bandwidth(PFConfig(), 1000 / 1.25, 1000) ** 2, 4)  # a quarter of the variance
+    0.0225
+    """
+    excess = n / max(ess, 1e-300) - 1.0
+    full = 1.0 / config.kernel_ess - 1.0
+    if full <= 0.0:  # kernel_ess = 1: full at every resampling
+        return config.kernel_bandwidth
+    return config.kernel_bandwidth * float(np.sqrt(min(max(excess, 0.0) / full, 1.0)))
 
 
 def jitter(belief: Belief, std: float, *, rng: np.random.Generator) -> Belief:

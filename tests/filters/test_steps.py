@@ -148,28 +148,34 @@ def test_the_calibration_kernel_keeps_the_cloud_s_moments():
     assert estimate["speed_scale_std"] == pytest.approx(np.sqrt(cov[2, 2]), rel=0.01)
 
 
-def test_the_calibration_kernel_moves_a_degenerate_cloud_only():
-    """A cloud resampled at every ping while its weights are still even keeps each particle's
-    calibration (the resampling copies them); one that has degenerated (ESS below ``kernel_ess``
-    of N) has them moved by the kernel."""
+def test_the_calibration_kernel_moves_as_much_whether_resampled_at_every_ping_or_not():
+    """Resampled at every ping with weights of squared coefficient of variation ``v`` each, the
+    kernel moves each particle's calibration by a variance ``h^2 v`` per ping, so 500 such pings
+    (``v = 0.002``: one PF resampling's worth at ``kernel_ess = 0.5``) move it as one full kernel
+    does: each particle's calibration keeps a correlation of about ``a = sqrt(1 - h^2)`` with its
+    ancestor's. At the full bandwidth at every ping (the old rule) it keeps ``a^500``, about 0:
+    the constant errors walk."""
     rng = np.random.default_rng(3)
-    n = 2000
+    n, pings, cv2 = 4000, 500, 0.002
     belief = initial_belief([0.0, 0.0], 1.0, n, rng=rng).replace(
         calibration=rng.normal(0.0, [0.02, 0.05], (n, 2)))
     model = FilterModel.from_model(MODEL, MAP)
     every_ping = SJCPFConfig(n_particles=n)
     assert every_ping.ess_threshold == 1.0 and every_ping.kernel_ess == 0.5
-    start = belief.calibration.copy()
-    current = belief
-    for _ in range(200):  # even weights: resampled (ess_threshold 1) but never degenerate
-        weights = np.exp(0.01 * rng.standard_normal(n))
-        current = current.replace(log_weights=np.log(weights / weights.sum()))
+    start, current = belief.calibration.copy(), belief
+    for _ in range(pings):
+        log_w = np.sqrt(np.log1p(cv2)) * rng.standard_normal(n)  # lognormal: CV^2 = cv2
+        current = current.replace(log_weights=log_w - np.log(np.exp(log_w).sum()))
         current, index, ess = steps.resample_if_needed(current, every_ping, rng=rng, model=model)
         assert index is not None and ess > 0.99 * n
         start = start[index]
-        np.testing.assert_array_equal(current.calibration, start)
-    log_weights = np.where(np.arange(n) < n // 10, 0.0, -50.0)  # ESS n / 10: degenerate
+    a = np.sqrt(1.0 - every_ping.kernel_bandwidth**2)
+    for axis in range(2):
+        r = np.corrcoef(start[:, axis], current.calibration[:, axis])[0, 1]
+        assert abs(r - a) < 0.03, (axis, r, a)
+    # a degenerate cloud (ESS below kernel_ess N) gets the full kernel in one step
+    log_weights = np.where(np.arange(n) < n // 10, 0.0, -50.0)
     degenerate = belief.replace(log_weights=log_weights - np.log(n // 10))
+    assert steps.kernel_bandwidth(every_ping, 0.1 * n, n) == every_ping.kernel_bandwidth
     moved, index, ess = steps.resample_if_needed(degenerate, every_ping, rng=rng, model=model)
-    assert ess < 0.5 * n and index is not None
-    assert not np.allclose(moved.calibration, belief.calibration[index])
+    assert ess < 0.5 * n and not np.allclose(moved.calibration, belief.calibration[index])
