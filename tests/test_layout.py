@@ -23,6 +23,7 @@ TESTED_THROUGH: dict[str, tuple[str, ...]] = {
     "tangraph.experiments.scheduling": ("experiments/test_runner.py",),
     "tangraph.experiments.tables": ("experiments/test_runner.py",),
     "tangraph.experiments.tasks": ("experiments/test_runner.py",),
+    "tangraph.filters.pmf_bank": ("filters/test_pmf.py",),
     "tangraph.filters.pmf_grid": ("filters/test_pmf.py",),
     "tangraph.formats._checks": ("formats/test_csv_xyz.py", "formats/test_sontek.py", "formats/test_xtf.py"),
     "tangraph.graph.batch": ("graph/test_smoother.py",),

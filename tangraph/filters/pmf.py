@@ -29,17 +29,12 @@ its posterior has moved from their placement: the Gauss-Hermite rule of the post
 heading error grown by the heading walk since the last placement), each new node given the
 position density of the nearest old member shifted by the regression of the members' mean
 positions on the calibration (the posterior's position sensitivity to it, the walk since the
-placement counted in the calibration's spread). **Cells**: each node stands for a share of
-the calibration's variance about it (its cell: :func:`~tangraph.filters.pmf_bank._place_nodes`;
-the nodes are laid on the rest, so together they keep its mean and covariance), and what the
-cell's calibrations, and the heading walk since the placement, would do to the member's
-positions is convolved into its density as the member travels
-(:class:`~tangraph.filters.pmf_bank.CellSpread`); a member's evidence is then its cell's, and
-the evidence fit sharpens it back. Without cells, members whose nodes hold heading errors
-degrees apart (after the turns of a compass DR, ``heading_turn_std``) parted by tens of metres
-along a line with no point between them, and on a flat, poorly mapped shelf the terrain picked
-one with confidence (the caputh_replay study); a single node (``calibration_points`` 1 on an
-axis) stands for the whole axis. When one
+placement counted in the calibration's spread). The bank is for constant errors and a slow
+walk: a heading error that may change by degrees at every turn (``heading_turn_std``) spreads
+the nodes degrees apart after each turn, and their members' positions part by tens of metres
+along the next line, between which the bank holds no point; where the terrain cannot choose
+among them (a flat, poorly mapped shelf) it picks one with confidence. A particle filter
+follows such a heading error (the caputh_replay study). When one
 ping's evidence differs by more than ``_SHARP`` nats between the nodes and is Gaussian in the
 calibration, the predicted state's nodes are first re-placed at the posterior it gives and the
 ping weighed again (adaptive Gauss-Hermite quadrature). The tide posteriors of points mixed by
@@ -84,7 +79,7 @@ from tangraph.errors import TangraphError
 from tangraph.filters.belief import Belief
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import FilterModel, Ping, survey_pings
-from tangraph.filters.pmf_bank import CellSpread, _calibration_moved, _evidence_fit, _place_nodes
+from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
 from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _regrid
 from tangraph.filters.runner import check_run_inputs, step_timings
 from tangraph.filters.steps import _chi2_quantile, innovation
@@ -182,7 +177,7 @@ class PMFConfig:
 def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig) -> PointMass:
     cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
     cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
-    nodes, log_weight, cell = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
+    nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
     s = navigation.initial_position_std
     axes = grid.axes(np.eye(2) * s**2)
     h = (grid.n - 1) / 2.0
@@ -195,8 +190,7 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
                      density - log_total - np.log(area), np.full(density.shape, navigation.tide),
                      navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
-                     (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape),
-                     cells=CellSpread(cell))
+                     (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape))
 
 
 def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
@@ -205,11 +199,7 @@ def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     step = rotate(-state.nodes[:, 1], np.broadcast_to(ping.increment, state.centres.shape))
     state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
     state.pending = state.pending + model.motion.noise_covariance(ping)
-    walk = model.motion.walk_variance(ping)
-    state.walk += walk
-    if state.cells is not None:  # the calibration the members stand for but do not hold
-        state.cells, spread = state.cells.step(ping.increment, walk, state.prior[0])
-        state.pending = state.pending + spread
+    state.walk += model.motion.walk_variance(ping)
     state.tide, state.tide_var, state.tide_drift = predict_tide(state.tide, state.tide_var, state.tide_drift,
                                                                 model.navigation, ping)
     inv = np.linalg.inv(state.axes)
@@ -282,7 +272,7 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
         if not live.any() or np.ptp(evidence[live]) <= _SHARP:
             return trial, check, update
         mean, cov, concave = _evidence_fit(trial.nodes, trial.member_log_mass() - trial.node_base,
-                                           *trial.prior, None if trial.cells is None else trial.cells.cell)
+                                           *trial.prior)
         if not concave:  # not a Gaussian in the calibration: the nodes cannot be aimed by it
             return trial, check, update
         cov[1, 1] += state.walk
@@ -318,7 +308,7 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
                      np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
                      navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
                      (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit,
-                     TideDrift.start(navigation, (1, n, n)), CellSpread(cal_cov))
+                     TideDrift.start(navigation, (1, n, n)))
 
 
 @dataclasses.dataclass(eq=False)

@@ -16,7 +16,7 @@ import scipy.fft
 from scipy import ndimage
 
 from tangraph.filters.likelihood import log_normalise
-from tangraph.filters.pmf_bank import CellSpread, _evidence_fit, _log_gaussian, _place_nodes
+from tangraph.filters.pmf_bank import _evidence_fit, _log_gaussian, _place_nodes
 from tangraph.filters.tide import TideDrift
 from tangraph.sensors.misfit import MisfitScale
 
@@ -54,9 +54,7 @@ class PointMass:
     its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on;
     ``misfit`` the local misfit scale the density shares (:mod:`tangraph.sensors.misfit`; None:
     the stated errors trusted); ``tide_drift`` the drifting part of the points' tide posteriors
-    (:mod:`tangraph.filters.tide`, its mean ``(M, n, n)``; None: a constant tide); ``cells``
-    what the calibration each member stands for does to its positions
-    (:class:`~tangraph.filters.pmf_bank.CellSpread`; None: nothing)."""
+    (:mod:`tangraph.filters.tide`, its mean ``(M, n, n)``; None: a constant tide)."""
 
     nodes: np.ndarray
     node_base: np.ndarray
@@ -71,7 +69,6 @@ class PointMass:
     placed: tuple[np.ndarray, np.ndarray]
     misfit: MisfitScale | None = None
     tide_drift: TideDrift | None = None
-    cells: CellSpread | None = None
     # what the methods below derive from the fields (read-only arrays), each dropped when a field
     # it depends on (_DEPENDS) is set: the fields are replaced, never changed in place
     _cache: dict[str, np.ndarray | tuple[np.ndarray, ...]] = dataclasses.field(
@@ -169,8 +166,7 @@ class PointMass:
     def calibration(self) -> tuple[np.ndarray, np.ndarray]:
         """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the prior at
         placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`)."""
-        return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior,
-                             None if self.cells is None else self.cells.cell)[:2]
+        return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior)[:2]
 
 
 def _offsets(n: int, axes: np.ndarray) -> np.ndarray:
@@ -371,14 +367,12 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
     shift = np.zeros((len(nodes), 2))
     log_weight = np.log(np.maximum(weight, 1e-300))
     node_base = state.node_base  # the nodes stay: so does the evidence since their placement
-    cells = state.cells
     if estimate:
         own_mean, own_cov = state.calibration()
         own_cov = own_cov.copy()
         own_cov[1, 1] += state.walk
         cal_mean, cal_cov = (own_mean, own_cov) if target is None else target
-        nodes, log_weight, cell = _place_nodes(cal_mean, cal_cov, config.calibration_points)
-        cells = CellSpread(cell)
+        nodes, log_weight = _place_nodes(cal_mean, cal_cov, config.calibration_points)
         if target is not None:  # mass = weight x own posterior / target's at each node
             log_weight = log_weight + _log_gaussian(nodes, own_mean, own_cov) \
                 - _log_gaussian(nodes, cal_mean, cal_cov)
@@ -427,4 +421,4 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
     return PointMass(nodes, node_base, new_centres, axes, density - log_total - np.log(area), tide,
                      state.tide_var, np.zeros((2, 2)), 0.0 if estimate else state.walk, prior, placed,
                      state.misfit, None if state.tide_drift is None else
-                     dataclasses.replace(state.tide_drift, mean=drift[0]), cells)
+                     dataclasses.replace(state.tide_drift, mean=drift[0]))

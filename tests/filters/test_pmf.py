@@ -40,11 +40,9 @@ def test_the_pmf_matches_the_kalman_filter(seed, tide_sd):
 
 def test_the_pmf_with_a_speed_scale_matches_the_exact_posterior():
     """A DVL reading 4 % fast (prior std of k 3 %): the bank's position and k against the exact
-    mixture of Kalman filters over quadrature nodes of k. The bank's error is its quadrature,
-    its Gaussian re-placements and its cells (each node stands for a share of the calibration,
-    whose evidence it averages: the fit sharpens it back, not quite): in seeds 5-6 at pings 10,
-    30, 59 at most 0.07 std on the position, 6 % on its variance, 0.4 std on k, and k's std
-    between 0.996 and 1.106 times the exact (the 3 x 3 default)."""
+    mixture of Kalman filters over quadrature nodes of k. The bank's error is its quadrature and
+    its Gaussian re-placements: in seeds 5-6 at pings 10, 30, 59 at most 0.13 std on the
+    position, 8 % on its variance, 0.33 std on k and 8 % on its std (the 3 x 3 default)."""
     q, sigma, p0, scale_sd = 0.5, 1.0, 30.0, 0.03
     survey = linear_gaussian_run(5, k=60, q=q, sigma=sigma, p0=p0, scale=0.04)
     x_kf, p_kf, k_kf, k_sd = kalman_mixture(survey, q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
@@ -55,7 +53,7 @@ def test_the_pmf_with_a_speed_scale_matches_the_exact_posterior():
     np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.1)
     calibration = track.meta["calibration"]
     assert abs(calibration["speed_scale"] - k_kf) < 0.4 * k_sd, (calibration, k_kf)
-    assert 0.97 * k_sd < calibration["speed_scale_std"] < 1.15 * k_sd, (calibration, k_sd)
+    np.testing.assert_allclose(calibration["speed_scale_std"], k_sd, rtol=0.1)
     assert k_sd < 0.5 * scale_sd  # the soundings did teach the filter the scale
 
 

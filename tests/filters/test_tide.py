@@ -70,7 +70,6 @@ def test_every_filter_carries_its_tide_posterior_through_the_drift(drift):
                                [cov[0, 0], cov[0, 1], cov[1, 1]], rtol=1e-12)
 
     class State:  # what the point-mass filter's prediction reads and writes
-        cells = None
         centres = np.zeros((1, 2))
         nodes = np.zeros((1, 2))
         pending = np.zeros((2, 2))
