@@ -302,7 +302,7 @@ class _Layout:
         if self.tide is not None:
             v[self.tide] = model.tide_std**2
         if self.drift is not None:
-            v[self.drift] = (model.tide_drift or (0.0, 1.0))[0] ** 2
+            v[self.drift] = (model.tide_drift_std or 0.0) ** 2
         return v
 
     def scale(self, model: NavigationModel, walk: np.ndarray) -> np.ndarray:
@@ -337,7 +337,7 @@ def _transitions(survey: Survey, model: NavigationModel, layout: _Layout) -> tup
     if layout.drift is not None:
         keep = model.tide_memory(dt)
         f[:, layout.drift, layout.drift] = keep
-        q[:, layout.drift, layout.drift] = (1.0 - keep**2) * (model.tide_drift or (0.0, 1.0))[0] ** 2
+        q[:, layout.drift, layout.drift] = (1.0 - keep**2) * (model.tide_drift_std or 0.0) ** 2
     return f, q
 
 

@@ -65,7 +65,7 @@ def predict_tide(tide, tide_var: float, drift: TideDrift | None, navigation: Nav
         return tide, tide_var, drift
     keep = float(navigation.tide_memory(ping.dt))
     lose = 1.0 - keep
-    q = (navigation.tide_drift or (0.0, 1.0))[0] ** 2 * (1.0 - keep**2)
+    q = (navigation.tide_drift_std or 0.0) ** 2 * (1.0 - keep**2)
     variance = tide_var - 2.0 * lose * drift.cross + lose**2 * drift.var + q
     moved = TideDrift(keep * drift.mean, keep * drift.cross - keep * lose * drift.var + q,
                       keep**2 * drift.var + q)
