@@ -91,7 +91,7 @@ from tangraph.survey import Survey
 from tangraph.track import Track
 from tangraph.validation import check_count, check_number
 
-__all__ = ["PMFConfig", "point_mass_filter"]
+__all__ = ["PMFConfig", "point_mass_filter", "start_run"]
 
 _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
@@ -411,6 +411,23 @@ def _check_memory(config: PMFConfig, n_beams: int) -> None:
             )
 
 
+def start_run(survey: Survey, bathymetry: BathymetryMap, navigation: NavigationModel,
+              config: PMFConfig) -> tuple[_Run, PointMass, list[Ping]]:
+    """A run of the filter over ``survey`` under ``navigation`` (a checked model): the run, its
+    state before the first ping (the start's prior) and every ping. ``state = run.step(state,
+    pings[k])`` for ``k = 0, 1, ...`` is the filter; the online graph's acquisition
+    (:mod:`tangraph.graph.acquisition`) steps it so."""
+    _check_memory(config, survey.beam_depth.shape[1])
+    filter_model = FilterModel.from_model(navigation, bathymetry)
+    grid = _Grid(config, config.min_spacing)
+    estimate = any(c > 1 and s > 0
+                   for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
+    state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
+    state.misfit = filter_model.misfit_prior()
+    run = _Run(bathymetry, navigation, filter_model, config, grid, slope_moment(bathymetry), estimate)
+    return run, state, survey_pings(survey, bathymetry, navigation)
+
+
 def point_mass_filter(
     survey: Survey,
     bathymetry: BathymetryMap,
@@ -440,21 +457,12 @@ def point_mass_filter(
     check_run_inputs(survey, bathymetry, rng, where="pmf", rng_optional=True)
     config = config or PMFConfig()
     navigation = survey_navigation_model(survey, model, where="pmf", bathymetry=bathymetry)
-    _check_memory(config, survey.beam_depth.shape[1])
-    filter_model = FilterModel.from_model(navigation, bathymetry)
-    grid = _Grid(config, config.min_spacing)
-    slope = slope_moment(bathymetry)
-    estimate = any(c > 1 and s > 0
-                   for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
-    state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
-    state.misfit = filter_model.misfit_prior()
-    run = _Run(bathymetry, navigation, filter_model, config, grid, slope, estimate)
+    run, state, pings = start_run(survey, bathymetry, navigation, config)
     k_total = survey.n_pings
     mean = np.empty((k_total, 2))
     cov = np.full((k_total, 3, 3), np.nan)
     seconds = np.empty(k_total)
     started = _time.perf_counter()
-    pings = survey_pings(survey, bathymetry, navigation)
     for ping in tqdm(pings, disable=not progress, desc="pmf", unit="ping", leave=False):
         t0 = _time.perf_counter()
         state = run.step(state, ping)

@@ -194,14 +194,16 @@ class OnlineConfig:
     terrain : {"fixes", "soundings"}
         What the online graph weighs of the terrain once it has found the vehicle: ``"fixes"``,
         a window's fix (``front_end``) at every window end (default); ``"soundings"``, every
-        sounding (:mod:`tangraph.graph.online_terrain`). Once the fix policy has used a fix and is
-        not lost, and while the map is near its tangent plane over the belief, the soundings of
-        each key's pings enter iSAM2 as one terrain factor on that key, the calibration and the
-        tide (a variable then), relinearised with them. The windows are then searched as checks
-        only (``FixStatus.CHECKED``), and the windows and their fixes take over again when a
-        check says the prediction is wrong, the belief grows too wide for the linearisation, or
-        most pings stop fitting the map. Only with ``front_end = "tap"``; the batch smoother's
-        forward pass always weighs fixes (``BatchConfig.smoother_terrain`` chooses its terrain).
+        sounding (:mod:`tangraph.graph.online_terrain`). Once the vehicle is found (``acquire``),
+        and while the map is near its tangent plane over the belief, the soundings of each key's
+        pings enter iSAM2 as one terrain factor on that key, the calibration and the tide (a
+        variable then). The windows are then searched as checks only (``FixStatus.CHECKED``),
+        and take over again when a check says the prediction is wrong, the belief grows too wide
+        for the linearisation, or most pings stop fitting the map. Only with ``front_end =
+        "tap"``; the batch smoother's forward pass weighs fixes (``BatchConfig.smoother_terrain``).
+    acquire : {"windows", "pmf"}
+        How the online graph finds the vehicle to track on soundings: TAP windows and the fix policy
+        (default) or a point-mass filter (:mod:`tangraph.graph.acquisition`; only with soundings).
     front_end_pings : int
         Pings per window of the point-mass front end, so only with ``front_end = "pmf"`` (another
         value with ``"tap"`` is refused: it would not be used; default 3: on three seeds each of
@@ -248,6 +250,7 @@ class OnlineConfig:
 
     front_end: Literal["tap", "pmf"] = "tap"
     terrain: Literal["fixes", "soundings"] = "fixes"
+    acquire: Literal["windows", "pmf"] = "windows"
     front_end_pings: int = _FRONT_END_PINGS
     relinearize_threshold: float = 0.005
     relinearize_position: float = 1.0
@@ -260,6 +263,9 @@ class OnlineConfig:
     def __post_init__(self) -> None:
         _choice(self, "front_end", ("tap", "pmf"))
         _choice(self, "terrain", ("fixes", "soundings"))
+        _choice(self, "acquire", ("windows", "pmf"))
+        if self.acquire == "pmf" and self.terrain != "soundings":
+            raise TangraphError("OnlineConfig.acquire = 'pmf' tracks on soundings: set terrain = 'soundings'")
         if self.terrain == "soundings" and self.front_end != "tap":
             raise TangraphError("OnlineConfig: terrain = 'soundings' takes over from TAP windows once the "
                                 f"vehicle is found, not from front_end = {self.front_end!r}: set "

@@ -24,7 +24,7 @@ from tangraph.graph.calibration import (
 from tangraph.graph.factors import between_noise, pose_prior_factor, position_fix_factor
 from tangraph.sensors import DeadReckoningModel, increment_covariance, odometry
 
-__all__ = ["PoseGraph", "fix_windows", "increments", "key_indices", "window_ends"]
+__all__ = ["PoseGraph", "fix_windows", "increments", "key_indices", "translate_error", "window_ends"]
 
 _MAX_PAD = 2_000_000  # pairs x longest pair held at once by increment_covariance
 
@@ -338,3 +338,19 @@ def _describe(group: list[int], graph: PoseGraph) -> str:
     first, last = group[0], group[-1]
     where = f"ping {first}" if first == last else f"pings {first}..{last} ({len(group)} key poses)"
     return f"{where} at t = {times[first]:.1f}..{times[last]:.1f} s"
+
+
+def translate_error(exc: Exception, graph: PoseGraph) -> Exception:
+    """A TangraphError naming the unconstrained poses for GTSAM's indeterminant-system error."""
+    text = str(exc)
+    if "ndetermina" not in text:
+        return exc
+    try:
+        graph.check_determined()
+    except TangraphError as named:
+        return named
+    import re
+
+    near = re.search(r"near variable\s+(\d+)", text)
+    where = f" near key pose {near.group(1)} (ping {near.group(1)})" if near else ""
+    return TangraphError(f"the pose graph is indeterminant (ill-conditioned){where}")

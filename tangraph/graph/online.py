@@ -11,8 +11,8 @@ of the latest key (jointly with the DR's calibration) only is read. iSAM2 runs i
 incremental fixed-lag smoother, which keeps the newest ``GraphConfig.online.isam_window`` key poses and
 the calibration and marginalises the older poses, so the work per update stays bounded as the
 mission grows: without it each new fix moves the whole past and the update time grows with the
-chain. Between key poses the output
-is the latest key estimate composed with the DR increment, its covariance grown by the increment's.
+chain. Between key poses the output is the latest key estimate composed with the DR increment, its
+covariance grown by the increment's (while tracking on soundings, updated by those since the key).
 What the navigator does with a fix beyond the gate (use it, hold it for confirmation, drop it),
 and how it finds out that it is lost and relocalises, is decided by the pure fix policy
 (:mod:`tangraph.graph.policy`); :mod:`tangraph.graph.lost` puts each window to it and executes
@@ -23,7 +23,8 @@ With ``GraphConfig.online.front_end = "pmf"`` a window's factor comes from the p
 the tide, which the graph then holds as a variable beside the calibration, its windows share no
 ping, and an ambiguous window is held and grown by the next pings. With
 ``GraphConfig.online.terrain = "soundings"`` the navigator tracks on every sounding once it has
-found the vehicle (:mod:`tangraph.graph.online_terrain`).
+found the vehicle (:mod:`tangraph.graph.online_terrain`), and with ``acquire = "pmf"`` a point-mass
+filter finds it (:mod:`tangraph.graph.acquisition`).
 """
 
 from __future__ import annotations
@@ -34,9 +35,10 @@ import gtsam
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.fix_records import FixRecord, FixStatus
-from tangraph.geometry import wrap_near
+from tangraph.fix_records import FixRecord
+from tangraph.geometry import to_dr_frame, wrap_near
 from tangraph.graph import online_fixes
+from tangraph.graph.acquisition import Acquisition
 from tangraph.graph.calibration import (
     CALIBRATION,
     TIDE,
@@ -49,7 +51,7 @@ from tangraph.graph.calibration import (
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.fixes import FixOutcome, LostEpisode, check_tide_drift, fix_drift
-from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices
+from tangraph.graph.keyposes import PoseGraph, fix_windows, increments, key_indices, translate_error
 from tangraph.graph.lost import take_window
 from tangraph.graph.online_terrain import OnlineTerrain
 from tangraph.graph.policy import FixPolicy, PolicyState
@@ -98,7 +100,7 @@ class GraphNavigator:
                                                                            bathymetry=bathymetry))
         self.white = self.model.dead_reckoning
         self.fix_drift = fix_drift(self.model, self.config, survey.time)  # what widens each fix's window
-        # the map error each sounding shares with the survey's others: it widens every fix
+        # (the map error each sounding shares with the survey's others: it widens every fix)
         self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)
         c = self.config
         n = survey.n_pings
@@ -111,8 +113,7 @@ class GraphNavigator:
         if c.online.front_end == "pmf":
             self._terrain = online_fixes.window_terrain(survey, bathymetry, self.model)
             self._window_start = 0  # the first ping of the front end's next window
-        # the point-mass front end's windows (and the soundings while tracking) tell the tide too:
-        # the graph holds it (a constant, never marginalised), so what it learnt sharpens the next
+        # the point-mass windows and tracking tell the tide: the graph holds it (never marginalised)
         calibration_std = graph_calibration_std(self.model)
         self.tide = c.online.learns_tide and calibration_std is not None and self.model.tide_std > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
@@ -122,6 +123,7 @@ class GraphNavigator:
         self.tide_steps: list[int] = []
         self._last_outcome: FixOutcome | None = None
         self.terrain = OnlineTerrain.of(self) if c.online.terrain == "soundings" else None
+        self.acquisition = Acquisition.of(self) if c.online.acquire == "pmf" else None
         self.keys = key_indices(survey.time, self.fix_ends, c.key_interval)
         self._is_end = np.isin(np.arange(n), self.fix_ends)
         self._is_key = np.isin(np.arange(n), self.keys)
@@ -149,7 +151,7 @@ class GraphNavigator:
         self.isam = self.smoother.getISAM2()
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
-        self.index = -1  # last ping processed
+        self.index, self._extra_iterations = -1, 0  # the last ping processed; iSAM2 steps to add
         self._key_pose = np.zeros(3)  # DR frame
         self._key_joint = np.zeros((5, 5))  # (pose in DR-frame world coordinates, c)
         self._key_of = -1  # the key whose estimate _key_pose and _key_joint hold
@@ -210,12 +212,23 @@ class GraphNavigator:
             raise TangraphError(f"the survey has {self.survey.n_pings} pings; all have been processed")
         if fix is not None and int(fix.index) != k:
             raise TangraphError(f"step of ping {k} was given a fix of ping {fix.index}")
+        acquisition = self._acquiring()
+        density = handover = None
+        if acquisition is not None:  # the point-mass filter finds the vehicle (tangraph.graph.acquisition)
+            density = acquisition.step(k)
+            if k > 0 and self._is_key[k]:
+                handover = acquisition.ready(self, k)
         if k == 0:
             self._start(fix)
         elif self._is_key[k] or fix is not None:
-            self._key_step(k, fix)
+            self._key_step(k, fix, handover)
         else:
-            self.pose[k], self.covariance[k] = self.predicted(k)
+            now = self.terrain.filtered(self, k) if self.terrain is not None else None
+            self.pose[k], self.covariance[k] = self.predicted(k) if now is None else now
+        if density is not None and self._acquiring() is not None:  # the filter's belief is the output
+            self.pose[k, :2] = density[0]
+            self.covariance[k, :2, :] = self.covariance[k, :, :2] = 0.0
+            self.covariance[k, :2, :2] = density[1]
         self.index = k
         self.step_times.append(_time.perf_counter() - started)
         return self.pose[k].copy(), self.covariance[k].copy()
@@ -241,30 +254,53 @@ class GraphNavigator:
         joint[2, 2] = heading_std**2
         if self.graph.calibration_std is not None:
             joint[3:, 3:] = np.diag(self.graph.calibration_std**2)
-        take_window(self, 0, dr, joint, fix)
+        if self.acquisition is None or fix is not None:
+            take_window(self, 0, dr, joint, fix)
         self._update(0)
         self._rebase(0)
 
-    def _key_step(self, k: int, fix: TerrainFix | None) -> None:
+    def _key_step(self, k: int, fix: TerrainFix | None, handover=None) -> None:
+        """The key pose of ping ``k``: its odometry, the terrain factor or window ending there
+        (``fix``: the one given to :meth:`step`), or the acquisition's ``handover`` ``(position,
+        covariance)``, and the iSAM2 update."""
         prev = self.graph.keys[-1]
+        acquisition = self._acquiring()
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
-        self._new_values.insert(k, gtsam.Pose2(*pose))
+        start = pose.copy()
+        if acquisition is not None:  # linearised at the filter's mean: the basin the exact posterior chose
+            start[:2] = to_dr_frame(acquisition.mean, self.calibration, self.origin)
+        self._new_values.insert(k, gtsam.Pose2(*start))
         grows = self.config.online.front_end == "pmf" and self._is_end[k] and fix is None
         if grows:
             self.window_first[k] = self._window_start
+        if acquisition is not None:  # the graph tracks from the filter's belief only
+            acquisition.before_key(self, prev)
         if self.terrain is not None:  # every sounding once the vehicle is found
             self.terrain.key_step(self, prev, k)
-        window = self.terrain is None or fix is not None or self.terrain.window(self, k, pose, joint)
+        # a start of tracking from the filter's belief is vetted by the filter after the update
+        started = acquisition is not None and self.terrain is not None and self.terrain.tracking
+        if acquisition is not None and handover is not None and not started:
+            acquisition.hand_over(self, k, handover)
+        if acquisition is not None:  # no window: the point-mass filter has the pings
+            window = fix is not None
+        else:
+            window = self.terrain is None or fix is not None or self.terrain.window(self, k, pose, joint)
         extra = take_window(self, k, pose, joint, fix) if window else 0.0
         if grows:
-            self._grow_window(k)
+            online_fixes.grow_window(self, k)
             if self.tide:
                 online_fixes.tide_step(self, k)
         self._new_factors.add(self.graph.add_odometry(prev, k, self._delta[k], self._delta_cov[k],
                                                       break_std=extra))
         self._update(k, self._odometry_only(prev, extra, joint))
+        if acquisition is not None and started:
+            acquisition.vet(self, k, handover)
         self._rebase(k)
+
+    def _acquiring(self) -> Acquisition | None:
+        """The point-mass filter while it is finding the vehicle (None otherwise)."""
+        return self.acquisition if self.acquisition is not None and self.acquisition.active else None
 
     def _odometry_only(self, prev: int, extra: float, predicted: np.ndarray) -> np.ndarray | None:
         """The new key's joint covariance with the calibration when the odometry from key ``prev``
@@ -278,16 +314,6 @@ class GraphNavigator:
         # between_noise's floors, isotropic in position: the same in the world as in the key's frame
         floor = [self.graph.min_std**2, self.graph.min_std**2, self.graph.min_heading_std**2, 0.0, 0.0]
         return predicted + np.diag(floor)
-
-    def _grow_window(self, k: int) -> None:
-        """The point-mass front end's next window: the pings after ``k``, or, when the window
-        ending at ``k`` was multimodal or uninformative and ``GraphConfig.fixes.n_pings`` allows, the
-        same window grown by the next ``front_end_pings`` pings (its pings are not lost: one
-        window's soundings together may settle what a few could not)."""
-        record = self.fixes[-1] if self.fixes and self.fixes[-1].index == k else None
-        held = record is not None and record.status in (FixStatus.MULTIMODAL, FixStatus.UNINFORMATIVE)
-        if not (held and k + self.config.spacing - self._window_start + 1 <= self.config.fixes.n_pings):
-            self._window_start = k + 1
 
     def _rebase(self, k: int) -> None:
         """Make the pings up to the next planned key take their increments from key ``k`` (a
@@ -311,12 +337,6 @@ class GraphNavigator:
     def _fix_factor(self, key: int, fix) -> gtsam.NonlinearFactor | None:
         return online_fixes.fix_factor(self, key, fix)
 
-    def _misfit_noise(self, k: int, sigma: float) -> float:
-        return online_fixes.misfit_noise(self, k, sigma)
-
-    def _laid(self, k: int, pose) -> np.ndarray | None:
-        return online_fixes.laid_poses(self, k, pose)
-
     def _grown(self, fix: TerrainFix, laid, joint) -> TerrainFix:
         return online_fixes.grown(self, fix, laid, joint)
 
@@ -336,8 +356,12 @@ class GraphNavigator:
         self.smoother.setSmootherLag(self._lag())
         try:
             self.smoother.update(self._new_factors, self._new_values, stamps, self._remove)
+            for _ in range(self._extra_iterations):
+                self.smoother.update(gtsam.NonlinearFactorGraph(), gtsam.Values(),
+                                     gtsam.FixedLagSmootherKeyTimestampMap(), [])
         except RuntimeError as exc:
-            raise _translate(exc, self.graph) from None
+            raise translate_error(exc, self.graph) from None
+        self._extra_iterations = 0
         self._new_factors = gtsam.NonlinearFactorGraph()
         self._new_values = gtsam.Values()
         self._remove = []
@@ -417,6 +441,7 @@ class GraphNavigator:
                          "steps": list(self.tide_steps)}}
                if self.tide else {}),
             **({"terrain": self.terrain.meta()} if self.terrain is not None else {}),
+            **({"acquisition": self.acquisition.meta()} if self.acquisition is not None else {}),
             "config": self.config.as_dict(),
             "model": self.model.as_dict(),
         }
@@ -438,22 +463,6 @@ class GraphNavigator:
         }
         return Track(time=self.survey.time[:done], pose=self.pose[:done], covariance=self.covariance[:done],
                      method="isam2", timings=timings, meta=self.meta(), fixes=tuple(self.fixes))
-
-
-def _translate(exc: Exception, graph: PoseGraph) -> Exception:
-    """A TangraphError naming the unconstrained poses for GTSAM's indeterminant-system error."""
-    text = str(exc)
-    if "ndetermina" not in text:
-        return exc
-    try:
-        graph.check_determined()
-    except TangraphError as named:
-        return named
-    import re
-
-    near = re.search(r"near variable\s+(\d+)", text)
-    where = f" near key pose {near.group(1)} (ping {near.group(1)})" if near else ""
-    return TangraphError(f"the pose graph is indeterminant (ill-conditioned){where}")
 
 
 def navigate_online(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,

@@ -43,8 +43,9 @@ if TYPE_CHECKING:
     from tangraph.sensors import NavigationModel
     from tangraph.survey import Survey
 
-__all__ = ["MISFIT_WINDOWS", "TIDE_STEP_AGREE", "TIDE_STEP_PINGS", "fix_factor", "grown", "judge",
-           "laid_poses", "misfit_noise", "posterior_window_fix", "tide_step", "window_terrain"]
+__all__ = ["MISFIT_WINDOWS", "TIDE_STEP_AGREE", "TIDE_STEP_PINGS", "fix_factor", "grow_window", "grown",
+           "judge", "laid_poses", "misfit_noise", "position_tide_prior", "posterior_window_fix", "tide_step",
+           "window_terrain"]
 
 log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, one logger for them
 #: The tide steps when the point-mass front end's windows find one depth fault (offsets within
@@ -94,13 +95,10 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
         return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
 
 
-def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> WindowFix:
-    """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
-    ``poses`` of its pings, on the prediction ``N(world, cov)``."""
-    first = nav.window_first[k]
-    patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.fixes.tap.min_soundings,
-                         poses=poses)
-    likelihood, variance, map_variance, slope = nav._terrain
+def position_tide_prior(nav: GraphNavigator, k: int, world, cov) -> tuple[np.ndarray, np.ndarray]:
+    """The graph's prediction of ping ``k``'s world position and of the tide, mean ``(3,)`` and
+    covariance ``(3, 3)``, from its world prediction ``N(world, cov)``: with the tide the graph
+    holds and how it goes with the position, or else the model's tide prior, apart from it."""
     mean, prior = np.append(world[:2], nav.model.tide), np.zeros((3, 3))
     prior[:2, :2], prior[2, 2] = cov[:2, :2], nav.model.tide_std**2
     if nav.tide:  # the graph's belief in the tide, and how it goes with the position
@@ -113,6 +111,17 @@ def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> Wind
         mean[2] = nav._tide_mean
         prior[:2, 2] = prior[2, :2] = tide[:2, 2]
         prior[2, 2] = tide[2, 2]
+    return mean, prior
+
+
+def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> WindowFix:
+    """The point-mass front end's fix of the window ending at ping ``k``, laid with the world
+    ``poses`` of its pings, on the prediction ``N(world, cov)``."""
+    first = nav.window_first[k]
+    patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.fixes.tap.min_soundings,
+                         poses=poses)
+    likelihood, variance, map_variance, slope = nav._terrain
+    mean, prior = position_tide_prior(nav, k, world, cov)
     return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
                          None if map_variance is None else map_variance[patch.ping, patch.beam],
                          slope, mean, prior, tide_factor=nav.tide)
@@ -209,3 +218,14 @@ def tide_step(nav: GraphNavigator, k: int) -> None:
     log.info("graph: the tide stepped at ping %d: windows over %d pings %.2f m off the held tide",
              k, k - nav._faults[0][0] + 1, float(np.median(offsets)))
     nav._faults = []
+
+
+def grow_window(nav: GraphNavigator, k: int) -> None:
+    """The point-mass front end's next window: the pings after ``k``, or, when the window
+    ending at ``k`` was multimodal or uninformative and ``GraphConfig.fixes.n_pings`` allows, the
+    same window grown by the next ``front_end_pings`` pings (its pings are not lost: one
+    window's soundings together may settle what a few could not)."""
+    record = nav.fixes[-1] if nav.fixes and nav.fixes[-1].index == k else None
+    held = record is not None and record.status in (FixStatus.MULTIMODAL, FixStatus.UNINFORMATIVE)
+    if not (held and k + nav.config.spacing - nav._window_start + 1 <= nav.config.fixes.n_pings):
+        nav._window_start = k + 1

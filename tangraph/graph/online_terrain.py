@@ -6,9 +6,11 @@ vehicle, and once it is found the navigator *tracks* it on every sounding.
 
 **When it tracks.** The fix policy is not lost and has used a unimodal fix (a fix used as one of
 several places would lead the linearised soundings into its basin), and the map is near its
-tangent plane over the belief: over the key's 2-sigma position ellipse the map's depth under the
-new pings' footprints departs from its linearisation by less than the soundings' noise
-(:func:`_nonlinearity`), so a Gauss-Newton step on them is sound.
+tangent plane over the belief: over each new ping's 2-sigma position ellipse (the key's belief
+carried to the ping by the DR) the map's depth under its footprints departs from its
+linearisation by less than the soundings' noise (:func:`_nonlinearity`), so a Gauss-Newton step
+on them is sound. (Started, the update that adds the first factor is iterated:
+``START_ITERATIONS``.)
 
 **The factor.** At each key step the soundings of the pings hung from the previous key (its own
 ping and those before the new key, less any ping a window took) enter iSAM2 as one factor on
@@ -42,7 +44,8 @@ tracking waits for a new unimodal fix the policy uses:
   belief the linearised soundings have led into a wrong basin still fits them; the check finds
   it. The policy then takes that window (its pings are counted twice there);
 - the map's departure from its tangent plane grows beyond ``NONLINEAR_STOP`` times the noise (the
-  terrain told too little to keep the belief narrow for it);
+  terrain told too little to keep the belief narrow for it; pings with no sounding on the map
+  tell nothing and do not end it: the DR carries the belief over them);
 - more than half of the pings of ``MISFIT_KEYS`` keys in a row fail the ping test.
 """
 
@@ -58,7 +61,7 @@ from scipy import stats
 
 from tangraph.fix_records import FixStatus
 from tangraph.geometry import gate_threshold
-from tangraph.graph.calibration import CALIBRATION, world_covariance
+from tangraph.graph.calibration import CALIBRATION
 from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
 from tangraph.sensors import sounding_variances
 
@@ -66,7 +69,8 @@ if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
 
 __all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_SIGMAS", "NONLINEAR_STOP",
-           "SOUNDING_GATE", "OnlineTerrain"]
+           "SOUNDING_GATE", "START_ITERATIONS", "OnlineTerrain",
+           "tangent_departure"]
 
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
@@ -83,6 +87,11 @@ CHECK_PROBABILITY = 0.9
 _SURPRISE = float(stats.chi2.ppf(CHECK_PROBABILITY, 2))
 #: A sounding beyond this many sigma of its innovation is left out (two-sided 0.999 of a normal).
 SOUNDING_GATE = 3.29
+#: Further iSAM2 updates (Gauss-Newton steps: one per update) when tracking starts: its first
+#: factor is linearised at a belief that may be metres off, far for one step
+START_ITERATIONS = 5
+#: Gauss-Newton iterations of the output between keys (:meth:`OnlineTerrain.filtered`)
+FILTERED_ITERATIONS = 3
 _USED = (FixStatus.ACCEPTED, FixStatus.CONFIRMED)
 
 
@@ -105,6 +114,7 @@ class OnlineTerrain:
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
     found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
     _judged: object = None  # the navigator's latest window outcome, looked at for that
+    _first: tuple = (None, 0, 0)  # the factor of the latest episode's first key, its pings and soundings
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> OnlineTerrain:
@@ -168,15 +178,20 @@ class OnlineTerrain:
             return
         pings = np.arange(first, k)
         terrain = _terrain(nav, prev, pings, self.variance[pings])
-        bent = _nonlinearity(nav, terrain)
-        if not bent <= (NONLINEAR_STOP if self.tracking else 1.0):
+        bent = _nonlinearity(nav, terrain, prev, pings)
+        # (pings with no sounding on the map tell nothing: tracking carries the DR over them)
+        if not (bent <= (NONLINEAR_STOP if self.tracking else 1.0) or (np.isnan(bent) and self.tracking)):
             self._stop()
             return
         if not self.tracking:
             self.tracking = True
             self.episodes.append([prev, prev])
+            nav._extra_iterations = START_ITERATIONS
         self.next_ping = self.free_ping = max(self.free_ping, k)
+        counts = (self.pings, self.soundings)
         factor, failed = self._factor(nav, prev, pings, terrain)
+        if self.episodes[-1][1] == prev:  # the episode's first factor: what undoing it takes back
+            self._first = (factor, self.pings - counts[0], self.soundings - counts[1])
         self.failed = [*self.failed[-(MISFIT_KEYS - 1):], failed] if MISFIT_KEYS > 1 else [failed]
         if factor is not None:
             nav._new_factors.add(factor)
@@ -184,6 +199,76 @@ class OnlineTerrain:
         self.episodes[-1][1] = k
         if len(self.failed) == MISFIT_KEYS and min(self.failed) > 0.5:
             self._stop()
+
+    def handed_over(self, k: int) -> None:
+        """A point-mass filter gave the graph its information at key ``k``
+        (:mod:`tangraph.graph.acquisition`): the vehicle is found (the next key step may track),
+        and the pings up to ``k`` are the filter's."""
+        self.found = True
+        self.next_ping = self.free_ping = k + 1
+
+    def filtered(self, nav: GraphNavigator, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """While tracking, the world pose and covariance of ping ``k`` (not a key) given the
+        soundings since the latest key too (None when not tracking or none is used): the output
+        of a navigator uses what it has heard up to now, though these soundings enter iSAM2 only
+        at the next key. The prediction from the latest key is updated by ``FILTERED_ITERATIONS``
+        Gauss-Newton steps on the soundings of the pings no factor holds yet, gated as the
+        factor's are, in a common shift of the key's world position (and the tide when held):
+        ``(P^-1 + G^T W G)^-1 G^T W r`` with ``P`` the key's world covariance, ``G`` the map's
+        gradients under the footprints (and ones), ``W`` the soundings' precisions (the DR noise
+        since the key included), and the covariance of ping ``k`` less what the key's became
+        more certain."""
+        first = max(nav._key_of, self.free_ping)
+        if not self.tracking or first > k:
+            return None
+        pings = np.arange(first, k + 1)
+        terrain = _terrain(nav, nav._key_of, pings, self.variance[pings])
+        tide, tide_var = (nav._tide_mean, float(nav._tide_joint[5, 5])) if nav.tide else (nav.model.tide, 0.0)
+        key = nav._key_pose[None]
+        key_cov = nav._world(nav._key_pose, nav._key_joint)[1][:2, :2]
+        prior = _ping_covariances(nav, nav._key_of, pings)
+        used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
+                    offset_variance=np.full(pings.size, tide_var))
+        if not used.any():
+            return None
+        n = 3 if tide_var > 0 else 2
+        information = np.zeros((n, n))
+        information[:2, :2] = np.linalg.inv(key_cov)
+        if n == 3:
+            information[2, 2] = 1.0 / tide_var
+        shift = np.zeros(n)
+        for _ in range(FILTERED_ITERATIONS):  # Gauss-Newton, relinearised at the shifted footprints
+            residual, _, dr_variance, grad, *_ = _evaluate(
+                terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
+                offset=shift[2] if n == 3 else None, map_offset=shift[:2])
+            ok = used & np.isfinite(residual)
+            weight = np.where(ok, 1.0 / (terrain.variance + dr_variance), 0.0).ravel()
+            g = grad.reshape(-1, 2)
+            if n == 3:
+                g = np.column_stack([g, np.ones(len(g))])
+            g = np.where(weight[:, None] > 0, g, 0.0)
+            r = np.where(weight > 0, residual.ravel(), 0.0)
+            posterior = np.linalg.inv(information + g.T @ (weight[:, None] * g))
+            shift = posterior @ (g.T @ (weight * (r + g @ shift)))
+        pose, cov = nav.predicted(k)
+        pose[:2] += shift[:2]
+        cov[:2, :2] -= key_cov - posterior[:2, :2]
+        return pose, cov
+
+    def undo_start(self, nav: GraphNavigator) -> None:
+        """Undo the tracking episode that has just started (a check found its first update wrong,
+        :meth:`tangraph.graph.acquisition.Acquisition.vet`): its factor is taken out of iSAM2 at
+        the next update, its counts and episode forgotten, tracking stopped."""
+        factor, pings, soundings = self._first
+        if factor is not None:
+            index = next(i for i in range(nav.smoother.getFactors().size())
+                         if nav.smoother.getFactors().at(i) is factor)
+            nav._remove.append(index)
+            self.factors -= 1
+        self.pings -= pings
+        self.soundings -= soundings
+        self.episodes.pop()
+        self._stop()
 
     def _stop(self) -> None:
         """End tracking (if it was on): it waits for a unimodal fix the policy uses after this."""
@@ -197,8 +282,7 @@ class OnlineTerrain:
         and the share of those pings with soundings on the map that failed."""
         tide, tide_var = _tide_belief(nav)
         key = nav._key_pose[None]
-        at_key = nav._world(nav._key_pose, nav._key_joint)
-        prior = np.stack([(at_key if i == prev else nav.predicted(int(i)))[1] for i in pings])[:, :2, :2]
+        prior = _ping_covariances(nav, prev, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=np.full(pings.size, tide_var))
         residual, _, dr_variance, grad, *_ = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
@@ -252,22 +336,41 @@ def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
     return float(b @ np.linalg.pinv(h @ prior @ h + h, hermitian=True) @ b)
 
 
-def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain) -> float:
+def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain, prev: int, pings: np.ndarray) -> float:
     """How far the map departs from its tangent plane over the belief, against the soundings'
-    noise: the mean over the soundings on the map and the four points ``NONLINEAR_SIGMAS`` stds
-    along the principal axes of the key's world position covariance ``P`` of ``(h(f + d) - h(f) -
-    g^T d)^2 / v``, at the footprints ``f`` of the prediction. At most 1, the Gauss-Newton step of the
-    terrain factor errs less than the soundings do; NaN with no sounding on the map."""
-    cov = world_covariance(nav._key_pose, nav._key_joint, nav.calibration, nav.origin)[:2, :2]
-    values, vectors = np.linalg.eigh(cov)
-    steps = (vectors * NONLINEAR_SIGMAS * np.sqrt(np.maximum(values, 0.0))).T  # (2, 2) along the axes
+    noise (:func:`tangent_departure`), at the footprints of the prediction and over each ping's
+    world position covariance (the key ``prev``'s carried by the DR to the ping: the belief the
+    ping's soundings are linearised over)."""
     north, east = footprints(terrain, nav.bathymetry, nav._key_pose[None], nav.calibration)
-    depth = nav.bathymetry.depth_at(north, east)
-    grad = nav.bathymetry.gradient_at(north, east)
+    covariances = _ping_covariances(nav, prev, pings)
+    return tangent_departure(nav.bathymetry, north, east, terrain.variance, covariances)
+
+
+def _ping_covariances(nav: GraphNavigator, prev: int, pings: np.ndarray) -> np.ndarray:
+    """The world position covariance ``(K, 2, 2)`` of each of the ``pings`` hung from the latest
+    key ``prev`` (its own ping: the key's)."""
+    at_key = nav._world(nav._key_pose, nav._key_joint)
+    return np.stack([(at_key if i == prev else nav.predicted(int(i)))[1] for i in pings])[:, :2, :2]
+
+
+def tangent_departure(bathymetry, north, east, variance, cov) -> float:
+    """How far the map departs from its tangent plane over a belief of position covariance ``cov
+    (2, 2)``, or one per ping ``(K, 2, 2)``, against the soundings' noise: the mean over the
+    soundings at ``north, east (K, B)`` on the map (their variances ``variance``) and the four
+    points ``NONLINEAR_SIGMAS`` stds along the principal axes of their ping's covariance of
+    ``(h(f + d) - h(f) - g^T d)^2 / v``. At most 1, a Gauss-Newton step on the soundings errs less
+    than they do; NaN with no sounding on the map."""
+    cov = np.broadcast_to(np.asarray(cov, float), (np.shape(north)[0], 2, 2))
+    values, vectors = np.linalg.eigh(cov)
+    # (K, 2 axes, 2 coordinates): the steps along each ping's principal axes
+    steps = np.swapaxes(vectors * NONLINEAR_SIGMAS * np.sqrt(np.maximum(values, 0.0))[:, None, :], 1, 2)
+    depth = bathymetry.depth_at(north, east)
+    grad = bathymetry.gradient_at(north, east)
     parts = []
-    for d in (*steps, *-steps):
-        bent = nav.bathymetry.depth_at(north + d[0], east + d[1]) - depth - grad @ d
-        parts.append(bent**2 / terrain.variance)
+    for d in (steps[:, 0], steps[:, 1], -steps[:, 0], -steps[:, 1]):
+        dn, de = d[:, 0, None], d[:, 1, None]
+        bent = bathymetry.depth_at(north + dn, east + de) - depth - (grad[..., 0] * dn + grad[..., 1] * de)
+        parts.append(bent**2 / variance)
     bent = np.stack(parts)
     ok = np.isfinite(bent)
     return float(np.mean(bent[ok])) if ok.any() else float("nan")

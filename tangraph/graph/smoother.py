@@ -36,8 +36,8 @@ from tangraph.graph.batch import (
 from tangraph.graph.calibration import CALIBRATION, calibration_summary, joint_in_frame
 from tangraph.graph.config import GraphConfig
 from tangraph.graph.fixes import failed, judge_fix, make_fix, search_half_width
-from tangraph.graph.keyposes import PoseGraph
-from tangraph.graph.online import GraphNavigator, _translate
+from tangraph.graph.keyposes import PoseGraph, translate_error
+from tangraph.graph.online import GraphNavigator
 from tangraph.graph.robust import gnc
 from tangraph.graph.terrain_solve import terrain_solve
 from tangraph.maps.grid import BathymetryMap
@@ -90,7 +90,7 @@ def smooth_pose_graph(graph: PoseGraph, config: GraphConfig | None = None, *,
         ordering = metis_ordering(factors, graph.calibrated)
         result, iterations = gauss_newton(factors, values, ordering, config.batch.max_iterations)
     except (RuntimeError, IndexError) as exc:  # GTSAM's indeterminant system; METIS on odd graphs
-        raise _translate(exc, graph) from None
+        raise translate_error(exc, graph) from None
     solved = _time.perf_counter()
     keys = np.asarray(graph.keys, np.int64)
     pose = np.array(gtsam.utilities.extractPose2(result), float)  # in key order: the pings ascending
@@ -222,13 +222,13 @@ def _gnc_inliers(graph: PoseGraph, fixes, config: GraphConfig, initial, calibrat
                      probability=config.batch.gnc_probability)
     except RuntimeError as exc:  # a weighted graph GTSAM finds indeterminant
         if not as_candidate:
-            raise _translate(exc, graph) from None
+            raise translate_error(exc, graph) from None
         fixed.append(plain.start_factor())
         try:
             result = gnc(fixed, candidate, len(fixes), values, solve,
                          probability=config.batch.gnc_probability)
         except RuntimeError as again:
-            raise _translate(again, graph) from None
+            raise translate_error(again, graph) from None
         as_candidate = False
     inlier = result.inliers[: len(fixes)]
     keep_start = not as_candidate or bool(result.inliers[-1])
@@ -311,7 +311,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
     if isinstance(config, GraphConfig) and config.online.front_end != "tap":  # the online graph's only
         config = config.replace(front_end="tap")
     if isinstance(config, GraphConfig) and config.online.terrain != "fixes":  # so is its tracking
-        config = config.replace(terrain="fixes")
+        config = config.replace(terrain="fixes", acquire="windows")
     nav = GraphNavigator(survey, bathymetry, config, model=model).run(progress)
     forward = _time.perf_counter()
     config = nav.config

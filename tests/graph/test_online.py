@@ -18,10 +18,11 @@ from tangraph.graph import (
     PoseGraph,
     dense_track,
     navigate_online,
+    online_fixes,
     propagate,
     smooth_pose_graph,
 )
-from tangraph.graph.online import _translate
+from tangraph.graph.keyposes import translate_error
 from tangraph.matching import tap_fix
 from tangraph.sensors import (
     DeadReckoningModel,
@@ -96,7 +97,7 @@ def test_step_returns_copies_and_patches_are_laid_rigidly(small_survey, rough_ma
     pose[:] = 1e9
     cov[:] = 0.0
     assert np.all(nav.track().pose[39] < 1e8) and np.all(np.isfinite(nav.track().covariance[39]))
-    laid = nav._laid(39, nav.track().pose[39])
+    laid = online_fixes.laid_poses(nav, 39, nav.track().pose[39])
     # the window has the DR's shape: every increment from its last ping is the DR's
     from tangraph.sensors import odometry
 
@@ -125,11 +126,11 @@ def test_gtsam_indeterminant_error_is_translated():
     graph.add_pose(0, 0.0, [0, 0, 0])
     graph.add_pose(7, 1.0, [1, 0, 0])
     graph.add_pose_prior(0, [0, 0, 0], np.eye(3))
-    error = _translate(RuntimeError("Indeterminate linear system detected while working near variable\n"
+    error = translate_error(RuntimeError("Indeterminate linear system detected while working near variable\n"
                                     "7 (Symbol: 7)."), graph)
     assert isinstance(error, TangraphError) and "ping 7" in str(error)
     other = RuntimeError("something else")
-    assert _translate(other, graph) is other
+    assert translate_error(other, graph) is other
 
 
 def outlier_fixes(survey, bathymetry, config, rate: float, rng) -> dict:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from tangraph.fix_records import FixStatus
-from tangraph.graph import GraphConfig, GraphNavigator, navigate_online
+from tangraph.graph import GraphConfig, GraphNavigator, navigate_online, online_fixes
 from tangraph.sensors import NavigationModel
 from tangraph.track import position_errors
 
@@ -35,17 +35,18 @@ def test_the_misfit_test_holds_a_window_against_the_ones_around_it(small_survey,
     as badly are not refused; one that fits far worse than those around it is."""
     nav = GraphNavigator(small_survey, rough_map, CONFIG)
     noise = nav.model.measurement_std
-    assert nav._misfit_noise(9, 0.5 * noise) == noise  # never below the model's
-    assert nav._misfit_noise(19, 8.0 * noise) == noise  # two windows: too few to say what fits
+    assert online_fixes.misfit_noise(nav, 9, 0.5 * noise) == noise  # never below the model's
+    assert online_fixes.misfit_noise(nav, 19, 8.0 * noise) == noise  # two windows: too few to say
     bad = [9.0, 10.0, 8.5, 9.5, 9.0, 8.0, 10.0, 9.0, 8.5]
     for k, sigma in zip(range(29, 119, 10), bad, strict=True):
-        limit = CONFIG.fixes.misfit_ratio * nav._misfit_noise(k, sigma * noise)
+        limit = CONFIG.fixes.misfit_ratio * online_fixes.misfit_noise(nav, k, sigma * noise)
         assert sigma * noise < limit  # all as bad: none refused
     for k in range(119, 239, 10):
-        nav._misfit_noise(k, noise)  # the DR's errors known: the windows fit
-    assert 5.0 * noise > CONFIG.fixes.misfit_ratio * nav._misfit_noise(239, 5.0 * noise)  # one bad one
+        online_fixes.misfit_noise(nav, k, noise)  # the DR's errors known: the windows fit
+    # one bad one
+    assert 5.0 * noise > CONFIG.fixes.misfit_ratio * online_fixes.misfit_noise(nav, 239, 5.0 * noise)
     kept = list(nav._residuals)
-    nav._misfit_noise(239, 5.0 * noise)  # the same window judged again (after a widening)
+    online_fixes.misfit_noise(nav, 239, 5.0 * noise)  # the same window judged again (after a widening)
     assert list(nav._residuals) == kept and len(kept) == 10  # it pushes no older window out
 
 
