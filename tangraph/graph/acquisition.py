@@ -25,7 +25,11 @@ every key pose is linearised at the filter's mean: the basin the exact posterior
 one nearest the DR's prediction.
 
 **The hand-over.** A key step after a key that received the filter's factor (so that the
-graph's belief is the filter's) asks whether the graph can track
+graph's belief is the filter's), once the density has converged there (at most half the start
+prior's variance along every axis: the terrain has told the position at least as much as the
+prior did; on smooth terrain a belief as wide as the prior passes the tangent-plane test, and
+linearised soundings then settle in whichever basin lies under it), asks whether the graph can
+track
 (:meth:`~tangraph.graph.online_terrain.OnlineTerrain.key_step`: the map near its tangent plane
 over the belief, under the footprints of the pings since that key). When it does, those pings
 enter the graph as its first terrain factor, linearised there, and the update is checked
@@ -90,6 +94,7 @@ class Acquisition:
     cov: np.ndarray = dataclasses.field(default_factory=lambda: np.full((2, 2), np.nan))
     seconds: float = 0.0
     last_reason: str = ""
+    converged: bool = False  # the density at the latest factor had converged (before_key)
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> Acquisition:
@@ -145,11 +150,16 @@ class Acquisition:
         _tracker(nav).handed_over(k)
         nav._extra_iterations = START_ITERATIONS
         self.factors.append(k)
+        # converged: the terrain has told the position at least as much as the start's prior did
+        start = nav.model.initial_position_std**2
+        self.converged = bool(np.linalg.eigvalsh(self.cov).max() <= 0.5 * start)
 
     def before_key(self, nav: GraphNavigator, prev: int) -> None:
         """Before the key step after key ``prev``: the graph may start tracking only from a
-        belief that is the filter's, so only when ``prev`` received the filter's factor."""
-        if self.factors[-1:] != [prev]:
+        belief that is the filter's and has converged, so only when ``prev`` received the
+        filter's factor with its density at most half the start's prior variance along every
+        axis."""
+        if self.factors[-1:] != [prev] or not self.converged:
             _tracker(nav).found = False
 
     def vet(self, nav: GraphNavigator, k: int, factor) -> None:
