@@ -29,9 +29,11 @@ def test_quick_demo_writes_the_report_and_the_graph_beats_dead_reckoning(tmp_pat
     for name in ("tracks.png", "errors.png", "fix.png"):
         assert f"]({name})" in text and (result.out / name).read_bytes()[:4] == b"\x89PNG"
     rows = {r["method"]: r for r in json.loads((result.out / "results.json").read_text())}
-    assert set(rows) == {"dead reckoning", "isam2", "smoother", "pf", "ipf", "sjcpf", "pmf"}
+    assert set(rows) == {"dead reckoning", "isam2", "isam2 tracking", "smoother", "pf", "ipf", "sjcpf", "pmf"}
     assert rows["smoother"]["rmse"] < 0.5 * rows["dead reckoning"]["rmse"]
     assert rows["isam2"]["rmse"] < rows["dead reckoning"]["rmse"]
+    assert rows["isam2 tracking"]["rmse"] < rows["dead reckoning"]["rmse"]
+    assert "isam2 tracking" in text and (result.out / "tracks" / "isam2_tracking.csv").exists()
     settings = json.loads((result.out / "settings.json").read_text())
     assert settings["seed"] == 7 and settings["quick"] is True
     assert (result.out / "tracks" / "smoother.csv").read_text().startswith("time,lat,lon")
