@@ -53,6 +53,7 @@ from scipy import stats
 
 from tangraph.errors import TangraphError
 from tangraph.filters import pmf
+from tangraph.filters.likelihood import FilterDivergence
 from tangraph.filters.pmf_grid import _sample
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import mahalanobis2
@@ -95,6 +96,7 @@ class Acquisition:
     seconds: float = 0.0
     last_reason: str = ""
     converged: bool = False  # the density at the latest factor had converged (before_key)
+    diverged: int | None = None  # the ping at which the filter diverged
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> Acquisition:
@@ -103,12 +105,19 @@ class Acquisition:
 
     @property
     def active(self) -> bool:
-        return self.handover is None
+        return self.handover is None and self.diverged is None
 
-    def step(self, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """The filter after ping ``k``: its position mean ``(2,)`` and covariance ``(2, 2)``."""
+    def step(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The filter after ping ``k``: its position mean ``(2,)`` and covariance ``(2, 2)``; None
+        when it has diverged (no point of its density left: the windows and the fix policy
+        then find the vehicle, as without acquisition, and ``diverged`` is that ping)."""
         started = _time.perf_counter()
-        self.state = self.run.step(self.state, self.pings[k])
+        try:
+            self.state = self.run.step(self.state, self.pings[k])
+        except FilterDivergence as exc:
+            log.warning("graph: the point-mass acquisition diverged at ping %d (%s): windows now", k, exc)
+            self.diverged = k
+            return None
         self.mean, self.cov = self.state.moments()
         self.seconds += _time.perf_counter() - started
         return self.mean, self.cov
@@ -184,9 +193,10 @@ class Acquisition:
     def meta(self) -> dict:
         """What ``Track.meta["acquisition"]`` says: the key the graph tracked from (``handover``;
         None: never), the keys the filter gave it a factor at, the tracking starts it undid
-        (``undone``) and the filter's seconds."""
+        (``undone``), the ping it diverged at (``diverged``, None: never) and its seconds."""
         return {"handover": self.handover, "factors": list(self.factors), "undone": list(self.undone),
-                "seconds": self.seconds, **({"waiting": self.last_reason} if self.handover is None else {})}
+                "diverged": self.diverged, "seconds": self.seconds,
+                **({"waiting": self.last_reason} if self.handover is None else {})}
 
 
 def _tracker(nav: GraphNavigator) -> OnlineTerrain:

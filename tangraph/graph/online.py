@@ -216,7 +216,7 @@ class GraphNavigator:
         density = handover = None
         if acquisition is not None:  # the point-mass filter finds the vehicle (tangraph.graph.acquisition)
             density = acquisition.step(k)
-            if k > 0 and self._is_key[k]:
+            if density is not None and k > 0 and self._is_key[k]:
                 handover = acquisition.ready(self, k)
         if k == 0:
             self._start(fix)

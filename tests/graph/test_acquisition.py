@@ -109,3 +109,23 @@ def test_the_settings_it_refuses_and_the_smoother_uses_windows(small_survey, rou
     a = smooth_survey(small_survey, rough_map, ACQUIRE)
     b = smooth_survey(small_survey, rough_map, GraphConfig())
     np.testing.assert_array_equal(a.pose, b.pose)
+
+
+def test_a_filter_that_diverges_leaves_the_vehicle_to_the_windows(small_survey, rough_map):
+    from tangraph.filters.likelihood import FilterDivergence
+
+    nav = GraphNavigator(small_survey, rough_map, ACQUIRE)
+    step = nav.acquisition.run.step
+
+    def diverging(state, ping):
+        if ping.index == 2:  # before any factor: the graph knows only the DR
+            raise FilterDivergence("pmf: all points have zero likelihood (filter diverged)")
+        return step(state, ping)
+
+    nav.acquisition.run.step = diverging
+    track = nav.run().track()
+    assert track.meta["acquisition"]["diverged"] == 2 and track.meta["acquisition"]["handover"] is None
+    assert np.all(np.isfinite(track.pose)) and np.all(np.isfinite(track.covariance[:, :2, :2]))
+    # the windows and the fix policy found the vehicle and the graph tracks
+    assert any(r.accepted and r.detail != HANDOVER_DETAIL for r in track.fixes)
+    assert nav.terrain.episodes
