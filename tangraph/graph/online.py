@@ -261,8 +261,9 @@ class GraphNavigator:
 
     def _key_step(self, k: int, fix: TerrainFix | None, handover=None) -> None:
         """The key pose of ping ``k``: its odometry, the terrain factor or window ending there
-        (``fix``: the one given to :meth:`step`), or the acquisition's ``handover`` ``(position,
-        covariance)``, and the iSAM2 update."""
+        (``fix``: the one given to :meth:`step`), or the acquisition's ``handover`` (its factor's
+        mean and covariance, :meth:`~tangraph.graph.acquisition.Acquisition.ready`), and the
+        iSAM2 update."""
         prev = self.graph.keys[-1]
         acquisition = self._acquiring()
         pose, joint = self.predicted_frame(k)
