@@ -126,7 +126,7 @@ class Acquisition:
         """The graph's factor at key ``k`` when the filter's density after ping ``k`` is one part
         and tells more than the graph's prediction: ``(mean, covariance)`` over the world position,
         and the tide when the graph holds it; None otherwise (``last_reason`` says why)."""
-        mean, cov = self.state.moments()
+        mean, cov = self.mean, self.cov  # after ping k (step)
         if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov).min() <= 0:
             self.last_reason = "degenerate density"
             return None

@@ -62,6 +62,7 @@ from scipy import stats
 from tangraph.fix_records import FixStatus
 from tangraph.geometry import gate_threshold
 from tangraph.graph.calibration import CALIBRATION
+from tangraph.graph.lost import _isam_index
 from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
 from tangraph.sensors import sounding_variances
 
@@ -260,9 +261,8 @@ class OnlineTerrain:
         :meth:`tangraph.graph.acquisition.Acquisition.vet`): its factor is taken out of iSAM2 at
         the next update, its counts and episode forgotten, tracking stopped."""
         factor, pings, soundings = self._first
-        if factor is not None:
-            index = next(i for i in range(nav.smoother.getFactors().size())
-                         if nav.smoother.getFactors().at(i) is factor)
+        index = None if factor is None else _isam_index(nav, factor)
+        if index is not None:
             nav._remove.append(index)
             self.factors -= 1
         self.pings -= pings
