@@ -1,6 +1,7 @@
 """Speed of the factor graph (tangraph.graph): online iSAM2 per key pose, batch smoother on long chains.
 
     python benchmarks/bench_graph.py [--online-only | --batch-only] [--sizes 100000 300000] [--long 100000]
+    python benchmarks/bench_graph.py --tracking [--seeds 7 8 9]
 
 Online: the chen2022 scenario (100 000 s at 1 m/s, a single-beam sounding every 100 s, on the
 500 m polar chart), navigated by :func:`tangraph.graph.navigate_online`; prints the mean and p99
@@ -13,7 +14,12 @@ every pose (target: 100 000 poses in <= 15 s; 300 000 without a crash). ``--long
 navigator over N key poses with a given fix every 10 (no TAP), to show the update time stays
 flat as the chain grows, and a plain GTSAM ``IncrementalFixedLagSmoother`` loop on the same
 chain with the fixes the navigator used, in the same run (target: tangraph's mean update at most
-2 x the plain loop's). Nothing is asserted.
+2 x the plain loop's). ``--tracking``: the online graph that tracks on every sounding after a
+point-mass acquisition (``terrain = "soundings"``, ``acquire = "pmf"``) on ``demo`` surveys, per
+ping (mean, p99, max of a whole step, before and after the hand-over), against the point-mass
+filter and the TAP graph on the same surveys, and its iSAM2 updates against the plain loop on
+its key chain, all in the same run (targets: p99 step <= 10 ms, mean update <= 2 x the plain
+loop's). Nothing is asserted.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from types import SimpleNamespace
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -115,6 +122,50 @@ def long_online(n: int) -> None:
           f"{np.percentile(updates, 99) / np.percentile(plain, 99):.2f}")
 
 
+def tracking(seeds: list[int]) -> None:
+    """Per-ping times of the tracking graph against the point-mass filter, the TAP graph and the
+    plain iSAM2 loop (see the module docstring), on one ``demo`` survey per seed."""
+    from tangraph.filters.pmf import point_mass_filter
+
+    scenario = load_scenario("demo")
+    bathymetry = load_any(scenario.map)
+    config = GraphConfig().replace(terrain="soundings", acquire="pmf")
+    rows = []
+    for seed in seeds:
+        survey = simulate(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry)
+        model = NavigationModel.from_survey(survey)
+        nav = GraphNavigator(survey, bathymetry, config, model=model).run()
+        steps = np.asarray(nav.step_times) * 1e3
+        handover = nav.acquisition.handover if nav.acquisition.handover is not None else survey.n_pings
+        updates = np.asarray(nav.update_times) * 1e3
+        keys = np.asarray(nav.graph.keys)
+        chain = SimpleNamespace(time=survey.time[keys], dr_pose=survey.dr_pose[keys], n_pings=keys.size)
+        plain = plain_loop(chain, {}, lag=float(nav._lag()))
+        t0 = time.perf_counter()
+        filtered = point_mass_filter(survey, bathymetry, model=model)
+        pmf_ms = (time.perf_counter() - t0) * 1e3 / survey.n_pings
+        t0 = time.perf_counter()
+        tap = GraphNavigator(survey, bathymetry, GraphConfig(), model=model).run()
+        tap_ms = (time.perf_counter() - t0) * 1e3 / survey.n_pings
+        error = {name: float(np.sqrt(np.mean(np.sum((t.pose[:, :2] - survey.true_pose[:, :2]) ** 2, 1))))
+                 for name, t in (("tracking", nav.track()), ("pmf", filtered), ("tap", tap.track()))}
+        rows.append((steps, handover, updates, plain, pmf_ms, tap_ms, error))
+        print(f"demo seed {seed}: {survey.n_pings} pings, hand-over at {handover}, {keys.size} key poses")
+        print(f"  tracking graph  step mean {steps.mean():.2f} ms  p99 {np.percentile(steps, 99):.2f} ms  "
+              f"max {steps.max():.1f} ms  (acquiring: mean {steps[:handover].mean():.2f} ms, p99 "
+              f"{np.percentile(steps[:handover], 99):.2f}; tracking: mean {steps[handover:].mean():.2f} ms, "
+              f"p99 {np.percentile(steps[handover:], 99):.2f})")
+        print(f"  per ping: point-mass filter {pmf_ms:.2f} ms, TAP graph {tap_ms:.2f} ms; "
+              f"tracking / pmf {steps.mean() / pmf_ms:.2f}, / TAP {steps.mean() / tap_ms:.2f}")
+        print(f"  iSAM2 update mean {updates.mean():.2f} ms (plain loop on its keys {plain.mean():.2f} ms: "
+              f"ratio {updates.mean() / plain.mean():.2f}); RMSE tracking {error['tracking']:.2f} m, "
+              f"pmf {error['pmf']:.2f} m, TAP {error['tap']:.2f} m")
+    steps = np.concatenate([r[0] for r in rows])
+    print(f"all seeds: step mean {steps.mean():.2f} ms, p99 {np.percentile(steps, 99):.2f} ms; "
+          f"tracking / pmf {np.mean([r[0].mean() / r[4] for r in rows]):.2f}; update / plain loop "
+          f"{np.mean([r[2].mean() / r[3].mean() for r in rows]):.2f}")
+
+
 def plain_loop(survey, fixes: dict, lag: float) -> np.ndarray:
     """GTSAM's ``IncrementalFixedLagSmoother`` on its own (ms per key pose): the survey's DR
     increments as ``BetweenFactorPose2``, the fixes the navigator used as translation priors, the
@@ -204,8 +255,14 @@ def main() -> None:
     parser.add_argument("--sizes", type=int, nargs="+", default=[100_000, 300_000])
     parser.add_argument("--long", type=int, default=0,
                         help="also a graph-only online run of this many key poses")
+    parser.add_argument("--tracking", action="store_true",
+                        help="only the tracking graph with point-mass acquisition on demo surveys")
+    parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 9])
     args = parser.parse_args()
     print(f"pid {os.getpid()}")
+    if args.tracking:
+        tracking(args.seeds)
+        return
     if not args.batch_only:
         online()
         if args.long:

@@ -19,13 +19,12 @@ resampling (:mod:`tangraph.filters.resampling`) and the SJCPF's correlations
 """
 
 from tangraph.filters.api import FilterMethod, config_type, default_config, run_filter
-from tangraph.filters.config import FilterHealth, ParticleConfig
+from tangraph.filters.config import FilterHealth, ParticleConfig, PMFConfig
 from tangraph.filters.ipf import IPFConfig
 from tangraph.filters.jbpf import JBPFConfig
 from tangraph.filters.likelihood import FilterDivergence, OffMap
 from tangraph.filters.mle import MLEConfig
 from tangraph.filters.pf import PFConfig
-from tangraph.filters.pmf import PMFConfig
 from tangraph.filters.sjcpf import SJCPFConfig
 from tangraph.filters.tercom_pf import TercomPFConfig
 

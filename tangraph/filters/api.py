@@ -8,11 +8,12 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters.config import PMFConfig
 from tangraph.filters.ipf import IPFConfig, ipf
 from tangraph.filters.jbpf import JBPFConfig, jbpf
 from tangraph.filters.mle import MLEConfig, mle_filter
 from tangraph.filters.pf import PFConfig, bootstrap_pf
-from tangraph.filters.pmf import PMFConfig, point_mass_filter
+from tangraph.filters.pmf import point_mass_filter
 from tangraph.filters.runner import check_run_inputs
 from tangraph.filters.sjcpf import SJCPFConfig, sjcpf
 from tangraph.filters.tercom_pf import TercomPFConfig, tercom_pf

@@ -1,4 +1,5 @@
-"""The configuration every particle filter shares, and the checks all filter configs use.
+"""The configuration every particle filter shares, the point-mass filter's, and the checks all
+filter configs use.
 
 Configs are frozen dataclasses validated in ``__post_init__``: a bad value raises
 :class:`~tangraph.errors.TangraphError` naming the class, the field and the value.
@@ -9,11 +10,13 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import numpy as np
+
 from tangraph.errors import TangraphError
 from tangraph.filters.resampling import Resampler
 from tangraph.validation import check_count, check_number
 
-__all__ = ["FilterHealth", "ParticleConfig"]
+__all__ = ["FilterHealth", "PMFConfig", "ParticleConfig"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,3 +185,91 @@ class ParticleConfig:
         if health:
             changes["health"] = dataclasses.replace(changes.get("health", self.health), **health)
         return dataclasses.replace(self, **changes)
+
+
+@dataclasses.dataclass(frozen=True)
+class PMFConfig:
+    """Settings of the point-mass filter.
+
+    Parameters
+    ----------
+    grid_points : int
+        Points per axis of a member's position grid (odd, >= 5).
+    grid_sigmas : float
+        Half-width of the grid in standard deviations of the density along each principal axis.
+    min_spacing : float
+        Smallest grid spacing (m): the floor a grid shrinks to around a density narrower than
+        its points (a coarser floor gives up precision: each sounding's variance grows with the
+        spacing, see the module docstring).
+    calibration_points : tuple of int
+        Gauss-Hermite nodes of the calibration bank along the principal axes of the
+        calibration's covariance (first: the speed scale's, second: the heading error's; 1 on an
+        axis whose std is 0, whatever is asked).
+    lost_alpha, lost_pings : float, int
+        A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
+        quantile; ``lost_pings`` in a row flag the filter lost.
+    ping_gate, gate_pings : bool, int
+        With ``ping_gate`` an inconsistent ping (the lost test's) does not weigh the density
+        (bad data or a lost filter: weighing by it drags the density to a wrong place with a
+        small spread; ``meta["gated_steps"]``), until ``gate_pings`` in a row, longer than a
+        block of bad pings lasts, say the density is wrong: the tide is put back at its prior
+        (a start on bad depths or a step of the water level: the held tide is the first suspect)
+        and the pings are weighed again (``meta["tide_reopened_steps"]``).
+    relocalise : bool
+        When lost, start afresh from a uniform density on the global grid (off by default: on
+        a map whose error the model under-states, as on a flat lake gridded from an earlier
+        survey, the lost test fires where the filter is not lost, and a global restart there
+        chose a wrong place in most runs; use it where the terrain is distinctive).
+    relocalise_points : int
+        Points per axis of the global grid (odd, >= 5).
+    relocalise_radius : float or None
+        Half-width (m) of the global grid around the estimate; None: the map's data extent.
+
+    Examples
+    --------
+    >>> PMFConfig().grid_points
+    31
+    >>> PMFConfig(grid_points=4)
+    Traceback (most recent call last):
+    ...
+    tangraph.errors.TangraphError: PMFConfig.grid_points must be an odd integer >= 5, got 4
+    """
+
+    grid_points: int = 31
+    grid_sigmas: float = 5.0
+    min_spacing: float = 0.01
+    calibration_points: tuple[int, int] = (3, 3)
+    lost_alpha: float = 1e-3
+    lost_pings: int = 5
+    ping_gate: bool = False
+    gate_pings: int = 30
+    relocalise: bool = False
+    relocalise_points: int = 201
+    relocalise_radius: float | None = None
+
+    def __post_init__(self) -> None:
+        n = self.grid_points
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
+            raise TangraphError(f"PMFConfig.grid_points must be an odd integer >= 5, got {n!r}")
+        object.__setattr__(self, "grid_points", int(n))
+        check_number(self, "grid_sigmas", low=1.0)
+        check_number(self, "min_spacing", low=0.0, open_low=True)
+        points = self.calibration_points
+        if (not isinstance(points, (tuple, list)) or len(points) != 2
+                or any(isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1 for p in points)):
+            raise TangraphError(f"PMFConfig.calibration_points must be two integers >= 1, got {points!r}")
+        object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
+        check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
+        check_count(self, "lost_pings", low=1)
+        object.__setattr__(self, "ping_gate", bool(self.ping_gate))
+        check_count(self, "gate_pings", low=1)
+        object.__setattr__(self, "relocalise", bool(self.relocalise))
+        n = self.relocalise_points
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
+            raise TangraphError(f"PMFConfig.relocalise_points must be an odd integer >= 5, got {n!r}")
+        object.__setattr__(self, "relocalise_points", int(n))
+        if self.relocalise_radius is not None:
+            check_number(self, "relocalise_radius", low=0.0, open_low=True)
+
+    def as_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)

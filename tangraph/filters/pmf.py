@@ -61,7 +61,8 @@ the soundings could have come from, and its covariance says so until the terrain
 The filter and its run loop are here; the density on its grids (the state
 :class:`~tangraph.filters.pmf_grid.PointMass`, the DR noise convolved in, re-gridding) is in
 :mod:`tangraph.filters.pmf_grid`, the calibration bank (node placement, evidence fit) in
-:mod:`tangraph.filters.pmf_bank`.
+:mod:`tangraph.filters.pmf_bank`, its settings :class:`~tangraph.filters.config.PMFConfig` in
+:mod:`tangraph.filters.config`.
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.belief import Belief
+from tangraph.filters.config import PMFConfig
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
@@ -89,89 +91,11 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
-from tangraph.validation import check_count, check_number
 
 __all__ = ["PMFConfig", "point_mass_filter", "start_run"]
 
 _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
-
-
-@dataclasses.dataclass(frozen=True)
-class PMFConfig:
-    """Settings of the point-mass filter.
-
-    Parameters
-    ----------
-    grid_points : int
-        Points per axis of a member's position grid (odd, >= 5).
-    grid_sigmas : float
-        Half-width of the grid in standard deviations of the density along each principal axis.
-    min_spacing : float
-        Smallest grid spacing (m): the floor a grid shrinks to around a density narrower than
-        its points (a coarser floor gives up precision: each sounding's variance grows with the
-        spacing, see the module docstring).
-    calibration_points : tuple of int
-        Gauss-Hermite nodes of the calibration bank along the principal axes of the
-        calibration's covariance (first: the speed scale's, second: the heading error's; 1 on an
-        axis whose std is 0, whatever is asked).
-    lost_alpha, lost_pings : float, int
-        A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
-        quantile; ``lost_pings`` in a row flag the filter lost.
-    relocalise : bool
-        When lost, start afresh from a uniform density on the global grid (off by default: on
-        a map whose error the model under-states, as on a flat lake gridded from an earlier
-        survey, the lost test fires where the filter is not lost, and a global restart there
-        chose a wrong place in most runs; use it where the terrain is distinctive).
-    relocalise_points : int
-        Points per axis of the global grid (odd, >= 5).
-    relocalise_radius : float or None
-        Half-width (m) of the global grid around the estimate; None: the map's data extent.
-
-    Examples
-    --------
-    >>> PMFConfig().grid_points
-    31
-    >>> PMFConfig(grid_points=4)
-    Traceback (most recent call last):
-    ...
-    tangraph.errors.TangraphError: PMFConfig.grid_points must be an odd integer >= 5, got 4
-    """
-
-    grid_points: int = 31
-    grid_sigmas: float = 5.0
-    min_spacing: float = 0.01
-    calibration_points: tuple[int, int] = (3, 3)
-    lost_alpha: float = 1e-3
-    lost_pings: int = 5
-    relocalise: bool = False
-    relocalise_points: int = 201
-    relocalise_radius: float | None = None
-
-    def __post_init__(self) -> None:
-        n = self.grid_points
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
-            raise TangraphError(f"PMFConfig.grid_points must be an odd integer >= 5, got {n!r}")
-        object.__setattr__(self, "grid_points", int(n))
-        check_number(self, "grid_sigmas", low=1.0)
-        check_number(self, "min_spacing", low=0.0, open_low=True)
-        points = self.calibration_points
-        if (not isinstance(points, (tuple, list)) or len(points) != 2
-                or any(isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1 for p in points)):
-            raise TangraphError(f"PMFConfig.calibration_points must be two integers >= 1, got {points!r}")
-        object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
-        check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
-        check_count(self, "lost_pings", low=1)
-        object.__setattr__(self, "relocalise", bool(self.relocalise))
-        n = self.relocalise_points
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 5 or n % 2 == 0:
-            raise TangraphError(f"PMFConfig.relocalise_points must be an odd integer >= 5, got {n!r}")
-        object.__setattr__(self, "relocalise_points", int(n))
-        if self.relocalise_radius is not None:
-            check_number(self, "relocalise_radius", low=0.0, open_low=True)
-
-    def as_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
 
 
 def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig) -> PointMass:
@@ -288,6 +212,16 @@ def _inconsistent(check, alpha: float) -> bool:
     return bool(check.nis > _chi2_quantile(alpha, 1))
 
 
+def _tide_reopened(state: PointMass, navigation: NavigationModel) -> PointMass:
+    """The state with every point's tide back at its prior (a start on a block of bad depths, or a
+    step of the water level, leaves a held tide that no later ping agrees with)."""
+    out = state.copy()
+    out.tide = np.full(state.tide.shape, navigation.tide)
+    out.tide_var = navigation.tide_variance
+    out.tide_drift = TideDrift.start(navigation, state.tide.shape)
+    return out
+
+
 def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: NavigationModel,
                   config: PMFConfig, centre: np.ndarray) -> PointMass:
     """A uniform density on the global grid (see the module docstring)."""
@@ -324,6 +258,8 @@ class _Run:
     slope: np.ndarray
     estimate: bool  # whether the calibration is estimated (a bank of more than one node)
     lost_steps: list[int] = dataclasses.field(default_factory=list)
+    gated_steps: list[int] = dataclasses.field(default_factory=list)
+    tide_reopened_steps: list[int] = dataclasses.field(default_factory=list)
     off_map_steps: list[int] = dataclasses.field(default_factory=list)
     divergence_steps: list[int] = dataclasses.field(default_factory=list)
     relocalisation_steps: list[int] = dataclasses.field(default_factory=list)
@@ -333,12 +269,20 @@ class _Run:
     def step(self, state: PointMass, ping: Ping) -> PointMass:
         """The state after ``ping``: predicted, weighed, tested for lost, re-gridded if due."""
         _predict(state, ping, self.model)
+        if self.config.ping_gate and self.streak == self.config.gate_pings - 1:  # the gate's way out:
+            state = _tide_reopened(state, self.navigation)  # the held tide is the first suspect
+            self.tide_reopened_steps.append(ping.index)
+        predicted = state
         try:
             state, check, update = _measure(state, ping, self.model, self.slope, self.grid, self.config,
                                             self.estimate)
         except FilterDivergence:  # no point of positive density explains the ping: keep the prior
             self.divergence_steps.append(ping.index)
             check, update = None, False
+        if (self.config.ping_gate and check is not None and _inconsistent(check, self.config.lost_alpha)
+                and self.streak < self.config.gate_pings - 1):  # (a streak this long: the density is wrong)
+            state = predicted
+            self.gated_steps.append(ping.index)
         if update is None and ping.n_soundings:
             self.off_map_steps.append(ping.index)
         if check is not None or update is False:
@@ -381,6 +325,8 @@ class _Run:
             "divergence_steps": self.divergence_steps,
             "n_lost": len(self.lost_steps),
             "lost_steps": self.lost_steps,
+            "gated_steps": self.gated_steps,
+            "tide_reopened_steps": self.tide_reopened_steps,
             "n_off_map": len(self.off_map_steps),
             "off_map_steps": self.off_map_steps,
             "relocalisation_steps": self.relocalisation_steps,

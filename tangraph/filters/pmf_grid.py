@@ -21,7 +21,7 @@ from tangraph.filters.tide import TideDrift
 from tangraph.sensors.misfit import MisfitScale
 
 if TYPE_CHECKING:
-    from tangraph.filters.pmf import PMFConfig
+    from tangraph.filters.config import PMFConfig
 
 __all__ = ["PointMass"]
 

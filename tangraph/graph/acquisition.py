@@ -22,7 +22,11 @@ m), L^-1)`` with ``L = S^-1 - P^-1`` (``posterior_fix._remove_prior``). The pred
 earlier keys received, so each factor carries what the filter learnt since, nothing is counted
 twice, and the graph's belief at the key is the filter's. No window is made meanwhile, and
 every key pose is linearised at the filter's mean: the basin the exact posterior chose, not the
-one nearest the DR's prediction.
+one nearest the DR's prediction. The filter runs with its ping gate (``PMFConfig.ping_gate``: a
+ping its density cannot explain, as in a block of bad depths, does not weigh it), and a factor
+whose information lies beyond the graph's prediction (its NIS against the prediction beyond the
+``chi2`` quantile ``GraphConfig.fixes.gate_probability``) is not given: a filter dragged off
+would otherwise throw the graph's calibration out.
 
 **The hand-over.** A key step after a key that received the filter's factor (so that the
 graph's belief is the filter's), once the density has converged there (at most half the start
@@ -53,13 +57,14 @@ from scipy import stats
 
 from tangraph.errors import TangraphError
 from tangraph.filters import pmf
+from tangraph.filters.config import PMFConfig
 from tangraph.filters.likelihood import FilterDivergence
 from tangraph.filters.pmf_grid import _sample
 from tangraph.fix_records import FixRecord, FixStatus
-from tangraph.geometry import mahalanobis2
+from tangraph.geometry import gate_threshold, mahalanobis2
 from tangraph.graph import posterior_fix as pf
 from tangraph.graph.calibration import position_tide_factor
-from tangraph.graph.online_fixes import position_tide_prior
+from tangraph.graph.online_fixes import new_tide, position_tide_prior
 from tangraph.graph.online_terrain import START_ITERATIONS
 
 if TYPE_CHECKING:
@@ -97,10 +102,12 @@ class Acquisition:
     last_reason: str = ""
     converged: bool = False  # the density at the latest factor had converged (before_key)
     diverged: int | None = None  # the ping at which the filter diverged
+    tide_seen: int = -1  # the latest ping the filter put its tide back at its prior (ready)
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> Acquisition:
-        run, state, pings = pmf.start_run(nav.survey, nav.bathymetry, nav.model, pmf.PMFConfig())
+        settings = PMFConfig(ping_gate=True)
+        run, state, pings = pmf.start_run(nav.survey, nav.bathymetry, nav.model, settings)
         return cls(run, state, pings)
 
     @property
@@ -127,6 +134,14 @@ class Acquisition:
         and tells more than the graph's prediction: ``(mean, covariance)`` over the world position,
         and the tide when the graph holds it; None otherwise (``last_reason`` says why)."""
         mean, cov = self.mean, self.cov  # after ping k (step)
+        reopened = self.run.tide_reopened_steps
+        if nav.tide and reopened and reopened[-1] > self.tide_seen:  # the filter found its tide wrong:
+            self.tide_seen = reopened[-1]  # so is the graph's, which holds what the filter gave it
+            new_tide(nav, k, nav.model.tide)
+            log.info("graph: a new tide from key %d: the point-mass filter's pings disagreed with it", k)
+        if self.run.streak >= self.run.config.lost_pings:
+            self.last_reason = f"lost: {self.run.streak} pings in a row it cannot explain"
+            return None
         if not np.all(np.isfinite(cov)) or np.linalg.eigvalsh(cov).min() <= 0:
             self.last_reason = "degenerate density"
             return None
@@ -141,6 +156,11 @@ class Acquisition:
         reasons: list[str] = []
         factor = pf._remove_prior(mean3[:n], cov3[:n, :n], prior_mean[:n], prior_cov[:n, :n], reasons)
         self.last_reason = "; ".join(reasons)
+        if factor is not None:  # what the filter learnt must be something the prediction allows
+            nis = float(mahalanobis2(factor[0] - prior_mean[:n], factor[1] + prior_cov[:n, :n]))
+            if nis > gate_threshold(nav.config.fixes.gate_probability or VET_PROBABILITY, n):
+                self.last_reason = f"its information is beyond the graph's prediction (NIS {nis:.0f})"
+                return None
         return factor
 
     def hand_over(self, nav: GraphNavigator, k: int, factor) -> None:
@@ -189,6 +209,11 @@ class Acquisition:
         if factor is not None:
             self.hand_over(nav, k, factor)
         nav._update(k)
+
+    def lost_steps(self) -> list[int]:
+        """The pings the filter flagged lost (its lost test) while it was the navigator's output."""
+        end = self.handover if self.handover is not None else self.diverged
+        return [int(p) for p in self.run.lost_steps if end is None or p < end]
 
     def meta(self) -> dict:
         """What ``Track.meta["acquisition"]`` says: the key the graph tracked from (``handover``;

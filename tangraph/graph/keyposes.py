@@ -352,5 +352,14 @@ def translate_error(exc: Exception, graph: PoseGraph) -> Exception:
     import re
 
     near = re.search(r"near variable\s+(\d+)", text)
-    where = f" near key pose {near.group(1)} (ping {near.group(1)})" if near else ""
-    return TangraphError(f"the pose graph is indeterminant (ill-conditioned){where}")
+    return TangraphError(f"the pose graph is indeterminant (ill-conditioned)"
+                         f"{'' if near is None else ' near ' + _variable(int(near.group(1)))}")
+
+
+def _variable(key: int) -> str:
+    """What a GTSAM key of the graph is, in words: a key pose (its ping), the calibration, a tide."""
+    if key < 1 << 56:  # key poses are keyed by their ping
+        return f"key pose {key} (ping {key})"
+    symbol = gtsam.Symbol(key)
+    name = {"c": "the calibration", "t": "the tide", "o": "the map offset"}.get(chr(symbol.chr()), "variable")
+    return f"{name} ({gtsam.DefaultKeyFormatter(key)})"

@@ -425,11 +425,12 @@ class GraphNavigator:
         return calibration_summary(self.calibration, joint, pose, self.survey.dr_pose[k, 2])
 
     def meta(self) -> dict:
-        """The counts of the fixes, the pings flagged lost (``n_lost``, ``lost_steps``) and the
-        ``lost_episodes``, ``key_indices``, ``calibration``, the configuration and model, and
-        with the point-mass front end's tide variable ``tide`` (its estimate and std, m)."""
+        """The fix counts, the pings flagged lost (``n_lost``, ``lost_steps``: the fix policy's and
+        the acquisition's), ``lost_episodes``, ``key_indices``, ``calibration``, the configuration
+        and model, and the tide variable ``tide`` when held (its estimate and std, m)."""
         accepted = sum(f.accepted for f in self.fixes)
-        lost = sorted({p for e in self.episodes for p in e.pings(self.index + 1)})
+        lost = sorted({p for e in self.episodes for p in e.pings(self.index + 1)}
+                      | set(self.acquisition.lost_steps() if self.acquisition is not None else ()))
         return {
             "n_fixes_accepted": int(accepted),
             "n_fixes_rejected": len(self.fixes) - int(accepted),

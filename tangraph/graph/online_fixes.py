@@ -206,7 +206,15 @@ def tide_step(nav: GraphNavigator, k: int) -> None:
         if np.ptp(offsets) > TIDE_STEP_AGREE:  # not one offset: faults of their own
             nav._faults = nav._faults[-1:]
         return
-    tide = nav._tide_mean + float(np.median(offsets))
+    new_tide(nav, k, nav._tide_mean + float(np.median(offsets)))
+    log.info("graph: the tide stepped at ping %d: windows over %d pings %.2f m off the held tide",
+             k, k - nav._faults[0][0] + 1, float(np.median(offsets)))
+    nav._faults = []
+
+
+def new_tide(nav: GraphNavigator, k: int, tide: float) -> None:
+    """The graph holds a new tide variable from key ``k`` on (the held one is wrong), its prior
+    ``tide`` with the model's tide std."""
     nav.tide_key = int(gtsam.symbol("t", len(nav.tide_steps) + 1))
     nav.tide_steps.append(k)
     nav._new_factors.add(gtsam.PriorFactorVector(
@@ -215,9 +223,6 @@ def tide_step(nav: GraphNavigator, k: int) -> None:
     nav._tide_mean = tide
     nav._tide_joint[5, :] = nav._tide_joint[:, 5] = 0.0
     nav._tide_joint[5, 5] = nav.model.tide_std**2
-    log.info("graph: the tide stepped at ping %d: windows over %d pings %.2f m off the held tide",
-             k, k - nav._faults[0][0] + 1, float(np.median(offsets)))
-    nav._faults = []
 
 
 def grow_window(nav: GraphNavigator, k: int) -> None:

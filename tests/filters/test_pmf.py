@@ -11,8 +11,9 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.filters import PMFConfig, run_filter
-from tangraph.filters.pmf import point_mass_filter
+from tangraph.filters.pmf import point_mass_filter, start_run
 from tangraph.sensors import DeadReckoningModel
+from tangraph.sim.faults import outlier_blocks
 from tests.filters.linear_gaussian import (
     kalman,
     kalman_mixture,
@@ -129,6 +130,7 @@ def test_the_pmf_runs_by_name_without_a_random_generator():
         ({"calibration_points": (3,)}, "calibration_points must be two integers >= 1"),
         ({"calibration_points": (0, 3)}, "calibration_points must be two integers >= 1"),
         ({"lost_pings": 0}, "lost_pings must be an integer >= 1"),
+        ({"gate_pings": 0}, "gate_pings must be an integer >= 1"),
     ],
 )
 def test_bad_settings_are_named(settings, message):
@@ -181,3 +183,42 @@ def test_a_start_far_off_is_found_again_on_the_global_grid():
     flagged = np.zeros(shifted.n_pings, bool)
     flagged[track.meta["lost_steps"]] = True
     assert not np.any(((nees > 20) & ~flagged)[1:]), np.flatnonzero((nees > 20) & ~flagged)
+
+
+@pytest.mark.parametrize("seed", [2, 3])
+def test_the_ping_gate_keeps_a_block_of_biased_depths_out(seed):
+    """A block of 20 pings whose depths are all 3-10 m off drags the density of the plain filter
+    metres off for good; with the ping gate exactly that block is gated and the track stays
+    where the clean pings put it."""
+    bathymetry = rough_map(1)
+    survey = multibeam_survey(bathymetry, seed=4, pings=120)
+    model = navigation(survey)
+    bad = outlier_blocks(survey, "depth_bias", 20 / 120, rng=np.random.default_rng(seed))
+    final = {}
+    for gate in (False, True):
+        track = point_mass_filter(bad, bathymetry, PMFConfig(ping_gate=gate), model=model)
+        final[gate] = float(np.hypot(*(track.pose[-1, :2] - bad.true_pose[-1, :2])))
+    gated = track.meta["gated_steps"]
+    assert len(gated) == 20 and np.ptp(gated) == 19, gated
+    assert final[True] < 2.0 and final[False] > 3.0 * final[True], final
+
+
+def test_a_start_on_biased_depths_is_undone_by_putting_the_tide_back_at_its_prior():
+    """The first 20 pings' depths are all 5 m off: the filter takes that for the tide, and every
+    later ping disagrees with it. The gate's way out puts the tide back at its prior, and the
+    filter ends at the truth with the true (zero) tide."""
+    bathymetry = rough_map(1)
+    survey = multibeam_survey(bathymetry, seed=4, pings=120)
+    depth = survey.beam_depth.copy()
+    depth[:20] += 5.0
+    bad = survey.replace(beam_depth=depth)
+    model = navigation(survey)
+    config = PMFConfig(ping_gate=True)
+    run, state, pings = start_run(bad, bathymetry, model, config)
+    for ping in pings:
+        state = run.step(state, ping)
+    assert run.tide_reopened_steps and run.tide_reopened_steps[0] >= 20 + config.gate_pings - 1
+    mean, _ = state.moments()
+    assert np.hypot(*(mean - bad.true_pose[-1, :2])) < 2.0
+    weights = state.masses().ravel()
+    assert abs(float(weights @ state.tide.ravel()) - model.tide) < 0.2

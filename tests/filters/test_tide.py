@@ -151,7 +151,8 @@ def test_the_point_mass_filter_mixes_and_regrids_the_datum_and_the_drift_togethe
     mass-weighted first and second moments of the offset and of its drift (their cross moment
     too) are kept, the spread of the mixed means going into the shared covariance; a re-grid
     interpolates both means (a constant stays that constant)."""
-    from tangraph.filters.pmf import PMFConfig, _start
+    from tangraph.filters.config import PMFConfig
+    from tangraph.filters.pmf import _start
     from tangraph.filters.pmf_grid import _diffuse, _Grid, _regrid
 
     nav = NavigationModel(tide_std=2.0, tide_drift_std=DRIFT, tide_drift_time=FORGET, speed_scale_std=0.0,

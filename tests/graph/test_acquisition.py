@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.filters.pmf import PMFConfig, point_mass_filter, start_run
+from tangraph.filters.config import PMFConfig
+from tangraph.filters.pmf import point_mass_filter, start_run
 from tangraph.graph import GraphConfig, GraphNavigator, navigate_online, smooth_survey
 from tangraph.graph.acquisition import HANDOVER_DETAIL, _shape
 
@@ -25,7 +26,7 @@ def test_until_the_graph_tracks_the_output_is_the_point_mass_filters(acquired, s
     meta = nav.track().meta["acquisition"]
     handover = meta["handover"]
     assert handover is not None and meta["factors"] and meta["factors"][-1] < handover
-    pmf = point_mass_filter(small_survey, rough_map, PMFConfig(), model=nav.model)
+    pmf = point_mass_filter(small_survey, rough_map, PMFConfig(ping_gate=True), model=nav.model)
     before = slice(0, handover)
     np.testing.assert_allclose(nav.pose[before, :2], pmf.pose[before, :2], atol=1e-9)
     np.testing.assert_allclose(nav.covariance[before, :2, :2], pmf.covariance[before, :2, :2], atol=1e-9)
@@ -129,3 +130,36 @@ def test_a_filter_that_diverges_leaves_the_vehicle_to_the_windows(small_survey, 
     # the windows and the fix policy found the vehicle and the graph tracks
     assert any(r.accepted and r.detail != HANDOVER_DETAIL for r in track.fixes)
     assert nav.terrain.episodes
+
+
+def test_what_the_prediction_cannot_allow_is_not_given_to_the_graph(small_survey, rough_map):
+    """The filter's tide moved 10 m behind the graph's back (as a block of biased depths would move
+    it): at the next key its information lies far beyond the graph's prediction, and the graph
+    does not take it (a factor that far off threw the graph's calibration out, and iSAM2 with it)."""
+    nav = GraphNavigator(small_survey, rough_map, ACQUIRE)
+    while not nav.acquisition.factors:
+        nav.step()
+    first = nav.acquisition.factors[0]
+    while not nav._is_key[nav.index + 1]:
+        nav.step()
+    nav.acquisition.state.tide = nav.acquisition.state.tide + 10.0
+    nav.acquisition.converged = False  # (so that the graph does not try to track from there)
+    nav.step()  # the key after the first factor
+    assert nav._is_key[nav.index]
+    assert nav.acquisition.factors == [first]
+    assert "beyond the graph's prediction" in nav.acquisition.last_reason, nav.acquisition.last_reason
+
+
+def test_a_filter_that_cannot_explain_the_pings_gives_nothing_and_says_it_is_lost(small_survey, rough_map):
+    """The DR starts 67 m from the truth while the model says a few metres: the filter's pings are
+    inconsistent, it flags them lost, and the graph gets no factor from a lost filter; the track
+    says those pings are lost (they are not confidently wrong)."""
+    from tangraph.sim.faults import offset_start
+
+    shifted = offset_start(small_survey, np.array([60.0, -30.0]))
+    nav = GraphNavigator(shifted, rough_map, ACQUIRE).run()
+    track = nav.track()
+    lost = nav.acquisition.run.lost_steps
+    assert lost and not nav.acquisition.factors and nav.acquisition.last_reason.startswith("lost")
+    assert set(lost) <= set(track.meta["lost_steps"])
+    assert np.mean(track.lost) > 0.8

@@ -7,6 +7,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 
+import gtsam
 import numpy as np
 import pytest
 
@@ -129,6 +130,12 @@ def test_gtsam_indeterminant_error_is_translated():
     error = translate_error(RuntimeError("Indeterminate linear system detected while working near variable\n"
                                     "7 (Symbol: 7)."), graph)
     assert isinstance(error, TangraphError) and "ping 7" in str(error)
+    determined = PoseGraph()
+    determined.add_pose(0, 0.0, [0, 0, 0])
+    determined.add_pose_prior(0, [0, 0, 0], np.eye(3))
+    tide = translate_error(RuntimeError(f"Indeterminate system near variable\n{int(gtsam.symbol('t', 0))}"),
+                           determined)
+    assert str(tide) == "the pose graph is indeterminant (ill-conditioned) near the tide (t0)"
     other = RuntimeError("something else")
     assert translate_error(other, graph) is other
 
