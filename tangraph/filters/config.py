@@ -212,9 +212,11 @@ class PMFConfig:
         With ``ping_gate`` an inconsistent ping (the lost test's) does not weigh the density
         (bad data or a lost filter: weighing by it drags the density to a wrong place with a
         small spread; ``meta["gated_steps"]``), until ``gate_pings`` in a row, longer than a
-        block of bad pings lasts, say the density is wrong: the tide is put back at its prior
-        (a start on bad depths or a step of the water level: the held tide is the first suspect)
-        and the pings are weighed again (``meta["tide_reopened_steps"]``).
+        block of bad pings lasts, say the density is wrong: it starts afresh around its mean,
+        wider (by ``3 max(s, 1)``, ``s`` the model's start std, doubled at each further way-out
+        before it has been consistent for ``gate_pings`` pings), with the tide and the
+        calibration at their priors, and the pings are weighed again
+        (``meta["reopened_steps"]``).
     relocalise : bool
         When lost, start afresh from a uniform density on the global grid (off by default: on
         a map whose error the model under-states, as on a flat lake gridded from an earlier

@@ -98,11 +98,14 @@ _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
 
 
-def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig) -> PointMass:
+def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig,
+           std: float | None = None) -> PointMass:
+    """The start's density: a Gaussian of ``std`` (m; None: the model's initial position std)
+    around ``centre``, the calibration and the tide at their priors."""
     cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
     cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
     nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
-    s = navigation.initial_position_std
+    s = navigation.initial_position_std if std is None else std
     axes = grid.axes(np.eye(2) * s**2)
     h = (grid.n - 1) / 2.0
     i, j = np.meshgrid(np.arange(grid.n) - h, np.arange(grid.n) - h, indexing="ij")
@@ -212,14 +215,8 @@ def _inconsistent(check, alpha: float) -> bool:
     return bool(check.nis > _chi2_quantile(alpha, 1))
 
 
-def _tide_reopened(state: PointMass, navigation: NavigationModel) -> PointMass:
-    """The state with every point's tide back at its prior (a start on a block of bad depths, or a
-    step of the water level, leaves a held tide that no later ping agrees with)."""
-    out = state.copy()
-    out.tide = np.full(state.tide.shape, navigation.tide)
-    out.tide_var = navigation.tide_variance
-    out.tide_drift = TideDrift.start(navigation, state.tide.shape)
-    return out
+def _diagonal(bathymetry: BathymetryMap) -> float:
+    return float(np.hypot(np.ptp(bathymetry.north), np.ptp(bathymetry.east)))
 
 
 def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: NavigationModel,
@@ -259,7 +256,9 @@ class _Run:
     estimate: bool  # whether the calibration is estimated (a bank of more than one node)
     lost_steps: list[int] = dataclasses.field(default_factory=list)
     gated_steps: list[int] = dataclasses.field(default_factory=list)
-    tide_reopened_steps: list[int] = dataclasses.field(default_factory=list)
+    reopened: list[tuple[int, float]] = dataclasses.field(default_factory=list)  # (ping, widening std)
+    reopen_run: int = 0  # the gate's way-outs since the filter was last consistent for gate_pings pings
+    calm: int = 0  # consistent pings in a row
     off_map_steps: list[int] = dataclasses.field(default_factory=list)
     divergence_steps: list[int] = dataclasses.field(default_factory=list)
     relocalisation_steps: list[int] = dataclasses.field(default_factory=list)
@@ -269,9 +268,8 @@ class _Run:
     def step(self, state: PointMass, ping: Ping) -> PointMass:
         """The state after ``ping``: predicted, weighed, tested for lost, re-gridded if due."""
         _predict(state, ping, self.model)
-        if self.config.ping_gate and self.streak == self.config.gate_pings - 1:  # the gate's way out:
-            state = _tide_reopened(state, self.navigation)  # the held tide is the first suspect
-            self.tide_reopened_steps.append(ping.index)
+        if self.config.ping_gate and self.streak == self.config.gate_pings - 1:
+            state = self.reopen(state, ping)
         predicted = state
         try:
             state, check, update = _measure(state, ping, self.model, self.slope, self.grid, self.config,
@@ -292,11 +290,31 @@ class _Run:
             self.n_regrids += 1
         return state
 
+    def reopen(self, state: PointMass, ping: Ping) -> PointMass:
+        """The gate's way out (``PMFConfig.gate_pings``): the density is wrong, not the pings. It
+        starts afresh around its mean, wider by the PF's re-initialisation spread (``3 max(s,
+        1)``, ``s`` the model's start std), doubled for each further way-out before the filter
+        has been consistent for ``gate_pings`` pings, with the tide and the calibration at their
+        priors (a start on bad depths, a step of the water level, a block of bad pings followed,
+        a start farther off than stated all leave a density no later ping agrees with)."""
+        self.reopen_run += 1
+        mean, cov = state.moments()
+        spread = 3.0 * max(self.navigation.initial_position_std, 1.0) * 2.0 ** (self.reopen_run - 1)
+        spread = min(spread, _diagonal(self.bathymetry))
+        std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), spread))
+        _log.info("pmf: %d pings in a row it cannot explain at ping %d: afresh around its mean, %.0f m wide",
+                  self.streak, ping.index, std)
+        self.reopened.append((ping.index, std))
+        return _start(self.navigation, mean, self.grid, self.config, std=std)
+
     def lost_test(self, state: PointMass, ping: Ping, check, update) -> PointMass:
         """The lost streak after ``ping`` (its innovation ``check``; ``update`` False: it
         diverged); with ``relocalise``, a lost filter starts afresh on the global grid."""
         config = self.config
         self.streak = self.streak + 1 if update is False or _inconsistent(check, config.lost_alpha) else 0
+        self.calm = 0 if self.streak else self.calm + 1
+        if self.calm >= config.gate_pings:
+            self.reopen_run = 0
         if self.streak == config.lost_pings:  # the streak's pings all said so
             self.lost_steps.extend(range(ping.index - self.streak + 1, ping.index))
         if self.streak >= config.lost_pings:
@@ -326,7 +344,7 @@ class _Run:
             "n_lost": len(self.lost_steps),
             "lost_steps": self.lost_steps,
             "gated_steps": self.gated_steps,
-            "tide_reopened_steps": self.tide_reopened_steps,
+            "reopened_steps": [p for p, _ in self.reopened],
             "n_off_map": len(self.off_map_steps),
             "off_map_steps": self.off_map_steps,
             "relocalisation_steps": self.relocalisation_steps,

@@ -102,7 +102,8 @@ class Acquisition:
     last_reason: str = ""
     converged: bool = False  # the density at the latest factor had converged (before_key)
     diverged: int | None = None  # the ping at which the filter diverged
-    tide_seen: int = -1  # the latest ping the filter put its tide back at its prior (ready)
+    reopened_seen: int = -1  # the latest ping the filter started afresh at, as the graph knows (ready)
+    break_std: float = 0.0  # the break (m) the next key's odometry takes for it (online._key_step)
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> Acquisition:
@@ -134,11 +135,16 @@ class Acquisition:
         and tells more than the graph's prediction: ``(mean, covariance)`` over the world position,
         and the tide when the graph holds it; None otherwise (``last_reason`` says why)."""
         mean, cov = self.mean, self.cov  # after ping k (step)
-        reopened = self.run.tide_reopened_steps
-        if nav.tide and reopened and reopened[-1] > self.tide_seen:  # the filter found its tide wrong:
-            self.tide_seen = reopened[-1]  # so is the graph's, which holds what the filter gave it
-            new_tide(nav, k, nav.model.tide)
-            log.info("graph: a new tide from key %d: the point-mass filter's pings disagreed with it", k)
+        reopened = [(p, std) for p, std in self.run.reopened if p > self.reopened_seen]
+        if reopened:  # the filter started afresh: so does the graph's belief, which holds what it gave
+            self.reopened_seen = reopened[-1][0]
+            self.break_std = float(np.hypot.reduce([std for _, std in reopened]))
+            if nav.tide:
+                new_tide(nav, k, nav.model.tide)
+            self.last_reason = "the filter started afresh since the last key: a break into this key"
+            log.info("graph: a break of %.0f m into key %d and a new tide: the point-mass filter "
+                     "started afresh", self.break_std, k)
+            return None
         if self.run.streak >= self.run.config.lost_pings:
             self.last_reason = f"lost: {self.run.streak} pings in a row it cannot explain"
             return None
@@ -182,6 +188,12 @@ class Acquisition:
         # converged: the terrain has told the position at least as much as the start's prior did
         start = nav.model.initial_position_std**2
         self.converged = bool(np.linalg.eigvalsh(self.cov).max() <= 0.5 * start)
+
+    def broken(self, extra: float) -> float:
+        """The break (std, m) on the odometry into this key: ``extra`` and the filter's widening
+        since the last key (:meth:`ready`), taken once."""
+        extra, self.break_std = float(np.hypot(extra, self.break_std)), 0.0
+        return extra
 
     def before_key(self, nav: GraphNavigator, prev: int) -> None:
         """Before the key step after key ``prev``: the graph may start tracking only from a

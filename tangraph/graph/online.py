@@ -288,6 +288,7 @@ class GraphNavigator:
         else:
             window = self.terrain is None or fix is not None or self.terrain.window(self, k, pose, joint)
         extra = take_window(self, k, pose, joint, fix) if window else 0.0
+        extra = extra if acquisition is None else acquisition.broken(extra)  # where it started afresh
         if grows:
             online_fixes.grow_window(self, k)
             if self.tide:

@@ -217,7 +217,7 @@ def test_a_start_on_biased_depths_is_undone_by_putting_the_tide_back_at_its_prio
     run, state, pings = start_run(bad, bathymetry, model, config)
     for ping in pings:
         state = run.step(state, ping)
-    assert run.tide_reopened_steps and run.tide_reopened_steps[0] >= 20 + config.gate_pings - 1
+    assert run.reopened and run.reopened[0][0] >= 20 + config.gate_pings - 1
     mean, _ = state.moments()
     assert np.hypot(*(mean - bad.true_pose[-1, :2])) < 2.0
     weights = state.masses().ravel()

@@ -150,16 +150,23 @@ def test_what_the_prediction_cannot_allow_is_not_given_to_the_graph(small_survey
     assert "beyond the graph's prediction" in nav.acquisition.last_reason, nav.acquisition.last_reason
 
 
-def test_a_filter_that_cannot_explain_the_pings_gives_nothing_and_says_it_is_lost(small_survey, rough_map):
+def test_a_filter_that_cannot_explain_the_pings_says_it_is_lost_and_finds_the_vehicle_afresh(
+        small_survey, rough_map):
     """The DR starts 67 m from the truth while the model says a few metres: the filter's pings are
-    inconsistent, it flags them lost, and the graph gets no factor from a lost filter; the track
-    says those pings are lost (they are not confidently wrong)."""
+    inconsistent, it flags them lost and gives the graph nothing meanwhile; at its gate's way out
+    it starts afresh around its mean, wider, and the graph takes a break of that width into the
+    next key; the filter finds the vehicle and hands it over, and the track ends at the truth."""
     from tangraph.sim.faults import offset_start
 
     shifted = offset_start(small_survey, np.array([60.0, -30.0]))
     nav = GraphNavigator(shifted, rough_map, ACQUIRE).run()
     track = nav.track()
-    lost = nav.acquisition.run.lost_steps
-    assert lost and not nav.acquisition.factors and nav.acquisition.last_reason.startswith("lost")
-    assert set(lost) <= set(track.meta["lost_steps"])
-    assert np.mean(track.lost) > 0.8
+    acquisition = nav.acquisition
+    lost, reopened = acquisition.run.lost_steps, acquisition.run.reopened
+    assert lost and reopened
+    assert {p for p in lost if p < acquisition.handover} <= set(track.meta["lost_steps"])
+    assert all(k > reopened[0][0] for k in acquisition.factors)  # none from the lost filter
+    key = min(k for k in nav.graph.keys if k > reopened[0][0])  # the break into the next key
+    assert nav.graph.breaks.get(key, 0.0) >= reopened[0][1]
+    assert acquisition.handover is not None
+    assert np.hypot(*(track.pose[-1, :2] - shifted.true_pose[-1, :2])) < 1.0
