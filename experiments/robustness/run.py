@@ -71,7 +71,8 @@ def _case(name: str, survey, bathymetry, rng):
 
 def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
     """One survey, every case and method: a row per (case, method), and the dead reckoning's.
-    The particle filters run with ``ping_gate=True``, their defence against bad pings."""
+    The particle and point-mass filters run with ``ping_gate=True``, their defence against bad
+    pings."""
 
     from tangraph.eval import position_nees, track_metrics
     from tangraph.maps import load_any
@@ -99,10 +100,11 @@ def one_run(config: dict, *, rng: np.random.Generator) -> list[dict]:
                 from tangraph.experiments.study import graph_settings
 
                 settings = graph_settings(config["graph"])
-            if method in ("pf", "ipf", "sjcpf"):  # with its defence against bad pings
-                from tangraph.filters import default_config
+            if method in ("pf", "ipf", "sjcpf", "pmf"):  # with its defence against bad pings
+                from tangraph.filters import PMFConfig, default_config
 
-                settings = default_config(method).replace(ping_gate=True)
+                settings = PMFConfig(ping_gate=True) if method == "pmf" else \
+                    default_config(method).replace(ping_gate=True)
             started = time.perf_counter()
             tracks[method] = navigate(spoiled, chart, method, rng=streams[2 + 2 * n], model=model,
                                       config=settings, other_map=case in ("half-map", "off-map"))
@@ -216,7 +218,7 @@ def main(argv=None) -> int:
                           quick="3 runs of the graph on clean, shift-30 and start-200")
     parser.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
     parser.add_argument("--methods", nargs="+", default=list(METHODS),
-                        choices=["isam2", "smoother", "pf", "ipf", "sjcpf"])
+                        choices=["isam2", "smoother", "pf", "ipf", "sjcpf", "pmf"])
     parser.add_argument("--graph", nargs="+", default=[], metavar="FIELD=VALUE",
                         help="GraphConfig settings of the graph's runs (values as Python literals)")
     args = parser.parse_args(argv)

@@ -213,8 +213,7 @@ class PMFConfig:
         (bad data or a lost filter: weighing by it drags the density to a wrong place with a
         small spread; ``meta["gated_steps"]``), until ``gate_pings`` in a row, longer than a
         block of bad pings lasts, say the density is wrong: it starts afresh around its mean,
-        wider (by ``3 max(s, 1)``, ``s`` the model's start std, doubled at each further way-out
-        before it has been consistent for ``gate_pings`` pings), with the tide and the
+        wider (by ``3 max(s, 1)``, ``s`` the model's start std), with the tide and the
         calibration at their priors, and the pings are weighed again
         (``meta["reopened_steps"]``).
     relocalise : bool
