@@ -56,7 +56,9 @@ around its estimate; ``relocalise_points`` per axis), with one calibration node 
 calibration's prior, which the bank grows back from at its next re-grid, and the tide at its
 prior (what a lost filter believes of them is suspect too). The density then holds every place
 the soundings could have come from, and its covariance says so until the terrain has chosen
-(``meta["relocalisation_steps"]``).
+(``meta["relocalisation_steps"]``). With ``ping_gate`` an inconsistent ping does not weigh the
+density, and ``gate_pings`` of them in a row start it afresh around its mean, wider, with the
+tide and the calibration at their priors (:meth:`_Run.reopen`).
 
 The filter and its run loop are here; the density on its grids (the state
 :class:`~tangraph.filters.pmf_grid.PointMass`, the DR noise convolved in, re-gridding) is in

@@ -26,7 +26,11 @@ one nearest the DR's prediction. The filter runs with its ping gate (``PMFConfig
 ping its density cannot explain, as in a block of bad depths, does not weigh it), and a factor
 whose information lies beyond the graph's prediction (its NIS against the prediction beyond the
 ``chi2`` quantile ``GraphConfig.fixes.gate_probability``) is not given: a filter dragged off
-would otherwise throw the graph's calibration out.
+would otherwise throw the graph's calibration out. Nor is a factor given while the filter is
+lost (its lost test's streak), and the pings it flags lost are flagged lost in the track. When
+the gate's way out starts the filter afresh, wider and with the tide at its prior, the graph
+follows: a break of the same width on the odometry into its next key pose, and a new tide
+variable (:func:`~tangraph.graph.online_fixes.new_tide`).
 
 **The hand-over.** A key step after a key that received the filter's factor (so that the
 graph's belief is the filter's), once the density has converged there (at most half the start
