@@ -142,39 +142,38 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
     rot_a = rotation_matrix(key_pose[:, 2])  # (K, 2, 2)
-    frame = key_pose[:, :2] + np.einsum("kij,kj->ki", rot_a, delta[:, :2])
+    frame = key_pose[:, :2] + np.matmul(rot_a, delta[:, :2, None])[..., 0]
     heading = key_pose[:, 2] + delta[:, 2] - b
     scale = rotation_matrix(-b) / (1.0 + k)  # DR frame -> world
     rel = frame - terrain.origin
     world = terrain.origin + rel @ scale.T
     rot_w = rotation_matrix(heading)
-    lever = np.einsum("kij,kbj->kbi", rot_w, terrain.offsets)  # (K, B, 2)
+    rot_w_t = np.swapaxes(rot_w, 1, 2)  # (small products as matmul: einsum's overhead was most of it)
+    lever = np.matmul(terrain.offsets, rot_w_t)  # (K, B, 2)
     shift = np.zeros(2) if map_offset is None else np.asarray(map_offset, float)
     north, east = world[:, None, 0] + lever[..., 0] + shift[0], world[:, None, 1] + lever[..., 1] + shift[1]
     residual = terrain.depth - tide - bathymetry.depth_at(north, east)
     grad = bathymetry.gradient_at(north, east)  # (K, B, 2)
     if offset is not None:
         residual = residual - offset
-    turn = np.einsum("ij,kbj->kbi", _J, terrain.offsets)
-    d_heading = np.einsum("kij,kbj->kbi", rot_w, turn)  # d f / d psi_w (K, B, 2)
-    d_xy = np.einsum("ij,kjl->kil", scale, rot_a)  # d f / d (x, y) of the key, (K, 2, 2)
+    d_heading = np.matmul(terrain.offsets @ _J.T, rot_w_t)  # d f / d psi_w (K, B, 2)
+    d_xy = np.matmul(scale, rot_a)  # d f / d (x, y) of the key, (K, 2, 2)
     # the white DR noise from the key to the ping: d f / d increment = [scale R_a, d_heading]
-    d_inc = np.concatenate([np.broadcast_to(d_xy[:, None], (*residual.shape, 2, 2)), d_heading[..., None]],
-                           axis=-1)
-    g_inc = np.einsum("kbi,kbij->kbj", grad, d_inc)
-    dr_variance = np.einsum("kbi,kij,kbj->kb", g_inc, terrain.increment_cov, g_inc)
+    g_xy = np.matmul(grad, d_xy)  # (K, B, 2)
+    g_inc = np.concatenate([g_xy, np.sum(grad * d_heading, axis=-1)[..., None]], axis=-1)
+    dr_variance = np.sum(np.matmul(g_inc, terrain.increment_cov) * g_inc, axis=-1)
     if not jacobian:
         return residual, None, dr_variance, grad, north, east
-    d_theta = np.einsum("kil,kl->ki", d_xy, delta[:, :2] @ _J.T)  # d f / d heading of the key, less turn
+    d_theta = np.matmul(d_xy, (delta[:, :2] @ _J.T)[..., None])[..., 0]  # d f / d key heading, less turn
     jac = np.zeros((*residual.shape, terrain.n_parameters))
-    jac[..., 0:2] = -np.einsum("kbi,kij->kbj", grad, d_xy)
-    jac[..., 2] = -np.einsum("kbi,kbi->kb", grad, d_theta[:, None, :] + d_heading)
+    jac[..., 0:2] = -g_xy
+    jac[..., 2] = -np.sum(grad * (d_theta[:, None, :] + d_heading), axis=-1)
     column = 3
     if terrain.calibrated:
         d_k = -(rel @ scale.T) / (1.0 + k)  # (K, 2)
         d_b = -(rel @ (scale @ _J).T)
-        jac[..., column] = -np.einsum("kbi,ki->kb", grad, d_k)
-        jac[..., column + 1] = -np.einsum("kbi,kbi->kb", grad, d_b[:, None, :] - d_heading)
+        jac[..., column] = -np.sum(grad * d_k[:, None, :], axis=-1)
+        jac[..., column + 1] = -np.sum(grad * (d_b[:, None, :] - d_heading), axis=-1)
         column += 2
     if terrain.estimates_tide:
         jac[..., column] = -1.0
@@ -209,7 +208,7 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
     if offset_variance is not None:
         cov[:, 2, 2] = np.asarray(offset_variance, float)
     g = np.concatenate([grad, np.ones((*residual.shape, 1))], axis=-1)  # shift, then offset
-    spread = np.einsum("kbi,kij,kbj->kb", g, cov, g)
+    spread = np.sum(np.matmul(g, cov) * g, axis=-1)
     limit = threshold * np.sqrt(variance + spread)
     finite = np.isfinite(residual) & np.isfinite(spread)
     ok = finite & (np.abs(residual) <= limit)
@@ -219,10 +218,10 @@ def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration,
     r = np.where(finite, np.clip(residual, -limit, limit), 0.0)
     g = np.where(finite[..., None], g, 0.0)
     # Woodbury: less b^T P (I + C P)^-1 b, what a shift within P (and the offset) explains
-    b = np.einsum("kb,kbi,kb->ki", w, g, r)
-    c = np.einsum("kb,kbi,kbj->kij", w, g, g)
+    b = np.sum((w * r)[..., None] * g, axis=1)
+    c = np.matmul(np.swapaxes(g * w[..., None], 1, 2), g)
     y = np.linalg.solve(np.eye(3) + c @ cov, b[..., None])[..., 0]
-    stat = np.sum(w * r * r, axis=1) - np.einsum("ki,kij,kj->k", b, cov, y)
+    stat = np.sum(w * r * r, axis=1) - np.sum(np.matmul(b[:, None, :], cov)[:, 0] * y, axis=-1)
     count = finite.sum(axis=1)
     consistent = stat <= stats.chi2.ppf(PING_PROBABILITY, np.maximum(count, 1))
     return ok & consistent[:, None]
@@ -249,8 +248,8 @@ def linear_factors(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, ca
     jac = np.where(ok[..., None], jac, 0.0)
     residual = np.where(ok, residual, 0.0)
     p = terrain.n_parameters
-    per_ping_h = np.einsum("kb,kbi,kbj->kij", weight, jac, jac)
-    per_ping_g = np.einsum("kb,kbi,kb->ki", weight, jac, residual)
+    per_ping_h = np.matmul(np.swapaxes(jac * weight[..., None], 1, 2), jac)
+    per_ping_g = np.sum((weight * residual)[..., None] * jac, axis=1)
     n = terrain.keys.size
     info = np.zeros((n, p, p))
     grad = np.zeros((n, p))
