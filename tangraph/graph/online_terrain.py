@@ -61,7 +61,8 @@ from scipy import stats
 
 from tangraph.fix_records import FixStatus
 from tangraph.geometry import gate_threshold
-from tangraph.graph.calibration import CALIBRATION
+from tangraph.graph.calibration import CALIBRATION, world_covariance
+from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.lost import _isam_index
 from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
 from tangraph.sensors import sounding_variances
@@ -349,8 +350,14 @@ def _nonlinearity(nav: GraphNavigator, terrain: PingTerrain, prev: int, pings: n
 def _ping_covariances(nav: GraphNavigator, prev: int, pings: np.ndarray) -> np.ndarray:
     """The world position covariance ``(K, 2, 2)`` of each of the ``pings`` hung from the latest
     key ``prev`` (its own ping: the key's)."""
-    at_key = nav._world(nav._key_pose, nav._key_joint)
-    return np.stack([(at_key if i == prev else nav.predicted(int(i)))[1] for i in pings])[:, :2, :2]
+    pings = np.asarray(pings, np.int64)
+    key = np.broadcast_to(nav._key_pose, (pings.size, 3))  # nav.predicted, all at once
+    pose = compose(key, nav._delta[pings])
+    joint = propagate_joint(key, np.broadcast_to(nav._key_joint, (pings.size, 5, 5)), nav._delta[pings],
+                            nav._delta_cov[pings])
+    joint[pings == prev] = nav._key_joint
+    pose[pings == prev] = nav._key_pose
+    return world_covariance(pose, joint, nav.calibration, nav.origin)[:, :2, :2]
 
 
 def tangent_departure(bathymetry, north, east, variance, cov) -> float:
