@@ -353,8 +353,8 @@ def _ping_covariances(nav: GraphNavigator, prev: int, pings: np.ndarray) -> np.n
     pings = np.asarray(pings, np.int64)
     key = np.broadcast_to(nav._key_pose, (pings.size, 3))  # nav.predicted, all at once
     pose = compose(key, nav._delta[pings])
-    joint = propagate_joint(key, np.broadcast_to(nav._key_joint, (pings.size, 5, 5)), nav._delta[pings],
-                            nav._delta_cov[pings])
+    joints = np.broadcast_to(nav._key_joint, (pings.size, *np.shape(nav._key_joint)))
+    joint = propagate_joint(key, joints, nav._delta[pings], nav._delta_cov[pings])
     joint[pings == prev] = nav._key_joint
     pose[pings == prev] = nav._key_pose
     return world_covariance(pose, joint, nav.calibration, nav.origin)[:, :2, :2]
