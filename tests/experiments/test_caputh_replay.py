@@ -62,7 +62,8 @@ def test_the_map_error_goals_are_checked_on_the_long_runs_with_spoiled_and_compa
 
 @pytest.mark.parametrize("name", ["config.toml", "config_turn_walk.toml", "config_check_lines.toml",
                                   "config_tracking.toml", "config_front_end.toml", "config_field.toml",
-                                  "config_field_offset.toml", "config_map_drift.toml"])
+                                  "config_field_offset.toml", "config_map_drift.toml",
+                                  "config_acquired.toml"])
 def test_every_configuration_gives_models_the_graph_accepts(name):
     from tangraph.graph.fixes import check_tide_drift
 
