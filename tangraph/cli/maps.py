@@ -192,7 +192,8 @@ def _gridding_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--fill", type=FILL, default=0, metavar="CELLS",
-        help="fill empty cells from cells with data within CELLS cells (inverse distance squared); "
+        help="fill empty cells from cells with data within CELLS cells (a plane across a gap closed from "
+        "both sides, else inverse distance squared); "
         "farther cells stay no-data (default: 0, no fill)",
     )
     p.add_argument(

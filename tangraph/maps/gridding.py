@@ -3,7 +3,7 @@
 :func:`block_reduce` bins ``(north, east, depth)`` points into square cells and gives the count,
 (weighted) mean, (weighted) median and spread of depth per cell, by one sort of the points by
 cell (no Python loop over cells); :func:`grid_soundings` does it for an array or an Open3D point
-cloud. :func:`fill_gaps` gives empty cells near data a depth by inverse-distance weighting. The
+cloud. :func:`fill_gaps` gives empty cells near data a depth (linear across gaps). The
 result is a :class:`SoundingGrid`, whose :attr:`~SoundingGrid.depth` carries the map's error
 (:func:`tangraph.maps.gridding_error.gridded_error`). Surveys are gridded, in one frame, by
 :func:`tangraph.gridding_surveys.grid_surveys`.
@@ -23,7 +23,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.maps._grid_checks import cell_axis, check_cell, check_error_drift
 from tangraph.maps.grid import BathymetryMap
-from tangraph.maps.gridding_error import gridded_error
+from tangraph.maps.gridding_error import bridging_triangles, gridded_error
 
 __all__ = [
     "SoundingGrid",
@@ -294,14 +294,24 @@ def _reduce_cells(flat: np.ndarray, z: np.ndarray, w: np.ndarray, shape: tuple[i
 
 # -- gap filling ------------------------------------------------------------------------------
 def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
-    """Give empty cells near data a depth: inverse-distance weighting within ``cells`` cells.
+    """Give empty cells near data a depth: linear across gaps, inverse distance elsewhere.
 
-    An empty cell gets ``sum(w_k d_k) / sum(w_k)`` over the cells ``k`` holding soundings
-    whose centres lie within ``cells`` cell sizes of its own (a disc), with ``w_k = 1 / r_k^2``
-    (``r_k`` the distance in cells) and ``d_k`` the grid's chosen statistic. It is computed for
-    all cells at once as a normalised convolution (the data times the kernel over the data
-    mask times the kernel). Only measured cells feed the fill (it is not iterated), and a
-    cell farther than ``cells`` from every measured cell stays no-data (NaN).
+    An empty cell within ``cells`` cell sizes of a measured cell (a disc) is filled; a cell
+    farther from every measured cell stays no-data (NaN). Only measured cells feed the fill (it
+    is not iterated), with the grid's chosen statistic as their depth ``d_k``.
+
+    - **Across a gap** (:func:`~tangraph.maps.gridding_error.bridging_triangles`): the cell
+      lies in a triangle of the Delaunay triangulation of the measured cells whose sides span at
+      most a gap the fill closes from both sides (``2 cells`` empty cells). It gets the plane
+      through the three corners, ``sum(w_k d_k)`` with its barycentric weights ``w_k`` (a TIN).
+      A plane is reproduced exactly: a seafloor that slopes across a gap is filled with its slope.
+    - **Elsewhere** (a bay in the data, beyond the data's hull): ``sum(w_k d_k) / sum(w_k)`` over
+      the measured cells within ``cells`` cells, ``w_k = 1 / r_k^2`` (``r_k`` the distance in
+      cells), a normalised convolution. This flattens the map towards its data.
+
+    The inverse distance average alone, across a gap between survey lines on a sloping seafloor,
+    leans on the nearer line's depth: its error is a sawtooth across the gap, the same all along
+    the lines, which a vehicle running along the gap takes for a position offset.
 
     Parameters
     ----------
@@ -317,13 +327,13 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
 
     Examples
     --------
-    >>> g = block_reduce([[0.0, 0, 10], [0, 2, 14], [1, 0, 10], [1, 2, 14], [0, 6, 20]], cell=1.0)
+    >>> g = block_reduce([[0.0, 0, 10], [0, 3, 16], [1, 0, 10], [1, 3, 16], [0, 7, 20]], cell=1.0)
     >>> f = fill_gaps(g, 1)
-    >>> f.depth.depth
-    array([[10., 12., 14., 14., nan, 20., 20.],
-           [10., 12., 14., 14., nan, nan, 20.]])
+    >>> f.depth.depth  # columns 1-2 bridged by the plane; the wider gap is not: its nearest data
+    array([[10., 12., 14., 16., 16., nan, 20., 20.],
+           [10., 12., 14., 16., 16., nan, nan, 20.]])
     >>> f.n_filled
-    6
+    8
     """
     from scipy import ndimage
 
@@ -334,17 +344,25 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
     measured = grid.count > 0
     gap_fill = np.full(grid.mean.shape, np.nan)
     if cells > 0:
-        di, dj = np.mgrid[-cells : cells + 1, -cells : cells + 1]
-        r2 = (di**2 + dj**2).astype(np.float64)
-        kernel = np.where((r2 > 0) & (r2 <= cells**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0)
+        kernel = _fill_kernel(cells)
         data = np.where(measured, depth, 0.0)
         num = ndimage.correlate(data, kernel, mode="constant", cval=0.0)
         den = ndimage.correlate(measured.astype(np.float64), kernel, mode="constant", cval=0.0)
         near = ~measured & (den > 0)
         gap_fill[near] = num[near] / den[near]
-    meta = {**grid.meta, "gap_fill": {"cells": cells, "method": "inverse distance squared"}}
+        target, corners, weights = bridging_triangles(measured, cells)
+        gap_fill.flat[target] = np.sum(weights * depth.flat[corners], axis=1)
+    meta = {**grid.meta, "gap_fill": {"cells": cells, "method": "linear across gaps (Delaunay), "
+                                      "inverse distance squared elsewhere"}}
     return SoundingGrid(grid.mean, grid.count, grid.std, grid.n_dropped, median=grid.median,
                         statistic=grid.statistic, gap_fill=gap_fill, meta=meta)
+
+
+def _fill_kernel(cells: int) -> np.ndarray:
+    """The inverse-squared-distance weights of the cells within ``cells`` of the centre (0 there)."""
+    di, dj = np.mgrid[-cells : cells + 1, -cells : cells + 1]
+    r2 = (di**2 + dj**2).astype(np.float64)
+    return np.where((r2 > 0) & (r2 <= cells**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0)
 
 
 def _as_points(points) -> np.ndarray:

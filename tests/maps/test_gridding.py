@@ -115,6 +115,25 @@ def test_fill_gaps_fills_a_one_cell_hole_and_leaves_far_cells_nan():
         fill_gaps(g, -1)
 
 
+def test_a_gap_between_lines_on_a_slope_is_filled_with_the_slope():
+    # two survey strips (columns 0-2 and 9-11) of a plane sloping across them: the gap between
+    # is filled by the plane exactly, where an inverse distance average would lean on the
+    # nearer strip (a sawtooth across the gap, the same along it)
+    nn, ee = np.meshgrid(np.arange(20.0), np.arange(12.0), indexing="ij")
+    depth = 50 + 0.1 * nn + 0.5 * ee
+    keep = (ee <= 2) | (ee >= 9)
+    g = block_reduce(np.column_stack([nn[keep], ee[keep], depth[keep]]), cell=1.0)
+    f = fill_gaps(g, 3)
+    gap = np.s_[:, 3:9]
+    np.testing.assert_allclose(f.depth.depth[gap], depth[gap], atol=1e-9)
+    assert "linear" in f.meta["gap_fill"]["method"]
+    # a gap wider than twice the radius is not bridged: its cells within reach lean on their
+    # own side (the depth flattened towards that strip's), the middle stays no-data
+    w = fill_gaps(g, 2).depth.depth
+    assert np.all(w[2:-2, 3:5] < depth[2:-2, 3:5]) and np.all(w[2:-2, 7:9] > depth[2:-2, 7:9])
+    assert np.all(np.isnan(w[:, 5:7]))
+
+
 # -- soundings ---------------------------------------------------------------------------------
 SOUNDINGS = np.array(
     [

@@ -11,7 +11,7 @@ import pytest
 
 from tangraph.errors import TangraphError
 from tangraph.maps import block_reduce, fill_gaps
-from tangraph.maps.gridding_error import gridded_error
+from tangraph.maps.gridding_error import bridging_triangles, gridded_error
 from tests.gridding_cases import _plane_survey
 
 
@@ -70,13 +70,14 @@ def test_a_filled_cell_grows_with_the_distance_to_the_data_as_the_variogram_says
     for k in range(1, 7):
         errors.append(max(errors[-1], np.nanmean((layer[:, k:] - layer[:, :-k]) ** 2)))
     column = e.depth_std[:, 10]
-    data = np.argwhere(measured)
-    for row in range(1, 7):  # the fill's own weights over the measured cells within 6 cells
-        r = np.hypot(*(data - [row, 10]).T)
-        near = (r > 0) & (r <= 6)
-        w = 1.0 / r[near] ** 2
-        own = e.depth_std[data[near, 0], data[near, 1]] ** 2
-        expected = np.sqrt(np.sum(w * (np.interp(r[near], np.arange(7.0), errors) + own)) / np.sum(w))
+    target, corners, weights = bridging_triangles(measured, 6)  # the gap is bridged by planes
+    for row in range(1, 7):  # the fill's own weights over its triangle's corners
+        (i,) = np.flatnonzero(target == np.ravel_multi_index((row, 10), measured.shape))
+        corner = np.stack(np.unravel_index(corners[i], measured.shape), axis=-1)
+        assert measured.flat[corners[i]].all() and weights[i] @ corner == pytest.approx([row, 10])
+        r = np.hypot(*(corner - [row, 10]).T)
+        own = e.depth_std.flat[corners[i]] ** 2
+        expected = np.sqrt(np.sum(weights[i] * (np.interp(r, np.arange(7.0), errors) + own)))
         assert column[row] == pytest.approx(expected, rel=1e-12)
     assert np.all(np.diff(column[0:4]) > 0)  # grows towards the middle of the gap
     assert np.all(np.diff(column[4:8]) < 0)  # and falls towards the northern line
@@ -168,8 +169,8 @@ def test_the_positioning_std_adds_its_depth_error_through_the_slope():
 
 
 def test_a_gap_fill_does_not_hide_the_slope_next_to_the_data():
-    """Lines 40 m apart, the gaps filled by inverse distance from 2 cells: the fill is flat next
-    to the data, but the slope the positioning error meets is the seafloor's (0.112 here)."""
+    """Lines 40 m apart, the gaps filled from 2 cells: the slope the positioning error meets is
+    the seafloor's (0.112 here), wherever the fill is flatter next to the data."""
     from tangraph.maps import grid_surveys
 
     surveys = _plane_survey(0.0, n_lines=40)[::4]
