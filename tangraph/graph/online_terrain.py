@@ -23,6 +23,12 @@ its soundings (relinearised far from where they were judged, the factor pulls no
 tide is a variable of the graph (its prior the model's), so the soundings' common offset is
 learnt, not taken as position.
 
+**Little information where the terrain does not rise above the map's noise.** Each sounding's
+likelihood is raised to its information exponent, the filters' MBARI weighting linearised
+(:meth:`OnlineTerrain._exponents`): a belief narrower than the map's error lets the terrain
+under it vary by less than that error, and soundings that converge it further would follow the
+map's noise. (On a perfect map every exponent is 1.)
+
 **The soundings judged** as innovations of the prediction, once: each at ``SOUNDING_GATE`` sigma
 of the prediction's position and tide uncertainty, each ping's together at
 ``terrain_factors.PING_PROBABILITY`` (:func:`~tangraph.graph.terrain_factors.gate`: a ping that
@@ -65,14 +71,13 @@ from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.lost import _isam_index
 from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
-from tangraph.sensors import sounding_variances
+from tangraph.sensors import sounding_map_variances, sounding_variances
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
 
-__all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MISFIT_KEYS", "NONLINEAR_SIGMAS", "NONLINEAR_STOP",
-           "SOUNDING_GATE", "START_ITERATIONS", "OnlineTerrain",
-           "tangent_departure"]
+__all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MIN_EXPONENT", "MISFIT_KEYS", "NONLINEAR_SIGMAS",
+           "NONLINEAR_STOP", "SOUNDING_GATE", "START_ITERATIONS", "OnlineTerrain", "tangent_departure"]
 
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
@@ -92,6 +97,9 @@ SOUNDING_GATE = 3.29
 #: Further iSAM2 updates (Gauss-Newton steps: one per update) when tracking starts: its first
 #: factor is linearised at a belief that may be metres off, far for one step
 START_ITERATIONS = 5
+#: A sounding whose information exponent (:meth:`OnlineTerrain._exponents`) is below this tells
+#: nothing here and is left out of its factor
+MIN_EXPONENT = 1e-3
 #: Gauss-Newton iterations of the output between keys (:meth:`OnlineTerrain.filtered`)
 FILTERED_ITERATIONS = 3
 _USED = (FixStatus.ACCEPTED, FixStatus.CONFIRMED)
@@ -115,12 +123,14 @@ class OnlineTerrain:
     soundings: int = 0
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
     found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
+    map_variance: np.ndarray | None = None  # (K, B) the map's own error variance under each sounding
     _judged: object = None  # the navigator's latest window outcome, looked at for that
     _first: tuple = (None, 0, 0)  # the factor of the latest episode's first key, its pings and soundings
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> OnlineTerrain:
-        return cls(sounding_variances(nav.survey, nav.bathymetry, nav.model))
+        return cls(sounding_variances(nav.survey, nav.bathymetry, nav.model),
+                   map_variance=sounding_map_variances(nav.survey, nav.bathymetry, nav.model))
 
     def meta(self) -> dict:
         """What ``Track.meta["terrain"]`` says: factors, pings and soundings used, and the
@@ -231,6 +241,9 @@ class OnlineTerrain:
         prior = _ping_covariances(nav, nav._key_of, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=np.full(pings.size, tide_var))
+        grad = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False)[3]
+        exponent = self._exponents(pings, grad, prior)
+        used &= exponent > MIN_EXPONENT
         if not used.any():
             return None
         n = 3 if tide_var > 0 else 2
@@ -244,7 +257,7 @@ class OnlineTerrain:
                 terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
                 offset=shift[2] if n == 3 else None, map_offset=shift[:2])
             ok = used & np.isfinite(residual)
-            weight = np.where(ok, 1.0 / (terrain.variance + dr_variance), 0.0).ravel()
+            weight = np.where(ok, exponent / (terrain.variance + dr_variance), 0.0).ravel()
             g = grad.reshape(-1, 2)
             if n == 3:
                 g = np.column_stack([g, np.ones(len(g))])
@@ -296,6 +309,8 @@ class OnlineTerrain:
             if _innovation(residual, grad, weight, prior[0], tide_var) > gate_nis:
                 used[:] = False  # the soundings together pull the belief beyond its gate
                 failed = 1.0
+        exponent = self._exponents(pings, grad, prior)
+        used &= exponent > MIN_EXPONENT
         if not used.any():
             return None, failed
         self.pings += int(np.any(used, axis=1).sum())
@@ -308,9 +323,25 @@ class OnlineTerrain:
         threshold = float(np.sqrt(stats.chi2.ppf(PING_PROBABILITY, n)))
         noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(threshold),
                                                gtsam.noiseModel.Unit.Create(n))
-        std = np.sqrt(terrain.variance + dr_variance)[used]  # the weights, fixed as the soundings judged
+        # the weights, fixed as the soundings were judged
+        std = np.sqrt((terrain.variance + dr_variance)[used] / exponent[used])
         error = functools.partial(_error, terrain, nav.bathymetry, used, std, float(nav.model.tide))
         return gtsam.CustomFactor(noise, keys, error), failed
+
+    def _exponents(self, pings, grad, position_cov) -> np.ndarray:
+        """The information exponents ``(K, B)`` of the ``pings``' soundings (the filters' MBARI
+        weighting, :func:`tangraph.sensors.information_exponent`, linearised): with ``D^2`` the
+        spread of the depths the belief predicts for a sounding, ``g^T P g`` (``g`` the map's
+        gradient under it, ``P`` its ping's position covariance ``position_cov (K, 2, 2)``),
+        less what the map's noise ``s^2`` alone would spread, ``D^2 / (D^2 + 2 s^2)``: 1 on a
+        perfect map, near 0 where the belief is too narrow for the terrain under it to rise
+        above the map's noise."""
+        if self.map_variance is None:
+            return np.ones(grad.shape[:2])
+        s2 = np.nan_to_num(self.map_variance[pings])
+        spread = np.maximum(np.einsum("kbi,kij,kbj->kb", grad, position_cov, grad) - s2, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(s2 > 0, spread / (spread + 2.0 * s2), 1.0)
 
 
 def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
