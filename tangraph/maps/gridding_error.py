@@ -180,7 +180,7 @@ def gridded_error(grid: SoundingGrid, *, neighbourhood: int = 2) -> GriddedError
         radius = int(grid.meta.get("gap_fill", {}).get("cells", math.ceil(distance.max() / cell)))
         fill_error = _fill_error(layer, measured, std, radius, gamma)
         variance = _fill_variance(measured, std, radius, fill_error)
-        variance.flat[:] = _bridged_variance(variance.ravel(), measured, std, radius, fill_error)
+        variance = _bridged_variance(variance.ravel(), measured, std, radius, fill_error).reshape(std.shape)
         std = np.where(filled, np.sqrt(variance), std)
     valid = measured | filled
     position_std = float(grid.meta.get("position_std", 0.0))
@@ -295,6 +295,7 @@ def bridging_triangles(measured: np.ndarray, cells: int) -> tuple[np.ndarray, np
     corner_cells = nodes[tri.simplices[simplex]]  # (m, 3, 2)
     edges = corner_cells - np.roll(corner_cells, 1, axis=1)
     near = np.all(np.hypot(edges[..., 0], edges[..., 1]) <= reach, axis=1)
+    near &= np.all(np.isfinite(weights), axis=1)  # (a sliver's barycentric transform may be NaN)
     shape = measured.shape
     flat = np.ravel_multi_index(tuple(target[near].T), shape)
     corners = np.ravel_multi_index(tuple(np.moveaxis(corner_cells[near], -1, 0)), shape)
