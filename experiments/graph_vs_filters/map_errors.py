@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-import run as study  # noqa: E402  (the study's own survey, so the maps are the runs' maps)
+import run as study  # the study's own surveys, so the maps are the runs' maps
 
-from tangraph.experiments import run_rng  # noqa: E402
+from tangraph.experiments import run_rng
 
 
 def map_errors(scenario: str, index: int, run: int) -> dict[str, float]:
@@ -41,9 +41,9 @@ def map_errors(scenario: str, index: int, run: int) -> dict[str, float]:
     rms = lambda a: float(np.sqrt(np.mean(a**2)))  # noqa: E731
     with np.errstate(invalid="ignore"):
         along = np.nanmean(np.where(ok, error, np.nan), axis=0)
-    return {"rms": rms(error[ok]), "measured": rms(error[ok & measured]), "filled": rms(error[ok & ~measured]),
-            "z_measured": rms(z[ok & measured]), "z_filled": rms(z[ok & ~measured]),
-            "along_lines": rms(along[np.isfinite(along)])}
+    return {"rms": rms(error[ok]), "measured": rms(error[ok & measured]),
+            "filled": rms(error[ok & ~measured]), "z_measured": rms(z[ok & measured]),
+            "z_filled": rms(z[ok & ~measured]), "along_lines": rms(along[np.isfinite(along)])}
 
 
 def main() -> None:
