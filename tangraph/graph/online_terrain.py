@@ -241,9 +241,6 @@ class OnlineTerrain:
         prior = _ping_covariances(nav, nav._key_of, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=np.full(pings.size, tide_var))
-        grad = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False)[3]
-        exponent = self._exponents(pings, grad, prior)
-        used &= exponent > MIN_EXPONENT
         if not used.any():
             return None
         n = 3 if tide_var > 0 else 2
@@ -252,10 +249,15 @@ class OnlineTerrain:
         if n == 3:
             information[2, 2] = 1.0 / tide_var
         shift = np.zeros(n)
-        for _ in range(FILTERED_ITERATIONS):  # Gauss-Newton, relinearised at the shifted footprints
+        for step in range(FILTERED_ITERATIONS):  # Gauss-Newton, relinearised at the shifted footprints
             residual, _, dr_variance, grad, *_ = _evaluate(
                 terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
                 offset=shift[2] if n == 3 else None, map_offset=shift[:2])
+            if step == 0:  # weighed as judged, at the prediction
+                exponent = self._exponents(pings, grad, prior)
+                used &= exponent > MIN_EXPONENT
+                if not used.any():
+                    return None
             ok = used & np.isfinite(residual)
             weight = np.where(ok, exponent / (terrain.variance + dr_variance), 0.0).ravel()
             g = grad.reshape(-1, 2)

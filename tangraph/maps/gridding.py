@@ -23,7 +23,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.maps._grid_checks import cell_axis, check_cell, check_error_drift
 from tangraph.maps.grid import BathymetryMap
-from tangraph.maps.gridding_error import bridging_triangles, gridded_error
+from tangraph.maps.gridding_error import bridging_triangles, fill_kernel, gridded_error
 
 __all__ = [
     "SoundingGrid",
@@ -344,7 +344,7 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
     measured = grid.count > 0
     gap_fill = np.full(grid.mean.shape, np.nan)
     if cells > 0:
-        kernel = _fill_kernel(cells)
+        kernel, _ = fill_kernel(cells)
         data = np.where(measured, depth, 0.0)
         num = ndimage.correlate(data, kernel, mode="constant", cval=0.0)
         den = ndimage.correlate(measured.astype(np.float64), kernel, mode="constant", cval=0.0)
@@ -356,13 +356,6 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
                                       "inverse distance squared elsewhere"}}
     return SoundingGrid(grid.mean, grid.count, grid.std, grid.n_dropped, median=grid.median,
                         statistic=grid.statistic, gap_fill=gap_fill, meta=meta)
-
-
-def _fill_kernel(cells: int) -> np.ndarray:
-    """The inverse-squared-distance weights of the cells within ``cells`` of the centre (0 there)."""
-    di, dj = np.mgrid[-cells : cells + 1, -cells : cells + 1]
-    r2 = (di**2 + dj**2).astype(np.float64)
-    return np.where((r2 > 0) & (r2 <= cells**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0)
 
 
 def _as_points(points) -> np.ndarray:

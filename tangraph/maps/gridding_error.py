@@ -75,6 +75,7 @@ for lines far apart with their gaps filled.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import logging
 import math
 from typing import TYPE_CHECKING, cast
@@ -86,7 +87,7 @@ from tangraph.errors import TangraphError
 if TYPE_CHECKING:
     from tangraph.maps.gridding import SoundingGrid
 
-__all__ = ["GriddedError", "bridging_triangles", "gridded_error"]
+__all__ = ["GriddedError", "bridging_triangles", "fill_kernel", "gridded_error"]
 
 #: the logger of gridding (the one the map's error has always been reported under)
 log = logging.getLogger("tangraph.maps.gridding")
@@ -248,15 +249,21 @@ def _fill_variance(measured: np.ndarray, std: np.ndarray, radius: int, fill_erro
     spread, is left out, on the safe side (NaN where no measured cell is within reach)."""
     from scipy import ndimage
 
-    di, dj = np.mgrid[-radius : radius + 1, -radius : radius + 1]
-    r2 = (di**2 + dj**2).astype(np.float64)
-    kernel = np.where((r2 > 0) & (r2 <= radius**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0)
+    kernel, distance = fill_kernel(radius)
     data = measured.astype(np.float64)
     weight = ndimage.correlate(data, kernel, mode="constant", cval=0.0)
-    spread = ndimage.correlate(data, kernel * fill_error(np.sqrt(r2)), mode="constant", cval=0.0)
+    spread = ndimage.correlate(data, kernel * fill_error(distance), mode="constant", cval=0.0)
     own = ndimage.correlate(np.where(measured, std**2, 0.0), kernel, mode="constant", cval=0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(weight > 0, (spread + own) / weight, np.nan)
+
+
+def fill_kernel(cells: int) -> tuple[np.ndarray, np.ndarray]:
+    """The inverse-distance fill's weights ``1 / r^2`` over the cells within ``cells`` of the
+    centre (0 at the centre and beyond), and the distances ``r`` (in cells) of that window."""
+    di, dj = np.mgrid[-cells : cells + 1, -cells : cells + 1]
+    r2 = (di**2 + dj**2).astype(np.float64)
+    return np.where((r2 > 0) & (r2 <= cells**2), 1.0 / np.where(r2 > 0, r2, 1.0), 0.0), np.sqrt(r2)
 
 
 def bridging_triangles(measured: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -268,6 +275,21 @@ def bridging_triangles(measured: np.ndarray, cells: int) -> tuple[np.ndarray, np
     Delaunay triangulation of the measured cells near a gap (those within ``2 cells + 2`` of an
     empty cell) whose sides are at most ``2 cells + 2`` cells long: a gap the fill closes from
     both sides (``2 cells`` empty cells between data), a diagonal's slack included."""
+    measured = np.asarray(measured, bool)
+    key = (int(cells), measured.shape, hashlib.blake2b(np.packbits(measured).tobytes()).digest())
+    if _BRIDGED[0] != key:  # a gap fill and the map's error ask for the same grid's in turn
+        answer = _bridging_triangles(measured, int(cells))
+        for array in answer:
+            array.flags.writeable = False
+        _BRIDGED[:] = [key, answer]
+    return _BRIDGED[1]
+
+
+#: the latest :func:`bridging_triangles` asked for: its key and its (read-only) answer
+_BRIDGED: list = [None, None]
+
+
+def _bridging_triangles(measured: np.ndarray, cells: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     from scipy import ndimage
     from scipy.spatial import Delaunay, QhullError
 
