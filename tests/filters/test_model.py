@@ -232,6 +232,7 @@ def test_pings_carry_the_terrain_models_variances():
         keep = np.isfinite(SURVEY.beam_depth[ping.index])
         np.testing.assert_allclose(ping.variance, want[ping.index, keep])
         np.testing.assert_allclose(ping.map_variance, 0.09)
+        assert ping.map_ranges == (20.0,) and ping.map_variance.shape == (1, keep.sum())
     # soundings that share a map error count as fewer: each variance is above noise + map error
     assert all(np.all(p.variance > 0.5**2 + 0.3**2) for p in pings)
     # a perfect map: the sounding noise alone; no model: nothing carried
