@@ -8,18 +8,21 @@ vehicle, and once it is found the navigator *tracks* it on every sounding.
 several places would lead the linearised soundings into its basin), and the map is near its
 tangent plane over the belief: over each new ping's 2-sigma position ellipse (the key's belief
 carried to the ping by the DR) the map's depth under its footprints departs from its
-linearisation by less than the soundings' noise (:func:`_nonlinearity`), so a Gauss-Newton step
-on them is sound. (Started, the update that adds the first factor is iterated:
-``START_ITERATIONS``.)
+linearisation by less than the soundings' noise (:func:`_nonlinearity`), so the soundings
+linearised there hold over the belief. (Started, the update that adds the first factor is
+iterated: ``START_ITERATIONS``.)
 
 **The factor.** At each key step the soundings of the pings hung from the previous key (its own
 ping and those before the new key, less any ping a window took) enter iSAM2 as one factor on
 that key pose, the calibration and the tide. This is the batch smoother's terrain model
 (:mod:`tangraph.graph.terrain_factors`): every sounding's residual against the map's depth at its
-footprint, with the row-sum variance of the map's error and the white DR noise between the key
-and its ping. The residuals are whitened with the variances they were judged with, and iSAM2
-relinearises the factor with its variables, under a Huber kernel at the chi-square quantile of
-its soundings (relinearised far from where they were judged, the factor pulls no further). The
+footprint, with the row-sum variance of the map's error, linearised at the prediction where
+they are judged, with the white DR noise between the key and each ping integrated out exactly:
+all soundings of a ping share its noise, and each ping that of the pings before it
+(:func:`~tangraph.graph.terrain_factors.chain_information`; counted as each sounding's own, a
+ping's soundings told its position as many times over as it has soundings). The factor is
+linear (a :class:`gtsam.LinearContainerFactor`): the tangent-plane test above is what makes the
+linearisation hold over the belief, and iSAM2 updates it without calling back into Python. The
 tide is a variable of the graph (its prior the model's), so the soundings' common offset is
 learnt, not taken as position.
 
@@ -58,7 +61,6 @@ tracking waits for a new unimodal fix the policy uses:
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import TYPE_CHECKING
 
 import gtsam
@@ -70,7 +72,14 @@ from tangraph.geometry import gate_threshold
 from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.lost import _isam_index
-from tangraph.graph.terrain_factors import PING_PROBABILITY, PingTerrain, _evaluate, footprints, gate
+from tangraph.graph.terrain_factors import (
+    PingTerrain,
+    _evaluate,
+    chain_information,
+    footprints,
+    gate,
+    information_factor,
+)
 from tangraph.sensors import sounding_map_variances, sounding_variances, unshared_map_variance
 
 if TYPE_CHECKING:
@@ -227,10 +236,10 @@ class OnlineTerrain:
         at the next key. The prediction from the latest key is updated by ``FILTERED_ITERATIONS``
         Gauss-Newton steps on the soundings of the pings no factor holds yet, gated as the
         factor's are, in a common shift of the key's world position (and the tide when held):
-        ``(P^-1 + G^T W G)^-1 G^T W r`` with ``P`` the key's world covariance, ``G`` the map's
-        gradients under the footprints (and ones), ``W`` the soundings' precisions (the DR noise
-        since the key included), and the covariance of ping ``k`` less what the key's became
-        more certain."""
+        ``(P^-1 + G^T C^-1 G)^-1 G^T C^-1 r`` with ``P`` the key's world covariance, ``G`` the map's
+        gradients under the footprints (and ones), ``C`` the soundings' covariance with the DR
+        noise since the key that their pings share (:func:`_information`), and the covariance of
+        ping ``k`` less what the key's became more certain."""
         first = max(nav._key_of, self.free_ping)
         if not self.tracking or first > k:
             return None
@@ -251,23 +260,18 @@ class OnlineTerrain:
             information[2, 2] = 1.0 / tide_var
         shift = np.zeros(n)
         for step in range(FILTERED_ITERATIONS):  # Gauss-Newton, relinearised at the shifted footprints
-            residual, _, dr_variance, grad, *_ = _evaluate(
+            residual, _, _, grad, _, _, noise = _evaluate(
                 terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
-                offset=shift[2] if n == 3 else None, map_offset=shift[:2])
+                offset=shift[2] if n == 3 else None, map_offset=shift[:2], noise=True)
             if step == 0:  # weighed as judged, at the prediction
                 exponent = self._exponents(pings, grad, prior)
                 used &= exponent > MIN_EXPONENT
                 if not used.any():
                     return None
-            ok = used & np.isfinite(residual)
-            weight = np.where(ok, exponent / (terrain.variance + dr_variance), 0.0).ravel()
-            g = grad.reshape(-1, 2)
-            if n == 3:
-                g = np.column_stack([g, np.ones(len(g))])
-            g = np.where(weight[:, None] > 0, g, 0.0)
-            r = np.where(weight > 0, residual.ravel(), 0.0)
-            posterior = np.linalg.inv(information + g.T @ (weight[:, None] * g))
-            shift = posterior @ (g.T @ (weight * (r + g @ shift)))
+            g = grad if n == 2 else np.concatenate([grad, np.ones((*grad.shape[:2], 1))], axis=-1)
+            info, gradient = _information(terrain, used, -g, noise, residual, exponent)
+            posterior = np.linalg.inv(information + info)
+            shift = shift - posterior @ (gradient + information @ shift)
         pose, cov = nav.predicted(k)
         pose[:2] += shift[:2]
         cov[:2, :2] -= key_cov - posterior[:2, :2]
@@ -302,8 +306,8 @@ class OnlineTerrain:
         prior = _ping_covariances(nav, prev, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=np.full(pings.size, tide_var))
-        residual, _, dr_variance, grad, *_ = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
-                                                       jacobian=False)
+        evaluated = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, noise=True)
+        residual, jac, dr_variance, grad, _, _, noise = evaluated
         seen = np.any(np.isfinite(residual), axis=1)
         failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
         if used.any():
@@ -320,16 +324,17 @@ class OnlineTerrain:
         self.soundings += int(used.sum())
         keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
             + ([int(nav.tide_key)] if terrain.estimates_tide else [])
-        n = int(used.sum())
-        # whitened residuals beyond their chi-square quantile together (the factor relinearised far
-        # from where its soundings were judged) pull no further than that: Huber on the whole factor
-        threshold = float(np.sqrt(stats.chi2.ppf(PING_PROBABILITY, n)))
-        noise = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(threshold),
-                                               gtsam.noiseModel.Unit.Create(n))
-        # the weights, fixed as the soundings were judged
-        std = np.sqrt((terrain.variance + dr_variance)[used] / exponent[used])
-        error = functools.partial(_error, terrain, nav.bathymetry, used, std, float(nav.model.tide))
-        return gtsam.CustomFactor(noise, keys, error), failed
+        info, gradient = _information(terrain, used, jac, noise, residual, exponent)
+        factor = information_factor(info, gradient, keys)
+        if factor is None:
+            return None, failed
+        at = gtsam.Values()  # linearised at the prediction: the map is near its tangent plane over it
+        at.insert(keys[0], gtsam.Pose2(*nav._key_pose))
+        if terrain.calibrated:
+            at.insert(CALIBRATION, np.asarray(nav.calibration, float))
+        if terrain.estimates_tide:
+            at.insert(keys[-1], np.array([tide]))
+        return gtsam.LinearContainerFactor(factor, at), failed
 
     def _exponents(self, pings, grad, position_cov) -> np.ndarray:
         """The information exponents ``(K, B)`` of the ``pings``' soundings (the filters' MBARI
@@ -347,6 +352,17 @@ class OnlineTerrain:
         spread = np.maximum(np.einsum("kbi,kij,kbj->kb", grad, position_cov, grad) - s2, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(s2 > 0, spread / (spread + 2.0 * s2), 1.0)
+
+
+def _information(terrain: PingTerrain, used, a, noise, residual, exponent) -> tuple[np.ndarray, np.ndarray]:
+    """The information and gradient of the soundings ``used`` on the parameters whose derivatives
+    are ``a (K, B, P)``, each sounding weighed by its exponent as it was judged, with the DR
+    noise since the key that their pings share integrated out
+    (:func:`~tangraph.graph.terrain_factors.chain_information`)."""
+    ok = used & np.isfinite(residual) & np.all(np.isfinite(a), axis=-1)
+    mask = ok[..., None]
+    return chain_information(np.where(mask, a, 0.0), np.where(mask, noise, 0.0), np.where(ok, residual, 0.0),
+                             np.where(ok, exponent / terrain.variance, 0.0), terrain.increment_cov)
 
 
 def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
@@ -440,34 +456,3 @@ def _terrain(nav: GraphNavigator, prev: int, pings: np.ndarray, variance: np.nda
     return PingTerrain(np.array([prev]), np.zeros(pings.size, np.int64), increment, increment_cov, offsets,
                        np.asarray(s.beam_depth[pings], float), variance, nav.origin.copy(),
                        nav.graph.calibrated, float(nav.model.tide), tide_std)
-
-
-def _error(terrain: PingTerrain, bathymetry, used: np.ndarray, std: np.ndarray, tide: float, factor, values,
-           jacobians):  # fmt: skip
-    """Whitened residuals ``r / std`` of the ``used`` soundings at the factor's values (the key
-    pose, then ``c`` and the tide when they are variables; ``std`` as the soundings were judged);
-    a sounding that has lost its map since it was judged counts as at the gate, with no
-    gradient."""
-    keys = factor.keys()
-    pose = values.atPose2(keys[0])
-    key = np.array([[pose.x(), pose.y(), pose.theta()]])
-    column = 1
-    calibration = np.zeros(2)
-    if terrain.calibrated:
-        calibration = values.atVector(keys[column])
-        column += 1
-    if terrain.estimates_tide:
-        tide = float(values.atVector(keys[column])[0])
-    residual, jac, *_ = _evaluate(terrain, bathymetry, key, calibration, tide)
-    r, j = residual[used], jac[used]
-    lost = ~np.isfinite(r) | ~np.all(np.isfinite(j), axis=-1)
-    error = np.where(lost, SOUNDING_GATE, r / np.where(lost, 1.0, std))
-    if jacobians is not None:
-        j = np.where(lost[:, None], 0.0, j / std[:, None])
-        jacobians[0] = j[:, :3]
-        at = 3
-        for i in range(1, len(keys)):
-            width = 2 if (terrain.calibrated and i == 1) else 1
-            jacobians[i] = j[:, at:at + width]
-            at += width
-    return error

@@ -39,8 +39,8 @@ from tangraph.graph.keyposes import increments
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import rotation_matrix, sounding_variances
 
-__all__ = ["PingTerrain", "footprints", "gate", "linear_factors", "ping_terrain", "sounding_jacobians",
-           "terrain_cost", "terrain_residuals"]
+__all__ = ["PingTerrain", "chain_information", "footprints", "gate", "information_factor", "linear_factors",
+           "ping_terrain", "sounding_jacobians", "terrain_cost", "terrain_residuals"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 PING_PROBABILITY = 0.999  #: a ping's soundings together beyond this chi-square quantile: left out
@@ -134,10 +134,11 @@ def footprints(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibr
 
 
 def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float, *,
-              jacobian: bool = True, offset: np.ndarray | None = None, map_offset=None):
+              jacobian: bool = True, offset: np.ndarray | None = None, map_offset=None, noise: bool = False):
     """:func:`sounding_jacobians`, the map's gradient ``(K, B, 2)`` under every footprint and the
     footprints on the map ``north, east (K, B)``; the Jacobians None unless ``jacobian`` (the
-    cost and the gate need none)."""
+    cost and the gate need none). With ``noise``, also the residuals' derivatives in the white
+    DR noise of each ping's increment from the key ``(K, B, 3)`` (:func:`chain_information`)."""
     key_pose = np.asarray(key_pose, float)[terrain.key_index]
     k, b = (float(calibration[0]), float(calibration[1])) if terrain.calibrated else (0.0, 0.0)
     delta = terrain.increment
@@ -162,8 +163,9 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
     g_xy = np.matmul(grad, d_xy)  # (K, B, 2)
     g_inc = np.concatenate([g_xy, np.sum(grad * d_heading, axis=-1)[..., None]], axis=-1)
     dr_variance = np.sum(np.matmul(g_inc, terrain.increment_cov) * g_inc, axis=-1)
+    extra = (-g_inc,) if noise else ()
     if not jacobian:
-        return residual, None, dr_variance, grad, north, east
+        return (residual, None, dr_variance, grad, north, east, *extra)
     d_theta = np.matmul(d_xy, (delta[:, :2] @ _J.T)[..., None])[..., 0]  # d f / d key heading, less turn
     jac = np.zeros((*residual.shape, terrain.n_parameters))
     jac[..., 0:2] = -g_xy
@@ -180,7 +182,7 @@ def _evaluate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibra
         column += 1
     if terrain.estimates_offset:
         jac[..., column:column + 2] = -grad
-    return residual, jac, dr_variance, grad, north, east
+    return (residual, jac, dr_variance, grad, north, east, *extra)
 
 
 def gate(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, calibration, tide: float,
@@ -255,30 +257,67 @@ def linear_factors(terrain: PingTerrain, bathymetry: BathymetryMap, key_pose, ca
     grad = np.zeros((n, p))
     np.add.at(info, terrain.key_index, per_ping_h)
     np.add.at(grad, terrain.key_index, per_ping_g)
-    values, vectors = np.linalg.eigh(info)
-    scale = np.max(values, axis=1, keepdims=True)
-    keep = values > 1e-12 * np.maximum(scale, 1e-300)
-    root = np.sqrt(np.where(keep, values, 0.0))
-    inv_root = np.where(keep, 1.0 / np.where(keep, root, 1.0), 0.0)
-    a = root[..., None] * np.swapaxes(vectors, 1, 2)  # (n, P, P): A^T A = info
-    b = -inv_root * np.einsum("nji,nj->ni", vectors, grad)  # A^T b = -grad: minimises |A d - b|^2
-    factors = []
-    unit = gtsam.noiseModel.Unit.Create(p)
-    for n_key in np.flatnonzero(np.any(keep, axis=1)):
-        blocks = [int(terrain.keys[n_key]), a[n_key, :, 0:3]]
-        column = 3
-        if terrain.calibrated:
-            blocks += [CALIBRATION, a[n_key, :, column:column + 2]]
-            column += 2
-        if terrain.estimates_tide:
-            blocks += [TIDE, a[n_key, :, column:column + 1]]
-        factors.append(_jacobian_factor(blocks, b[n_key], unit))
-    return factors
+    others = ([CALIBRATION] if terrain.calibrated else []) + ([TIDE] if terrain.estimates_tide else [])
+    keys = [[int(key), *others] for key in terrain.keys]
+    factors = (information_factor(info[n_key], grad[n_key], keys[n_key]) for n_key in range(n))
+    return [f for f in factors if f is not None]
 
 
-def _jacobian_factor(blocks, b, noise) -> gtsam.JacobianFactor:
-    if len(blocks) == 2:
-        return gtsam.JacobianFactor(blocks[0], blocks[1], b, noise)
-    if len(blocks) == 4:
-        return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], b, noise)
-    return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4], blocks[5], b, noise)
+def information_factor(info, gradient, keys) -> gtsam.JacobianFactor | None:
+    """The :class:`gtsam.JacobianFactor` whose cost is ``1/2 d^T info d + gradient^T d`` (up to a
+    constant) in the tangent ``d`` of the variables ``keys``: a key pose, then ``c`` and the tide
+    when given (the columns of ``info (P, P)``: 3, 2, 1); None when ``info`` is zero. Directions
+    ``info`` holds nothing of are left out (its positive eigenvalues only)."""
+    values, vectors = np.linalg.eigh(np.asarray(info, float))
+    keep = values > 1e-12 * max(float(values.max()), 1e-300)
+    if not keep.any():
+        return None
+    root = np.sqrt(values[keep])
+    a = root[:, None] * vectors[:, keep].T  # A^T A = info
+    b = -(vectors[:, keep].T @ np.asarray(gradient, float)) / root  # A^T b = -gradient: minimises |A d - b|^2
+    blocks, column = [], 0
+    for key in keys:
+        width = 3 if column == 0 else (2 if key == CALIBRATION else 1)
+        blocks += [key, a[:, column:column + width]]
+        column += width
+    noise = gtsam.noiseModel.Unit.Create(int(keep.sum()))
+    return gtsam.JacobianFactor(*blocks, b, noise)
+
+
+def chain_information(a, a_noise, residual, weight, increment_cov) -> tuple[np.ndarray, np.ndarray]:
+    """The information ``(P, P)`` and gradient ``(P,)`` on the parameters ``theta`` of the
+    soundings of ``K`` pings hung in a row from one key pose, with the white DR noise between
+    the key and each ping integrated out: every sounding of a ping shares its ping's noise, and
+    each ping the noise of those before it.
+
+    A sounding ``b`` of ping ``j`` (in order from the key) is ``r_jb = residual + a_jb d_theta +
+    n_jb u_j + e_jb`` (``a (K, B, P)`` and ``a_noise (K, B, 3)`` the residual's derivatives in
+    the parameters and in the DR noise ``u_j`` of the ping's increment from the key; ``e`` of
+    precision ``weight (K, B)``, 0: not used). ``u`` is taken as a walk, ``u_j = u_(j-1) + w_j``
+    (``u = 0`` at the key), its steps' covariances the growth of the cumulative covariances
+    ``increment_cov (K, 3, 3)`` (made positive semi-definite: the DR model's white heading noise
+    is carried over as if it persisted, which tells less of the heading than it holds). An
+    information filter backwards along the pings gives ``A^T C^-1 A`` and ``A^T C^-1 r`` for the
+    soundings' dense covariance ``C`` under that walk, at the cost of a few ``(P + 3)``-square
+    products per ping (the tests check it against ``C``). Counting each sounding's share of the
+    DR noise as its own instead, the ``B`` soundings of one ping would tell its position ``B``
+    times over."""
+    a, a_noise = np.asarray(a, float), np.asarray(a_noise, float)
+    k, _, p = a.shape
+    lam, eta = np.zeros((p + 3, p + 3)), np.zeros(p + 3)
+    for j in range(k - 1, -1, -1):
+        ok = weight[j] > 0
+        if ok.any():
+            rows = np.concatenate([a[j, ok], a_noise[j, ok]], axis=1)
+            lam += rows.T @ (weight[j, ok, None] * rows)
+            eta += rows.T @ (weight[j, ok] * residual[j, ok])
+        step = increment_cov[j] - (increment_cov[j - 1] if j > 0 else 0.0)
+        values, vectors = np.linalg.eigh(0.5 * (step + step.T))
+        step = (vectors * np.maximum(values, 0.0)) @ vectors.T
+        gain = step @ np.linalg.inv(np.eye(3) + lam[p:, p:] @ step)  # (L_uu + Q^-1)^-1
+        cross = lam[:, p:].copy()
+        eta -= cross @ gain @ eta[p:]
+        lam -= cross @ gain @ cross.T
+        if j == 0:  # u = 0 at the key
+            break
+    return lam[:p, :p], eta[:p]

@@ -1,11 +1,20 @@
 """Terrain factors per ping (tangraph.graph.terrain_factors): Jacobians, the information they
 carry, and the gate that leaves out misplaced pings."""
 
+import dataclasses
+
 import gtsam
 import numpy as np
 import pytest
 
-from tangraph.graph.terrain_factors import linear_factors, ping_terrain, sounding_jacobians, terrain_cost
+from tangraph.graph.terrain_factors import (
+    _evaluate,
+    chain_information,
+    linear_factors,
+    ping_terrain,
+    sounding_jacobians,
+    terrain_cost,
+)
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.survey import Survey
@@ -67,6 +76,59 @@ def test_jacobians_match_numerical_derivatives(calibrated):
     numeric = (sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide + eps)[0]
                - sounding_jacobians(terrain, bathymetry, key_pose, calibration, tide - eps)[0]) / (2 * eps)
     np.testing.assert_allclose(jac[..., column], numeric, atol=1e-9)
+
+
+def test_the_chain_information_is_that_of_the_dense_covariance():
+    """Pings hung in a row from a key, their soundings sharing the DR noise of each ping's
+    increment (a walk): the backward information filter gives ``A^T C^-1 A`` and ``A^T C^-1 r``
+    of the soundings' dense covariance ``C = W^-1 + N cov(u) N^T``, with some soundings unused,
+    whether the first ping is the key's own (no noise) or one after it."""
+    rng = np.random.default_rng(3)
+    k, b, p = 6, 5, 6
+    a = rng.normal(size=(k, b, p))
+    a_noise = rng.normal(size=(k, b, 3))
+    residual = rng.normal(size=(k, b))
+    weight = rng.uniform(0.5, 4.0, size=(k, b))
+    weight[2, [1, 3]] = 0.0
+    for own in (True, False):
+        steps = np.stack([(lambda m: m @ m.T)(rng.normal(scale=0.3, size=(3, 3))) for _ in range(k)])
+        if own:
+            steps[0] = 0.0
+        cumulative = np.cumsum(steps, axis=0)
+        info, grad = chain_information(a, a_noise, residual, weight, cumulative)
+        used = weight.ravel() > 0
+        big_n = np.zeros((k * b, 3 * k))
+        for j in range(k):
+            big_n[j * b:(j + 1) * b, 3 * j:3 * j + 3] = a_noise[j]
+        cov_u = np.block([[cumulative[min(i, j)] for j in range(k)] for i in range(k)])
+        dense = np.diag(1.0 / np.where(used, weight.ravel(), 1.0)) + big_n @ cov_u @ big_n.T
+        dense = dense[np.ix_(used, used)]
+        rows, r = a.reshape(-1, p)[used], residual.ravel()[used]
+        np.testing.assert_allclose(info, rows.T @ np.linalg.solve(dense, rows), rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(grad, rows.T @ np.linalg.solve(dense, r), rtol=1e-9, atol=1e-9)
+    # no DR noise: the soundings' own normal equations
+    info, grad = chain_information(a, a_noise, residual, weight, np.zeros((k, 3, 3)))
+    rows, w = a.reshape(-1, p), weight.ravel()
+    np.testing.assert_allclose(info, rows.T @ (w[:, None] * rows), rtol=1e-12)
+    np.testing.assert_allclose(grad, rows.T @ (w * residual.ravel()), rtol=1e-12)
+
+
+def test_the_residuals_derivatives_in_the_dr_noise():
+    """The derivatives of the residuals in each ping's increment from its key (the DR noise the
+    chain integrates out) against numerical ones."""
+    bathymetry = smooth_map(slope=(0.02, -0.01))
+    survey = line_survey()
+    terrain = terrain_of(survey, bathymetry, np.array([0, 4]))
+    key_pose = survey.dr_pose[[0, 4]] + np.array([[1.3, -0.7, 0.02], [-0.4, 0.9, -0.03]])
+    calibration, tide = np.array([0.02, 0.03]), 0.3
+    derivative = _evaluate(terrain, bathymetry, key_pose, calibration, tide, noise=True)[-1]
+    eps = 1e-5
+    for axis in range(3):
+        step = np.zeros(3)
+        step[axis] = eps
+        moved = [dataclasses.replace(terrain, increment=terrain.increment + sign * step) for sign in (1, -1)]
+        up, down = (sounding_jacobians(m, bathymetry, key_pose, calibration, tide)[0] for m in moved)
+        np.testing.assert_allclose(derivative[..., axis], (up - down) / (2 * eps), atol=2e-6)
 
 
 def test_linear_factors_carry_the_soundings_normal_equations():
