@@ -203,7 +203,7 @@ def load_dr_model(path: str | os.PathLike) -> DeadReckoningModel:
 def load_scenario(name_or_path: str | os.PathLike) -> Scenario:
     """A scenario from a TOML file, or a shipped one by name (``list_scenarios()``)."""
     path = Path(name_or_path)
-    if not path.suffix and not path.exists():
+    if not path.suffix and not path.is_file():  # a name (a folder of that name here is not a scenario)
         path = scenario_path() / f"{name_or_path}.toml"
         if not path.is_file():
             raise ScenarioError(

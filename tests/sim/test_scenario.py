@@ -27,6 +27,13 @@ def test_shipped_scenarios_load_with_the_papers_settings():
     assert wang.sonar.swath == pytest.approx(np.radians(140.0))
 
 
+def test_a_folder_named_as_a_scenario_does_not_hide_it(tmp_path, monkeypatch):
+    """An output folder called ``demo`` where the command runs is not the scenario ``demo``."""
+    (tmp_path / "demo").mkdir()
+    monkeypatch.chdir(tmp_path)
+    assert load_scenario("demo").name == "demo"
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [
