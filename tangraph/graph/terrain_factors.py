@@ -281,7 +281,11 @@ def information_factor(info, gradient, keys) -> gtsam.JacobianFactor | None:
         blocks += [key, a[:, column:column + width]]
         column += width
     noise = gtsam.noiseModel.Unit.Create(int(keep.sum()))
-    return gtsam.JacobianFactor(*blocks, b, noise)
+    if len(blocks) == 2:
+        return gtsam.JacobianFactor(blocks[0], blocks[1], b, noise)
+    if len(blocks) == 4:
+        return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], b, noise)
+    return gtsam.JacobianFactor(blocks[0], blocks[1], blocks[2], blocks[3], blocks[4], blocks[5], b, noise)
 
 
 def chain_information(a, a_noise, residual, weight, increment_cov) -> tuple[np.ndarray, np.ndarray]:
