@@ -184,7 +184,7 @@ class Ping:
         """The map error's variance under each sounding that the weighted ``particles (N, 2)``
         do not share on average (:func:`tangraph.sensors.unshared_map_variance` over their
         weighted covariance); None: a perfect map."""
-        if self.map_variance is None or not self.map_ranges:
+        if self.map_variance is None or not self.map_ranges or not np.any(self.map_variance):
             return self.total_map_variance
         from tangraph.sensors.terrain import unshared_map_variance
 
