@@ -65,11 +65,11 @@ def main(argv=None) -> None:
     plain = best_cpu(lambda: like.ping_update(belief.particles, ping_plain.offsets, ping_plain.depths,
                                               belief.tide, belief.tide_var, turn=turn,
                                               weights=belief.weights, variance=ping_plain.variance,
-                                              map_variance=ping_plain.total_map_variance), args.repeat)
-    # the map-aware update with its exponents' unshared map noise from the cloud's covariance
-    aware = best_cpu(lambda: fm.terrain.evaluate(belief.particles, belief.tide, belief.tide_var, ping_error,
-                                                 belief.calibration[:, 1], weights=belief.weights),
-                     args.repeat)
+                                              map_variance=ping_plain.map_variance), args.repeat)
+    aware = best_cpu(lambda: like.ping_update(belief.particles, ping_error.offsets, ping_error.depths,
+                                              belief.tide, belief.tide_var, turn=turn,
+                                              weights=belief.weights, variance=ping_error.variance,
+                                              map_variance=ping_error.map_variance), args.repeat)
     scaled_model = model.replace(misfit_dof=2.0)
     fm_scaled = FilterModel.from_model(scaled_model, prior)
     scale = fm_scaled.misfit_prior()

@@ -66,11 +66,9 @@ class Ping:
     its finite soundings from the dead-reckoned position, their ``depths (B,)``, the time
     ``dt`` (s) since the previous ping (its white DR errors grow with it; 0 at ping 0), the DR
     heading's ``turn`` (rad, wrapped) since the previous ping, and the terrain measurement
-    model's ``variance (B,)`` of each sounding (:func:`tangraph.sensors.sounding_variances`)
-    and ``map_variance (C, B)`` of the map's error under it, one row per independent field of
-    the error, of ranges ``map_ranges (C,)`` (m; :func:`tangraph.sensors.sounding_map_variances`;
-    a ``(B,)`` variance is one field shared over no distance). None: the filter model's
-    sounding std and a perfect map.
+    model's ``variance (B,)`` of each sounding and ``map_variance (B,)`` of
+    the map's error under it (:func:`tangraph.sensors.sounding_variances`; None: the filter
+    model's sounding std and a perfect map).
 
     Checked on construction: ``index`` an integer >= 0, ``dt`` finite >= 0, ``increment`` finite
     ``(2,)``, ``offsets`` finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is
@@ -92,7 +90,6 @@ class Ping:
     variance: np.ndarray | None = None
     map_variance: np.ndarray | None = None
     turn: float = 0.0
-    map_ranges: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         try:
@@ -131,18 +128,12 @@ class Ping:
             if value is None:
                 continue
             value = np.asarray(value, dtype=np.float64)
-            if value.shape[-1:] != depths.shape or value.ndim > (2 if name == "map_variance" else 1):
-                raise TangraphError(f"Ping {index}: {name} must have shape {depths.shape} as depths"
-                                    f"{' (or (C, B))' if name == 'map_variance' else ''}, got {value.shape}")
-            if not np.all((value[..., keep] >= 0) & np.isfinite(value[..., keep])):
+            if value.shape != depths.shape:
+                raise TangraphError(f"Ping {index}: {name} must have shape {depths.shape} as depths, "
+                                    f"got {value.shape}")
+            if not np.all((value[keep] >= 0) & np.isfinite(value[keep])):
                 raise TangraphError(f"Ping {index}: {name} must be finite and >= 0")
-            extra[name] = value[..., keep]
-        ranges = tuple(float(r) for r in self.map_ranges)
-        rows = 1 if self.map_variance is None else np.atleast_2d(extra["map_variance"]).shape[0]
-        if ranges and (len(ranges) != rows or not all(np.isfinite(r) and r >= 0 for r in ranges)):
-            raise TangraphError(f"Ping {index}: map_ranges must be {rows} finite ranges >= 0 (one per "
-                                f"row of map_variance), got {self.map_ranges!r}")
-        object.__setattr__(self, "map_ranges", ranges)
+            extra[name] = value[keep]
         if not keep.all():
             offsets, depths = offsets[keep], depths[keep]
         object.__setattr__(self, "index", int(index))
@@ -172,26 +163,6 @@ class Ping:
     def n_soundings(self) -> int:
         return int(self.depths.size)
 
-    @property
-    def total_map_variance(self) -> np.ndarray | None:
-        """The map error's variance under each sounding ``(B,)``, its fields summed (None: a
-        perfect map)."""
-        if self.map_variance is None:
-            return None
-        return self.map_variance if self.map_variance.ndim == 1 else self.map_variance.sum(axis=0)
-
-    def unshared_map_variance(self, particles: np.ndarray, weights=None) -> np.ndarray | None:
-        """The map error's variance under each sounding that the weighted ``particles (N, 2)``
-        do not share on average (:func:`tangraph.sensors.unshared_map_variance` over their
-        weighted covariance); None: a perfect map."""
-        if self.map_variance is None or not self.map_ranges or not np.any(self.map_variance):
-            return self.total_map_variance
-        from tangraph.sensors.terrain import unshared_map_variance
-
-        w = None if weights is None else np.asarray(weights, dtype=np.float64)
-        cov = np.cov(np.asarray(particles, dtype=np.float64), rowvar=False, aweights=w, bias=True)
-        return unshared_map_variance(np.atleast_2d(self.map_variance), self.map_ranges, np.atleast_2d(cov))
-
 
 def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None = None) -> list[Ping]:
     """The pings of a survey as filter inputs (NaN soundings dropped). Given the map and the
@@ -204,11 +175,11 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
     dr = survey.dr_pose
     valid = np.isfinite(survey.beam_depth)
     variance = map_variance = None
-    ranges: tuple[float, ...] = ()
     if bathymetry is not None and model is not None:
         variance = sounding_variances(survey, bathymetry, model)
-        components = sounding_map_variances(survey, bathymetry, model)
-        map_variance, ranges = (np.zeros((1, *north.shape)), (0.0,)) if components is None else components
+        map_variance = sounding_map_variances(survey, bathymetry, model)
+        if map_variance is None:
+            map_variance = np.zeros(north.shape)
     turned = wrap_angle(np.diff(dr[:, 2]))
     pings = []
     for k in range(survey.n_pings):
@@ -219,8 +190,7 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
         pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt,
                           turn=float(turned[k - 1]) if k > 0 else 0.0,
                           variance=None if variance is None else variance[k, keep],
-                          map_variance=None if map_variance is None else map_variance[:, k, keep],
-                          map_ranges=ranges))
+                          map_variance=None if map_variance is None else map_variance[k, keep]))
     return pings
 
 
@@ -373,12 +343,10 @@ class TerrainModel:
         if scale is not None:
             scale = scale.forget(float(np.hypot(*ping.increment)))
             noise = self.sounding_std if self.noise_std is None else self.noise_std
-            counts = misfit_counts(variance, ping.total_map_variance, noise**2 + extra_variance)
-        # the exponents weigh the soundings by the map noise that tells the cloud's points apart
-        unshared = None if exponent is not None else ping.unshared_map_variance(particles, weights)
+            counts = misfit_counts(variance, ping.map_variance, noise**2 + extra_variance)
         update = self.likelihood.ping_update(
             particles, ping.offsets, ping.depths, tide, tide_var, turn=turn, weights=weights,
-            variance=variance, map_variance=unshared, exponent=exponent, scale=scale,
+            variance=variance, map_variance=ping.map_variance, exponent=exponent, scale=scale,
             counts=counts,
         )  # fmt: skip
         return TerrainUpdate(update.log_likelihood, update.tide, update.tide_var, update.predicted,

@@ -169,8 +169,7 @@ def innovation(
     b = ping.n_soundings
     noise = model.terrain.sounding_std**2 / b
     if ping.variance is not None:  # white noise averages out over the ping, its map error may not
-        own = cast(np.ndarray, ping.total_map_variance)
-        noise = model.navigation.sounding_std**2 / b + float(np.mean(own))
+        noise = model.navigation.sounding_std**2 / b + float(np.mean(cast(np.ndarray, ping.map_variance)))
     variance = spread + noise + belief.tide_var
     nis = float((np.mean(ping.depths) - mean) ** 2 / variance)
     best = float(-2.0 * np.max(update.log_likelihood[finite]))

@@ -34,13 +34,7 @@ from tangraph.graph.fixes import (
 )
 from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
 from tangraph.matching import MatchingError, window_patch
-from tangraph.sensors import (
-    odometry,
-    slope_moment,
-    sounding_map_variances,
-    sounding_variances,
-    unshared_map_variance,
-)
+from tangraph.sensors import odometry, slope_moment, sounding_map_variances, sounding_variances
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
@@ -128,11 +122,8 @@ def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> Wind
                          poses=poses)
     likelihood, variance, map_variance, slope = nav._terrain
     mean, prior = position_tide_prior(nav, k, world, cov)
-    unshared = None  # the map's noise that tells the prediction's points apart
-    if map_variance is not None:
-        unshared = unshared_map_variance(map_variance[0][:, patch.ping, patch.beam], map_variance[1],
-                                         prior[:2, :2])
-    return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam], unshared,
+    return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
+                         None if map_variance is None else map_variance[patch.ping, patch.beam],
                          slope, mean, prior, tide_factor=nav.tide)
 
 
@@ -189,9 +180,8 @@ def grown(nav: GraphNavigator, fix: TerrainFix, laid, joint) -> TerrainFix:
 
 def window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
     """What the point-mass front end weighs soundings with: the terrain likelihood, every
-    sounding's variance ``(K, B)`` and map error (:func:`tangraph.sensors.sounding_map_variances`:
-    its fields' variances and ranges, None for a perfect map) at the DR's footprints (as the
-    filters'), and the map's slope moment."""
+    sounding's variance and map error variance ``(K, B)`` (None: a perfect map) at the DR's
+    footprints (as the filters'), and the map's slope moment."""
     return (TerrainLikelihood(bathymetry, model.measurement_std),
             sounding_variances(survey, bathymetry, model),
             sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))

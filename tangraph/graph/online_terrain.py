@@ -28,9 +28,9 @@ learnt, not taken as position.
 
 **Little information where the terrain does not rise above the map's noise.** Each sounding's
 likelihood is raised to its information exponent, the filters' MBARI weighting linearised
-(:meth:`OnlineTerrain._exponents`): where the terrain under a belief varies by less than the
-part of the map's error its points do not share, soundings that converge it further would follow
-the map's noise. (On a perfect map every exponent is 1.)
+(:meth:`OnlineTerrain._exponents`): a belief narrower than the map's error lets the terrain
+under it vary by less than that error, and soundings that converge it further would follow the
+map's noise. (On a perfect map every exponent is 1.)
 
 **The soundings judged** as innovations of the prediction, once: each at ``SOUNDING_GATE`` sigma
 of the prediction's position and tide uncertainty, each ping's together at
@@ -80,7 +80,7 @@ from tangraph.graph.terrain_factors import (
     gate,
     information_factor,
 )
-from tangraph.sensors import sounding_map_variances, sounding_variances, unshared_map_variance
+from tangraph.sensors import sounding_map_variances, sounding_variances
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
@@ -132,8 +132,7 @@ class OnlineTerrain:
     soundings: int = 0
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
     found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
-    # the map's own error under each sounding: its fields' variances (C, K, B) and ranges (C,)
-    map_variance: tuple[np.ndarray, tuple[float, ...]] | None = None
+    map_variance: np.ndarray | None = None  # (K, B) the map's own error variance under each sounding
     _judged: object = None  # the navigator's latest window outcome, looked at for that
     _first: tuple = (None, 0, 0)  # the factor of the latest episode's first key, its pings and soundings
 
@@ -341,14 +340,12 @@ class OnlineTerrain:
         weighting, :func:`tangraph.sensors.information_exponent`, linearised): with ``D^2`` the
         spread of the depths the belief predicts for a sounding, ``g^T P g`` (``g`` the map's
         gradient under it, ``P`` its ping's position covariance ``position_cov (K, 2, 2)``),
-        less what the map's noise ``s^2`` alone would spread (the part of the map's error the
-        belief's points do not share, :func:`tangraph.sensors.unshared_map_variance`),
-        ``D^2 / (D^2 + 2 s^2)``: 1 on a perfect map, near 0 where the terrain under the belief
-        does not rise above the map's noise."""
+        less what the map's noise ``s^2`` alone would spread, ``D^2 / (D^2 + 2 s^2)``: 1 on a
+        perfect map, near 0 where the belief is too narrow for the terrain under it to rise
+        above the map's noise."""
         if self.map_variance is None:
             return np.ones(grad.shape[:2])
-        variances, ranges = self.map_variance
-        s2 = np.nan_to_num(unshared_map_variance(variances[:, pings], ranges, position_cov))
+        s2 = np.nan_to_num(self.map_variance[pings])
         spread = np.maximum(np.einsum("kbi,kij,kbj->kb", grad, position_cov, grad) - s2, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(s2 > 0, spread / (spread + 2.0 * s2), 1.0)

@@ -9,7 +9,7 @@ from tangraph.sensors.dead_reckoning import (
     simulate_dead_reckoning,
     walk_variance,
 )
-from tangraph.sensors.matern import matern_correlation, matern_field, mean_correlation
+from tangraph.sensors.matern import matern_correlation, matern_field
 from tangraph.sensors.misfit import MisfitScale, misfit_counts
 from tangraph.sensors.navigation_model import (
     KNOWN_STD,
@@ -35,7 +35,6 @@ from tangraph.sensors.terrain import (
     sounding_map_variances,
     sounding_variances,
     survey_map_error,
-    unshared_map_variance,
 )
 
 __all__ = [
@@ -55,7 +54,6 @@ __all__ = [
     "map_error",
     "matern_correlation",
     "matern_field",
-    "mean_correlation",
     "misfit_counts",
     "odometry",
     "rotation_matrix",
@@ -69,6 +67,5 @@ __all__ = [
     "sounding_variances",
     "survey_map_error",
     "survey_navigation_model",
-    "unshared_map_variance",
     "walk_variance",
 ]

@@ -1,8 +1,7 @@
 """The Matérn correlation of the map's error (:mod:`tangraph.sensors.terrain`): the function
 ``rho(r) = (k r) K_1(k r)``, a seeded field of it on a grid, and its sums over scattered points
 (one window's or a survey's soundings) on a grid of a sixth of its range: the row sums
-``sum_j w_j rho_bj`` and the quadratic form ``sum_(b != j) w_b w_j^T rho_bj``; and its mean
-between two points of a Gaussian belief."""
+``sum_j w_j rho_bj`` and the quadratic form ``sum_(b != j) w_b w_j^T rho_bj``."""
 
 from __future__ import annotations
 
@@ -13,13 +12,11 @@ from scipy import special
 
 from tangraph.errors import TangraphError
 
-__all__ = ["matern_correlation", "matern_field", "mean_correlation"]
+__all__ = ["matern_correlation", "matern_field"]
 
 # Grid of the row sums: at least this many cells per correlation length, at most this many cells.
 _CELLS_PER_LENGTH = 6
 _MAX_CELLS = 4_000_000
-# Directions of the half turn over which :func:`mean_correlation` averages.
-_DIRECTIONS = 32
 
 
 
@@ -35,52 +32,6 @@ def matern_correlation(distance, length: float) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         out = r * special.kv(1, r)
     return np.where(r > 0, out, 1.0)
-
-
-def mean_correlation(cov, length) -> np.ndarray:
-    """The mean correlation ``E rho(|x - y|)`` of the map error at two independent points ``x, y``
-    of a Gaussian belief of covariance ``cov (..., 2, 2)`` (m^2), for fields of range
-    ``length`` (m; a number, or an array broadcasting against ``cov.shape[:-2]``; 0: a field
-    correlated over no distance, mean 0): how much of the map's error the belief's points share
-    on average, 1 for a point belief, towards 0 for one much wider than the range.
-
-    With the field's spectral density ``k^2 / (pi (k^2 + |w|^2)^2)`` and ``x - y ~ N(0, 2 cov)``
-    it is ``E rho = integral S(w) exp(-w^T cov w) dw``: in polar coordinates the mean over
-    directions ``u`` of ``f(k^2 u^T cov u)``, ``f(a) = integral_0^inf exp(-a t) / (1 + t)^2 dt
-    = 1 - a e^a E_1(a)`` (the directions by the trapezoid rule on a half turn, exact to
-    rounding for a smooth periodic integrand).
-
-    Examples
-    --------
-    >>> mean_correlation(np.zeros((2, 2)), 30.0).round(3).tolist()
-    1.0
-    >>> bool(mean_correlation(np.eye(2) * 1e6, 30.0) < 0.01)
-    True
-    """
-    cov = np.asarray(cov, dtype=np.float64)
-    if cov.shape[-2:] != (2, 2):
-        raise TangraphError(f"mean_correlation: cov must be (..., 2, 2), got {cov.shape}")
-    theta = np.linspace(0.0, np.pi, _DIRECTIONS, endpoint=False)
-    c, s = np.cos(theta), np.sin(theta)
-    # u^T cov u for every direction: (..., D)
-    q = (cov[..., 0, 0, None] * c * c + 2.0 * cov[..., 0, 1, None] * c * s + cov[..., 1, 1, None] * s * s)
-    length = np.asarray(length, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        k2 = np.where(length > 0, 8.0 / length**2, np.inf)
-    a = np.maximum(q, 0.0) * k2[..., None]
-    return np.where(length > 0, np.mean(_spectral_mean(a), axis=-1), 0.0)
-
-
-def _spectral_mean(a: np.ndarray) -> np.ndarray:
-    """``f(a) = 1 - a e^a E_1(a)`` (:func:`mean_correlation`): 1 at 0, ``~ 1/a`` for large ``a``
-    (its asymptotic series from 50 on, where ``e^a`` would lose the digits)."""
-    small = np.where(a < 50.0, a, 1.0)
-    big = np.where(a >= 50.0, a, 50.0)
-    with np.errstate(invalid="ignore", over="ignore"):
-        near = 1.0 - np.where(small > 0, small * np.exp(small) * special.exp1(small), 0.0)
-    inv = 1.0 / big
-    far = inv * (1.0 - inv * (2.0 - inv * (6.0 - inv * (24.0 - 120.0 * inv))))
-    return np.where(np.isinf(a), 0.0, np.where(a < 50.0, near, far))
 
 
 def matern_field(north, east, std: float, length: float, *, rng: np.random.Generator) -> np.ndarray:

@@ -59,9 +59,6 @@ comparison instead of giving the candidate zero weight.
 that a belief predicts for a sounding spread no more than the map's error, the sounding cannot
 tell the belief's positions apart, and its small differences are the map's noise: the
 likelihood is raised to the exponent :func:`information_exponent` (MBARI's modified weighting).
-The noise that counts is the part of the map's error the belief's points do not share
-(:func:`unshared_map_variance`): points within the error's range see one error, which moves
-the whole belief (the variances above hold it) and tells none of its points apart.
 
 **Patches that err beyond the statement.** A real map errs as it states over most of its area
 and by several times that in patches (the check lines of :mod:`tangraph.eval.map_check`). The
@@ -79,7 +76,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
-from tangraph.sensors.matern import _correlation_quadratic, _weighted_correlation_sums, mean_correlation
+from tangraph.sensors.matern import _correlation_quadratic, _weighted_correlation_sums
 
 __all__ = [
     "MapError",
@@ -91,7 +88,6 @@ __all__ = [
     "sounding_map_variances",
     "sounding_variances",
     "survey_map_error",
-    "unshared_map_variance",
 ]
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -328,13 +324,10 @@ def information_exponent(predicted: np.ndarray, weights: np.ndarray, map_varianc
 
     ``predicted (N, B)`` are the depths (or residuals) that the belief's ``N`` weighted
     particles (``weights (N,)``, normalised) predict for each of ``B`` soundings (NaN: no map
-    there, left out); ``map_variance (B,)`` the map's error variance at each that the belief's
-    points do not share (:func:`unshared_map_variance`: the whole variance for a belief much
-    wider than the error's range, none for a point). With ``D^2`` the weighted spread of the
-    predictions less what the map's noise alone gives a weighted spread (``(1 - sum w^2)
-    s^2``), the exponent is ``D^2 / (D^2 + 2 s^2)`` (``2 s^2`` the noise in the difference of
-    two points' depths): 1 with a perfect map, near 0 where the belief's predictions differ by
-    no more than the map's noise.
+    there, left out); ``map_variance (B,)`` the map's error variance at each. With ``D^2`` the
+    weighted spread of the predictions less what the map's noise alone gives a weighted
+    spread (``(1 - sum w^2) s^2``), the exponent is ``D^2 / (D^2 + 2 s^2)``: 1 with a perfect
+    map, near 0 where the belief's predictions differ by no more than the map's noise.
 
     Examples
     --------
@@ -369,49 +362,17 @@ def slope_moment(bathymetry: BathymetryMap) -> np.ndarray:
     return g.T @ g / g.shape[0]
 
 
-def sounding_map_variances(
-    survey, bathymetry: BathymetryMap, model
-) -> tuple[np.ndarray, tuple[float, ...]] | None:
-    """The map's own error under every sounding at the dead-reckoned footprints, one row per
-    independent field of it (:meth:`MapError.components`): its variances ``(C, K, B)`` (m^2; a
-    field's median where a footprint is off its data, NaN where a beam has no depth) and the
-    fields' ranges ``(C,)`` (m); None for a perfect map. What the likelihood's information
-    exponents are made of (:func:`unshared_map_variance`,
-    :meth:`tangraph.filters.likelihood.TerrainLikelihood.ping_update`)."""
+def sounding_map_variances(survey, bathymetry: BathymetryMap, model) -> np.ndarray | None:
+    """Per sounding ``(K, B)`` the variance of the map's own error under it (m^2) at the
+    dead-reckoned footprints, the map's median error where a footprint is off its data, NaN
+    where a beam has no depth; None for a perfect map. What the likelihood's information
+    exponents are made of (:meth:`tangraph.filters.likelihood.TerrainLikelihood.ping_update`)."""
     error = map_error(bathymetry, model)
     if error.is_zero:
         return None
     north, east = survey.footprints()
     valid = np.isfinite(survey.beam_depth)
-    parts = error.components()
-    out = np.full((len(parts), *north.shape), np.nan)
-    for c, part in enumerate(parts):
-        s = part.std_at(north[valid], east[valid])
-        out[c][valid] = np.where(np.isfinite(s), s, part.typical_std) ** 2
-    return out, tuple(part.correlation_length for part in parts)
-
-
-def unshared_map_variance(variances, ranges, cov) -> np.ndarray:
-    """The part of the map error variance under each sounding that two points of a belief of
-    position covariance ``cov (..., 2, 2)`` do not share on average:
-    ``sum_c variances[c] (1 - mean_correlation(cov, ranges[c]))`` for the fields' variances
-    ``(C, ..., B)`` (:func:`sounding_map_variances`; ``...`` as ``cov``'s) and ranges ``(C,)``
-    (m; 0: shared over no distance). It is what the map's noise alone spreads the depths a
-    belief predicts for a sounding by (:func:`information_exponent`): a belief within the map
-    error's range sees one error, common to all its points, which moves the belief and tells
-    none of its points apart.
-
-    Examples
-    --------
-    >>> variances = np.array([[0.04, 0.09]])
-    >>> unshared_map_variance(variances, (30.0,), np.zeros((2, 2))).tolist()
-    [0.0, 0.0]
-    >>> unshared_map_variance(variances, (0.0,), np.eye(2)).tolist()
-    [0.04, 0.09]
-    """
-    variances = np.asarray(variances, dtype=np.float64)
-    cov = np.asarray(cov, dtype=np.float64)
-    lengths = np.asarray(ranges, dtype=np.float64).reshape((-1,) + (1,) * (cov.ndim - 2))
-    shared = mean_correlation(cov[None], lengths)  # (C, ...)
-    shared = shared.reshape(shared.shape + (1,) * (variances.ndim - shared.ndim))
-    return np.sum(variances * (1.0 - shared), axis=0)
+    out = np.full(north.shape, np.nan)
+    s = error.std_at(north[valid], east[valid])
+    out[valid] = np.where(np.isfinite(s), s, error.typical_std) ** 2
+    return out

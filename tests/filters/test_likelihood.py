@@ -176,8 +176,7 @@ def test_the_compiled_exponents_match_the_reference():
                                                turn=-belief.calibration[:, 1])
     predicted = ping.depths[None, :] - residual.T  # (N, B), NaN off the map
     assert np.isnan(predicted).any()
-    want = information_exponent(predicted, belief.weights, ping.unshared_map_variance(belief.particles,
-                                                                                     belief.weights))
+    want = information_exponent(predicted, belief.weights, ping.map_variance)
     np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12)
 
 

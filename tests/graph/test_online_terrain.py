@@ -225,24 +225,18 @@ def test_the_tracking_exponents_are_the_filters_weighting_linearised():
     drawn from it (tangraph.sensors.information_exponent) and the tracking factor's linearised
     exponent agree to Monte Carlo error; a perfect map weighs every sounding fully."""
     from tangraph.graph.online_terrain import OnlineTerrain
-    from tangraph.sensors import information_exponent, unshared_map_variance
+    from tangraph.sensors import information_exponent
 
     rng = np.random.default_rng(4)
     grad = np.array([[[0.05, 0.02], [0.2, -0.1], [0.01, 0.0]]])  # (1 ping, 3 soundings, 2)
     cov = np.array([[[9.0, 2.0], [2.0, 4.0]]])
-    map_variance = np.full((1, 1, 3), 0.04)
+    map_variance = np.full((1, 3), 0.04)
+    terrain = OnlineTerrain(np.full((1, 3), 0.05), map_variance=map_variance)
+    exponent = terrain._exponents(np.array([0]), grad, cov)
     cloud = rng.multivariate_normal(np.zeros(2), cov[0], 200_000)
     predicted = cloud @ grad[0].T  # the plane's depths under each sounding, (N, B)
-    weights = np.full(len(cloud), 1.0 / len(cloud))
-    for length in (0.0, 10.0):  # an error the belief's points share over no distance, and over 10 m
-        terrain = OnlineTerrain(np.full((1, 3), 0.05), map_variance=(map_variance, (length,)))
-        exponent = terrain._exponents(np.array([0]), grad, cov)
-        unshared = unshared_map_variance(map_variance[:, 0], (length,), cov[0])
-        filters = information_exponent(predicted, weights, unshared)
-        np.testing.assert_allclose(exponent[0], filters, atol=0.01)
-        assert exponent[0, 2] < 0.05 and 0.5 < exponent[0, 1] < 1.0  # flat: (almost) nothing; steep: most
-    # the points of a belief within the error's range share it: more of each sounding counts
-    independent = OnlineTerrain(np.full((1, 3), 0.05), map_variance=(map_variance, (0.0,)))
-    assert np.all(exponent[0, :2] > independent._exponents(np.array([0]), grad, cov)[0, :2])
+    filters = information_exponent(predicted, np.full(len(cloud), 1.0 / len(cloud)), map_variance[0])
+    np.testing.assert_allclose(exponent[0], filters, atol=0.01)
+    assert exponent[0, 2] == 0.0 and 0.5 < exponent[0, 1] < 1.0  # flat: nothing; steep: most
     perfect = OnlineTerrain(np.full((1, 3), 0.05))
     np.testing.assert_array_equal(perfect._exponents(np.array([0]), grad, cov), 1.0)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tangraph.errors import TangraphError
-from tangraph.sensors import matern_correlation, matern_field, mean_correlation
+from tangraph.sensors import matern_correlation, matern_field
 from tangraph.sensors.matern import _correlation_quadratic, _correlation_sums, _weighted_correlation_sums
 
 
@@ -23,26 +23,6 @@ def test_matern_field_has_its_std_and_correlation():
     assert abs(corr - matern_correlation(length, length)) < 0.05, corr
     with pytest.raises(TangraphError, match="length > 0"):
         matern_field(axis, axis, 0.3, 0.0, rng=np.random.default_rng(0))
-
-
-def test_the_mean_correlation_of_a_belief_against_pairs_drawn_from_it():
-    """``E rho(|x - y|)`` for independent draws of an anisotropic Gaussian, against 200 000 pairs
-    (tolerance 5 Monte Carlo standard errors); a point belief shares everything, a belief far
-    wider than the range nothing, a range of 0 nothing; a batch of covariances at once."""
-    rng = np.random.default_rng(2)
-    beliefs = ((np.array([[16.0, 6.0], [6.0, 9.0]]), 20.0), (np.array([[400.0, 0.0], [0.0, 1.0]]), 30.0))
-    for cov, length in beliefs:
-        x = rng.multivariate_normal(np.zeros(2), cov, 200_000)
-        y = rng.multivariate_normal(np.zeros(2), cov, 200_000)
-        r = matern_correlation(np.linalg.norm(x - y, axis=1), length)
-        assert abs(mean_correlation(cov, length) - r.mean()) < 5 * r.std() / np.sqrt(r.size)
-    assert mean_correlation(np.zeros((2, 2)), 10.0) == 1.0
-    assert mean_correlation(np.eye(2) * 1e8, 10.0) < 1e-5
-    assert mean_correlation(np.eye(2), 0.0) == 0.0
-    batch = np.stack([np.eye(2), 4 * np.eye(2), np.diag([1.0, 9.0])])
-    np.testing.assert_allclose(mean_correlation(batch, 15.0), [mean_correlation(c, 15.0) for c in batch])
-    with pytest.raises(TangraphError, match=r"\(\.\.\., 2, 2\)"):
-        mean_correlation(np.eye(3), 10.0)
 
 
 def test_correlation_sums_match_the_direct_sum():

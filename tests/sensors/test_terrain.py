@@ -11,9 +11,7 @@ from tangraph.sensors import (
     map_error,
     matern_correlation,
     shared_map_variances,
-    sounding_map_variances,
     sounding_variances,
-    unshared_map_variance,
 )
 from tangraph.survey import Survey
 
@@ -72,42 +70,6 @@ def test_the_information_exponent():
     assert information_exponent(tight, w, np.array([0.0]))[0] == 1.0  # a perfect map
     missing = np.array([[np.nan], [np.nan], [np.nan], [np.nan], [np.nan]])
     assert information_exponent(missing, w, np.array([0.04]))[0] == 0.0
-
-
-def test_the_map_noise_that_spreads_a_beliefs_predictions():
-    """What the map's error alone spreads the depths a belief predicts for a sounding by: over
-    200 seeded Matérn fields, the weighted spread of a field's values at a cloud's points is
-    ``(1 - sum w^2)`` times :func:`unshared_map_variance` (tolerance 4 Monte Carlo standard
-    errors): a cloud within the range shares most of its error, a wider one little."""
-    from tangraph.sensors import matern_field
-
-    axis = np.arange(0.0, 300.0, 1.0)
-    rng = np.random.default_rng(5)
-    for cov, length in ((np.diag([9.0, 4.0]), 30.0), (np.diag([900.0, 400.0]), 15.0)):
-        cloud = rng.multivariate_normal([150.0, 150.0], cov, 400)
-        cloud = cloud[np.all((cloud > 0) & (cloud < 299), axis=1)]
-        i, j = np.round(cloud).astype(int).T
-        spreads = []
-        for seed in range(200):
-            field = matern_field(axis, axis, 0.2, length, rng=np.random.default_rng(seed))[i, j]
-            spreads.append(np.var(field))  # equal weights: (1 - 1/N) times the unshared variance
-        want = (1 - 1 / len(cloud)) * unshared_map_variance(np.array([[0.04]]), (length,), np.cov(cloud.T))[0]
-        assert abs(np.mean(spreads) - want) < 4 * np.std(spreads) / np.sqrt(len(spreads)) + 1e-4, (
-            np.mean(spreads), want)
-    assert unshared_map_variance(np.array([[0.04]]), (30.0,), np.diag([9.0, 4.0]))[0] < 0.01
-    assert unshared_map_variance(np.array([[0.04]]), (15.0,), np.diag([900.0, 400.0]))[0] > 0.035
-
-
-def test_the_map_error_under_every_sounding_by_field():
-    """Each of the map error's fields under each sounding, with its range; their sum is the
-    map's stated variance; None for a perfect map."""
-    std = np.where(np.arange(100)[None, :] < 50, 0.1, 0.4) * np.ones((100, 1))
-    gappy = FLAT.replace(depth_std=std, correlation_length=40.0)
-    survey = scattered_survey(np.array([[500.0, 205.0], [500.0, 805.0]]))
-    variances, ranges = sounding_map_variances(survey, gappy, NavigationModel())
-    assert ranges == (10.0, 40.0) and variances.shape == (2, 2, 1)
-    np.testing.assert_allclose(variances.sum(axis=0)[:, 0], [0.01, 0.16])
-    assert sounding_map_variances(survey, FLAT, NavigationModel()) is None
 
 
 def test_a_map_with_gaps_splits_its_error_by_scale():
