@@ -308,20 +308,20 @@ def chain_information(a, a_noise, residual, weight, increment_cov) -> tuple[np.n
     times over."""
     a, a_noise = np.asarray(a, float), np.asarray(a_noise, float)
     k, _, p = a.shape
+    w = np.where(weight > 0, weight, 0.0)
+    rows = np.where(w[..., None] > 0, np.concatenate([a, a_noise], axis=2), 0.0)  # (K, B, P + 3)
+    ping_info = np.matmul(np.swapaxes(rows * w[..., None], 1, 2), rows)  # each ping's normal equations
+    ping_grad = np.sum((w * np.where(w > 0, residual, 0.0))[..., None] * rows, axis=1)
+    cov = np.asarray(increment_cov, float)
+    steps = cov - np.concatenate([np.zeros((1, 3, 3)), cov[:-1]])
+    values, vectors = np.linalg.eigh(0.5 * (steps + np.swapaxes(steps, 1, 2)))
+    steps = np.matmul(vectors * np.maximum(values, 0.0)[:, None, :], np.swapaxes(vectors, 1, 2))
     lam, eta = np.zeros((p + 3, p + 3)), np.zeros(p + 3)
     for j in range(k - 1, -1, -1):
-        ok = weight[j] > 0
-        if ok.any():
-            rows = np.concatenate([a[j, ok], a_noise[j, ok]], axis=1)
-            lam += rows.T @ (weight[j, ok, None] * rows)
-            eta += rows.T @ (weight[j, ok] * residual[j, ok])
-        step = increment_cov[j] - (increment_cov[j - 1] if j > 0 else 0.0)
-        values, vectors = np.linalg.eigh(0.5 * (step + step.T))
-        step = (vectors * np.maximum(values, 0.0)) @ vectors.T
-        gain = step @ np.linalg.inv(np.eye(3) + lam[p:, p:] @ step)  # (L_uu + Q^-1)^-1
+        lam += ping_info[j]
+        eta += ping_grad[j]
+        gain = steps[j] @ np.linalg.inv(np.eye(3) + lam[p:, p:] @ steps[j])  # (L_uu + Q^-1)^-1
         cross = lam[:, p:].copy()
         eta -= cross @ gain @ eta[p:]
         lam -= cross @ gain @ cross.T
-        if j == 0:  # u = 0 at the key
-            break
-    return lam[:p, :p], eta[:p]
+    return lam[:p, :p], eta[:p]  # u = 0 at the key
