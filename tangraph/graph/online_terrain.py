@@ -103,8 +103,10 @@ CHECK_PROBABILITY = 0.9
 _SURPRISE = float(stats.chi2.ppf(CHECK_PROBABILITY, 2))
 #: A sounding beyond this many sigma of its innovation is left out (two-sided 0.999 of a normal).
 SOUNDING_GATE = 3.29
-#: Further iSAM2 updates (Gauss-Newton steps: one per update) when tracking starts: its first
-#: factor is linearised at a belief that may be metres off, far for one step
+#: Further iSAM2 updates (Gauss-Newton steps: one per update) when tracking starts (and when the
+#: point-mass filter gives its first factor): the graph's nonlinear factors (the odometry through
+#: the calibration, the filter's) are relinearised from a belief that may be metres off, far for
+#: one step (the tracking factors themselves are linear)
 START_ITERATIONS = 5
 #: A sounding whose information exponent (:meth:`OnlineTerrain._exponents`) is below this tells
 #: nothing here and is left out of its factor
