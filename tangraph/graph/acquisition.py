@@ -30,7 +30,7 @@ would otherwise throw the graph's calibration out. Nor is a factor given while t
 lost (its lost test's streak), and the pings it flags lost are flagged lost in the track. When
 the gate's way out starts the filter afresh, wider and with the tide at its prior, the graph
 follows: a break of the same width on the odometry into its next key pose, and a new tide
-variable (:func:`~tangraph.graph.online_fixes.new_tide`).
+variable (:func:`~tangraph.graph.online_tide.new_tide`).
 
 **The hand-over.** A key step after a key that received the filter's factor (so that the
 graph's belief is the filter's), once the density has converged there (at most half the start
@@ -68,8 +68,9 @@ from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold, mahalanobis2
 from tangraph.graph import posterior_fix as pf
 from tangraph.graph.calibration import position_tide_factor
-from tangraph.graph.online_fixes import new_tide, position_tide_prior
+from tangraph.graph.online_fixes import position_tide_prior
 from tangraph.graph.online_terrain import START_ITERATIONS
+from tangraph.graph.online_tide import new_tide, of_key
 
 if TYPE_CHECKING:
     from tangraph.filters.model import Ping
@@ -180,7 +181,7 @@ class Acquisition:
         graph linearised); the pings up to ``k`` are the filter's."""
         mean, cov = factor
         position, covariance = mean[:2], cov[:2, :2]
-        joint = position_tide_factor(k, mean, cov, nav.origin, "none", tide_key=nav.tide_key) \
+        joint = position_tide_factor(k, mean, cov, nav.origin, "none", tide_key=of_key(nav, k)) \
             if mean.size == 3 else None
         made = nav.graph.fix_factor(k, position, covariance, kernel="none") if joint is None else joint
         nav._new_factors.add(nav.graph.add_position_fix(k, position, covariance, made))

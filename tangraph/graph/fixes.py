@@ -48,9 +48,10 @@ __all__ = [
 def check_tide_drift(config: GraphConfig, model: NavigationModel) -> NavigationModel:
     """``model``, unless the graph would hold the tide constant while the model says it drifts
     (``tide_drift_std > 0``): refused, naming the setting that settles it, are TAP windows
-    whose criterion takes the depths as reduced to the map's datum (``msd``, ``mad``), and the
-    one tide variable of the online graph's point-mass front end, its tracking on soundings and
-    the smoother's terrain on soundings or with the map's error field."""
+    whose criterion takes the depths as reduced to the map's datum (``msd``, ``mad``), the one
+    tide of a point-mass front end's window and the smoother's terrain on soundings or with the
+    map's error field. The online graph's tracking on soundings and its point-mass acquisition
+    follow a drift (:mod:`tangraph.graph.online_tide`)."""
     if model.tide_drift is None:
         return model
     drift = (f"the navigation model's tide drifts (tide_drift_std = {model.tide_drift[0]:g} m: its own, "
@@ -60,11 +61,12 @@ def check_tide_drift(config: GraphConfig, model: NavigationModel) -> NavigationM
         raise TangraphError(f"graph: TAP criterion {criterion.value!r} takes the depths as reduced to the "
                             f"map's datum, but {drift}: use criterion 'mle' (each window's tide estimated)")
     held = [f"{name} = {value!r}" for name, value, default in
-            (("front_end", config.online.front_end, "tap"), ("terrain", config.online.terrain, "fixes"),
+            (("front_end", config.online.front_end, "tap"),
              ("smoother_terrain", config.batch.smoother_terrain, "fixes")) if value != default]
     if held:
         raise TangraphError(f"graph: {', '.join(held)} holds one tide for the whole survey, but {drift}: "
-                            "use the TAP fixes (the defaults), whose windows estimate their own tide")
+                            "use the TAP fixes (the defaults), whose windows estimate their own tide, or "
+                            "tracking on soundings (terrain = 'soundings'), which follows the drift")
     return model
 
 

@@ -37,7 +37,7 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.fix_records import FixRecord
 from tangraph.geometry import to_dr_frame, wrap_near
-from tangraph.graph import online_fixes
+from tangraph.graph import online_fixes, online_tide
 from tangraph.graph.acquisition import Acquisition
 from tangraph.graph.calibration import (
     CALIBRATION,
@@ -115,12 +115,13 @@ class GraphNavigator:
             self._window_start = 0  # the first ping of the front end's next window
         # the point-mass windows and tracking tell the tide: the graph holds it (never marginalised)
         calibration_std = graph_calibration_std(self.model)
-        self.tide = c.online.learns_tide and calibration_std is not None and self.model.tide_std > 0
+        self.tide = c.online.learns_tide and calibration_std is not None and self.model.tide_variance > 0
         self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
         self._tide_mean = float(self.model.tide)
-        self.tide_key = TIDE  # the tide's GTSAM key: a new one after each step of the tide
+        self.tide_key, self._tide_restart = TIDE, False  # the latest key's tide (see online_tide)
+        self.datum_key: int | None = None  # the datum of a drifting tide
         self._faults: list[tuple[int, float]] = []  # the depth faults since the last ordinary window
-        self.tide_steps: list[int] = []
+        self.tide_steps: list[int] = []  # the keys a new tide (or datum) was held from
         self._last_outcome: FixOutcome | None = None
         self.terrain = OnlineTerrain.of(self) if c.online.terrain == "soundings" else None
         self.acquisition = Acquisition.of(self) if c.online.acquire == "pmf" else None
@@ -141,6 +142,7 @@ class GraphNavigator:
                                               c.online.relinearize_threshold])))
         threshold.insert(("c", np.array([1e-4, c.online.relinearize_threshold])))
         threshold.insert(("t", np.array([1e-3])))  # the tide (m), when held: a linear variable
+        threshold.insert((online_tide.KEY_TIDE, np.array([1e-3])))  # a key pose's, when it drifts
         params.setRelinearizeThreshold(threshold)
         params.relinearizeSkip = c.online.relinearize_skip
         params.enablePartialRelinearizationCheck = True
@@ -246,9 +248,7 @@ class GraphNavigator:
             self._new_factors.add(self.graph._factors["prior"][0])
             self._new_values.insert(CALIBRATION, self.model.calibration_prior)
         if self.tide:  # in iSAM2 only: the batch smoother weighs the fixes' positions
-            self._new_factors.add(gtsam.PriorFactorVector(
-                TIDE, np.array([m.tide]), gtsam.noiseModel.Isotropic.Sigma(1, m.tide_std)))
-            self._new_values.insert(TIDE, np.array([m.tide]))
+            online_tide.start(self)
         joint = np.zeros((5, 5))
         joint[:2, :2] = np.eye(2) * m.initial_position_std**2
         joint[2, 2] = heading_std**2
@@ -265,6 +265,8 @@ class GraphNavigator:
         mean and covariance, :meth:`~tangraph.graph.acquisition.Acquisition.ready`), and the
         iSAM2 update."""
         prev = self.graph.keys[-1]
+        if self.tide:
+            online_tide.key_tide(self, prev, k)
         acquisition = self._acquiring()
         pose, joint = self.predicted_frame(k)
         self.graph.add_pose(k, self.survey.time[k], pose)
@@ -353,8 +355,8 @@ class GraphNavigator:
             stamps.insert((key, float(self.survey.time[k])))
         if self.graph.calibrated:  # the calibration is never old: it is never marginalised
             stamps.insert((CALIBRATION, float(self.survey.time[k])))
-        if self.tide:  # nor is the tide (the one held now: an earlier one after a step may go)
-            stamps.insert((self.tide_key, float(self.survey.time[k])))
+        for key in online_tide.held_keys(self):  # nor is the tide held (an earlier one after a step may go)
+            stamps.insert((key, float(self.survey.time[k])))
         self.smoother.setSmootherLag(self._lag())
         try:
             self.smoother.update(self._new_factors, self._new_values, stamps, self._remove)
@@ -440,9 +442,7 @@ class GraphNavigator:
             "lost_episodes": [e.as_dict() for e in self.episodes],
             "key_indices": [int(k) for k in self.graph.keys],
             "calibration": self.calibration_report(),
-            **({"tide": {"tide": self._tide_mean, "tide_std": float(np.sqrt(self._tide_joint[5, 5])),
-                         "steps": list(self.tide_steps)}}
-               if self.tide else {}),
+            **({"tide": online_tide.meta(self)} if self.tide else {}),
             **({"terrain": self.terrain.meta()} if self.terrain is not None else {}),
             **({"acquisition": self.acquisition.meta()} if self.acquisition is not None else {}),
             "config": self.config.as_dict(),

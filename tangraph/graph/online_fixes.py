@@ -20,6 +20,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
+from tangraph.graph import online_tide
 from tangraph.graph.calibration import position_tide_factor, to_world, world_jacobian
 from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
 from tangraph.graph.fixes import (
@@ -107,8 +108,9 @@ def position_tide_prior(nav: GraphNavigator, k: int, world, cov) -> tuple[np.nda
         jac = np.zeros((3, 6))
         jac[:2, :5] = world_jacobian(pose, nav.calibration, nav.origin)[:2]
         jac[2, 5] = 1.0
+        mean[2], joint = online_tide.carried(nav, float(nav.survey.time[k] - nav.survey.time[nav._key_of]),
+                                             nav._tide_mean, joint)
         tide = jac @ joint @ jac.T
-        mean[2] = nav._tide_mean
         prior[:2, 2] = prior[2, :2] = tide[:2, 2]
         prior[2, 2] = tide[2, 2]
     return mean, prior
@@ -132,8 +134,9 @@ def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | No
     end's on the position and the tide (None otherwise)."""
     if not (nav.tide and isinstance(fix, WindowFix) and np.all(np.isfinite(fix.joint_mean))):
         return None
-    return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, nav.origin,
-                                nav.model.robust_kernel, nav.model.robust_parameter, nav.tide_key)
+    m = nav.model
+    return position_tide_factor(key, fix.joint_mean, fix.joint_covariance, nav.origin, m.robust_kernel,
+                                m.robust_parameter, online_tide.of_key(nav, key))
 
 
 def misfit_noise(nav: GraphNavigator, k: int, sigma: float) -> float:
@@ -206,23 +209,10 @@ def tide_step(nav: GraphNavigator, k: int) -> None:
         if np.ptp(offsets) > TIDE_STEP_AGREE:  # not one offset: faults of their own
             nav._faults = nav._faults[-1:]
         return
-    new_tide(nav, k, nav._tide_mean + float(np.median(offsets)))
+    online_tide.new_tide(nav, k, nav._tide_mean + float(np.median(offsets)))
     log.info("graph: the tide stepped at ping %d: windows over %d pings %.2f m off the held tide",
              k, k - nav._faults[0][0] + 1, float(np.median(offsets)))
     nav._faults = []
-
-
-def new_tide(nav: GraphNavigator, k: int, tide: float) -> None:
-    """The graph holds a new tide variable from key ``k`` on (the held one is wrong), its prior
-    ``tide`` with the model's tide std."""
-    nav.tide_key = int(gtsam.symbol("t", len(nav.tide_steps) + 1))
-    nav.tide_steps.append(k)
-    nav._new_factors.add(gtsam.PriorFactorVector(
-        nav.tide_key, np.array([tide]), gtsam.noiseModel.Isotropic.Sigma(1, nav.model.tide_std)))
-    nav._new_values.insert(nav.tide_key, np.array([tide]))
-    nav._tide_mean = tide
-    nav._tide_joint[5, :] = nav._tide_joint[:, 5] = 0.0
-    nav._tide_joint[5, 5] = nav.model.tide_std**2
 
 
 def grow_window(nav: GraphNavigator, k: int) -> None:

@@ -69,6 +69,7 @@ from scipy import stats
 
 from tangraph.fix_records import FixStatus
 from tangraph.geometry import gate_threshold
+from tangraph.graph import online_tide
 from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.lost import _isam_index
@@ -195,7 +196,7 @@ class OnlineTerrain:
             if judged.record.status in _USED and fix is not None and not fix.quality.multimodal:
                 self.found = True
         first = max(prev, self.free_ping)
-        tide_known = nav.tide or nav.model.tide_std == 0
+        tide_known = nav.tide or nav.model.tide_variance == 0
         if nav.state.lost or not (self.found and tide_known) or first >= k:
             self._stop()
             return
@@ -250,8 +251,9 @@ class OnlineTerrain:
         key = nav._key_pose[None]
         key_cov = nav._world(nav._key_pose, nav._key_joint)[1][:2, :2]
         prior = _ping_covariances(nav, nav._key_of, pings)
+        drift = online_tide.ping_variance(nav, nav._key_of, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
-                    offset_variance=np.full(pings.size, tide_var))
+                    offset_variance=tide_var + (0.0 if drift is None else drift))
         if not used.any():
             return None
         n = 3 if tide_var > 0 else 2
@@ -270,7 +272,7 @@ class OnlineTerrain:
                 if not used.any():
                     return None
             g = grad if n == 2 else np.concatenate([grad, np.ones((*grad.shape[:2], 1))], axis=-1)
-            info, gradient = _information(terrain, used, -g, noise, residual, exponent)
+            info, gradient = _information(terrain, used, -g, noise, residual, exponent, drift)
             posterior = np.linalg.inv(information + info)
             shift = shift - posterior @ (gradient + information @ shift)
         pose, cov = nav.predicted(k)
@@ -302,11 +304,12 @@ class OnlineTerrain:
     def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain):
         """The factor of the ``pings`` hung from key ``prev`` (None when no sounding passes)
         and the share of those pings with soundings on the map that failed."""
-        tide, tide_var = _tide_belief(nav)
+        tide, tide_var = _tide_belief(nav, prev)
         key = nav._key_pose[None]
         prior = _ping_covariances(nav, prev, pings)
+        drift = online_tide.ping_variance(nav, prev, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
-                    offset_variance=np.full(pings.size, tide_var))
+                    offset_variance=tide_var + (0.0 if drift is None else drift))
         evaluated = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, noise=True)
         residual, jac, dr_variance, grad, _, _, noise = evaluated
         seen = np.any(np.isfinite(residual), axis=1)
@@ -324,8 +327,8 @@ class OnlineTerrain:
         self.pings += int(np.any(used, axis=1).sum())
         self.soundings += int(used.sum())
         keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
-            + ([int(nav.tide_key)] if terrain.estimates_tide else [])
-        info, gradient = _information(terrain, used, jac, noise, residual, exponent)
+            + ([online_tide.of_key(nav, prev)] if terrain.estimates_tide else [])
+        info, gradient = _information(terrain, used, jac, noise, residual, exponent, drift)
         factor = information_factor(info, gradient, keys)
         if factor is None:
             return None, failed
@@ -353,15 +356,24 @@ class OnlineTerrain:
             return np.where(s2 > 0, spread / (spread + 2.0 * s2), 1.0)
 
 
-def _information(terrain: PingTerrain, used, a, noise, residual, exponent) -> tuple[np.ndarray, np.ndarray]:
+def _information(terrain: PingTerrain, used, a, noise, residual, exponent,
+                 drift=None) -> tuple[np.ndarray, np.ndarray]:
     """The information and gradient of the soundings ``used`` on the parameters whose derivatives
     are ``a (K, B, P)``, each sounding weighed by its exponent as it was judged, with the DR
     noise since the key that their pings share integrated out
-    (:func:`~tangraph.graph.terrain_factors.chain_information`)."""
+    (:func:`~tangraph.graph.terrain_factors.chain_information`), and the tide's drift since the
+    key (``drift (K,)``, its variance at each ping: :func:`tangraph.graph.online_tide.ping_variance`)
+    as a fourth noise of that walk, which moves every sounding of a ping alike."""
     ok = used & np.isfinite(residual) & np.all(np.isfinite(a), axis=-1)
+    cov = terrain.increment_cov
+    if drift is not None:
+        noise = np.concatenate([noise, np.full((*noise.shape[:2], 1), -1.0)], axis=-1)  # d r / d tide
+        walk = np.zeros((len(cov), 4, 4))
+        walk[:, :3, :3], walk[:, 3, 3] = cov, drift
+        cov = walk
     mask = ok[..., None]
     return chain_information(np.where(mask, a, 0.0), np.where(mask, noise, 0.0), np.where(ok, residual, 0.0),
-                             np.where(ok, exponent / terrain.variance, 0.0), terrain.increment_cov)
+                             np.where(ok, exponent / terrain.variance, 0.0), cov)
 
 
 def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
@@ -434,13 +446,13 @@ def tangent_departure(bathymetry, north, east, variance, cov) -> float:
     return float(np.mean(bent[ok])) if ok.any() else float("nan")
 
 
-def _tide_belief(nav: GraphNavigator) -> tuple[float, float]:
-    """The tide's estimate and variance now: the graph's when it holds the tide, else the
-    model's (known)."""
+def _tide_belief(nav: GraphNavigator, key: int) -> tuple[float, float]:
+    """The tide's estimate and variance at key pose ``key`` now: the graph's when it holds the
+    tide, else the model's (known)."""
     if not nav.tide:
         return float(nav.model.tide), 0.0
-    mean = float(nav.isam.calculateEstimateVector(nav.tide_key)[0])
-    return mean, float(nav.isam.marginalCovariance(nav.tide_key)[0, 0])
+    tide = online_tide.of_key(nav, key)
+    return float(nav.isam.calculateEstimateVector(tide)[0]), float(nav.isam.marginalCovariance(tide)[0, 0])
 
 
 def _terrain(nav: GraphNavigator, prev: int, pings: np.ndarray, variance: np.ndarray) -> PingTerrain:
@@ -451,7 +463,7 @@ def _terrain(nav: GraphNavigator, prev: int, pings: np.ndarray, variance: np.nda
     increment[own], increment_cov[own] = 0.0, 0.0
     s = nav.survey
     offsets = np.stack([s.beam_forward[pings], s.beam_starboard[pings]], axis=-1).astype(float)
-    tide_std = float(nav.model.tide_std) if nav.tide else 0.0
+    tide_std = float(np.sqrt(nav.model.tide_variance)) if nav.tide else 0.0  # > 0: a tide variable
     return PingTerrain(np.array([prev]), np.zeros(pings.size, np.int64), increment, increment_cov, offsets,
                        np.asarray(s.beam_depth[pings], float), variance, nav.origin.copy(),
                        nav.graph.calibrated, float(nav.model.tide), tide_std)

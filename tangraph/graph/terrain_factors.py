@@ -295,32 +295,34 @@ def chain_information(a, a_noise, residual, weight, increment_cov) -> tuple[np.n
     each ping the noise of those before it.
 
     A sounding ``b`` of ping ``j`` (in order from the key) is ``r_jb = residual + a_jb d_theta +
-    n_jb u_j + e_jb`` (``a (K, B, P)`` and ``a_noise (K, B, 3)`` the residual's derivatives in
-    the parameters and in the DR noise ``u_j`` of the ping's increment from the key; ``e`` of
-    precision ``weight (K, B)``, 0: not used). ``u`` is taken as a walk, ``u_j = u_(j-1) + w_j``
-    (``u = 0`` at the key), its steps' covariances the growth of the cumulative covariances
-    ``increment_cov (K, 3, 3)`` (made positive semi-definite: the DR model's white heading noise
-    is carried over as if it persisted, which tells less of the heading than it holds). An
-    information filter backwards along the pings gives ``A^T C^-1 A`` and ``A^T C^-1 r`` for the
-    soundings' dense covariance ``C`` under that walk, at the cost of a few ``(P + 3)``-square
+    n_jb u_j + e_jb`` (``a (K, B, P)`` and ``a_noise (K, B, Q)`` the residual's derivatives in
+    the parameters and in the DR noise ``u_j`` of the ping's increment from the key, ``Q = 3``,
+    or 4 with the tide's drift since the key; ``e`` of precision ``weight (K, B)``, 0: not used).
+    ``u`` is taken as a walk, ``u_j = u_(j-1) + w_j`` (``u = 0`` at the key), its steps'
+    covariances the growth of the cumulative covariances ``increment_cov (K, Q, Q)`` (made
+    positive semi-definite: the DR model's white heading noise is carried over as if it
+    persisted, which tells less of the heading than it holds). An information filter backwards
+    along the pings gives ``A^T C^-1 A`` and ``A^T C^-1 r`` for the soundings' dense covariance
+    ``C`` under that walk, at the cost of a few ``(P + Q)``-square
     products per ping (the tests check it against ``C``). Counting each sounding's share of the
     DR noise as its own instead, the ``B`` soundings of one ping would tell its position ``B``
     times over."""
     a, a_noise = np.asarray(a, float), np.asarray(a_noise, float)
     k, _, p = a.shape
+    q = a_noise.shape[2]
     w = np.where(weight > 0, weight, 0.0)
-    rows = np.where(w[..., None] > 0, np.concatenate([a, a_noise], axis=2), 0.0)  # (K, B, P + 3)
+    rows = np.where(w[..., None] > 0, np.concatenate([a, a_noise], axis=2), 0.0)  # (K, B, P + Q)
     ping_info = np.matmul(np.swapaxes(rows * w[..., None], 1, 2), rows)  # each ping's normal equations
     ping_grad = np.sum((w * np.where(w > 0, residual, 0.0))[..., None] * rows, axis=1)
     cov = np.asarray(increment_cov, float)
-    steps = cov - np.concatenate([np.zeros((1, 3, 3)), cov[:-1]])
+    steps = cov - np.concatenate([np.zeros((1, q, q)), cov[:-1]])
     values, vectors = np.linalg.eigh(0.5 * (steps + np.swapaxes(steps, 1, 2)))
     steps = np.matmul(vectors * np.maximum(values, 0.0)[:, None, :], np.swapaxes(vectors, 1, 2))
-    lam, eta = np.zeros((p + 3, p + 3)), np.zeros(p + 3)
+    lam, eta = np.zeros((p + q, p + q)), np.zeros(p + q)
     for j in range(k - 1, -1, -1):
         lam += ping_info[j]
         eta += ping_grad[j]
-        gain = steps[j] @ np.linalg.inv(np.eye(3) + lam[p:, p:] @ steps[j])  # (L_uu + Q^-1)^-1
+        gain = steps[j] @ np.linalg.inv(np.eye(q) + lam[p:, p:] @ steps[j])  # (L_uu + Q^-1)^-1
         cross = lam[:, p:].copy()
         eta -= cross @ gain @ eta[p:]
         lam -= cross @ gain @ cross.T

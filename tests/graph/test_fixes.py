@@ -78,6 +78,8 @@ def test_a_graph_that_holds_the_tide_constant_refuses_a_drifting_one(changes, me
     drifting = NavigationModel(tide_drift_std=0.2, tide_drift_time=200.0)
     check_tide_drift(config, NavigationModel())  # a constant tide: every setting holds
     assert check_tide_drift(GraphConfig(), drifting) is drifting  # the defaults estimate each window's tide
+    tracking = GraphConfig().replace(terrain="soundings", acquire="pmf")  # follows the drift (online_tide)
+    assert check_tide_drift(tracking, drifting) is drifting
     with pytest.raises(TangraphError, match=message):
         check_tide_drift(config, drifting)
     with pytest.raises(TangraphError, match="tide_drift_std = 0.2 m"):  # where the graph starts

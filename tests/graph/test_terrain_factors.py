@@ -78,28 +78,30 @@ def test_jacobians_match_numerical_derivatives(calibrated):
     np.testing.assert_allclose(jac[..., column], numeric, atol=1e-9)
 
 
-def test_the_chain_information_is_that_of_the_dense_covariance():
+@pytest.mark.parametrize("q", [3, 4])
+def test_the_chain_information_is_that_of_the_dense_covariance(q):
     """Pings hung in a row from a key, their soundings sharing the DR noise of each ping's
-    increment (a walk): the backward information filter gives ``A^T C^-1 A`` and ``A^T C^-1 r``
-    of the soundings' dense covariance ``C = W^-1 + N cov(u) N^T``, with some soundings unused,
-    whether the first ping is the key's own (no noise) or one after it."""
+    increment (a walk; ``q = 4``: with the tide's drift since the key as a fourth noise): the
+    backward information filter gives ``A^T C^-1 A`` and ``A^T C^-1 r`` of the soundings' dense
+    covariance ``C = W^-1 + N cov(u) N^T``, with some soundings unused, whether the first ping
+    is the key's own (no noise) or one after it."""
     rng = np.random.default_rng(3)
     k, b, p = 6, 5, 6
     a = rng.normal(size=(k, b, p))
-    a_noise = rng.normal(size=(k, b, 3))
+    a_noise = rng.normal(size=(k, b, q))
     residual = rng.normal(size=(k, b))
     weight = rng.uniform(0.5, 4.0, size=(k, b))
     weight[2, [1, 3]] = 0.0
     for own in (True, False):
-        steps = np.stack([(lambda m: m @ m.T)(rng.normal(scale=0.3, size=(3, 3))) for _ in range(k)])
+        steps = np.stack([(lambda m: m @ m.T)(rng.normal(scale=0.3, size=(q, q))) for _ in range(k)])
         if own:
             steps[0] = 0.0
         cumulative = np.cumsum(steps, axis=0)
         info, grad = chain_information(a, a_noise, residual, weight, cumulative)
         used = weight.ravel() > 0
-        big_n = np.zeros((k * b, 3 * k))
+        big_n = np.zeros((k * b, q * k))
         for j in range(k):
-            big_n[j * b:(j + 1) * b, 3 * j:3 * j + 3] = a_noise[j]
+            big_n[j * b:(j + 1) * b, q * j:q * j + q] = a_noise[j]
         cov_u = np.block([[cumulative[min(i, j)] for j in range(k)] for i in range(k)])
         dense = np.diag(1.0 / np.where(used, weight.ravel(), 1.0)) + big_n @ cov_u @ big_n.T
         dense = dense[np.ix_(used, used)]
@@ -107,7 +109,7 @@ def test_the_chain_information_is_that_of_the_dense_covariance():
         np.testing.assert_allclose(info, rows.T @ np.linalg.solve(dense, rows), rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(grad, rows.T @ np.linalg.solve(dense, r), rtol=1e-9, atol=1e-9)
     # no DR noise: the soundings' own normal equations
-    info, grad = chain_information(a, a_noise, residual, weight, np.zeros((k, 3, 3)))
+    info, grad = chain_information(a, a_noise, residual, weight, np.zeros((k, q, q)))
     rows, w = a.reshape(-1, p), weight.ravel()
     np.testing.assert_allclose(info, rows.T @ (w[:, None] * rows), rtol=1e-12)
     np.testing.assert_allclose(grad, rows.T @ (w * residual.ravel()), rtol=1e-12)
