@@ -86,7 +86,7 @@ from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
 from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _regrid
 from tangraph.filters.runner import check_run_inputs, step_timings
-from tangraph.filters.steps import _chi2_quantile, innovation
+from tangraph.filters.steps import innovation
 from tangraph.filters.tide import TideDrift, predict_tide, update_drift
 from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
@@ -211,10 +211,11 @@ def _measure(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray
 
 def _inconsistent(check, alpha: float) -> bool:
     """The lost test of one ping: its mean sounding's innovation against the density's own
-    predictive spread (:class:`~tangraph.filters.steps.Innovation`'s ``nis``, chi-square(1)).
-    The best point's chi-square is not used: the calibration's few nodes need not hold a point
-    that fits every sounding of a wide swath while the heading error is still uncertain."""
-    return bool(check.nis > _chi2_quantile(alpha, 1))
+    predictive spread (:meth:`~tangraph.filters.steps.Innovation.nis_beyond`: chi-square(1), or
+    the Student-t tail of the map's local misfit scale). The best point's chi-square is not
+    used: the calibration's few nodes need not hold a point that fits every sounding of a wide
+    swath while the heading error is still uncertain."""
+    return check.nis_beyond(alpha)
 
 
 def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: NavigationModel,

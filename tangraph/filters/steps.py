@@ -80,7 +80,11 @@ class Innovation:
     squared innovation of the mean sounding over its predictive variance (the weighted cloud's
     spread of predicted mean depths, plus ``sigma^2 / B`` and the tide variance; chi-square(1)
     when the model holds), and ``best_chi2``, the smallest ``-2 log p`` over the particles
-    (chi-square(B) at the true state).
+    (chi-square(B) at the true state). Where the map errs with a Student-t tail (a local misfit
+    scale, :mod:`tangraph.sensors.misfit`) the soundings' part of the variance is at the scale's
+    estimate and ``nis`` is the square of a Student-t of ``dof`` degrees of freedom, ``F(1,
+    dof)`` (infinite: chi-square(1)): a map that says it errs by several times its stated error
+    in patches does not say the cloud is lost where it does.
 
     Examples
     --------
@@ -88,22 +92,38 @@ class Innovation:
     False
     >>> Innovation(nis=0.5, best_chi2=400.0, n_soundings=30).inconsistent(1e-3)
     True
+    >>> Innovation(nis=20.0, best_chi2=25.0, n_soundings=30).inconsistent(1e-3)
+    True
+    >>> Innovation(nis=20.0, best_chi2=25.0, n_soundings=30, dof=3.0).inconsistent(1e-3)
+    False
     """
 
     nis: float
     best_chi2: float
     n_soundings: int
+    dof: float = float("inf")
+
+    def nis_beyond(self, alpha: float) -> bool:
+        """Whether ``nis`` is beyond its quantile ``1 - alpha`` (chi-square(1), or ``F(1, dof)``)."""
+        return bool(self.nis > _nis_quantile(alpha, self.dof))
 
     def inconsistent(self, alpha: float) -> bool:
-        """Whether either statistic is beyond its chi-square quantile ``1 - alpha``."""
-        return bool(self.nis > _chi2_quantile(alpha, 1)
-                    or self.best_chi2 > _chi2_quantile(alpha, self.n_soundings))
+        """Whether either statistic is beyond its quantile ``1 - alpha``."""
+        return self.nis_beyond(alpha) or bool(self.best_chi2 > _chi2_quantile(alpha, self.n_soundings))
 
 
 @functools.lru_cache(maxsize=1024)
 def _chi2_quantile(alpha: float, dof: int) -> float:
     """``chi2.isf(alpha, dof)``, cached: asked at every ping, for few distinct sounding counts."""
     return float(stats.chi2.isf(alpha, dof))
+
+
+def _nis_quantile(alpha: float, dof: float) -> float:
+    """The quantile ``1 - alpha`` of one squared innovation: chi-square(1), or ``F(1, dof)`` for a
+    Student-t of ``dof`` degrees of freedom (its square)."""
+    if not np.isfinite(dof):
+        return _chi2_quantile(alpha, 1)
+    return float(stats.f.isf(alpha, 1, dof))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -170,10 +190,14 @@ def innovation(
     noise = model.terrain.sounding_std**2 / b
     if ping.variance is not None:  # white noise averages out over the ping, its map error may not
         noise = model.navigation.sounding_std**2 / b + float(np.mean(cast(np.ndarray, ping.map_variance)))
+    scale = getattr(update, "scale", None)  # the local misfit scale the ping was weighed with
+    dof = float("inf")
+    if scale is not None:  # the soundings err at its estimate, with its Student-t tail
+        noise, dof = noise * max(scale.factor, 1.0), 2.0 * scale.shape
     variance = spread + noise + belief.tide_var
     nis = float((np.mean(ping.depths) - mean) ** 2 / variance)
     best = float(-2.0 * np.max(update.log_likelihood[finite]))
-    return Innovation(nis, best, b)
+    return Innovation(nis, best, b, dof)
 
 
 def reweight(belief: Belief, log_factor: np.ndarray, *, where: str) -> Belief:

@@ -19,7 +19,7 @@ from tangraph.filters import (
     TercomPFConfig,
     steps,
 )
-from tangraph.filters.belief import calibration_estimate, initial_belief, model_belief, state_moments
+from tangraph.filters.belief import Belief, calibration_estimate, initial_belief, model_belief, state_moments
 from tangraph.filters.ipf import ipf_step
 from tangraph.filters.jbpf import jbpf_step
 from tangraph.filters.model import FilterModel, Ping, survey_pings
@@ -179,3 +179,28 @@ def test_the_calibration_kernel_moves_as_much_whether_resampled_at_every_ping_or
     assert steps.kernel_bandwidth(every_ping, 0.1 * n, n) == every_ping.kernel_bandwidth
     moved, index, ess = steps.resample_if_needed(degenerate, every_ping, rng=rng, model=model)
     assert ess < 0.5 * n and not np.allclose(moved.calibration, belief.calibration[index])
+
+
+def test_the_innovation_takes_the_map_s_misfit_scale_and_its_tail():
+    """With a local misfit scale (a map that states a Student-t tail) the mean sounding's
+    innovation is weighed at the scale's estimate and judged against ``F(1, 2 shape)``: a ping
+    five stated sigma off is lost without the scale, not with one that has learnt that the
+    patch errs at three times its stated variance; four times as far off, it still is."""
+    from tangraph.filters.model import TerrainUpdate
+    from tangraph.filters.steps import innovation
+    from tangraph.sensors import MisfitScale
+
+    n, b = 3, 4
+    model = FilterModel.from_model(navigation(SURVEY, sounding_std=0.5, tide_std=0.0), MAP)
+    belief = Belief(np.zeros((n, 2)), np.full(n, -np.log(n)), np.zeros(n), 0.0, np.empty((n, 0)), np.empty(0))
+    sigma = 0.5 / np.sqrt(b)  # the stated std of a ping's mean sounding (a perfect map)
+    scale = MisfitScale(shape=4.0, rate=12.0, dof=3.0, length=100.0)  # kappa = 3, 8 dof
+    for off, lost_stated, lost_scaled in ((5.0, True, False), (20.0, True, True)):
+        ping = Ping(1, np.zeros(2), np.zeros((b, 2)), np.full(b, 10.0 + off * sigma))
+        for given, lost in ((None, lost_stated), (scale, lost_scaled)):
+            update = TerrainUpdate(np.zeros(n), np.zeros(n), 0.0, np.full(n, 10.0), scale=given)
+            check = innovation(belief, update, ping, model)
+            expected = off**2 / (1.0 if given is None else 3.0)
+            assert check.nis == pytest.approx(expected, rel=1e-9)
+            assert check.dof == (np.inf if given is None else 8.0)
+            assert check.nis_beyond(1e-3) is lost
