@@ -222,3 +222,29 @@ def test_a_start_on_biased_depths_is_undone_by_putting_the_tide_back_at_its_prio
     assert np.hypot(*(mean - bad.true_pose[-1, :2])) < 2.0
     weights = state.masses().ravel()
     assert abs(float(weights @ state.tide.ravel()) - model.tide) < 0.2
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_the_ping_gate_takes_a_patch_the_map_s_tail_allows(seed):
+    """50 pings whose soundings err by five times the stated error (a patch of the map that errs
+    beyond its statement): with the stated errors trusted the gate holds back most of them as
+    pings the density cannot explain; on a map that states a Student-t tail (``misfit_dof``) the
+    gate judges them by the misfit scale they teach (:class:`tangraph.filters.steps.Innovation`)
+    and holds back at most a few (18-23 of them before it did)."""
+    bathymetry = rough_map(1)
+    survey = multibeam_survey(bathymetry, seed=seed, pings=120)
+    model = navigation(survey)
+    depth = survey.beam_depth.copy()
+    patch = np.random.default_rng(seed).normal(scale=5.0 * model.measurement_std, size=(50, depth.shape[1]))
+    depth[30:80] += patch
+    bad = survey.replace(beam_depth=depth)
+    gated = {}
+    for dof in (0.0, 2.0):
+        tailed = model.replace(misfit_dof=dof)
+        run, state, pings = start_run(bad, bathymetry, tailed, PMFConfig(ping_gate=True))
+        for ping in pings:
+            state = run.step(state, ping)
+        gated[dof] = len(run.gated_steps)
+        assert not run.reopened
+        assert np.hypot(*(state.moments()[0] - bad.true_pose[-1, :2])) < 5.0
+    assert gated[0.0] >= 15 and gated[2.0] <= 5, gated
