@@ -1,7 +1,7 @@
 """Speed of the factor graph (tangraph.graph): online iSAM2 per key pose, batch smoother on long chains.
 
     python benchmarks/bench_graph.py [--online-only | --batch-only] [--sizes 100000 300000] [--long 100000]
-    python benchmarks/bench_graph.py --tracking [--seeds 7 8 9]
+    python benchmarks/bench_graph.py --tracking [--seeds 7 8 9] [--tide-drift 0.2 170]
 
 Online: the chen2022 scenario (100 000 s at 1 m/s, a single-beam sounding every 100 s, on the
 500 m polar chart), navigated by :func:`tangraph.graph.navigate_online`; prints the mean and p99
@@ -19,12 +19,15 @@ point-mass acquisition (``terrain = "soundings"``, ``acquire = "pmf"``) on ``dem
 ping (mean, p99, max of a whole step, before and after the hand-over), against the point-mass
 filter and the TAP graph on the same surveys, and its iSAM2 updates against the plain loop on
 its key chain, all in the same run (targets: p99 step <= 10 ms, mean update <= 2 x the plain
-loop's). Nothing is asserted.
+loop's); with ``--tide-drift STD TIME`` the surveys' depths drift (m, s) and every estimator's
+model says so, the tracking graph then holding a tide per key pose
+(:mod:`tangraph.graph.online_tide`). Nothing is asserted.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 from types import SimpleNamespace
@@ -122,12 +125,16 @@ def long_online(n: int) -> None:
           f"{np.percentile(updates, 99) / np.percentile(plain, 99):.2f}")
 
 
-def tracking(seeds: list[int]) -> None:
+def tracking(seeds: list[int], drift: list[float] | None = None) -> None:
     """Per-ping times of the tracking graph against the point-mass filter, the TAP graph and the
-    plain iSAM2 loop (see the module docstring), on one ``demo`` survey per seed."""
+    plain iSAM2 loop (see the module docstring), on one ``demo`` survey per seed (``drift``: the
+    tide's drift std and time, m and s)."""
     from tangraph.filters.pmf import point_mass_filter
 
     scenario = load_scenario("demo")
+    if drift:
+        scenario = dataclasses.replace(scenario, sonar=dataclasses.replace(
+            scenario.sonar, tide_drift_std=drift[0], tide_drift_time=drift[1]))
     bathymetry = load_any(scenario.map)
     config = GraphConfig().replace(terrain="soundings", acquire="pmf")
     rows = []
@@ -258,10 +265,12 @@ def main() -> None:
     parser.add_argument("--tracking", action="store_true",
                         help="only the tracking graph with point-mass acquisition on demo surveys")
     parser.add_argument("--seeds", type=int, nargs="+", default=[7, 8, 9])
+    parser.add_argument("--tide-drift", type=float, nargs=2, metavar=("STD", "TIME"),
+                        help="with --tracking: the surveys' depths drift by STD m over TIME s")
     args = parser.parse_args()
     print(f"pid {os.getpid()}")
     if args.tracking:
-        tracking(args.seeds)
+        tracking(args.seeds, args.tide_drift)
         return
     if not args.batch_only:
         online()
