@@ -89,6 +89,8 @@ class GraphNavigator:
     >>> track = nav.track()                               # doctest: +SKIP
     """
 
+    datum_key: int | None  #: the datum of a drifting tide (:mod:`tangraph.graph.online_tide`)
+
     def __init__(self, survey: Survey, bathymetry: BathymetryMap, config: GraphConfig | None = None, *,
                  model: NavigationModel | None = None) -> None:
         self.survey = survey
@@ -113,13 +115,11 @@ class GraphNavigator:
         if c.online.front_end == "pmf":
             self._terrain = online_fixes.window_terrain(survey, bathymetry, self.model)
             self._window_start = 0  # the first ping of the front end's next window
-        # the point-mass windows and tracking tell the tide: the graph holds it (never marginalised)
+        # the point-mass windows and tracking tell the tide: the graph holds it (online_tide)
         calibration_std = graph_calibration_std(self.model)
         self.tide = c.online.learns_tide and calibration_std is not None and self.model.tide_variance > 0
-        self._tide_joint = np.zeros((6, 6))  # (latest key pose in the DR frame, c, tide)
-        self._tide_mean = float(self.model.tide)
-        self.tide_key, self._tide_restart = TIDE, False  # the latest key's tide (see online_tide)
-        self.datum_key: int | None = None  # the datum of a drifting tide
+        self._tide_mean, self._tide_joint = float(self.model.tide), np.zeros((6, 6))  # the latest key's
+        self.tide_key, self.datum_key, self._tide_restart = TIDE, None, False  # (see online_tide)
         self._faults: list[tuple[int, float]] = []  # the depth faults since the last ordinary window
         self.tide_steps: list[int] = []  # the keys a new tide (or datum) was held from
         self._last_outcome: FixOutcome | None = None
