@@ -63,7 +63,7 @@ def key_tide(nav: GraphNavigator, prev: int, k: int) -> None:
     if drift is None:
         return
     std, forget = drift
-    tide = nav.model.tide
+    tide = _datum(nav)
     key = of_key(nav, k)
     keys, a = [key], [1.0]
     if nav._tide_restart:  # s_k - c ~ N(0, S^2)
@@ -79,7 +79,7 @@ def key_tide(nav: GraphNavigator, prev: int, k: int) -> None:
         keys.append(nav.datum_key)
         a.append(-(1.0 - phi))
     else:
-        b = (1.0 - phi) * tide  # the datum known
+        b = (1.0 - phi) * float(nav.model.tide)  # the datum known
     nav._tide_restart = False
     nav._new_factors.add(_linear_factor(keys, a, b, sigma))
     nav._new_values.insert(key, np.array([start_value]))
@@ -140,10 +140,18 @@ def held_keys(nav: GraphNavigator) -> list[int]:
     return [] if nav.datum_key is None else [int(nav.datum_key)]
 
 
+def _datum(nav: GraphNavigator) -> float:
+    """The datum's estimate now (the model's tide while none is held or it is not yet solved)."""
+    key = nav.datum_key
+    if key is None or not nav.isam.valueExists(key):
+        return float(nav.model.tide)
+    return float(nav.isam.calculateEstimateVector(key)[0])
+
+
 def carried(nav: GraphNavigator, dt: float, mean: float, joint: np.ndarray) -> tuple[float, np.ndarray]:
     """The held tide's ``mean`` and its ``joint (6, 6)`` with a pose and the calibration (the tide
     last) carried ``dt`` seconds on by the drift: ``s = phi s + (1 - phi) c + w`` (the datum at
-    its prior mean: its uncertainty over a key's seconds, ``1 - phi`` of it, left out)."""
+    its estimate: its uncertainty over a key's seconds, ``1 - phi`` of it, left out)."""
     drift = nav.model.tide_drift
     if drift is None or dt <= 0:
         return mean, joint
@@ -152,7 +160,7 @@ def carried(nav: GraphNavigator, dt: float, mean: float, joint: np.ndarray) -> t
     joint[5, :] *= phi
     joint[:, 5] *= phi
     joint[5, 5] += drift[0] ** 2 * (1.0 - phi**2)
-    return phi * mean + (1.0 - phi) * float(nav.model.tide), joint
+    return phi * mean + (1.0 - phi) * _datum(nav), joint
 
 
 def ping_variance(nav: GraphNavigator, key: int, pings: np.ndarray) -> np.ndarray | None:
