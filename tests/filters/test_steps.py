@@ -204,3 +204,9 @@ def test_the_innovation_takes_the_map_s_misfit_scale_and_its_tail():
             assert check.nis == pytest.approx(expected, rel=1e-9)
             assert check.dof == (np.inf if given is None else 8.0)
             assert check.nis_beyond(1e-3) is lost
+    from scipy import stats
+
+    from tangraph.filters.steps import _nis_quantile
+
+    for dof in (1.9, 8.0, 300.0):  # the quantile is the F distribution's
+        assert _nis_quantile(1e-3, dof) == pytest.approx(stats.f.isf(1e-3, 1, dof), rel=1e-9)

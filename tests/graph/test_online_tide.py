@@ -104,7 +104,7 @@ def test_the_acquired_graph_follows_a_drifting_tide(drifting_surveys, rough_map)
     the drift in its model ends with the latest key's tide within 3 sigma of the truth (the
     sonar's offset plus the drift there) and follows the track better than the same graph
     holding one tide (the workaround before it could follow a drift: at least 30 % less RMSE;
-    0.27-0.32 against 0.64-0.66 m on these seeds)."""
+    0.27-0.32 against 0.56-0.66 m on these seeds)."""
     for survey, offset in drifting_surveys:
         model = drifting_model(survey, 0.5).replace(tide=0.0)
         nav = GraphNavigator(survey, rough_map, ACQUIRED, model=model).run()
