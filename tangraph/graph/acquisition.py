@@ -16,17 +16,11 @@ connected region above ``exp(-MODE_LEVEL)`` of the peak holds ``MODE_MASS`` of t
 grid's outer ring holds at most ``EDGE_MASS``: :mod:`tangraph.graph.posterior_fix`'s tests) and
 its information exceeds the graph's prediction's (``posterior_fix``'s ``MIN_GAIN`` and
 ``MAX_LOSS``), the graph receives the filter's terrain information on the key's world position,
-on the tide when the graph holds it, and on the DR's constant errors the filter's bank estimates
-(the speed scale and the heading error, the DR heading less the world heading) when the graph
-has a calibration variable: the density's moments over all of them (every point's tide
-posterior pooled; the calibration's the bank's fit, the rest's regression on it over the bank's
-members), the posterior's information less the prediction's, ``N(L^-1 (S^-1 mu - P^-1 m),
-L^-1)`` with ``L = S^-1 - P^-1`` (``posterior_fix._remove_prior``). The prediction holds what
+and on the tide when the graph holds it (the density's moments over both, every point's tide
+posterior pooled): the posterior's information less the prediction's, ``N(L^-1 (S^-1 mu - P^-1
+m), L^-1)`` with ``L = S^-1 - P^-1`` (``posterior_fix._remove_prior``). The prediction holds what
 earlier keys received, so each factor carries what the filter learnt since, nothing is counted
-twice, and the graph's belief at the key is the filter's, its calibration included. (Given on
-the position alone, the factors left the graph to learn the calibration again from the spacing
-of the positions it was given: on the drifting-tide demo survey it took the heading error's
-sign wrong at the hand-over, 2.5 deg against the truth's 3.5 deg, and tracked from there.) No window is made meanwhile, and
+twice, and the graph's belief at the key is the filter's. No window is made meanwhile, and
 every key pose is linearised at the filter's mean: the basin the exact posterior chose, not the
 one nearest the DR's prediction. The filter runs with its ping gate (``PMFConfig.ping_gate``: a
 ping its density cannot explain, as in a block of bad depths, does not weigh it), and a factor
@@ -52,8 +46,8 @@ key lies beyond the ``chi2(2)`` quantile ``VET_PROBABILITY`` of the filter's den
 variance along some axis is below ``VET_NARROWER`` of the filter's (the linearised soundings
 claim more than the exact filter found in them: on the drifting-tide demo survey a start
 passed the tangent-plane test with the filter's density 5 m wide along one axis and left the
-graph 2 m wide there, 8 m off), the start is undone (its factor taken out, the filter's factor given instead) and the
-filter goes on.
+graph 2 m wide there, 8 m off), the start is undone (its factor taken out, the filter's factor
+given instead) and the filter goes on.
 Otherwise the filter stops (its information since the last factor is dropped with it, so
 nothing is counted twice), the fix policy starts, and when tracking ends later the TAP windows
 and the fix policy take over as without acquisition.
@@ -77,7 +71,7 @@ from tangraph.filters.pmf_grid import _sample
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold, mahalanobis2
 from tangraph.graph import posterior_fix as pf
-from tangraph.graph.calibration import position_tide_calibration_factor, position_tide_factor
+from tangraph.graph.calibration import position_tide_factor
 from tangraph.graph.online_fixes import position_tide_prior
 from tangraph.graph.online_terrain import START_ITERATIONS
 from tangraph.graph.online_tide import new_tide, of_key
@@ -174,32 +168,18 @@ class Acquisition:
             self.last_reason = reason
             return None
         world, world_cov = nav.predicted(k)
-        rows = self.rows(nav)
-        calibrated = rows[-1] > 2
-        prior_mean, prior_cov = position_tide_prior(nav, k, world, world_cov, calibration=calibrated)
-        state_mean, state_cov = _moments(self.state, mean, cov, calibration=calibrated)
+        prior_mean, prior_cov = position_tide_prior(nav, k, world, world_cov)
+        mean3, cov3 = _with_tide(self.state, mean, cov)
+        n = 3 if nav.tide else 2
         reasons: list[str] = []
-        factor = pf._remove_prior(state_mean[rows], state_cov[np.ix_(rows, rows)], prior_mean[rows],
-                                  prior_cov[np.ix_(rows, rows)], reasons)
+        factor = pf._remove_prior(mean3[:n], cov3[:n, :n], prior_mean[:n], prior_cov[:n, :n], reasons)
         self.last_reason = "; ".join(reasons)
         if factor is not None:  # what the filter learnt must be something the prediction allows
-            nis = float(mahalanobis2(factor[0] - prior_mean[rows], factor[1] + prior_cov[np.ix_(rows, rows)]))
-            if nis > gate_threshold(nav.config.fixes.gate_probability or VET_PROBABILITY, len(rows)):
+            nis = float(mahalanobis2(factor[0] - prior_mean[:n], factor[1] + prior_cov[:n, :n]))
+            if nis > gate_threshold(nav.config.fixes.gate_probability or VET_PROBABILITY, n):
                 self.last_reason = f"its information is beyond the graph's prediction (NIS {nis:.0f})"
                 return None
         return factor
-
-    def rows(self, nav: GraphNavigator) -> list[int]:
-        """What the filter's factors are on, of (north, east, tide, speed scale, heading error):
-        the position, the tide when the graph holds it, and the calibration's axes the filter's
-        bank estimates when the graph has a calibration variable (the calibration is the
-        density's as much as the position is: a factor on the position alone would leave the
-        graph to learn it again from the spacing of the positions it was given)."""
-        rows = [0, 1] + ([2] if nav.tide else [])
-        if nav.graph.calibrated and self.run.estimate:
-            std, points = nav.model.calibration_std, self.run.config.calibration_points
-            rows += [3 + i for i in (0, 1) if std[i] > 0 and points[i] > 1]
-        return rows
 
     def hand_over(self, nav: GraphNavigator, k: int, factor) -> None:
         """Put the filter's ``factor`` (:meth:`ready`) on key pose ``k`` (added to the navigator's
@@ -207,16 +187,10 @@ class Acquisition:
         is iterated, ``START_ITERATIONS``, as the belief it gives may lie metres from where the
         graph linearised); the pings up to ``k`` are the filter's."""
         mean, cov = factor
-        rows = self.rows(nav)
         position, covariance = mean[:2], cov[:2, :2]
-        made = nav.graph.fix_factor(k, position, covariance, kernel="none")
-        if rows[-1] > 2:
-            full = np.zeros(5)
-            full[rows] = mean
-            made = position_tide_calibration_factor(k, full, cov, nav.origin, nav.survey.dr_pose[k, 2],
-                                                    of_key(nav, k) if nav.tide else None, rows)
-        elif nav.tide:
-            made = position_tide_factor(k, mean, cov, nav.origin, "none", tide_key=of_key(nav, k))
+        joint = position_tide_factor(k, mean, cov, nav.origin, "none", tide_key=of_key(nav, k)) \
+            if mean.size == 3 else None
+        made = nav.graph.fix_factor(k, position, covariance, kernel="none") if joint is None else joint
         nav._new_factors.add(nav.graph.add_position_fix(k, position, covariance, made))
         nav.fixes.append(FixRecord.of(k, _Fix(position, covariance), FixStatus.ACCEPTED, float("nan"),
                                       float("nan"), HANDOVER_DETAIL))
@@ -284,38 +258,20 @@ def _tracker(nav: GraphNavigator) -> OnlineTerrain:
     return nav.terrain
 
 
-def _moments(state: PointMass, mean, cov, calibration: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The density's moments over (north, east, tide, speed scale, heading error), ``(5,)`` and
-    ``(5, 5)``: ``mean (2,)`` and ``cov (2, 2)`` its position's, the tide's from every point's
-    tide posterior (mean per point, the shared variance); with ``calibration``, the
-    calibration's posterior (the bank's fit, :meth:`~tangraph.filters.pmf_grid.PointMass.calibration`)
-    and the position's and tide's regression on it over the bank's members (each point at its
-    member's node): what the density says of the rest at each calibration. Else the calibration's
-    rows are zero."""
+def _with_tide(state: PointMass, mean, cov) -> tuple[np.ndarray, np.ndarray]:
+    """The density's moments over (north, east, tide): ``mean (2,)`` and ``cov (2, 2)`` its
+    position's, with the tide's from every point's tide posterior (mean per point, the shared
+    variance)."""
     mass = state.masses().ravel()
-    size = mass.size // len(state.nodes)
-    z = np.column_stack([state.points(), state.tide.ravel(), np.repeat(state.nodes, size, axis=0)])
-    centre = mass @ z
-    d = z - centre
-    full = (d * mass[:, None]).T @ d
-    full[:2, :2] = cov  # with the white noise not yet convolved in
-    full[2, 2] += float(state.tide_var)
-    out = np.concatenate([np.asarray(mean, float), centre[2:]])
-    if not calibration:
-        out[3:], full[3:, :], full[:, 3:] = 0.0, 0.0, 0.0
-        return out, full
-    fit_mean, fit_cov = state.calibration()
-    spread = full[3:, 3:]
-    live = np.diag(spread) > 0
-    slope = np.zeros((3, 2))
-    slope[:, live] = full[:3, 3:][:, live] @ np.linalg.inv(spread[np.ix_(live, live)])
-    rest = full[:3, :3] - slope @ spread @ slope.T  # what no calibration explains
-    out[3:] = fit_mean
-    full[:3, :3] = rest + slope @ fit_cov @ slope.T
-    full[:3, 3:] = slope @ fit_cov
-    full[3:, :3] = full[:3, 3:].T
-    full[3:, 3:] = fit_cov
-    return out, full
+    tide = state.tide.ravel()
+    tide_mean = float(mass @ tide)
+    d_tide = tide - tide_mean
+    mean3 = np.append(mean, tide_mean)
+    cov3 = np.zeros((3, 3))
+    cov3[:2, :2] = cov
+    cov3[:2, 2] = cov3[2, :2] = (state.points() - mean).T @ (mass * d_tide)
+    cov3[2, 2] = float(state.tide_var) + float(mass @ d_tide**2)
+    return mean3, cov3
 
 
 @dataclasses.dataclass(frozen=True)

@@ -41,7 +41,6 @@ __all__ = [
     "calibration_summary",
     "graph_calibration_std",
     "joint_in_frame",
-    "position_tide_calibration_factor",
     "position_tide_factor",
     "to_world",
     "world_covariance",
@@ -176,41 +175,6 @@ def position_tide_factor(pose_key: int, measured, cov, origin, kernel: str = "no
     noise = robust_noise(np.asarray(cov, float), kernel, parameter)
     return gtsam.CustomFactor(noise, [int(pose_key), CALIBRATION, int(tide_key)],
                               partial(_position_tide_error, np.asarray(origin, float).copy(), measured))
-
-
-def _position_tide_calibration_error(origin, measured, dr_heading, rows, factor, values, jacobians):
-    """Error ``(world position, tide, k, heading error)[rows] - measured[rows]`` of a pose (key
-    0) under the calibration (key 1), with the tide (key 2, when the factor has one; else
-    ``rows`` leave the tide out), the heading error the DR heading ``dr_heading`` less the world
-    heading ``psi' - b``."""
-    keys = factor.keys()
-    inner = [None, None] if jacobians is not None else None
-    position = _position_error(origin, measured[:2], factor, values, inner)
-    tide = float(values.atVector(keys[2])[0]) - measured[2] if len(keys) > 2 else 0.0
-    pose = values.atPose2(keys[0])
-    k, b = values.atVector(keys[1])
-    heading = wrap_angle(dr_heading - pose.theta() + b - measured[4])
-    error = np.concatenate([position, [tide, k - measured[3], heading]])
-    if jacobians is not None:
-        jacobians[0] = np.vstack([inner[0], [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, -1.0]]])[rows]
-        jacobians[1] = np.vstack([inner[1], [[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]])[rows]
-        if len(keys) > 2:
-            jacobians[2] = np.array([[0.0], [0.0], [1.0], [0.0], [0.0]])[rows]
-    return error[rows]
-
-
-def position_tide_calibration_factor(pose_key: int, measured, cov, origin, dr_heading: float,
-                                     tide_key: int | None, rows=(0, 1, 2, 3, 4)) -> gtsam.CustomFactor:
-    """A factor on a DR-frame pose, the calibration and the tide (``tide_key``; None: none, and
-    ``rows`` leave it out): the pose's world position, the tide, the speed scale ``k`` and the
-    heading error (the DR heading ``dr_heading`` less the world heading: ``b`` and the heading
-    walk the pose holds), ``measured (5,)``, are those of ``rows`` with covariance ``cov`` over
-    them (no robust kernel: a posterior's information, :mod:`tangraph.graph.acquisition`)."""
-    measured, rows = np.asarray(measured, float).copy(), np.asarray(rows, np.int64)
-    keys = [int(pose_key), CALIBRATION] + ([] if tide_key is None else [int(tide_key)])
-    return gtsam.CustomFactor(gtsam.noiseModel.Gaussian.Covariance(np.asarray(cov, float)), keys,
-                              partial(_position_tide_calibration_error, np.asarray(origin, float).copy(),
-                                      measured, float(dr_heading), rows))
 
 
 def calibration_prior_factor(mean, std) -> gtsam.NonlinearFactor:

@@ -20,7 +20,6 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.filters.likelihood import TerrainLikelihood
-from tangraph.geometry import wrap_angle
 from tangraph.graph import online_tide
 from tangraph.graph.calibration import position_tide_factor, to_world, world_jacobian
 from tangraph.graph.factors import check_fix_covariance, compose, propagate_joint
@@ -97,47 +96,23 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
         return failed(k, exc, half_width, FixStatus.INVALID_COVARIANCE)
 
 
-def position_tide_prior(nav: GraphNavigator, k: int, world, cov, calibration: bool = False
-                        ) -> tuple[np.ndarray, np.ndarray]:
+def position_tide_prior(nav: GraphNavigator, k: int, world, cov) -> tuple[np.ndarray, np.ndarray]:
     """The graph's prediction of ping ``k``'s world position and of the tide, mean ``(3,)`` and
     covariance ``(3, 3)``, from its world prediction ``N(world, cov)``: with the tide the graph
-    holds and how it goes with the position, or else the model's tide prior, apart from it.
-    With ``calibration``, also of the speed scale ``k`` and the heading error at the ping (the DR
-    heading less the world heading: the bias ``b`` and the heading walk the pose holds), ``(5,)``
-    and ``(5, 5)`` over (north, east, tide, k, heading error)."""
-    n = 5 if calibration else 3
-    mean, prior = np.zeros(n), np.zeros((n, n))
-    mean[:3] = np.append(world[:2], nav.model.tide)
+    holds and how it goes with the position, or else the model's tide prior, apart from it."""
+    mean, prior = np.append(world[:2], nav.model.tide), np.zeros((3, 3))
     prior[:2, :2], prior[2, 2] = cov[:2, :2], nav.model.tide_std**2
-    if not (nav.tide or calibration):
-        return mean, prior
-    joint = np.zeros((6, 6))
-    joint[:5, :5], joint[5, 5] = nav._key_joint, nav.model.tide_std**2
-    tide = float(nav.model.tide)
-    if nav.tide:  # the graph's belief in the tide, and how it goes with the pose and calibration
-        joint, tide = nav._tide_joint, nav._tide_mean
-    pose = compose(nav._key_pose, nav._delta[k])
-    joint = propagate_joint(nav._key_pose, joint, nav._delta[k], nav._delta_cov[k])
-    if nav.tide:
-        tide, joint = online_tide.carried(nav, float(nav.survey.time[k] - nav.survey.time[nav._key_of]),
-                                          tide, joint)
-    jac = np.zeros((n, 6))
-    jac[:2, :5] = world_jacobian(pose, nav.calibration, nav.origin)[:2]
-    jac[2, 5] = 1.0
-    if calibration:  # k, and the DR heading less the world heading (psi' - b)
-        jac[3, 3] = 1.0
-        jac[4, 2], jac[4, 4] = -1.0, 1.0
-        mean[3] = nav.calibration[0]
-        mean[4] = wrap_angle(nav.survey.dr_pose[k, 2] - pose[2] + nav.calibration[1])
-    full = jac @ joint @ jac.T
-    prior[:2, 2:] = full[:2, 2:]
-    prior[2:, :2] = full[2:, :2]
-    prior[2:, 2:] = full[2:, 2:]
-    if not nav.tide:  # the model's tide, apart from the rest
-        prior[2, :] = prior[:, 2] = 0.0
-        prior[2, 2] = nav.model.tide_std**2
-    else:
-        mean[2] = tide
+    if nav.tide:  # the graph's belief in the tide, and how it goes with the position
+        pose = compose(nav._key_pose, nav._delta[k])
+        joint = propagate_joint(nav._key_pose, nav._tide_joint, nav._delta[k], nav._delta_cov[k])
+        jac = np.zeros((3, 6))
+        jac[:2, :5] = world_jacobian(pose, nav.calibration, nav.origin)[:2]
+        jac[2, 5] = 1.0
+        mean[2], joint = online_tide.carried(nav, float(nav.survey.time[k] - nav.survey.time[nav._key_of]),
+                                             nav._tide_mean, joint)
+        tide = jac @ joint @ jac.T
+        prior[:2, 2] = prior[2, :2] = tide[:2, 2]
+        prior[2, 2] = tide[2, 2]
     return mean, prior
 
 

@@ -16,8 +16,9 @@ iterated: ``START_ITERATIONS``.)
 ping and those before the new key, less any ping a window took) enter iSAM2 as one factor on
 that key pose, the calibration and the tide. This is the batch smoother's terrain model
 (:mod:`tangraph.graph.terrain_factors`): every sounding's residual against the map's depth at its
-footprint, with the row-sum variance of the map's error, linearised at the prediction where
-they are judged, with the white DR noise between the key and each ping integrated out exactly:
+footprint, with the row-sum variance of the map's error, judged at the prediction and
+linearised at the mode of the key's belief given them (:func:`_mode`: an iterated Kalman
+update's point), with the white DR noise between the key and each ping integrated out exactly:
 all soundings of a ping share its noise, and each ping that of the pings before it
 (:func:`~tangraph.graph.terrain_factors.chain_information`; counted as each sounding's own, a
 ping's soundings told its position as many times over as it has soundings). The factor is
@@ -36,8 +37,9 @@ map's noise. (On a perfect map every exponent is 1.)
 of the prediction's position and tide uncertainty, each ping's together at
 ``terrain_factors.PING_PROBABILITY`` (:func:`~tangraph.graph.terrain_factors.gate`: a ping that
 fits the map nowhere near the prediction, a fault of its depths or its footprints, is left
-out), and the key's together as a fix is (:func:`_innovation`): when the shift of the footprints
-and the tide they pull for is beyond the fixes' gate, none is used. A block of pings whose
+out), and the key's together as a fix is (:func:`_innovation`, with the DR noise and the tide's
+drift their pings share, as in the factor): when the shift of the footprints and the tide they
+pull for is beyond the fixes' gate, none is used. A block of pings whose
 footprints are all misplaced the same way fits the map ping by ping nearly as well as the truth
 does, and only together tells.
 
@@ -48,8 +50,9 @@ only (``FixStatus.CHECKED``).
 **When tracking ends**, the windows, their fixes and the fix policy's lost test take over, and
 tracking waits for a new unimodal fix the policy uses:
 
-- a check says the prediction is wrong: beyond the gate, its best match at the search's edge, or
-  precise and surprising ``CHECK_WINDOWS`` times in a row (:meth:`OnlineTerrain.window`). A
+- a check says the prediction is wrong: beyond the gate, its best match at the search's edge
+  (with an informative region: one that reaches the edge too tells nothing), or precise and
+  surprising ``CHECK_WINDOWS`` times in a row (:meth:`OnlineTerrain.window`). A
   belief the linearised soundings have led into a wrong basin still fits them; the check finds
   it. The policy then takes that window (its pings are counted twice there);
 - the map's departure from its tangent plane grows beyond ``NONLINEAR_STOP`` times the noise (the
@@ -68,7 +71,7 @@ import numpy as np
 from scipy import stats
 
 from tangraph.fix_records import FixStatus
-from tangraph.geometry import gate_threshold
+from tangraph.geometry import gate_threshold, rotation_matrix
 from tangraph.graph import online_tide
 from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.factors import compose, propagate_joint
@@ -167,7 +170,8 @@ class OnlineTerrain:
         and surprising (NIS beyond the ``chi2(2)`` quantile ``CHECK_PROBABILITY``) as the
         ``CHECK_WINDOWS - 1`` checks before it were. Then tracking ends, the policy takes this
         window (the one place its pings count twice: where the factors led the belief astray).
-        Otherwise, see :meth:`window_allowed`."""
+        Otherwise, see :meth:`window_allowed`. (A check whose best match lies at the search's
+        edge but whose region reaches the edge too is uninformative: it does not end tracking.)"""
         if not nav._is_end[k]:
             return True
         if not self.tracking:
@@ -175,9 +179,15 @@ class OnlineTerrain:
             if allowed:
                 self.window_taken(k)
             return allowed
-        record = nav._judge(k, pose, joint, None).record
+        outcome = nav._judge(k, pose, joint, None)
+        record = outcome.record
         self.surprises = self.surprises + 1 if record.accepted and record.nis > _SURPRISE else 0
-        if record.status.says_lost or self.surprises >= CHECK_WINDOWS:
+        # a window whose region reaches the search's edge tells nothing of where the vehicle is,
+        # wherever its best match lies
+        says_lost = record.status.says_lost and not (
+            record.status is FixStatus.OUTSIDE_SEARCH and outcome.fix is not None
+            and not outcome.fix.quality.informative)
+        if says_lost or self.surprises >= CHECK_WINDOWS:
             self._stop()
             self.window_taken(k)
             return True
@@ -235,13 +245,10 @@ class OnlineTerrain:
         """While tracking, the world pose and covariance of ping ``k`` (not a key) given the
         soundings since the latest key too (None when not tracking or none is used): the output
         of a navigator uses what it has heard up to now, though these soundings enter iSAM2 only
-        at the next key. The prediction from the latest key is updated by ``FILTERED_ITERATIONS``
-        Gauss-Newton steps on the soundings of the pings no factor holds yet, gated as the
-        factor's are, in a common shift of the key's world position (and the tide when held):
-        ``(P^-1 + G^T C^-1 G)^-1 G^T C^-1 r`` with ``P`` the key's world covariance, ``G`` the map's
-        gradients under the footprints (and ones), ``C`` the soundings' covariance with the DR
-        noise since the key that their pings share (:func:`_information`), and the covariance of
-        ping ``k`` less what the key's became more certain."""
+        at the next key. The prediction from the latest key is moved by the mode of a common
+        shift of the key's world position (and the tide when held) given the soundings of the
+        pings no factor holds yet, gated as the factor's are (:func:`_mode`), and the covariance
+        of ping ``k`` less what the key's became more certain."""
         first = max(nav._key_of, self.free_ping)
         if not self.tracking or first > k:
             return None
@@ -256,25 +263,14 @@ class OnlineTerrain:
                     offset_variance=tide_var + (0.0 if drift is None else drift))
         if not used.any():
             return None
-        n = 3 if tide_var > 0 else 2
-        information = np.zeros((n, n))
-        information[:2, :2] = np.linalg.inv(key_cov)
-        if n == 3:
-            information[2, 2] = 1.0 / tide_var
-        shift = np.zeros(n)
-        for step in range(FILTERED_ITERATIONS):  # Gauss-Newton, relinearised at the shifted footprints
-            residual, _, _, grad, _, _, noise = _evaluate(
-                terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
-                offset=shift[2] if n == 3 else None, map_offset=shift[:2], noise=True)
-            if step == 0:  # weighed as judged, at the prediction
-                exponent = self._exponents(pings, grad, prior)
-                used &= exponent > MIN_EXPONENT
-                if not used.any():
-                    return None
-            g = grad if n == 2 else np.concatenate([grad, np.ones((*grad.shape[:2], 1))], axis=-1)
-            info, gradient = _information(terrain, used, -g, noise, residual, exponent, drift)
-            posterior = np.linalg.inv(information + info)
-            shift = shift - posterior @ (gradient + information @ shift)
+        residual, _, _, grad, _, _, noise = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
+                                                      jacobian=False, noise=True)
+        exponent = self._exponents(pings, grad, prior)  # weighed as judged, at the prediction
+        used &= exponent > MIN_EXPONENT
+        if not used.any():
+            return None
+        shift, posterior = _mode(nav, terrain, key, tide, tide_var, key_cov, used, exponent, drift,
+                                 (residual, grad, noise))
         pose, cov = nav.predicted(k)
         pose[:2] += shift[:2]
         cov[:2, :2] -= key_cov - posterior[:2, :2]
@@ -311,19 +307,30 @@ class OnlineTerrain:
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=tide_var + (0.0 if drift is None else drift))
         evaluated = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, noise=True)
-        residual, jac, dr_variance, grad, _, _, noise = evaluated
+        residual, jac, _, grad, _, _, noise = evaluated
         seen = np.any(np.isfinite(residual), axis=1)
         failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
         if used.any():
-            weight = np.where(used, 1.0 / (terrain.variance + dr_variance), 0.0)
             gate_nis = gate_threshold(nav.config.fixes.gate_probability or 0.999, 2 + int(tide_var > 0))
-            if _innovation(residual, grad, weight, prior[0], tide_var) > gate_nis:
+            if _innovation(terrain, used, residual, grad, noise, drift, prior[0], tide_var) > gate_nis:
                 used[:] = False  # the soundings together pull the belief beyond its gate
                 failed = 1.0
         exponent = self._exponents(pings, grad, prior)
         used &= exponent > MIN_EXPONENT
         if not used.any():
             return None, failed
+        # linearised at the mode of the key's belief given them: where the map bends within the
+        # prediction's error, its tangent plane at the prediction led the factor back to it
+        key_cov = nav._world(nav._key_pose, nav._key_joint)[1][:2, :2]
+        shift, _ = _mode(nav, terrain, key, tide, tide_var, key_cov, used, exponent, drift,
+                         (residual, grad, noise))
+        pose = nav._key_pose.copy()
+        pose[:2] += (1.0 + nav.calibration[0]) * rotation_matrix(nav.calibration[1]) @ shift[:2] \
+            if terrain.calibrated else shift[:2]  # the world shift in the DR frame
+        tide = tide + (shift[2] if shift.size == 3 else 0.0)
+        residual, jac, _, _, _, _, noise = _evaluate(terrain, nav.bathymetry, pose[None], nav.calibration,
+                                                     tide, noise=True)
+        used &= np.isfinite(residual)
         self.pings += int(np.any(used, axis=1).sum())
         self.soundings += int(used.sum())
         keys = [int(prev)] + ([CALIBRATION] if terrain.calibrated else []) \
@@ -332,8 +339,8 @@ class OnlineTerrain:
         factor = information_factor(info, gradient, keys)
         if factor is None:
             return None, failed
-        at = gtsam.Values()  # linearised at the prediction: the map is near its tangent plane over it
-        at.insert(keys[0], gtsam.Pose2(*nav._key_pose))
+        at = gtsam.Values()
+        at.insert(keys[0], gtsam.Pose2(*pose))
         if terrain.calibrated:
             at.insert(CALIBRATION, np.asarray(nav.calibration, float))
         if terrain.estimates_tide:
@@ -376,24 +383,48 @@ def _information(terrain: PingTerrain, used, a, noise, residual, exponent,
                              np.where(ok, exponent / terrain.variance, 0.0), cov)
 
 
-def _innovation(residual, grad, weight, position_cov, tide_var: float) -> float:
-    """The NIS of the shift of the footprints (and of the tide) that the soundings' residuals
-    ``(K, B)`` pull for, on the map gradients ``grad (K, B, 2)`` with ``weight`` their
-    precisions (0: not used), against the prediction's position covariance ``(2, 2)`` and tide
-    variance: with ``H = G^T W G`` and ``b = G^T W r`` (``G`` the gradient and, with an
-    uncertain tide, a column of ones), ``b^T (H P H + H)^+ b``, chi-square with as many
-    degrees of freedom as ``H`` has rank under the prediction. The fix gate of a window's
-    soundings taken together: a block of pings whose footprints are all misplaced the same way
-    fits the map, ping by ping, nearly as well as the truth does, and only together tell."""
-    g = grad.reshape(-1, 2)
-    if tide_var > 0:
-        g = np.column_stack([g, np.ones(len(g))])
-    w = weight.ravel()
-    r = np.where(w > 0, residual.ravel(), 0.0)
-    g = np.where(w[:, None] > 0, g, 0.0)
-    h = g.T @ (w[:, None] * g)
-    b = g.T @ (w * r)
-    prior = np.zeros((g.shape[1], g.shape[1]))
+def _mode(nav: GraphNavigator, terrain: PingTerrain, key, tide: float, tide_var: float, key_cov, used,
+          exponent, drift, first) -> tuple[np.ndarray, np.ndarray]:
+    """The mode of a common shift of the key's world position (and of the tide when
+    ``tide_var > 0``) given the soundings ``used`` (weighed by their ``exponent``), under the
+    key's world position covariance ``key_cov (2, 2)``: ``FILTERED_ITERATIONS`` Gauss-Newton
+    steps from the prediction (``first``: the residuals, map gradients and noise derivatives
+    there), ``(P^-1 + G^T C^-1 G)^-1 G^T C^-1 r`` relinearised at the shifted footprints (``G``
+    the map's gradients, and ones; ``C`` the soundings' covariance with the DR noise since the key
+    that their pings share, :func:`_information`). Returns the shift and its covariance."""
+    n = 3 if tide_var > 0 else 2
+    information = np.zeros((n, n))
+    information[:2, :2] = np.linalg.inv(key_cov)
+    if n == 3:
+        information[2, 2] = 1.0 / tide_var
+    shift = np.zeros(n)
+    residual, grad, noise = first
+    for step in range(FILTERED_ITERATIONS):
+        if step:
+            residual, _, _, grad, _, _, noise = _evaluate(
+                terrain, nav.bathymetry, key, nav.calibration, tide, jacobian=False,
+                offset=shift[2] if n == 3 else None, map_offset=shift[:2], noise=True)
+        g = grad if n == 2 else np.concatenate([grad, np.ones((*grad.shape[:2], 1))], axis=-1)
+        info, gradient = _information(terrain, used, -g, noise, residual, exponent, drift)
+        posterior = np.linalg.inv(information + info)
+        shift = shift - posterior @ (gradient + information @ shift)
+    return shift, posterior
+
+
+def _innovation(terrain: PingTerrain, used, residual, grad, noise, drift, position_cov,
+                tide_var: float) -> float:
+    """The NIS of the shift of the footprints (and of the tide) that the soundings ``used`` pull
+    for (their residuals ``(K, B)`` on the map gradients ``grad (K, B, 2)``, with the DR noise
+    since the key their pings share and the tide's drift integrated out as in the factor:
+    :func:`_information`, unweighed) against the prediction's position covariance ``(2, 2)``
+    and tide variance: with ``H`` and ``b`` the soundings' information and gradient on the shift,
+    ``b^T (H P H + H)^+ b``, chi-square with as many degrees of freedom as ``H`` has rank under
+    the prediction. The fix gate of a key's soundings taken together: a block of pings whose
+    footprints are all misplaced the same way fits the map, ping by ping, nearly as well as the
+    truth does, and only together tell."""
+    g = grad if tide_var <= 0 else np.concatenate([grad, np.ones((*grad.shape[:2], 1))], axis=-1)
+    h, b = _information(terrain, used, -g, noise, residual, np.ones(residual.shape), drift)
+    prior = np.zeros((g.shape[-1], g.shape[-1]))
     prior[:2, :2] = position_cov
     if tide_var > 0:
         prior[2, 2] = tide_var

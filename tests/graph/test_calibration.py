@@ -11,7 +11,6 @@ from scipy import stats
 from tangraph.graph import GraphConfig, GraphNavigator, navigate_online, smooth_survey
 from tangraph.graph.calibration import (
     CALIBRATION,
-    position_tide_calibration_factor,
     to_world,
     world_jacobian,
     world_position_factor,
@@ -65,39 +64,6 @@ def test_world_position_factor_jacobians_match_numerical_derivatives():
         return factor.whitenedError(v)
 
     np.testing.assert_allclose(a, _numerical(whitened, np.zeros(5)), atol=1e-6)
-
-
-@pytest.mark.parametrize("tide", [True, False])
-def test_position_tide_calibration_factor_jacobians_match_numerical_derivatives(tide):
-    """The point-mass filter's factor on the world position, the tide, the speed scale and the
-    heading error (the DR heading less the world heading), with and without a tide variable."""
-    origin, tide_key = np.array([3.0, -4.0]), int(gtsam.symbol("s", 7))
-    rows = (0, 1, 2, 3, 4) if tide else (0, 1, 3, 4)
-    cov = np.diag([4.0, 2.0, 0.04, 1e-4, 4e-4])[np.ix_(rows, rows)]
-    cov[0, 1] = cov[1, 0] = 1.0
-    measured = [120.0, 80.0, 0.3, 0.01, 0.06]
-    factor = position_tide_calibration_factor(7, measured, cov, origin, 0.45, tide_key if tide else None,
-                                              rows)
-    pose, calib = gtsam.Pose2(150.0, 60.0, 0.4), np.array([0.02, -0.04])
-    values = gtsam.Values()
-    values.insert(7, pose)
-    values.insert(CALIBRATION, calib)
-    if tide:
-        values.insert(tide_key, np.array([0.1]))
-    a, _ = factor.linearize(values).jacobian()  # whitened [H_pose H_c (H_tide)]
-
-    def whitened(delta):
-        v = gtsam.Values()
-        v.insert(7, pose.retract(delta[:3]))
-        v.insert(CALIBRATION, calib + delta[3:5])
-        if tide:
-            v.insert(tide_key, np.array([0.1 + delta[5]]))
-        return factor.whitenedError(v)
-
-    np.testing.assert_allclose(a, _numerical(whitened, np.zeros(6 if tide else 5)), atol=1e-6)
-    # the heading error's row: DR heading 0.45 less the world heading 0.4 - (-0.04), less 0.06
-    error = factor.unwhitenedError(values)
-    np.testing.assert_allclose(error[-2:], [0.02 - 0.01, 0.45 - 0.44 - 0.06], atol=1e-12)
 
 
 @pytest.mark.parametrize("run", [navigate_online, smooth_survey])
