@@ -51,8 +51,8 @@ only (``FixStatus.CHECKED``).
 tracking waits for a new unimodal fix the policy uses:
 
 - a check says the prediction is wrong: beyond the gate, its best match at the search's edge
-  (with an informative region: one that reaches the edge too tells nothing), or precise and
-  surprising ``CHECK_WINDOWS`` times in a row (:meth:`OnlineTerrain.window`). A
+  (and its calibrated region without the prediction), or precise and surprising
+  ``CHECK_WINDOWS`` times in a row (:meth:`OnlineTerrain.window`). A
   belief the linearised soundings have led into a wrong basin still fits them; the check finds
   it. The policy then takes that window (its pings are counted twice there);
 - the map's departure from its tangent plane grows beyond ``NONLINEAR_STOP`` times the noise (the
@@ -171,7 +171,7 @@ class OnlineTerrain:
         ``CHECK_WINDOWS - 1`` checks before it were. Then tracking ends, the policy takes this
         window (the one place its pings count twice: where the factors led the belief astray).
         Otherwise, see :meth:`window_allowed`. (A check whose best match lies at the search's
-        edge but whose region reaches the edge too is uninformative: it does not end tracking.)"""
+        edge but whose calibrated region holds the prediction does not end tracking.)"""
         if not nav._is_end[k]:
             return True
         if not self.tracking:
@@ -182,11 +182,11 @@ class OnlineTerrain:
         outcome = nav._judge(k, pose, joint, None)
         record = outcome.record
         self.surprises = self.surprises + 1 if record.accepted and record.nis > _SURPRISE else 0
-        # a window whose region reaches the search's edge tells nothing of where the vehicle is,
-        # wherever its best match lies
+        # a best match on the search's edge whose region still holds the prediction does not
+        # contradict it
         says_lost = record.status.says_lost and not (
             record.status is FixStatus.OUTSIDE_SEARCH and outcome.fix is not None
-            and not outcome.fix.quality.informative)
+            and outcome.fix.quality.holds_centre)
         if says_lost or self.surprises >= CHECK_WINDOWS:
             self._stop()
             self.window_taken(k)

@@ -197,4 +197,5 @@ def _quality(
         reasons.append("uninformative: the calibrated region reaches the edge of the search grid")
     if area_fraction > config.max_area_fraction:
         reasons.append(f"uninformative: the calibrated region covers {area_fraction:.0%} of the search area")
-    return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons), on_edge)
+    centre = bool(mask[mask.shape[0] // 2, mask.shape[1] // 2])  # the search is centred on the prediction
+    return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons), on_edge, centre)

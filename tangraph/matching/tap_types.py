@@ -87,6 +87,7 @@ class FixQuality:
     touches_edge: bool  # the calibrated region reaches the edge of the search grid
     reasons: tuple[str, ...]  # why the fix is flagged; empty if it is not
     best_on_edge: bool = False  # the best candidate lies on the outer ring of the search grid
+    holds_centre: bool = False  # the calibrated region holds the search's centre (the prediction)
 
     @property
     def outside(self) -> bool:

@@ -314,3 +314,23 @@ def test_a_keys_soundings_are_linearised_at_their_mode_not_at_the_prediction(sma
                                 np.ones(residual.shape), None, (residual, grad, noise))
             miss[iterations] = np.hypot(*(shift[:2] - truth))
         assert miss[3] < 0.4 * miss[1] and miss[3] < 0.3
+
+
+@pytest.mark.parametrize("holds", [True, False])
+def test_a_check_on_the_search_edge_ends_tracking_only_if_its_region_leaves_the_prediction_out(holds):
+    """A check window whose best match lies on the search's edge contradicts the prediction only
+    when its calibrated region leaves the search's centre (the prediction) out: on the drifting
+    tide the windows' regions hold it while their best matches wander to the edge."""
+    from types import SimpleNamespace
+
+    from tangraph.fix_records import FixRecord
+    from tangraph.graph.online_terrain import OnlineTerrain
+
+    record = FixRecord.of(9, None, FixStatus.OUTSIDE_SEARCH, float("nan"), 40.0, "outside")
+    fix = SimpleNamespace(quality=SimpleNamespace(holds_centre=holds))
+    nav = SimpleNamespace(_is_end=np.ones(20, bool), fixes=[], window_first={},
+                          _judge=lambda k, pose, joint, fix_: SimpleNamespace(record=record, fix=fix))
+    terrain = OnlineTerrain(np.ones((20, 3)), tracking=True, found=True)
+    taken = terrain.window(nav, 9, np.zeros(3), np.eye(5))
+    assert terrain.tracking is holds and taken is not holds
+    assert [r.status for r in nav.fixes] == ([FixStatus.CHECKED] if holds else [])

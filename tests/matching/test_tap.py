@@ -181,6 +181,21 @@ def test_a_best_match_on_the_search_edge_says_the_truth_may_lie_beyond():
     assert not inside.quality.outside
 
 
+def test_the_fix_says_whether_its_region_holds_the_prediction():
+    """The search is centred on the prediction: a region far from it leaves it out; a window
+    that tells nothing (a flat seabed) holds it wherever its best match lies."""
+    m = rough_map(4)
+    s = survey_on(m, noise=0.1, seed=4, offset=(0.0, 0.0))
+    far = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0), prior=s.true_pose[9, :2] + np.array([55.0, 0.0]))
+    assert far.quality.outside and not far.quality.holds_centre
+    near = tap_fix(s, m, 9, 10, TapConfig(half_width=40.0), prior=s.true_pose[9, :2])
+    assert near.quality.holds_centre
+    flat = BathymetryMap(north=m.north, east=m.east, depth=np.full(m.depth.shape, 80.0))
+    plain = survey_on(flat, noise=0.1, seed=4, offset=(0.0, 0.0))
+    vague = tap_fix(plain, flat, 9, 10, TapConfig(half_width=40.0), prior=plain.true_pose[9, :2] + 20.0)
+    assert not vague.quality.informative and vague.quality.holds_centre
+
+
 def _inflation_reference(m, s, fix, error) -> float:
     """The window's own map error's sandwich ratio by the dense double sum over its soundings."""
     from tangraph.sensors import matern_correlation
