@@ -306,8 +306,9 @@ class OnlineTerrain:
         drift = online_tide.ping_variance(nav, prev, pings)
         used = gate(terrain, nav.bathymetry, key, nav.calibration, tide, SOUNDING_GATE, prior=prior,
                     offset_variance=tide_var + (0.0 if drift is None else drift))
-        evaluated = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide, noise=True)
-        residual, jac, _, grad, _, _, noise = evaluated
+        # judged at the prediction (the Jacobians are taken at the mode, where the factor is made)
+        residual, _, _, grad, _, _, noise = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
+                                                      jacobian=False, noise=True)
         seen = np.any(np.isfinite(residual), axis=1)
         failed = float(np.mean(~np.any(used, axis=1)[seen])) if seen.any() else 0.0
         if used.any():
@@ -319,8 +320,7 @@ class OnlineTerrain:
         used &= exponent > MIN_EXPONENT
         if not used.any():
             return None, failed
-        # linearised at the mode of the key's belief given them: where the map bends within the
-        # prediction's error, its tangent plane at the prediction led the factor back to it
+        # made at the mode of the key's belief given them (at the prediction it led back there)
         key_cov = nav._world(nav._key_pose, nav._key_joint)[1][:2, :2]
         shift, _ = _mode(nav, terrain, key, tide, tide_var, key_cov, used, exponent, drift,
                          (residual, grad, noise))
