@@ -100,7 +100,8 @@ _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
 
 
-def prior_belief(navigation: NavigationModel, centre: np.ndarray, std: float | None = None):
+def prior_belief(navigation: NavigationModel, centre: np.ndarray,
+                 std: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The start's belief over ``(north, east, k, b)``: a Gaussian of ``std`` (m; None: the
     model's initial position std) around ``centre``, the calibration at its prior, apart (the
     ``(mean (4,), cov (4, 4))`` :func:`start_state` takes)."""

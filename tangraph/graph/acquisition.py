@@ -280,7 +280,7 @@ class Acquisition:
         and the filter found the vehicle again from (``restarts``), the keys the filter gave the
         graph a factor at, the tracking starts it undid (``undone``), the ping it diverged at
         (``diverged``, None: never) and its seconds."""
-        return {"handover": (self.handovers or [None])[0], "handovers": list(self.handovers),
+        return {"handover": self.handovers[0] if self.handovers else None, "handovers": list(self.handovers),
                 "restarts": list(self.restarts), "factors": list(self.factors), "undone": list(self.undone),
                 "diverged": self.diverged, "seconds": self.seconds,
                 **({"waiting": self.last_reason} if self.handover is None else {})}

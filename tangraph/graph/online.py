@@ -284,9 +284,9 @@ class GraphNavigator:
         if acquisition is not None and handover is not None and not started:
             acquisition.hand_over(self, k, handover)
         # no window while the point-mass filter has the pings, nor when it is to find the vehicle again
-        again = self.acquisition is not None and self.acquisition.handover is not None
+        again = None if self.acquisition is None or self.acquisition.handover is None else self.acquisition
         window = fix is not None or (acquisition is None and (self.terrain is None or self.terrain.window(
-            self, k, pose, joint)) and not again)
+            self, k, pose, joint)) and again is None)
         extra = take_window(self, k, pose, joint, fix) if window else 0.0
         extra = extra if acquisition is None else acquisition.broken(extra)  # where it started afresh
         if grows:
@@ -298,8 +298,8 @@ class GraphNavigator:
         self._update(k, self._odometry_only(prev, extra, joint))
         if acquisition is not None and started:
             acquisition.vet(self, k, handover)
-        if again and not self.terrain.tracking:  # tracking ended: the filter finds the vehicle again
-            self.acquisition.restart(self, k)
+        if again is not None and not (self.terrain is None or self.terrain.tracking):  # tracking ended
+            again.restart(self, k)  # the filter finds the vehicle again
         self._rebase(k)
 
     def _acquiring(self) -> Acquisition | None:
