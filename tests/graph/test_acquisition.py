@@ -195,3 +195,48 @@ def test_a_start_that_claims_more_than_the_filter_found_is_undone(small_survey, 
     k, nis, ratio = seen[0]
     assert nis <= _VET_NIS and ratio < VET_NARROWER  # the position agrees; the variance does not
     assert meta["undone"][:1] == [k] and meta["handover"] is not None and meta["handover"] > k
+
+
+def test_when_tracking_ends_the_filter_finds_the_vehicle_again_from_the_graphs_belief(
+        small_survey, rough_map, monkeypatch):
+    """Tracking made to end at the third key after the hand-over (the map's departure from its
+    tangent plane said to be infinite there): the filter starts again from the graph's belief at
+    that key (its density's position moments are the graph's world position and covariance, its
+    calibration the graph's), no window is made, it gives the graph its factors, hands over
+    again, and the track ends at the truth."""
+    from tangraph.filters import pmf
+    from tangraph.graph import online_terrain
+
+    nav = GraphNavigator(small_survey, rough_map, ACQUIRE)
+    while nav.acquisition.handover is None:
+        nav.step()
+    first = nav.acquisition.handover
+    end = int(nav.keys[np.searchsorted(nav.keys, first) + 3])
+    bent = online_terrain._nonlinearity
+    monkeypatch.setattr(online_terrain, "_nonlinearity",
+                        lambda nav, terrain, prev, pings: np.inf if pings[-1] == end - 1 else bent(
+                            nav, terrain, prev, pings))
+    started = []
+    start_state = pmf.start_state
+
+    def recorded(*args, **kwargs):
+        state = start_state(*args, **kwargs)
+        world, cov = nav._world(nav._key_pose, nav._key_joint)
+        started.append((nav._key_of, state.moments(), state.calibration(), world, cov, nav.calibration))
+        return state
+
+    monkeypatch.setattr(pmf, "start_state", recorded)
+    nav.run()
+    meta = nav.track().meta["acquisition"]
+    assert meta["restarts"][:1] == [end] and meta["handovers"][:1] == [first]
+    assert len(meta["handovers"]) >= 2 and meta["handovers"][1] > end
+    key, (mean, cov), (cal_mean, _), world, world_cov, calibration = started[0]
+    assert key == end
+    np.testing.assert_allclose(mean, world[:2], atol=1e-3 * np.sqrt(np.trace(cov)))
+    np.testing.assert_allclose(cov, world_cov[:2, :2], rtol=1e-3)
+    np.testing.assert_allclose(cal_mean, calibration, atol=1e-12)
+    # no window: between the hand-overs only the filter's factors and the checks before the end
+    between = [r for r in nav.fixes if first < r.index < meta["handovers"][1]]
+    assert all(r.detail == HANDOVER_DETAIL or r.index <= end for r in between)
+    assert any(r.detail == HANDOVER_DETAIL and r.index > end for r in between)
+    assert np.hypot(*(nav.pose[-1, :2] - small_survey.true_pose[-1, :2])) < 1.0
