@@ -324,7 +324,9 @@ class _Run:
         start on bad depths, a step of the water level, a block of bad pings followed, a start
         farther off than stated all leave a density no later ping agrees with). The spread does
         not grow at further way-outs, as the PF's redraw: on the demo's surveys with a start
-        200 m off, doubling it took three runs in twelve to a wrong place kilometres off."""
+        200 m off, doubling it took three runs in twelve to a wrong place kilometres off. The
+        local misfit scale goes back to its prior too (it had been learnt from a wrong density;
+        it used to be dropped, leaving the stated errors trusted from there on)."""
         mean, cov = state.moments()
         spread = 3.0 * max(self.navigation.initial_position_std, 1.0)
         std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), spread))
@@ -332,7 +334,7 @@ class _Run:
                   self.streak, ping.index, std)
         self.reopened.append((ping.index, std))
         return start_state(self.navigation, self.grid, self.config, *prior_belief(self.navigation, mean, std),
-                           misfit=state.misfit)
+                           misfit=self.model.misfit_prior())
 
     def lost_test(self, state: PointMass, ping: Ping, check, update) -> PointMass:
         """The lost streak after ``ping`` (its innovation ``check``; ``update`` False: it

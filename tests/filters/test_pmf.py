@@ -224,6 +224,21 @@ def test_a_start_on_biased_depths_is_undone_by_putting_the_tide_back_at_its_prio
     assert abs(float(weights @ state.tide.ravel()) - model.tide) < 0.2
 
 
+def test_the_gates_way_out_puts_the_misfit_scale_back_at_its_prior():
+    """A local misfit scale learnt from a density found wrong is suspect as its tide and
+    calibration are: the gate's way out starts it at its prior again (it used to drop it, so the
+    stated errors were trusted from there on)."""
+    bathymetry = rough_map(1)
+    survey = multibeam_survey(bathymetry, seed=4, pings=40)
+    model = navigation(survey).replace(misfit_dof=5.0)
+    run, state, pings = start_run(survey, bathymetry, model, PMFConfig(ping_gate=True))
+    for ping in pings[:30]:
+        state = run.step(state, ping)
+    prior = run.model.misfit_prior()
+    assert prior is not None and state.misfit is not None and state.misfit != prior  # learnt
+    assert run.reopen(state, pings[30]).misfit == prior
+
+
 @pytest.mark.parametrize("seed", [4, 5])
 def test_the_ping_gate_takes_a_patch_the_map_s_tail_allows(seed):
     """50 pings whose soundings err by five times the stated error (a patch of the map that errs
@@ -266,7 +281,8 @@ def test_a_gaussian_belief_is_held_as_it_is():
                      [-0.01, 0.006, 0.003, 0.02, 0.0], [0.1, -0.05, 0.01, 0.02, 0.2]])
     joint = root @ root.T  # (north, east, k, b, tide)
     cov, cross = joint[:4, :4], joint[4, :4]
-    state = start_state(model, _Grid(config, config.min_spacing), config, mean, cov, (1.5, joint[4, 4], cross))
+    grid = _Grid(config, config.min_spacing)
+    state = start_state(model, grid, config, mean, cov, (1.5, joint[4, 4], cross))
     position, position_cov = state.moments()
     np.testing.assert_allclose(position, mean[:2], atol=1e-3 * np.sqrt(cov[0, 0]))
     np.testing.assert_allclose(position_cov, cov[:2, :2], rtol=1e-3)
