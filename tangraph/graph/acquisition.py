@@ -254,18 +254,24 @@ class Acquisition:
             self.hand_over(nav, k, factor)
         nav._update(k)
 
-    def restart(self, nav: GraphNavigator, k: int) -> None:
+    def restart(self, nav: GraphNavigator, k: int, wrong: bool) -> None:
         """Tracking ended at key ``k`` (its estimate current): the filter finds the vehicle again,
         from the graph's belief there (the key's world position jointly with the calibration and
         the tide the graph holds: :func:`belief`), and weighs ping ``k`` (whose soundings no
-        factor holds); it gives the graph its factors and hands over as at the start."""
+        factor holds); it gives the graph its factors and hands over as at the start. When the
+        end said the belief is ``wrong`` (a check window, the pings' misfit), the filter takes
+        its gate's way out at once (:meth:`~tangraph.filters.pmf._Run.reopen`: wider, the tide
+        and the calibration at their priors; the graph follows with a break and a new tide)."""
         mean, cov, tide = belief(nav)
         self.state = pmf.start_state(nav.model, self.run.grid, self.run.config, mean, cov, tide,
                                      misfit=self.state.misfit)
+        if wrong:
+            self.state = self.run.reopen(self.state, self.pings[k])
         self.run.streak = 0
         self.handover, self.converged = None, False
         self.restarts.append(k)
-        log.info("graph: tracking ended at key %d: the point-mass filter finds the vehicle again", k)
+        log.info("graph: tracking ended at key %d%s: the point-mass filter finds the vehicle again", k,
+                 " (the belief wrong)" if wrong else "")
         self.step(k, first=True)
 
     def lost_steps(self) -> list[int]:

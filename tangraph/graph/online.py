@@ -299,7 +299,7 @@ class GraphNavigator:
         if acquisition is not None and started:
             acquisition.vet(self, k, handover)
         if again is not None and not (self.terrain is None or self.terrain.tracking):  # tracking ended
-            again.restart(self, k)  # the filter finds the vehicle again
+            again.restart(self, k, self.terrain.wrong)  # the filter finds the vehicle again
         self._rebase(k)
 
     def _acquiring(self) -> Acquisition | None:
