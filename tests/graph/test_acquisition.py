@@ -240,3 +240,36 @@ def test_when_tracking_ends_the_filter_finds_the_vehicle_again_from_the_graphs_b
     assert all(r.detail == HANDOVER_DETAIL or r.index <= end for r in between)
     assert any(r.detail == HANDOVER_DETAIL and r.index > end for r in between)
     assert np.hypot(*(nav.pose[-1, :2] - small_survey.true_pose[-1, :2])) < 1.0
+
+
+def test_a_check_that_says_the_belief_is_wrong_restarts_the_filter_wider(
+        small_survey, rough_map, monkeypatch):
+    """Tracking ended by a check window saying the prediction is wrong (made to, at the second
+    window end after the hand-over): the filter restarts through its gate's way out, wider than
+    the graph's belief, and the graph takes a break of that width into its next key; the filter
+    finds the vehicle and hands over again, and the track ends at the truth."""
+    from tangraph.graph.online_terrain import OnlineTerrain
+
+    nav = GraphNavigator(small_survey, rough_map, ACQUIRE)
+    while nav.acquisition.handover is None:
+        nav.step()
+    ends = [int(k) for k in nav.fix_ends if k > nav.index and nav._is_key[k]]
+    end = ends[1]
+    window = OnlineTerrain.window
+
+    def says_wrong(self, nav, k, pose, joint):
+        if k == end and self.tracking:
+            self._stop(wrong=True)
+            return True
+        return window(self, nav, k, pose, joint)
+
+    monkeypatch.setattr(OnlineTerrain, "window", says_wrong)
+    nav.run()
+    acquisition = nav.acquisition
+    assert acquisition.restarts[:1] == [end]
+    std = next(std for ping, std in acquisition.run.reopened if ping == end)
+    assert std > 3.0 * nav.model.initial_position_std - 1e-9
+    key = min(k for k in nav.graph.keys if k > end)
+    assert nav.graph.breaks.get(key, 0.0) >= std
+    assert len(acquisition.handovers) >= 2 and acquisition.handovers[1] > end
+    assert np.hypot(*(nav.pose[-1, :2] - small_survey.true_pose[-1, :2])) < 1.0
