@@ -94,10 +94,12 @@ from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_mo
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["PMFConfig", "point_mass_filter", "prior_belief", "start_run", "start_state"]
+__all__ = ["DOUBT_SHARE", "PMFConfig", "point_mass_filter", "prior_belief", "start_run", "start_state"]
 
 _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
+#: the share of a doubted belief's mass that is wider (:func:`start_state`): as likely wrong as right
+DOUBT_SHARE = 0.5
 
 
 def prior_belief(navigation: NavigationModel, centre: np.ndarray,
@@ -113,13 +115,16 @@ def prior_belief(navigation: NavigationModel, centre: np.ndarray,
 
 def start_state(navigation: NavigationModel, grid: _Grid, config: PMFConfig, mean: np.ndarray,
                 cov: np.ndarray, tide: tuple[float, float, np.ndarray] | None = None,
-                misfit=None) -> PointMass:
+                misfit=None, doubt: float = 0.0) -> PointMass:
     """The density of a Gaussian belief ``N(mean (4,), cov (4, 4))`` over ``(north, east, k,
     b)``: the calibration's nodes placed on its marginal, each member's position the conditional
     Gaussian given its node (so a belief in which the position goes with the heading error, as
     after a long track, is held as it is); ``tide`` ``(mean, variance, covariance (4,) with the
     four)``, each point's tide posterior its conditional (None: the model's tide prior, apart).
-    A position variance below the grid's floor is held at the floor."""
+    A position variance below the grid's floor is held at the floor. With ``doubt`` (m) > 0 the
+    belief may be wrong: ``DOUBT_SHARE`` of each member's mass is its position ``doubt`` wider
+    along every axis, on a grid laid for that (each part normalised on the grid's points, so a
+    part narrower than the grid's spacing keeps its mass at the centre point)."""
     mean, cov = np.asarray(mean, np.float64), 0.5 * (np.asarray(cov, np.float64) + np.transpose(cov))
     cal_mean, cal_cov = mean[2:], cov[2:, 2:]
     nodes, log_weight = _place_nodes(cal_mean, cal_cov, config.calibration_points)
@@ -128,9 +133,14 @@ def start_state(navigation: NavigationModel, grid: _Grid, config: PMFConfig, mea
     floor = config.min_spacing**2 - np.linalg.eigvalsh(conditional).min()
     conditional = conditional + np.eye(2) * max(floor, 0.0)
     centres = mean[:2] + (nodes - cal_mean) @ gain.T
-    axes = grid.axes(conditional)
+    wide = conditional + np.eye(2) * doubt**2
+    axes = grid.axes(wide)
     offsets = _offsets(grid.n, axes)
     log_p = -0.5 * mahalanobis2(offsets, conditional)
+    if doubt > 0:  # (each part normalised on the grid's points)
+        log_wide = -0.5 * mahalanobis2(offsets, wide)
+        log_p = np.logaddexp(np.log1p(-DOUBT_SHARE) + log_p - log_normalise(log_p, where="pmf")[1],
+                             np.log(DOUBT_SHARE) + log_wide - log_normalise(log_wide, where="pmf")[1])
     density = (log_weight[:, None] + log_p[None]).reshape(len(nodes), grid.n, grid.n)
     _, log_total = log_normalise(density.ravel(), where="pmf")
     area = float(abs(np.linalg.det(axes)))
@@ -317,19 +327,23 @@ class _Run:
             self.n_regrids += 1
         return state
 
+    @property
+    def spread(self) -> float:
+        """The start's re-initialisation spread (m): ``3 max(s, 1)``, ``s`` the model's start std."""
+        return 3.0 * max(self.navigation.initial_position_std, 1.0)
+
     def reopen(self, state: PointMass, ping: Ping) -> PointMass:
         """The gate's way out (``PMFConfig.gate_pings``): the density is wrong, not the pings. It
-        starts afresh around its mean, wider by the PF's re-initialisation spread (``3 max(s,
-        1)``, ``s`` the model's start std), with the tide and the calibration at their priors (a
-        start on bad depths, a step of the water level, a block of bad pings followed, a start
-        farther off than stated all leave a density no later ping agrees with). The spread does
-        not grow at further way-outs, as the PF's redraw: on the demo's surveys with a start
-        200 m off, doubling it took three runs in twelve to a wrong place kilometres off. The
-        local misfit scale goes back to its prior too (it had been learnt from a wrong density;
-        it used to be dropped, leaving the stated errors trusted from there on)."""
+        starts afresh around its mean, wider by the PF's re-initialisation spread (:attr:`spread`),
+        with the tide and the calibration at their priors (a start on bad depths, a step of the
+        water level, a block of bad pings followed, a start farther off than stated all leave a
+        density no later ping agrees with). The spread does not grow at further way-outs, as the
+        PF's redraw: on the demo's surveys with a start 200 m off, doubling it took three runs in
+        twelve to a wrong place kilometres off. The local misfit scale goes back to its prior too
+        (it had been learnt from a wrong density; it used to be dropped, leaving the stated
+        errors trusted from there on)."""
         mean, cov = state.moments()
-        spread = 3.0 * max(self.navigation.initial_position_std, 1.0)
-        std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), spread))
+        std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), self.spread))
         _log.info("pmf: %d pings in a row it cannot explain at ping %d: afresh around its mean, %.0f m wide",
                   self.streak, ping.index, std)
         self.reopened.append((ping.index, std))

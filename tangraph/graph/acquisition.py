@@ -59,12 +59,14 @@ world position jointly with the calibration, the calibration's nodes placed on t
 posterior and each member's position its conditional, the tide the graph holds), so that what it
 gives is again its posterior less the graph's prediction, and no window is made. When the end
 says the belief is wrong (a check window, the pings' misfit: not merely too wide for the
-linearised soundings), the filter takes its gate's way out at once: afresh around the belief's
-mean, wider by the start's re-initialisation spread, the tide and the calibration at their
-priors, the graph taking a break of the same width and a new tide (started narrow on a belief
-the soundings had led astray, the filter took it for the truth: on the robustness study's
-misplaced footprints a quarter of the poses were confidently wrong). Only when the filter has
-diverged do the TAP windows and the fix policy find the vehicle, as without acquisition.
+linearised soundings), it may be: half the filter's mass is the belief, half the belief widened
+by the start's re-initialisation spread, and the pings choose (the graph takes a break of the
+mixture's variance into its next key). Started on the belief alone, the filter took a belief
+the soundings had led astray for the truth (on the robustness study's misplaced footprints up
+to a quarter of the poses confidently wrong); started on the wide part alone, it threw away a
+right belief whenever a check erred, as they do under a drifting tide (the graph_vs_filters
+study's ``demo-drift``: 7.7 m against 3.0 m). Only when the filter has diverged do the TAP
+windows and the fix policy find the vehicle, as without acquisition.
 """
 
 from __future__ import annotations
@@ -262,14 +264,15 @@ class Acquisition:
         from the graph's belief there (the key's world position jointly with the calibration and
         the tide the graph holds: :func:`belief`), and weighs ping ``k`` (whose soundings no
         factor holds); it gives the graph its factors and hands over as at the start. When the
-        end said the belief is ``wrong`` (a check window, the pings' misfit), the filter takes
-        its gate's way out at once (:meth:`~tangraph.filters.pmf._Run.reopen`: wider, the tide
-        and the calibration at their priors; the graph follows with a break and a new tide)."""
+        end said the belief is ``wrong`` (a check window, the pings' misfit), it may be: half the
+        filter's mass is the belief widened by the filter's re-initialisation spread
+        (:attr:`~tangraph.filters.pmf._Run.spread`; ``start_state``'s ``doubt``), and the graph
+        takes a break of the same variance, moment for moment, into its next key."""
         mean, cov, tide = belief(nav)
+        doubt = self.run.spread if wrong else 0.0
         self.state = pmf.start_state(nav.model, self.run.grid, self.run.config, mean, cov, tide,
-                                     misfit=self.state.misfit)
-        if wrong:
-            self.state = self.run.reopen(self.state, self.pings[k])
+                                     misfit=self.state.misfit, doubt=doubt)
+        self.break_std = float(np.sqrt(pmf.DOUBT_SHARE) * doubt)
         self.run.streak = 0
         self.handover, self.converged = None, False
         self.restarts.append(k)

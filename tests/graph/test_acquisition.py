@@ -242,12 +242,15 @@ def test_when_tracking_ends_the_filter_finds_the_vehicle_again_from_the_graphs_b
     assert np.hypot(*(nav.pose[-1, :2] - small_survey.true_pose[-1, :2])) < 1.0
 
 
-def test_a_check_that_says_the_belief_is_wrong_restarts_the_filter_wider(
+def test_a_check_that_says_the_belief_is_wrong_restarts_the_filter_doubting_it(
         small_survey, rough_map, monkeypatch):
     """Tracking ended by a check window saying the prediction is wrong (made to, at the second
-    window end after the hand-over): the filter restarts through its gate's way out, wider than
-    the graph's belief, and the graph takes a break of that width into its next key; the filter
-    finds the vehicle and hands over again, and the track ends at the truth."""
+    window end after the hand-over): the filter restarts with half its mass on the graph's
+    belief and half on it widened by the filter's re-initialisation spread (its position
+    variance the belief's plus half the spread's), and the graph takes a break of that variance
+    into its next key; the filter finds the vehicle, hands over again, and the track ends at the
+    truth."""
+    from tangraph.filters import pmf
     from tangraph.graph.online_terrain import OnlineTerrain
 
     nav = GraphNavigator(small_survey, rough_map, ACQUIRE)
@@ -263,13 +266,25 @@ def test_a_check_that_says_the_belief_is_wrong_restarts_the_filter_wider(
             return True
         return window(self, nav, k, pose, joint)
 
+    started = []
+    start_state = pmf.start_state
+
+    def recorded(*args, **kwargs):
+        state = start_state(*args, **kwargs)
+        belief_cov = nav._world(nav._key_pose, nav._key_joint)[1]
+        started.append((kwargs.get("doubt", 0.0), state.moments()[1], belief_cov))
+        return state
+
     monkeypatch.setattr(OnlineTerrain, "window", says_wrong)
+    monkeypatch.setattr(pmf, "start_state", recorded)
     nav.run()
     acquisition = nav.acquisition
     assert acquisition.restarts[:1] == [end]
-    std = next(std for ping, std in acquisition.run.reopened if ping == end)
-    assert std > 3.0 * nav.model.initial_position_std - 1e-9
+    doubt, cov, belief_cov = started[0]
+    assert doubt == acquisition.run.spread
+    # (the belief's part, narrower than the wide grid's spacing, sits on its centre point)
+    assert np.trace(cov) == pytest.approx(np.trace(belief_cov[:2, :2]) + doubt**2, rel=0.02)
     key = min(k for k in nav.graph.keys if k > end)
-    assert nav.graph.breaks.get(key, 0.0) >= std
+    assert nav.graph.breaks.get(key, 0.0) >= np.sqrt(pmf.DOUBT_SHARE) * doubt
     assert len(acquisition.handovers) >= 2 and acquisition.handovers[1] > end
     assert np.hypot(*(nav.pose[-1, :2] - small_survey.true_pose[-1, :2])) < 1.0
