@@ -33,6 +33,9 @@ window's pings (a sandwich on the map gradients, ``covariances["map"]``). The re
 window's own likelihood: widened by the drift's mean generalised eigenvalue, as by the window's
 own map error, they refused most windows of a simulated survey whose tide drifts and of Lake
 Caputh's, and the online graph's fixes fell from 245 to 53 in four runs (12.3 against 7.5 m).
+Whether the prediction is allowed (``FixQuality.holds_centre``, which the online graph's checks
+ask) is asked of the region so widened: the window's likelihood with the drift, which a right
+prediction falls outside the window's own region of as often as the drift moves the fix.
 
 A candidate is valid when every sounding of the window has a map depth there; a prior off the
 map is searched around like any other (the window may reach the map's data from there).
@@ -227,7 +230,11 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         if jack is not None:
             covariances["jackknife"] = jack
             covariance = _larger(covariance, jack)
-    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config, (i, j))
+    centre = None  # whether the prediction is allowed, asked of the likelihood with the drift
+    if drift is not None:
+        widened = max(inflation, 1.0 + float(np.trace(np.linalg.solve(drift[1], drift[0]))) / 2.0)
+        centre = region_thresholds(q_min, n, config.alpha, widened)[RegionMethod.CALIBRATED]
+    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config, (i, j), centre)
     return TapFix(
         index=patch.reference,
         first=patch.first,

@@ -173,8 +173,12 @@ def _crlb(bathymetry, patch, position, s2) -> np.ndarray:
 
 
 def _quality(
-    q, q_min, region: Region, config: TapConfig, best: tuple[int | np.integer, int | np.integer]
+    q, q_min, region: Region, config: TapConfig, best: tuple[int | np.integer, int | np.integer],
+    centre_threshold: float | None = None,
 ) -> FixQuality:
+    """The fix's quality flags from its calibrated ``region``; whether the search's centre (the
+    prediction) is allowed is asked of ``centre_threshold`` on ``q`` when given (a likelihood
+    wider than the window's own shape: the tide's drift), else of the region."""
     labels, n_basins = ndimage.label(region.mask)
     mask = region.mask
     touches = bool(mask[0].any() or mask[-1].any() or mask[:, 0].any() or mask[:, -1].any())
@@ -197,5 +201,6 @@ def _quality(
         reasons.append("uninformative: the calibrated region reaches the edge of the search grid")
     if area_fraction > config.max_area_fraction:
         reasons.append(f"uninformative: the calibrated region covers {area_fraction:.0%} of the search area")
-    centre = bool(mask[mask.shape[0] // 2, mask.shape[1] // 2])  # the search is centred on the prediction
+    middle = (mask.shape[0] // 2, mask.shape[1] // 2)  # the search is centred on the prediction
+    centre = bool(mask[middle] if centre_threshold is None else q[middle] <= centre_threshold)
     return FixQuality(peak_ratio, int(n_basins), area_fraction, touches, tuple(reasons), on_edge, centre)
