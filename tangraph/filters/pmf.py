@@ -84,82 +84,42 @@ from tangraph.filters.config import PMFConfig
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
 from tangraph.filters.model import FilterModel, Ping, survey_pings
 from tangraph.filters.pmf_bank import _calibration_moved, _evidence_fit, _place_nodes
-from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _offsets, _regrid
+from tangraph.filters.pmf_grid import PointMass, _diffuse, _Grid, _regrid
 from tangraph.filters.runner import check_run_inputs, step_timings
 from tangraph.filters.steps import innovation
 from tangraph.filters.tide import TideDrift, predict_tide, update_drift
-from tangraph.geometry import mahalanobis2, rotate
+from tangraph.geometry import rotate
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel, slope_moment, survey_navigation_model
 from tangraph.survey import Survey
 from tangraph.track import Track
 
-__all__ = ["DOUBT_SHARE", "PMFConfig", "point_mass_filter", "prior_belief", "start_run", "start_state"]
+__all__ = ["PMFConfig", "point_mass_filter", "start_run"]
 
 _log = logging.getLogger(__name__)
 _VALUES_PER_POINT = 8  # the density, the tide's mean and the likelihood's temporaries per grid point
-#: the share of a doubted belief's mass that is wider (:func:`start_state`): as likely wrong as right
-DOUBT_SHARE = 0.5
 
 
-def prior_belief(navigation: NavigationModel, centre: np.ndarray,
-                 std: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The start's belief over ``(north, east, k, b)``: a Gaussian of ``std`` (m; None: the
-    model's initial position std) around ``centre``, the calibration at its prior, apart (the
-    ``(mean (4,), cov (4, 4))`` :func:`start_state` takes)."""
+def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config: PMFConfig,
+           std: float | None = None) -> PointMass:
+    """The start's density: a Gaussian of ``std`` (m; None: the model's initial position std)
+    around ``centre``, the calibration and the tide at their priors."""
+    cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
+    cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
+    nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
     s = navigation.initial_position_std if std is None else std
-    mean = np.concatenate([np.asarray(centre, np.float64), navigation.calibration_prior])
-    cov = np.diag(np.concatenate([[s**2, s**2], np.asarray(navigation.calibration_std, np.float64) ** 2]))
-    return mean, cov
-
-
-def start_state(navigation: NavigationModel, grid: _Grid, config: PMFConfig, mean: np.ndarray,
-                cov: np.ndarray, tide: tuple[float, float, np.ndarray] | None = None,
-                misfit=None, doubt: float = 0.0) -> PointMass:
-    """The density of a Gaussian belief ``N(mean (4,), cov (4, 4))`` over ``(north, east, k,
-    b)``: the calibration's nodes placed on its marginal, each member's position the conditional
-    Gaussian given its node (so a belief in which the position goes with the heading error, as
-    after a long track, is held as it is); ``tide`` ``(mean, variance, covariance (4,) with the
-    four)``, each point's tide posterior its conditional (None: the model's tide prior, apart).
-    A position variance below the grid's floor is held at the floor. With ``doubt`` (m) > 0 the
-    belief may be wrong: ``DOUBT_SHARE`` of each member's mass is its position ``doubt`` wider
-    along every axis, on a grid laid for that (each part normalised on the grid's points, so a
-    part narrower than the grid's spacing keeps its mass at the centre point)."""
-    mean, cov = np.asarray(mean, np.float64), 0.5 * (np.asarray(cov, np.float64) + np.transpose(cov))
-    cal_mean, cal_cov = mean[2:], cov[2:, 2:]
-    nodes, log_weight = _place_nodes(cal_mean, cal_cov, config.calibration_points)
-    gain = cov[:2, 2:] @ np.linalg.pinv(cal_cov, rcond=1e-9)
-    conditional = cov[:2, :2] - gain @ cov[2:, :2]
-    floor = config.min_spacing**2 - np.linalg.eigvalsh(conditional).min()
-    conditional = conditional + np.eye(2) * max(floor, 0.0)
-    centres = mean[:2] + (nodes - cal_mean) @ gain.T
-    wide = conditional + np.eye(2) * doubt**2
-    axes = grid.axes(wide)
-    offsets = _offsets(grid.n, axes)
-    log_p = -0.5 * mahalanobis2(offsets, conditional)
-    if doubt > 0:  # (each part normalised on the grid's points)
-        log_wide = -0.5 * mahalanobis2(offsets, wide)
-        log_p = np.logaddexp(np.log1p(-DOUBT_SHARE) + log_p - log_normalise(log_p, where="pmf")[1],
-                             np.log(DOUBT_SHARE) + log_wide - log_normalise(log_wide, where="pmf")[1])
+    axes = grid.axes(np.eye(2) * s**2)
+    h = (grid.n - 1) / 2.0
+    i, j = np.meshgrid(np.arange(grid.n) - h, np.arange(grid.n) - h, indexing="ij")
+    offsets = np.column_stack([i.ravel(), j.ravel()]) @ axes.T
+    log_p = -0.5 * np.sum(offsets**2, axis=1) / max(s, 1e-9) ** 2
     density = (log_weight[:, None] + log_p[None]).reshape(len(nodes), grid.n, grid.n)
     _, log_total = log_normalise(density.ravel(), where="pmf")
     area = float(abs(np.linalg.det(axes)))
-    shape = density.shape
-    if tide is None:
-        tide_mean, tide_var = np.full(shape, navigation.tide), navigation.tide_variance
-    else:  # each point's tide: its conditional given the point and its member's node
-        regression = np.linalg.pinv(cov, rcond=1e-9) @ np.asarray(tide[2], np.float64)
-        points = centres[:, None, :] + offsets[None]
-        z = np.concatenate([points, np.broadcast_to(nodes[:, None, :], points.shape)], axis=2) - mean
-        tide_mean = (tide[0] + z @ regression).reshape(shape)
-        tide_var = max(float(tide[1] - regression @ tide[2]), 0.0)
-    drift = TideDrift.start(navigation, shape)
-    if drift is not None and tide is not None:  # the drift a part of the offset as narrow as it
-        part = min(drift.var, tide_var)
-        drift = dataclasses.replace(drift, cross=part, var=part)
-    return PointMass(nodes, log_weight, centres, axes, density - log_total - np.log(area), tide_mean,
-                     tide_var, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
-                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), misfit, drift)
+    return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
+                     density - log_total - np.log(area), np.full(density.shape, navigation.tide),
+                     navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
+                     (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape))
 
 
 def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
@@ -327,28 +287,25 @@ class _Run:
             self.n_regrids += 1
         return state
 
-    @property
-    def spread(self) -> float:
-        """The start's re-initialisation spread (m): ``3 max(s, 1)``, ``s`` the model's start std."""
-        return 3.0 * max(self.navigation.initial_position_std, 1.0)
-
     def reopen(self, state: PointMass, ping: Ping) -> PointMass:
         """The gate's way out (``PMFConfig.gate_pings``): the density is wrong, not the pings. It
-        starts afresh around its mean, wider by the PF's re-initialisation spread (:attr:`spread`),
-        with the tide and the calibration at their priors (a start on bad depths, a step of the
-        water level, a block of bad pings followed, a start farther off than stated all leave a
-        density no later ping agrees with). The spread does not grow at further way-outs, as the
-        PF's redraw: on the demo's surveys with a start 200 m off, doubling it took three runs in
-        twelve to a wrong place kilometres off. The local misfit scale goes back to its prior too
-        (it had been learnt from a wrong density; it used to be dropped, leaving the stated
-        errors trusted from there on)."""
+        starts afresh around its mean, wider by the PF's re-initialisation spread (``3 max(s,
+        1)``, ``s`` the model's start std), with the tide and the calibration at their priors (a
+        start on bad depths, a step of the water level, a block of bad pings followed, a start
+        farther off than stated all leave a density no later ping agrees with). The spread does
+        not grow at further way-outs, as the PF's redraw: on the demo's surveys with a start
+        200 m off, doubling it took three runs in twelve to a wrong place kilometres off. The
+        local misfit scale goes back to its prior too (it had been learnt from a wrong density;
+        it used to be dropped, leaving the stated errors trusted from there on)."""
         mean, cov = state.moments()
-        std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), self.spread))
+        spread = 3.0 * max(self.navigation.initial_position_std, 1.0)
+        std = float(np.hypot(np.sqrt(np.max(np.linalg.eigvalsh(cov))), spread))
         _log.info("pmf: %d pings in a row it cannot explain at ping %d: afresh around its mean, %.0f m wide",
                   self.streak, ping.index, std)
         self.reopened.append((ping.index, std))
-        return start_state(self.navigation, self.grid, self.config, *prior_belief(self.navigation, mean, std),
-                           misfit=self.model.misfit_prior())
+        state = _start(self.navigation, mean, self.grid, self.config, std=std)
+        state.misfit = self.model.misfit_prior()
+        return state
 
     def lost_test(self, state: PointMass, ping: Ping, check, update) -> PointMass:
         """The lost streak after ``ping`` (its innovation ``check``; ``update`` False: it
@@ -426,8 +383,8 @@ def start_run(survey: Survey, bathymetry: BathymetryMap, navigation: NavigationM
     grid = _Grid(config, config.min_spacing)
     estimate = any(c > 1 and s > 0
                    for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
-    state = start_state(navigation, grid, config, *prior_belief(navigation, survey.dr_pose[0, :2]),
-                        misfit=filter_model.misfit_prior())
+    state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
+    state.misfit = filter_model.misfit_prior()
     run = _Run(bathymetry, navigation, filter_model, config, grid, slope_moment(bathymetry), estimate)
     return run, state, survey_pings(survey, bathymetry, navigation)
 

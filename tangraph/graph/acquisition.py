@@ -49,24 +49,8 @@ passed the tangent-plane test with the filter's density 5 m wide along one axis 
 graph 2 m wide there, 8 m off), the start is undone (its factor taken out, the filter's factor
 given instead) and the filter goes on.
 Otherwise the filter stops (its information since the last factor is dropped with it, so
-nothing is counted twice) and the graph tracks.
-
-**When tracking ends** (:mod:`tangraph.graph.online_terrain`: a check window says the prediction
-is wrong, the map bends away from its tangent plane over the belief, the pings keep failing
-their test), the filter finds the vehicle again, as at the start, instead of the TAP windows and
-the fix policy: it starts from the graph's belief at that key (:meth:`Acquisition.restart`; the
-world position jointly with the calibration, the calibration's nodes placed on the graph's
-posterior and each member's position its conditional, the tide the graph holds), so that what it
-gives is again its posterior less the graph's prediction, and no window is made. When the end
-says the belief is wrong (a check window, the pings' misfit: not merely too wide for the
-linearised soundings), it may be: half the filter's mass is the belief, half the belief widened
-by the start's re-initialisation spread, and the pings choose (the graph takes a break of the
-mixture's variance into its next key). Started on the belief alone, the filter took a belief
-the soundings had led astray for the truth (on the robustness study's misplaced footprints up
-to a quarter of the poses confidently wrong); started on the wide part alone, it threw away a
-right belief whenever a check erred, as they do under a drifting tide (the graph_vs_filters
-study's ``demo-drift``: 7.7 m against 3.0 m). Only when the filter has diverged do the TAP
-windows and the fix policy find the vehicle, as without acquisition.
+nothing is counted twice), the fix policy starts, and when tracking ends later the TAP windows
+and the fix policy take over as without acquisition.
 """
 
 from __future__ import annotations
@@ -87,7 +71,7 @@ from tangraph.filters.pmf_grid import _sample
 from tangraph.fix_records import FixRecord, FixStatus
 from tangraph.geometry import gate_threshold, mahalanobis2
 from tangraph.graph import posterior_fix as pf
-from tangraph.graph.calibration import position_tide_factor, to_world, world_jacobian
+from tangraph.graph.calibration import position_tide_factor
 from tangraph.graph.online_fixes import position_tide_prior
 from tangraph.graph.online_terrain import START_ITERATIONS
 from tangraph.graph.online_tide import new_tide, of_key
@@ -113,11 +97,10 @@ log = logging.getLogger("tangraph.graph.online")
 
 @dataclasses.dataclass(eq=False)
 class Acquisition:
-    """The point-mass filter of one online run while the graph does not track (``handover``: the
-    key it last tracked from, None while the filter finds the vehicle; ``handovers`` every such
-    key, ``restarts`` the keys tracking ended at), with its state and pings, the keys it gave the
-    graph a factor at, the tracking starts it undid, the density's position ``mean`` and ``cov``
-    after the latest ping and the seconds it took."""
+    """The point-mass filter of one online run until the graph tracks (``handover``: that key,
+    None before), with its state and pings, the keys it gave the graph a factor at, the
+    tracking starts it undid, the density's position ``mean`` and ``cov`` after the latest ping
+    and the seconds it took."""
 
     run: pmf._Run
     state: PointMass
@@ -125,8 +108,6 @@ class Acquisition:
     handover: int | None = None
     factors: list[int] = dataclasses.field(default_factory=list)
     undone: list[int] = dataclasses.field(default_factory=list)
-    handovers: list[int] = dataclasses.field(default_factory=list)
-    restarts: list[int] = dataclasses.field(default_factory=list)
     mean: np.ndarray = dataclasses.field(default_factory=lambda: np.full(2, np.nan))
     cov: np.ndarray = dataclasses.field(default_factory=lambda: np.full((2, 2), np.nan))
     seconds: float = 0.0
@@ -146,15 +127,13 @@ class Acquisition:
     def active(self) -> bool:
         return self.handover is None and self.diverged is None
 
-    def step(self, k: int, first: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
-        """The filter after ping ``k`` (``first``: its state is at ping ``k`` already, not
-        carried to it): its position mean ``(2,)`` and covariance ``(2, 2)``; None
+    def step(self, k: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The filter after ping ``k``: its position mean ``(2,)`` and covariance ``(2, 2)``; None
         when it has diverged (no point of its density left: the windows and the fix policy
         then find the vehicle, as without acquisition, and ``diverged`` is that ping)."""
         started = _time.perf_counter()
-        ping = dataclasses.replace(self.pings[k], first=True) if first else self.pings[k]
         try:
-            self.state = self.run.step(self.state, ping)
+            self.state = self.run.step(self.state, self.pings[k])
         except FilterDivergence as exc:
             log.warning("graph: the point-mass acquisition diverged at ping %d (%s): windows now", k, exc)
             self.diverged = k
@@ -249,7 +228,6 @@ class Acquisition:
         narrow = float(np.linalg.eigvals(np.linalg.solve(self.cov, world_cov[:2, :2])).real.min())
         if nis <= _VET_NIS and narrow >= VET_NARROWER:
             self.handover = k
-            self.handovers.append(k)
             return
         log.info("graph: tracking from key %d undone: %.1f m from the point-mass filter's mean (NIS %.1f), "
                  "%.2f of its variance", k, float(np.hypot(*(world[:2] - self.mean))), nis, narrow)
@@ -259,58 +237,18 @@ class Acquisition:
             self.hand_over(nav, k, factor)
         nav._update(k)
 
-    def restart(self, nav: GraphNavigator, k: int, wrong: bool) -> None:
-        """Tracking ended at key ``k`` (its estimate current): the filter finds the vehicle again,
-        from the graph's belief there (the key's world position jointly with the calibration and
-        the tide the graph holds: :func:`belief`), and weighs ping ``k`` (whose soundings no
-        factor holds); it gives the graph its factors and hands over as at the start. When the
-        end said the belief is ``wrong`` (a check window, the pings' misfit), it may be: half the
-        filter's mass is the belief widened by the filter's re-initialisation spread
-        (:attr:`~tangraph.filters.pmf._Run.spread`; ``start_state``'s ``doubt``), and the graph
-        takes a break of the same variance, moment for moment, into its next key."""
-        mean, cov, tide = belief(nav)
-        doubt = self.run.spread if wrong else 0.0
-        self.state = pmf.start_state(nav.model, self.run.grid, self.run.config, mean, cov, tide,
-                                     misfit=self.state.misfit, doubt=doubt)
-        self.break_std = float(np.sqrt(pmf.DOUBT_SHARE) * doubt)
-        self.run.streak = 0
-        self.handover, self.converged = None, False
-        self.restarts.append(k)
-        log.info("graph: tracking ended at key %d%s: the point-mass filter finds the vehicle again", k,
-                 " (the belief wrong)" if wrong else "")
-        self.step(k, first=True)
-
     def lost_steps(self) -> list[int]:
         """The pings the filter flagged lost (its lost test) while it was the navigator's output."""
-        ends = [*self.handovers, self.diverged]  # (from the start and each restart; None: now)
-        spans = list(zip([0, *self.restarts], ends, strict=False))
-        return [int(p) for p in self.run.lost_steps if any(a <= p and (b is None or p < b) for a, b in spans)]
+        end = self.handover if self.handover is not None else self.diverged
+        return [int(p) for p in self.run.lost_steps if end is None or p < end]
 
     def meta(self) -> dict:
-        """What ``Track.meta["acquisition"]`` says: the key the graph first tracked from
-        (``handover``; None: never) and every such key (``handovers``), the keys tracking ended at
-        and the filter found the vehicle again from (``restarts``), the keys the filter gave the
-        graph a factor at, the tracking starts it undid (``undone``), the ping it diverged at
-        (``diverged``, None: never) and its seconds."""
-        return {"handover": self.handovers[0] if self.handovers else None, "handovers": list(self.handovers),
-                "restarts": list(self.restarts), "factors": list(self.factors), "undone": list(self.undone),
+        """What ``Track.meta["acquisition"]`` says: the key the graph tracked from (``handover``;
+        None: never), the keys the filter gave it a factor at, the tracking starts it undid
+        (``undone``), the ping it diverged at (``diverged``, None: never) and its seconds."""
+        return {"handover": self.handover, "factors": list(self.factors), "undone": list(self.undone),
                 "diverged": self.diverged, "seconds": self.seconds,
                 **({"waiting": self.last_reason} if self.handover is None else {})}
-
-
-def belief(nav: GraphNavigator) -> tuple[np.ndarray, np.ndarray, tuple[float, float, np.ndarray] | None]:
-    """The graph's belief at its latest key: the mean ``(4,)`` and covariance ``(4, 4)`` of the
-    world position and the calibration ``(k, b)``, and the tide held ``(mean, variance, its
-    covariance (4,) with them)`` (None when the graph does not hold it), as
-    :func:`~tangraph.filters.pmf.start_state` takes them."""
-    jac = np.zeros((5, 6))  # (north, east, k, b, tide) of (DR-frame pose, k, b, tide)
-    jac[:2, :5] = world_jacobian(nav._key_pose, nav.calibration, nav.origin)[:2]
-    jac[2:, 3:] = np.eye(3)
-    joint = nav._tide_joint if nav.tide else np.pad(nav._key_joint, ((0, 1), (0, 1)))
-    cov = jac @ joint @ jac.T
-    mean = np.concatenate([to_world(nav._key_pose, nav.calibration, nav.origin)[:2], nav.calibration])
-    tide = (float(nav._tide_mean), float(cov[4, 4]), cov[4, :4]) if nav.tide else None
-    return mean, cov[:4, :4], tide
 
 
 def _tracker(nav: GraphNavigator) -> OnlineTerrain:

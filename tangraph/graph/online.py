@@ -13,8 +13,10 @@ the calibration and marginalises the older poses, so the work per update stays b
 mission grows: without it each new fix moves the whole past and the update time grows with the
 chain. Between key poses the output is the latest key estimate composed with the DR increment, its
 covariance grown by the increment's (while tracking on soundings, updated by those since the key).
-What the navigator does with a fix beyond the gate (use, hold, drop it; lost, relocalise) is
-decided by the pure fix policy (:mod:`tangraph.graph.policy`), executed by :mod:`tangraph.graph.lost`.
+What the navigator does with a fix beyond the gate (use it, hold it for confirmation, drop it),
+and how it finds out that it is lost and relocalises, is decided by the pure fix policy
+(:mod:`tangraph.graph.policy`); :mod:`tangraph.graph.lost` puts each window to it and executes
+its actions on the graph and iSAM2.
 
 With ``GraphConfig.online.front_end = "pmf"`` a window's factor comes from the point-mass front end
 (:mod:`tangraph.graph.posterior_fix`) instead of TAP: its prior is the prediction jointly with
@@ -22,7 +24,7 @@ the tide, which the graph then holds as a variable beside the calibration, its w
 ping, and an ambiguous window is held and grown by the next pings. With
 ``GraphConfig.online.terrain = "soundings"`` the navigator tracks on every sounding once it has
 found the vehicle (:mod:`tangraph.graph.online_terrain`), and with ``acquire = "pmf"`` a point-mass
-filter finds it, and finds it again whenever tracking ends (:mod:`tangraph.graph.acquisition`).
+filter finds it (:mod:`tangraph.graph.acquisition`).
 """
 
 from __future__ import annotations
@@ -283,10 +285,10 @@ class GraphNavigator:
         started = acquisition is not None and self.terrain is not None and self.terrain.tracking
         if acquisition is not None and handover is not None and not started:
             acquisition.hand_over(self, k, handover)
-        # no window while the point-mass filter has the pings, nor when it is to find the vehicle again
-        again = None if self.acquisition is None or self.acquisition.handover is None else self.acquisition
-        window = fix is not None or (acquisition is None and (self.terrain is None or self.terrain.window(
-            self, k, pose, joint)) and again is None)
+        if acquisition is not None:  # no window: the point-mass filter has the pings
+            window = fix is not None
+        else:
+            window = self.terrain is None or fix is not None or self.terrain.window(self, k, pose, joint)
         extra = take_window(self, k, pose, joint, fix) if window else 0.0
         extra = extra if acquisition is None else acquisition.broken(extra)  # where it started afresh
         if grows:
@@ -298,8 +300,6 @@ class GraphNavigator:
         self._update(k, self._odometry_only(prev, extra, joint))
         if acquisition is not None and started:
             acquisition.vet(self, k, handover)
-        if again is not None and not (self.terrain is None or self.terrain.tracking):  # tracking ended
-            again.restart(self, k, self.terrain.wrong)  # the filter finds the vehicle again
         self._rebase(k)
 
     def _acquiring(self) -> Acquisition | None:

@@ -47,8 +47,8 @@ does, and only together tells.
 after the pings any window took. While tracking, the windows are searched and judged as checks
 only (``FixStatus.CHECKED``).
 
-**When tracking ends**, the windows and the fix policy take over until a unimodal fix is used
-(with ``acquire = "pmf"``, the point-mass filter: :mod:`tangraph.graph.acquisition`). It ends when:
+**When tracking ends**, the windows, their fixes and the fix policy's lost test take over, and
+tracking waits for a new unimodal fix the policy uses:
 
 - a check says the prediction is wrong: beyond the gate, its best match at the search's edge
   (and its calibrated region without the prediction), or precise and surprising
@@ -138,7 +138,6 @@ class OnlineTerrain:
     soundings: int = 0
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
     found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
-    wrong: bool = False  # the latest end of tracking said the belief was wrong (a check, the misfit)
     map_variance: np.ndarray | None = None  # (K, B) the map's own error variance under each sounding
     _judged: object = None  # the navigator's latest window outcome, looked at for that
     _first: tuple = (None, 0, 0)  # the factor of the latest episode's first key, its pings and soundings
@@ -149,7 +148,8 @@ class OnlineTerrain:
                    map_variance=sounding_map_variances(nav.survey, nav.bathymetry, nav.model))
 
     def meta(self) -> dict:
-        """``Track.meta["terrain"]``: factors, pings, soundings used, episodes ``[first, last key]``."""
+        """What ``Track.meta["terrain"]`` says: factors, pings and soundings used, and the
+        tracking episodes ``[first key, last key]``."""
         return {"factors": self.factors, "pings": self.pings, "soundings": self.soundings,
                 "episodes": [list(e) for e in self.episodes]}
 
@@ -188,7 +188,7 @@ class OnlineTerrain:
             record.status is FixStatus.OUTSIDE_SEARCH and outcome.fix is not None
             and outcome.fix.quality.holds_centre)
         if says_lost or self.surprises >= CHECK_WINDOWS:
-            self._stop(wrong=True)
+            self._stop()
             self.window_taken(k)
             return True
         nav.fixes.append(dataclasses.replace(record, status=FixStatus.CHECKED,
@@ -232,7 +232,7 @@ class OnlineTerrain:
             self.factors += 1
         self.episodes[-1][1] = k
         if len(self.failed) == MISFIT_KEYS and min(self.failed) > 0.5:
-            self._stop(wrong=True)
+            self._stop()
 
     def handed_over(self, k: int) -> None:
         """A point-mass filter gave the graph its information at key ``k``
@@ -290,12 +290,12 @@ class OnlineTerrain:
         self.episodes.pop()
         self._stop()
 
-    def _stop(self, wrong: bool = False) -> None:
-        """End tracking (if it was on; ``wrong``: the end says the belief is wrong, not too wide
-        for the soundings): it waits for a unimodal fix the policy uses after this."""
+    def _stop(self) -> None:
+        """End tracking (if it was on): it waits for a unimodal fix the policy uses after this."""
         if self.tracking:
             self.tracking = self.found = False
-            self.failed, self.surprises, self.wrong = [], 0, wrong
+            self.failed = []
+            self.surprises = 0
 
     def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain):
         """The factor of the ``pings`` hung from key ``prev`` (None when no sounding passes)

@@ -264,32 +264,3 @@ def test_the_ping_gate_takes_a_patch_the_map_s_tail_allows(seed):
         assert np.hypot(*(state.moments()[0] - bad.true_pose[-1, :2])) < 5.0
     assert gated[0.0] >= 15 and gated[2.0] <= 5, gated
 
-
-def test_a_gaussian_belief_is_held_as_it_is():
-    """``start_state`` of a belief in which the position goes with the calibration (as after a
-    long track) and the tide with both: the density's position moments, its calibration posterior
-    and its tide's mean and covariance with the position are the belief's (the Gauss-Hermite
-    nodes are exact for the linear regression; the grid's sums to 1e-3)."""
-    from tangraph.filters.pmf import _Grid, start_state
-    from tangraph.graph.acquisition import _with_tide
-    from tangraph.sensors import NavigationModel
-
-    model = NavigationModel(tide_std=0.5, speed_scale_std=0.02, heading_bias_std=0.03)
-    config = PMFConfig()
-    mean = np.array([100.0, 200.0, 0.01, -0.02])
-    root = np.array([[3.0, 0.0, 0.0, 0.0, 0.0], [1.0, 2.0, 0.0, 0.0, 0.0], [0.004, -0.002, 0.01, 0.0, 0.0],
-                     [-0.01, 0.006, 0.003, 0.02, 0.0], [0.1, -0.05, 0.01, 0.02, 0.2]])
-    joint = root @ root.T  # (north, east, k, b, tide)
-    cov, cross = joint[:4, :4], joint[4, :4]
-    grid = _Grid(config, config.min_spacing)
-    state = start_state(model, grid, config, mean, cov, (1.5, joint[4, 4], cross))
-    position, position_cov = state.moments()
-    np.testing.assert_allclose(position, mean[:2], atol=1e-3 * np.sqrt(cov[0, 0]))
-    np.testing.assert_allclose(position_cov, cov[:2, :2], rtol=1e-3)
-    cal_mean, cal_cov = state.calibration()
-    np.testing.assert_allclose(cal_mean, mean[2:], atol=1e-9)
-    np.testing.assert_allclose(cal_cov, cov[2:, 2:], rtol=1e-9)
-    mean3, cov3 = _with_tide(state, position, position_cov)
-    assert mean3[2] == pytest.approx(1.5, abs=1e-3)
-    np.testing.assert_allclose(cov3[:2, 2], cross[:2], rtol=2e-3, atol=1e-6)
-    assert cov3[2, 2] == pytest.approx(joint[4, 4], rel=2e-3)

@@ -32,8 +32,7 @@ def _case(misfit: bool):
     ping = Ping(3, np.array([2.0, 0.0]), np.column_stack([np.zeros(41), across]),
                 chart.depth_at(np.full(41, 300.0), 300.0 + across) + 0.2, dt=1.0)
     config = PMFConfig(grid_points=15)
-    state = pmf.start_state(model, pmf._Grid(config, config.min_spacing), config,
-                            *pmf.prior_belief(model, np.array([296.0, 303.0])))
+    state = pmf._start(model, np.array([296.0, 303.0]), pmf._Grid(config, config.min_spacing), config)
     density = state.log_density.copy()
     density[:, :4, :] = -np.inf  # a band no mass has reached
     density[2] = -np.inf  # and a member of no mass

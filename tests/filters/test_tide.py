@@ -152,14 +152,14 @@ def test_the_point_mass_filter_mixes_and_regrids_the_datum_and_the_drift_togethe
     too) are kept, the spread of the mixed means going into the shared covariance; a re-grid
     interpolates both means (a constant stays that constant)."""
     from tangraph.filters.config import PMFConfig
-    from tangraph.filters.pmf import prior_belief, start_state
+    from tangraph.filters.pmf import _start
     from tangraph.filters.pmf_grid import _diffuse, _Grid, _regrid
 
     nav = NavigationModel(tide_std=2.0, tide_drift_std=DRIFT, tide_drift_time=FORGET, speed_scale_std=0.0,
                           heading_bias_std=0.0, initial_position_std=20.0)
     config = PMFConfig()
     grid = _Grid(config, config.min_spacing)
-    state = start_state(nav, grid, config, *prior_belief(nav, np.array([250.0, 250.0])))
+    state = _start(nav, np.array([250.0, 250.0]), grid, config)
     i, j = np.meshgrid(np.arange(state.n), np.arange(state.n), indexing="ij")  # means that vary smoothly
     state.tide = (1.0 + 0.05 * i - 0.02 * j)[None]
     state.tide_drift = TideDrift((0.03 * j - 0.1)[None], 0.02, 0.05)

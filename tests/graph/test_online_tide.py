@@ -103,9 +103,8 @@ def test_the_acquired_graph_follows_a_drifting_tide(drifting_surveys, rough_map)
     """On surveys whose depths drift by 0.5 m over 100 s, the graph that tracks on soundings with
     the drift in its model ends with the latest key's tide within 3 sigma of the truth (the
     sonar's offset plus the drift there) and follows the track better than the same graph
-    holding one tide (the workaround before it could follow a drift: at least 10 % less RMSE;
-    0.27-0.32 against 0.37-0.39 m on these seeds; 0.56-0.66 m before the point-mass filter
-    found the vehicle again each time the tracking of the graph holding one tide ended)."""
+    holding one tide (the workaround before it could follow a drift: at least 30 % less RMSE;
+    0.27-0.32 against 0.56-0.66 m on these seeds)."""
     for survey, offset in drifting_surveys:
         model = drifting_model(survey, 0.5).replace(tide=0.0)
         nav = GraphNavigator(survey, rough_map, ACQUIRED, model=model).run()
@@ -118,4 +117,4 @@ def test_the_acquired_graph_follows_a_drifting_tide(drifting_surveys, rough_map)
         assert abs(tide - offset[key]) < 3.0 * std, (tide, std, offset[key])
         assert std < 0.5 * STD  # the soundings told it
         held = GraphNavigator(survey, rough_map, ACQUIRED, model=model.replace(tide_drift_std=0.0)).run()
-        assert rmse(track, survey.true_pose) < 0.9 * rmse(held.track(), survey.true_pose)
+        assert rmse(track, survey.true_pose) < 0.7 * rmse(held.track(), survey.true_pose)
