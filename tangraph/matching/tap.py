@@ -67,6 +67,7 @@ from tangraph.matching.tap_noise import (
 )
 from tangraph.matching.tap_regions import (
     _covariances,
+    _drift_threshold,
     _jackknife,
     _larger,
     _quadric,
@@ -230,11 +231,8 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         if jack is not None:
             covariances["jackknife"] = jack
             covariance = _larger(covariance, jack)
-    centre = None  # whether the prediction is allowed, asked of the likelihood with the drift
-    if drift is not None:
-        widened = max(inflation, 1.0 + float(np.trace(np.linalg.solve(drift[1], drift[0]))) / 2.0)
-        centre = region_thresholds(q_min, n, config.alpha, widened)[RegionMethod.CALIBRATED]
-    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config, (i, j), centre)
+    quality = _quality(q, q_min, regions[RegionMethod.CALIBRATED], config, (i, j),
+                       _drift_threshold(drift, inflation, q_min, n, config.alpha))
     return TapFix(
         index=patch.reference,
         first=patch.first,

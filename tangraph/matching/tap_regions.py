@@ -61,6 +61,17 @@ def region_thresholds(
     }
 
 
+def _drift_threshold(drift, inflation: float, q_min: float, n: int, alpha: float) -> float | None:
+    """The calibrated region's threshold on ``Q`` with the tide's drift within the window (its
+    sandwich ``drift``: the covariance it adds to the fix and the fix's without it), the
+    inflation at least their mean generalised eigenvalue: whether the prediction is allowed is
+    asked of it (:func:`_quality`). None without a drift."""
+    if drift is None:
+        return None
+    widened = max(inflation, 1.0 + float(np.trace(np.linalg.solve(drift[1], drift[0]))) / 2.0)
+    return region_thresholds(q_min, n, alpha, widened)[RegionMethod.CALIBRATED]
+
+
 def _regions(q, s_fixed, q_min, n, inflation, alpha, step) -> dict[RegionMethod, Region]:
     valid = np.isfinite(q)
     out = {}
