@@ -341,14 +341,17 @@ def _support(state: PointMass, centres: np.ndarray):
         + np.max(np.abs(state.axes.T @ vectors), axis=0)  # one old step along each
 
 
-def _sample(state: PointMass, member: int | np.integer, points: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Member ``member``'s density (relative to the state's largest value) at world ``points
-    (P, 2)`` and its mass-weighted tide means there (:func:`_point_means`; bilinear; zero
-    outside its grid)."""
+def _sample(state: PointMass, member: int | np.integer, points: np.ndarray,
+            own: bool = False) -> tuple[np.ndarray, ...]:
+    """Member ``member``'s density (relative to the state's largest value, or with ``own`` to
+    the member's: a member far less likely than the others keeps its shape instead of
+    underflowing) at world ``points (P, 2)`` and its mass-weighted tide means there
+    (:func:`_point_means`; bilinear; zero outside its grid)."""
     inv = np.linalg.inv(state.axes)
     h = (state.n - 1) / 2.0
     q = ((points - state.centres[member]) @ inv.T + h).T
-    p = np.exp(state.log_density[member] - np.max(state.log_density))
+    top = np.max(state.log_density[member] if own else state.log_density)
+    p = np.exp(state.log_density[member] - top) if np.isfinite(top) else np.zeros(state.log_density.shape[1:])
     return tuple(ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0)
                  for v in (p, *(p * t[member] for t in _point_means(state))))
 
@@ -399,7 +402,7 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
     point_means = _point_means(state)
     mass, firsts = np.empty(shape), [np.empty(shape) for _ in point_means]
     for m, src in enumerate(source):
-        value, *moments = _sample(state, src, new_centres[m] - shift[m] + offsets)
+        value, *moments = _sample(state, src, new_centres[m] - shift[m] + offsets, own=True)
         total = value.sum()
         if total <= 0:  # a member whose density missed its new grid: its mean point
             value, moments = np.zeros_like(value), [np.zeros_like(value) for _ in point_means]
@@ -407,10 +410,10 @@ def _regrid(state: PointMass, grid: _Grid, config: PMFConfig, estimate: bool, ta
             for t1, t in zip(moments, point_means, strict=True):
                 t1[value.size // 2] = t[src].mean()
             total = 1.0
-        scale = np.exp(log_weight[m] - np.max(log_weight)) / total
-        mass[m] = value.reshape(shape[1:]) * scale
+        share = np.exp(log_weight[m] - np.max(log_weight))  # (each member's shape sums to 1 first)
+        mass[m] = value.reshape(shape[1:]) / total * share
         for first, t1 in zip(firsts, moments, strict=True):
-            first[m] = t1.reshape(shape[1:]) * scale
+            first[m] = t1.reshape(shape[1:]) / total * share
     # re-sampling only reads the density between points: the tide means are interpolated (their
     # spread between neighbours is not a mixture: it would widen the tide at every re-grid)
     with np.errstate(divide="ignore", invalid="ignore"):
