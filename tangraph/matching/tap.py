@@ -34,8 +34,9 @@ window's own likelihood: widened by the drift's mean generalised eigenvalue, as 
 own map error, they refused most windows of a simulated survey whose tide drifts and of Lake
 Caputh's, and the online graph's fixes fell from 245 to 53 in four runs (12.3 against 7.5 m).
 Whether the prediction is allowed (``FixQuality.holds_centre``, which the online graph's checks
-ask) is asked of the region so widened: the window's likelihood with the drift, which a right
-prediction falls outside the window's own region of as often as the drift moves the fix.
+ask) is asked of the region so widened, the window's likelihood with the drift: the window's own
+region left a right prediction out of about half the drifting windows of a test, whenever the
+drift had moved the fix.
 
 A candidate is valid when every sounding of the window has a map depth there; a prior off the
 map is searched around like any other (the window may reach the map's data from there).

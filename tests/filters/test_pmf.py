@@ -265,7 +265,6 @@ def test_the_ping_gate_takes_a_patch_the_map_s_tail_allows(seed):
     assert gated[0.0] >= 15 and gated[2.0] <= 5, gated
 
 
-
 def test_a_regrid_keeps_a_member_that_barely_reaches_its_new_grid():
     """Regression: on the graph_vs_filters study's ``han2020`` run 14 (seed 6) with a 5 x 5
     calibration bank, the re-grid after ping 3 gave a new node the shape of a member whose
