@@ -307,7 +307,7 @@ def test_with_the_tides_drift_a_right_prediction_is_held_as_often_as_the_region_
     the prediction is allowed (``quality.holds_centre``) is asked of the likelihood with the
     drift, which holds the truth in at least 95 % of 200 windows less 3.5 Monte Carlo standard
     errors (measured: 0.93). The window's own region, which leaves the drift out, leaves the
-    truth out of 47 % of them: a check asking it ends right tracking."""
+    truth out of 47 % of them, far below its level: a check asking it ends right tracking."""
     from tangraph.matching.patch import _drift_covariance
     from tangraph.matching.tap_regions import _quality
 
@@ -323,9 +323,9 @@ def test_with_the_tides_drift_a_right_prediction_is_held_as_often_as_the_region_
         s = s.replace(beam_depth=s.beam_depth + shift[:, None])
         fix = tap_fix(s, m, end=pings - 1, n_pings=pings, config=config, drift=(0.1, 20.0))
         held.append(fix.quality.holds_centre)
-        q = fix.surface[0] if fix.surface.ndim == 3 else fix.surface
         region = fix.regions[RegionMethod.CALIBRATED]
-        own.append(_quality(q, float(np.nanmin(q)), region, config, (1, 1)).holds_centre)
+        own.append(_quality(fix.surface, float(np.nanmin(fix.surface)), region, config, (1, 1)).holds_centre)
     p = 1.0 - config.alpha
-    assert np.mean(held) >= p - 3.5 * np.sqrt(p * (1 - p) / runs), np.mean(held)
-    assert np.mean(own) < np.mean(held), (np.mean(own), np.mean(held))
+    floor = p - 3.5 * np.sqrt(p * (1 - p) / runs)
+    assert np.mean(held) >= floor, np.mean(held)
+    assert np.mean(own) < floor, np.mean(own)  # the window's own region: not at its level
