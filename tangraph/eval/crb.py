@@ -72,6 +72,16 @@ smoother bound. (On the ``demo`` survey, 1256 pings, with 250 pings solved that 
 was within 1.5 % of the bound solved at every ping in RMS, 17 % at worst, 0.3 % in
 :func:`bound_rmse`; 60 are solved by default, so that a study's bounds take seconds per run.)
 
+The map's horizontal offset
+---------------------------
+A map is placed by its earlier surveys' positioning, so it may lie metres from where its
+coordinates say (``NavigationModel.map_offset_std``): a sounding at ``q`` then meets the map at
+``q + o`` and its residual has the Jacobian ``-g`` on ``o``, as on ``dp_k``. One offset for the
+survey (``map_offset_length = 0``) is two more constants of the state; a field of offsets
+(``map_offset_length > 0``) is two more fields beside the depth error's, one per axis, seen
+through the map's slope (:func:`tangraph.eval.map_field.map_error_field`), and the depth
+error is the part of the map's stated error the offset leaves.
+
 Approximations, beyond the linearisation: the field lives on the nodes (the lattice's
 correlation at ``L`` is 0.126 against Matérn's 0.140 at ``L / 3``) and the nugget is independent
 between soundings (at ``L / 5`` the simulated realistic maps' bounds move by 1 %); a step whose
@@ -92,6 +102,7 @@ from typing import Any, Literal
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.eval.kalman import covariance_filter, covariance_smoother
 from tangraph.geometry import wrap_angle
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.dead_reckoning import walk_variance
@@ -241,10 +252,10 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
     scale, f, q, p0 = _scaled_model(survey, model, layout)
     features, n_soundings = _sounding_features(survey, bathymetry, order)
     error = map_error(bathymetry, model)
-    solve = _plain_bound if error.is_zero or n_soundings == 0 else _field_bound
+    fields = not error.is_zero or min(model.map_offset_std, model.map_offset_length) > 0
+    solve = _field_bound if fields and n_soundings > 0 else _plain_bound
     position, constants, extra = solve(survey, model, error, kind, layout, scale, f, q, p0, features)
-    cal = constants[np.ix_(layout.calibration, layout.calibration)]
-    tide = layout.tide
+    cal, tide = constants[np.ix_(layout.calibration, layout.calibration)], layout.tide
     tide_std = float(np.sqrt(max(constants[tide, tide], 0.0))) if tide is not None else 0.0
     logger.debug("posterior_crb: %s bound over %d pings and %d soundings%s", kind, survey.n_pings,
                  n_soundings, f", a map error field of {extra['field_nodes']} nodes" if extra else "")
@@ -256,7 +267,7 @@ def posterior_crb(survey: Survey, bathymetry: BathymetryMap, model: NavigationMo
 @dataclasses.dataclass(frozen=True)
 class _Layout:
     """Indices of the error state: ``dp`` (0, 1), then walk, white, scale, bias, tide, the tide's
-    drift if present."""
+    drift, the map's horizontal offset (one for the survey) if present."""
 
     n: int
     walk: int | None
@@ -265,6 +276,7 @@ class _Layout:
     heading_bias: int
     tide: int | None
     drift: int | None = None
+    offset: int | None = None  # the first of two (north, east)
 
     @classmethod
     def of(cls, model: NavigationModel) -> _Layout:
@@ -278,10 +290,18 @@ class _Layout:
             names.append("tide")
         if model.tide_drift is not None:
             names.append("drift")
+        if model.map_offset_std > 0 and model.map_offset_length == 0:  # a field's is the map field's
+            names += ["offset", "offset_east"]
         where = {name: i for i, name in enumerate(names)}
         return cls(n=len(names), walk=where.get("walk"), white=where.get("white"),
                    speed_scale=where["scale"], heading_bias=where["bias"], tide=where.get("tide"),
-                   drift=where.get("drift"))
+                   drift=where.get("drift"), offset=where.get("offset"))
+
+    @property
+    def constants(self) -> list[int]:
+        """The states that hold for the whole survey: the calibration, the tide, the map's offset."""
+        out = [*self.calibration, *([self.tide] if self.tide is not None else [])]
+        return out + ([self.offset, self.offset + 1] if self.offset is not None else [])
 
     @property
     def calibration(self) -> list[int]:
@@ -303,6 +323,8 @@ class _Layout:
             v[self.tide] = model.tide_std**2
         if self.drift is not None:
             v[self.drift] = (model.tide_drift_std or 0.0) ** 2
+        if self.offset is not None:
+            v[self.offset:self.offset + 2] = model.map_offset_std**2
         return v
 
     def scale(self, model: NavigationModel, walk: np.ndarray) -> np.ndarray:
@@ -367,6 +389,8 @@ def _sounding_jacobian(layout: _Layout) -> np.ndarray:
     for i in (layout.tide, layout.drift):
         if i is not None:
             jacobian[i, 3] = 1.0
+    if layout.offset is not None:  # the map where it lies: seen as the vehicle's position is
+        jacobian[layout.offset, 0] = jacobian[layout.offset + 1, 1] = -1.0
     return jacobian
 
 
@@ -376,49 +400,6 @@ def _information_factor(features: np.ndarray, sigma: float, layout: _Layout) -> 
     value, vector = np.linalg.eigh(info)
     root = vector * np.sqrt(np.maximum(value, 0.0))[:, None, :]
     return _sounding_jacobian(layout) @ root
-
-
-def _forward(p0: np.ndarray, f: np.ndarray, q: np.ndarray,
-             factor: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Kalman filter covariances: filtered (K, n, n) and predicted ``P_{k+1|k}`` (K-1, n, n).
-
-    The update of ping k is ``P - P L (I + L^T P L)^-1 L^T P``, the information form
-    ``(P^-1 + L L^T)^-1`` written so that a singular ``P`` (the walk's zero start) is fine.
-    """
-    k, n = factor.shape[0], p0.shape[0]
-    filtered = np.empty((k, n, n))
-    predicted = np.empty((max(k - 1, 0), n, n))
-    eye = np.eye(factor.shape[2])
-    informed = np.any(factor != 0.0, axis=(1, 2))
-    p = p0
-    for i in range(k):
-        if i:
-            p = f[i - 1] @ p @ f[i - 1].T + q[i - 1]
-            predicted[i - 1] = p
-        if informed[i]:
-            pl = p @ factor[i]
-            p = p - pl @ np.linalg.solve(eye + factor[i].T @ pl, pl.T)
-            p = 0.5 * (p + p.T)
-        filtered[i] = p
-    return filtered, predicted
-
-
-def _rts(filtered: np.ndarray, predicted: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """Rauch-Tung-Striebel smoother covariances from the filter's."""
-    smoothed = np.empty_like(filtered)
-    smoothed[-1] = filtered[-1]
-    if filtered.shape[0] == 1:
-        return smoothed
-    try:  # G_k^T = P_{k+1|k}^-1 F_k P_k
-        gain_t = np.linalg.solve(predicted, f @ filtered[:-1])
-    except np.linalg.LinAlgError:
-        raise TangraphError("posterior_crb: a predicted covariance is singular; the smoother bound "
-                            "is not defined (is a noise std zero with no prior?)") from None
-    for i in range(filtered.shape[0] - 2, -1, -1):
-        g = gain_t[i].T
-        s = filtered[i] + g @ (smoothed[i + 1] - predicted[i]) @ g.T
-        smoothed[i] = 0.5 * (s + s.T)
-    return smoothed
 
 
 # -- the bound with the map's error field -------------------------------------------------------
@@ -460,8 +441,8 @@ def _plain_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     linearised model, smoothed by RTS for ``"smoother"``; called and returning as
     :func:`_field_bound` (``survey`` and ``error`` unused)."""
     factor = _information_factor(features, model.sounding_std, layout) * scale[:, None]
-    filtered, predicted = _forward(p0, f, q, factor)
-    p = filtered if kind == "filter" else _rts(filtered, predicted, f)
+    filtered, predicted = covariance_filter(p0, f, q, factor)
+    p = filtered if kind == "filter" else covariance_smoother(filtered, predicted, f)
     p = p * np.outer(scale, scale)
     return p[:, :2, :2], p[-1], dict[str, Any]()
 
@@ -480,16 +461,17 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     used = features[..., 3] > 0
     fine = kind == "smoother"  # the filter bound's, solved 60 times, no finer than the map's cell
     most = map_field.BOUND_MAX_NODES if fine else map_field.MAX_NODES
-    field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=fine, max_nodes=most)
+    field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=fine, max_nodes=most,
+                                      offset=(model.map_offset_std, model.map_offset_length))
     node, weight = field.weights(north[used], east[used])
     std = np.ones(used.shape)  # each sounding's noise: its own and the field's nugget
     std[used] = np.sqrt(model.sounding_std**2 + field.nugget(node, weight))
     known = None
     if kind == "filter":  # the filter bound were the map error known, at every ping
         factor = _information_factor(features / std[..., None], 1.0, layout) * scale[:, None]
-        known = _forward(p0, f, q, factor)[0][:, :2, :2]
+        known = covariance_filter(p0, f, q, factor)[0][:, :2, :2]
     constant = np.zeros(layout.n, dtype=bool)
-    constant[[*layout.calibration, *([layout.tide] if layout.tide is not None else [])]] = True
+    constant[layout.constants] = True
     state = map_field.ErrorState(f=f, q=q, p0=np.diag(p0), constant=constant, ping=np.nonzero(used)[0],
                                  jacobian=features[used] @ _sounding_jacobian(layout).T * scale)
     position, constants = map_field.field_bound(state, field, node, weight, std[used], known_filter=known)

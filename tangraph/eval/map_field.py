@@ -42,6 +42,7 @@ share the nugget among the soundings of a cell instead
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 
 import numpy as np
 from scipy import sparse
@@ -102,6 +103,9 @@ class MapErrorField:
         The stationary lattice correlation of ``u`` at node offsets (0, 0), (0, 1) and (1, 1).
     correlation_length : float
         The Matérn range ``L``, m.
+    through : (BathymetryMap, int), optional
+        A field of the map's horizontal offset along axis 0 (north) or 1 (east), seen through
+        the map's slope along it: a point's weights are times the gradient (0 where none).
     """
 
     origin: tuple[float, float]
@@ -111,6 +115,7 @@ class MapErrorField:
     precision: sparse.csc_array
     correlation: np.ndarray
     correlation_length: float
+    through: tuple[Any, int] | None = None
 
     @property
     def n_nodes(self) -> int:
@@ -132,12 +137,17 @@ class MapErrorField:
         nx = self.shape[1]
         index = np.stack([i * nx + j, i * nx + j + 1, (i + 1) * nx + j, (i + 1) * nx + j + 1], axis=-1)
         weight = np.stack([(1 - ty) * (1 - tx), (1 - ty) * tx, ty * (1 - tx), ty * tx], axis=-1)
+        if self.through is not None:  # the offset seen through the slope along its axis
+            bathymetry, axis = self.through
+            slope = bathymetry.gradient_at(north, east)[..., axis]
+            weight = weight * np.nan_to_num(slope)[..., None]
         return index, weight
 
     def nugget(self, index: np.ndarray, weight: np.ndarray) -> np.ndarray:
         """The variance (M,) of the map error at points that their interpolation on the nodes
-        misses: ``sum_ab w_a w_b s_a s_b (1 - R_ab)`` (m^2)."""
-        ws = weight * self.std[index]
+        misses: ``sum_ab w_a w_b s_a s_b (1 - R_ab)`` (m^2); none for an offset (``through``),
+        its nodes interpolated: a displacement smooth within a node cell."""
+        ws = weight * self.std[index] * (self.through is None)
         miss = 1.0 - self.correlation  # offsets (0, 0), (0, 1), (1, 1)
         out = np.zeros(ws.shape[0])
         for a in range(4):
@@ -188,7 +198,8 @@ def spde_precision(shape: tuple[int, int], c: float) -> sparse.csc_array:
 
 
 def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *, max_nodes: int = MAX_NODES,
-                    finer_than_cell: bool = False) -> MapErrorField | CombinedField:
+                    finer_than_cell: bool = False,
+                    offset: tuple[float, float] | None = None) -> MapErrorField | CombinedField:
     """The map error's field on a grid of nodes over the points ``north, east`` (the soundings'
     true footprints), one grid per independent field of the error
     (:meth:`~tangraph.sensors.MapError.components`: the cell-scale error and the excess of the
@@ -206,8 +217,18 @@ def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *, max
     >>> field = map_error_field(np.array([200.0, 300.0]), np.array([250.0, 250.0]), error)
     >>> field.spacing, field.shape, float(field.std[0])
     (20.0, (18, 13), 0.3)
-    """
+
+    ``offset = (std, length)``, both > 0 (the navigation model's ``map_offset_std`` and
+    ``map_offset_length``): the map's horizontal offset is two more fields of that std and range,
+    one per axis, seen through the map's slope (``through``), and the depth error is the part
+    the offset leaves (:meth:`~tangraph.sensors.MapError.without_offset`)."""
+    std, length = offset if offset is not None and min(offset) > 0 else (0.0, 0.0)
+    error = error.without_offset(std)
     fields = [_one_field(north, east, part, max_nodes, finer_than_cell) for part in error.components()]
+    if std > 0:  # its std at every node (off the map's data a field's nodes take its median)
+        base = _one_field(north, east, MapError(error.bathymetry, np.full(error.std.shape, std), length),
+                          max_nodes, True)
+        fields += [dataclasses.replace(base, through=(error.bathymetry, axis)) for axis in (0, 1)]
     return fields[0] if len(fields) == 1 else CombinedField(tuple(fields))
 
 

@@ -123,9 +123,12 @@ PATCH_PRIOR_DOF = 4.0
 
 def variance_ratio(field: Field, index: np.ndarray, weight: np.ndarray, factor: np.ndarray) -> np.ndarray:
     """(M,) the map error's variance at points (``index, weight`` their interpolation on the
-    nodes) with the node stds times ``factor`` over that as stated: the nodes' variances blended
-    with the interpolation weights."""
-    variance = weight * field.std[index] ** 2
+    nodes) with the node stds times ``factor`` over that as stated: each field's nodes'
+    variances blended with its interpolation weights, times the square of what the weights sum
+    to (1 for a depth field; the slope for a field of the map's offset, whose weights carry it)."""
+    size = np.abs(weight)
+    parts = np.sum(size.reshape(*size.shape[:-1], -1, 4), axis=-1)  # each field's four nodes
+    variance = size * np.repeat(parts, 4, axis=-1) * field.std[index] ** 2
     total = np.sum(variance, axis=-1)
     return np.divide(np.sum(variance * np.asarray(factor)[index] ** 2, axis=-1), total,
                      out=np.ones(total.shape), where=total > 0)

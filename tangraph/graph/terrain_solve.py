@@ -82,7 +82,7 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
     if config.batch.smoother_terrain == "field" and nav.map_error is not None:
-        if nav.model.map_offset_std > 0:  # the map's horizontal offset, solved with the rest
+        if nav.model.map_offset_std > 0 and nav.model.map_offset_length == 0:  # one for the survey
             terrain = dataclasses.replace(terrain, map_offset_std=float(nav.model.map_offset_std))
             factors.add(gtsam.PriorFactorVector(MAP_OFFSET, np.zeros(2),
                                                 gtsam.noiseModel.Isotropic.Sigma(2, terrain.map_offset_std)))
@@ -134,21 +134,21 @@ def _nothing_fits(fixes_solution: SmootherSolution, terrain) -> tuple[SmootherSo
 
 def _field_solve(nav: GraphNavigator, factors, values, terrain, prior, reference, fixes_solution,
                  config: GraphConfig, started: float) -> tuple[SmootherSolution, dict, BathymetryMap | None]:
-    """The terrain solve with the map's error as a field of unknowns (:mod:`.field_solve`) over
-    the footprints of the fixes' solution. A sounding's variance is its noise and shared nugget;
-    the gate judges the soundings against the map's stated error (its std under each, and its
-    mean under a ping as an offset the ping's soundings share). After each converged solve the
-    soundings' noise is grown by its a posteriori variance factor (:func:`.field_solve.variance_components`)
-    and the field's std by each patch's (:func:`.field_solve.patch_factors`), never shrunk below
-    the model's, while these move. Returns the solution, what it used and the refined map."""
+    """The terrain solve with the map's error (and its horizontal offset, ``map_offset_length >
+    0``) as fields of unknowns (:mod:`.field_solve`) over the fixes' solution's footprints. A
+    sounding's variance is its noise and shared nugget; the gate judges the soundings against
+    the map's stated error (its std under each, its mean under a ping as an offset they share).
+    Each converged solve grows the soundings' noise and each patch of the field by their a
+    posteriori variance factors (never below the model's). Returns the solution, its use, the map."""
     bathymetry, error = nav.bathymetry, nav.map_error
     assert error is not None  # the caller's condition
     north, east = terrain_factors.footprints(terrain, bathymetry, *_unpack(values, terrain, reference)[:2])
     seen = np.isfinite(terrain.depth) & np.isfinite(bathymetry.depth_at(north, east))
     if not seen.any():
         return _nothing_fits(fixes_solution, terrain)
-    hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], error), north, east, seen)
-    noise = float(nav.model.sounding_std) ** 2
+    placed, noise = (nav.model.map_offset_std, nav.model.map_offset_length), nav.model.sounding_std**2
+    hold = field_solve.FieldSoundings.at(map_error_field(north[seen], east[seen], error, offset=placed),
+                                         north, east, seen)
     s2 = np.where(seen, error.std_at(north, east) ** 2, np.nan)
     s2, counts = np.where(seen & ~np.isfinite(s2), error.typical_std**2, s2), seen.sum(axis=1)
 

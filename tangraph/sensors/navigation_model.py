@@ -117,6 +117,17 @@ class NavigationModel:
         error cannot say it. 0 (default): the map lies where its coordinates say. Solved for by
         the batch smoother with ``smoother_terrain = "field"``, whose track then stays in the
         survey's frame while the soundings are matched to the map at the offset.
+    map_offset_length : float
+        How the map's horizontal offset varies over the map (m): 0 (default) one offset for the
+        whole survey; > 0 a 2-D field of offsets, each axis a Matérn (nu = 1) field of std
+        ``map_offset_std`` and this range (the earlier surveys' positioning error drifts, so the
+        map is displaced patch by patch: about twice their speed times the time their GPS error
+        takes to forget). A sounding sees the offset through the map's slope, ``g . o``, which
+        no track can tell from its own position over one patch: the bound
+        (:func:`~tangraph.eval.posterior_crb`) and the batch smoother's field solve
+        (``smoother_terrain = "field"``) hold the offset as unknowns, and the part of the map's
+        stated depth error that the offset explains through the slope is taken out of the depth
+        field (:meth:`tangraph.sensors.MapError.without_offset`).
     robust_kernel : {"huber", "cauchy", "none"}
         The tail of a terrain fix's error in the factor graph: the M-estimator on each position
         fix's whitened error (a fix from a window whose map or pings err beyond their model is
@@ -163,6 +174,7 @@ class NavigationModel:
     tide_drift_std: float | None = None
     tide_drift_time: float = 0.0
     map_offset_std: float = 0.0
+    map_offset_length: float = 0.0
     robust_kernel: str = "huber"
     robust_parameter: float = 2.45
     fix_inflation: float = 1.0
@@ -173,7 +185,7 @@ class NavigationModel:
         for name in ("speed_noise", "heading_noise", "heading_walk", "heading_turn_std",
                      "dropout_speed_noise", "map_std", "map_correlation_length", "tide_std",
                      "tide_drift_time",
-                     "map_offset_std", "speed_scale_std", "heading_bias_std"):
+                     "map_offset_std", "map_offset_length", "speed_scale_std", "heading_bias_std"):
             _number(self, name, low=0.0)
         _number(self, "misfit_dof", low=0.0)
         if self.tide_drift_std is not None:
@@ -287,7 +299,10 @@ class NavigationModel:
         the DR as :meth:`from_dead_reckoning`; ``sounding_std`` 1.5 times the sonar's
         ``depth_noise`` (the margin covers map interpolation and attitude errors), at least 0.2 m;
         the tide prior of mean zero and std 3 m, drifting as the sonar's ``tide_drift_std``
-        and ``tide_drift_time`` say.
+        and ``tide_drift_time`` say; with a prior map gridded from an earlier survey (a
+        ``[prior_map]``, :mod:`tangraph.sim.seafloor`), the map's horizontal offset that its
+        gridding kept of that survey's GPS error (``meta["seafloor"]``'s ``map_offset_std``
+        and ``map_offset_length``).
         ``overrides`` replace any field.
 
         Raises
@@ -323,6 +338,11 @@ class NavigationModel:
                  for k in ("tide_drift_std", "tide_drift_time")]
         if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in drift):
             terrain["tide_drift_std"], terrain["tide_drift_time"] = float(drift[0]), float(drift[1])
+        world = survey.meta.get("seafloor")  # the offset a prior map's gridding kept
+        placed = [world.get(k, 0.0) if isinstance(world, dict) else 0.0
+                  for k in ("map_offset_std", "map_offset_length")]
+        if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in placed):
+            terrain["map_offset_std"], terrain["map_offset_length"] = float(placed[0]), float(placed[1])
         return cls.from_dead_reckoning(dr, **(terrain | overrides))
 
     @classmethod

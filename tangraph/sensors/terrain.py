@@ -155,6 +155,21 @@ class MapError:
         return (MapError(self.bathymetry, cell, self.cell_length),
                 MapError(self.bathymetry, excess, self.correlation_length))
 
+    def without_offset(self, offset_std: float) -> MapError:
+        """The error left once the map's horizontal offset of std ``offset_std`` (m per axis,
+        ``NavigationModel.map_offset_std``) is held on its own: each cell's variance less the
+        part the offset explains through the map's slope, ``offset_std^2 |g|^2`` (a gridded map
+        counts its soundings' positioning error that way, :mod:`tangraph.maps.gridding_error`),
+        never below half the stated std (a map whose std leaves its positioning out keeps most
+        of what it states)."""
+        if not offset_std > 0 or self.is_zero:
+            return self
+        m = self.bathymetry
+        north, east = np.meshgrid(m.north, m.east, indexing="ij")
+        slope = np.nan_to_num(np.sum(m.gradient_at(north, east) ** 2, axis=-1))
+        std = np.sqrt(np.maximum(self.std**2 - offset_std**2 * slope, 0.25 * self.std**2))
+        return MapError(m, std, self.correlation_length)
+
     def std_at(self, north, east) -> np.ndarray:
         """Bilinear std of the map's error at points (NaN where the map has no data)."""
         if self.is_zero:

@@ -388,7 +388,8 @@ def simulate_run(
         "dvl_dropouts": int(dr.n_dropouts),
     }
     if world is not None:
-        meta["seafloor"] = {"source_map": source.name, "map_error_rms": _rms(world.map_error())}
+        meta["seafloor"] = {"source_map": source.name, "map_error_rms": _rms(world.map_error()),
+                            "map_offset_std": world.offset[0], "map_offset_length": world.offset[1]}
     survey = Survey(
         time=time,
         dr_pose=dr.pose,

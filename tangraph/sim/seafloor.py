@@ -11,10 +11,12 @@ in its TOML, :mod:`tangraph.sim.scenario`). Then:
   from a simulated earlier survey of that seafloor: a lawnmower of parallel lines
   ``prior_map.line_spacing`` apart, ray cast with the scenario's sonar (or
   ``[prior_map.sonar]``), placed at a GPS track with a slowly varying error of std
-  ``prior_map.position_std`` (which the gridding counts in the map's error through its slope,
-  :func:`tangraph.maps.gridded_error`), binned at ``prior_map.cell``, with gaps of up to
-  ``prior_map.fill`` cells filled. Its error is spatially correlated, larger between lines and
-  in filled gaps, and its data stop at edges, as a real map's do, while the truth stays known.
+  ``prior_map.position_std`` forgetting over ``prior_map.position_time`` (60 s; the gridding
+  counts it in the map's error through its slope, :func:`tangraph.maps.gridded_error`),
+  binned at ``prior_map.cell``, with gaps of up to ``prior_map.fill`` cells filled. Its error
+  is spatially correlated, larger between lines and in filled gaps, and its data stop at
+  edges, as a real map's do, while the truth stays known. The map keeps a horizontal offset of
+  that GPS error, patch by patch (:func:`_offset`), which the survey's metadata states.
 
 The survey itself is ray cast on the true seafloor. With ``seafloor.change_std > 0`` the seafloor
 has **changed since the earlier survey**: the survey sees it plus a Matérn field of std
@@ -45,7 +47,6 @@ __all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "changed_sea
 
 log = logging.getLogger(__name__)
 
-_GPS_TIME_CONSTANT = 60.0  # s: the earlier survey's GPS error is a first-order Gauss-Markov process
 
 
 def _known_keys(cls, table: dict, where: str) -> None:
@@ -96,6 +97,7 @@ class PriorMapSettings:
     speed: float = 2.0
     ping_rate: float = 1.0
     position_std: float = 1.0
+    position_time: float = 60.0
     cell: float = 10.0
     fill: int = 3
     statistic: str = "median"
@@ -107,7 +109,7 @@ class PriorMapSettings:
         _known_keys(cls, table, where)
         values: dict[str, Any] = {}
         for key, value in table.items():
-            if key in ("line_spacing", "speed", "ping_rate", "cell"):
+            if key in ("line_spacing", "speed", "ping_rate", "cell", "position_time"):
                 values[key] = _positive(table, key, where)
             elif key in ("position_std", "vehicle_depth"):
                 values[key] = _positive(table, key, where, zero=True)
@@ -137,11 +139,14 @@ def _finite(value, key: str, where: str) -> float:
 @dataclasses.dataclass(frozen=True, eq=False)
 class ScenarioWorld:
     """The true ``seafloor`` the soundings see and the ``prior_map`` the estimators use, with the
-    ``prior_survey`` it was gridded from (its ``true_pose`` is the GPS track it was placed at)."""
+    ``prior_survey`` it was gridded from (its ``true_pose`` is the GPS track it was placed at),
+    and the std (m per axis) and range (m) of the horizontal offset the gridding kept of that
+    track's error (:func:`_offset`)."""
 
     seafloor: BathymetryMap
     prior_map: BathymetryMap
     prior_survey: Any = None
+    offset: tuple[float, float] = (0.0, 0.0)
 
     def map_error(self) -> np.ndarray:
         """The prior map's true error on its own grid, ``seafloor - prior map`` (m; NaN where
@@ -189,16 +194,22 @@ def changed_seafloor(seafloor: BathymetryMap, settings: SeafloorSettings, *,
     return seafloor.replace(depth=seafloor.depth + change, name=f"{seafloor.name}, changed")
 
 
+def _line_axes(seafloor: BathymetryMap, settings: PriorMapSettings) -> tuple[float, np.ndarray, np.ndarray]:
+    """The earlier survey's line heading and its unit vector along and across (to starboard)."""
+    n_lo, n_hi, e_lo, e_hi = seafloor.extent
+    if settings.line_heading_deg is None:
+        heading = 0.0 if n_hi - n_lo >= e_hi - e_lo else np.pi / 2
+    else:
+        heading = np.radians(settings.line_heading_deg)
+    along, across = rotation_matrix(heading).T
+    return heading, along, across
+
+
 def _prior_trajectory(seafloor: BathymetryMap, settings: PriorMapSettings) -> tuple[np.ndarray, np.ndarray]:
     from tangraph.sim import trajectories
 
     n_lo, n_hi, e_lo, e_hi = seafloor.extent
-    height, width = n_hi - n_lo, e_hi - e_lo
-    if settings.line_heading_deg is None:
-        heading = 0.0 if height >= width else np.pi / 2
-    else:
-        heading = np.radians(settings.line_heading_deg)
-    along, across = rotation_matrix(heading).T  # the heading's unit vector and its starboard
+    heading, along, across = _line_axes(seafloor, settings)
     corners = np.array([[n_lo, e_lo], [n_lo, e_hi], [n_hi, e_lo], [n_hi, e_hi]])
     a, c = corners @ along, corners @ across
     length = float(a.max() - a.min())
@@ -210,12 +221,13 @@ def _prior_trajectory(seafloor: BathymetryMap, settings: PriorMapSettings) -> tu
                                   settings.ping_rate)
 
 
-def _gps_error(time: np.ndarray, std: float, rng: np.random.Generator) -> np.ndarray:
-    """A first-order Gauss-Markov error (K, 2) of stationary std ``std`` per axis."""
+def _gps_error(time: np.ndarray, std: float, rng: np.random.Generator, memory: float) -> np.ndarray:
+    """A first-order Gauss-Markov error (K, 2) of stationary std ``std`` per axis, forgetting
+    over ``memory`` seconds."""
     out = np.zeros((time.size, 2))
     if std == 0 or time.size == 0:
         return out
-    phi = np.exp(-np.diff(time, prepend=time[0]) / _GPS_TIME_CONSTANT)
+    phi = np.exp(-np.diff(time, prepend=time[0]) / memory)
     draws = rng.standard_normal((time.size, 2))
     out[0] = std * draws[0]
     for k in range(1, time.size):
@@ -224,8 +236,9 @@ def _gps_error(time: np.ndarray, std: float, rng: np.random.Generator) -> np.nda
 
 
 def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng: np.random.Generator,
-              name: str) -> tuple[BathymetryMap, Any]:
-    """The map gridded from a simulated earlier survey of ``seafloor``, and that survey."""
+              name: str) -> tuple[BathymetryMap, Any, tuple[float, float]]:
+    """The map gridded from a simulated earlier survey of ``seafloor``, that survey, and the
+    std and range of the map's horizontal offset its gridding keeps (:func:`_offset`)."""
     from tangraph.gridding_surveys import grid_surveys
     from tangraph.maps.mesh import raycasting_scene
     from tangraph.sensors import simulate_pings
@@ -237,7 +250,7 @@ def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng
     depth = np.full(time.size, settings.vehicle_depth)
     pings = simulate_pings(raycasting_scene(seafloor), truth, depth, sonar, rng=rng)
     gps = truth.copy()
-    gps[:, :2] += _gps_error(time, settings.position_std, rng)
+    gps[:, :2] += _gps_error(time, settings.position_std, rng, settings.position_time)
     survey = Survey(time=time, dr_pose=gps, vehicle_depth=depth, beam_forward=pings.beam_forward,
                     beam_starboard=pings.beam_starboard, beam_depth=pings.beam_depth, true_pose=gps,
                     meta={"crs": seafloor.crs, "origin": list(seafloor.origin), "name": f"{name} survey"})
@@ -245,7 +258,36 @@ def prior_map(seafloor: BathymetryMap, settings: PriorMapSettings, sonar, *, rng
                         fill=settings.fill, name=name, position_std=settings.position_std)
     log.info("prior map %r: %d pings, %.0f %% of cells measured", name, time.size,
              100 * float(np.mean(grid.count > 0)))
-    return grid.depth.replace(name=name), survey
+    across = truth[:, :2] @ _line_axes(seafloor, settings)[2]
+    lines = np.rint((across - across[0]) / settings.line_spacing)
+    return grid.depth.replace(name=name), survey, _offset(survey, lines, grid.depth, settings)
+
+
+def _offset(survey, lines: np.ndarray, gridded: BathymetryMap,
+            settings: PriorMapSettings) -> tuple[float, float]:
+    """The horizontal offset a gridded map keeps of its soundings' positioning error: its std (m
+    per axis) and its range (m). A cell's depth is placed where the soundings of the lines over
+    it were placed, and the lines' errors are independent (a line takes many of the error's
+    memories), so a cell of ``n`` lines is off by ``position_std / sqrt(n)``: the std is the
+    root mean square of that over the measured cells. The offset is shared along a line over
+    twice the distance the survey runs while its error forgets (an exponential correlation has
+    fallen to 0.14 there, as a Matérn field's at its range) and across it by the lines' width
+    of cover (the spacing times the lines over a cell); the range is the geometric mean of the
+    two, the isotropic field of the same correlation area. ``lines (K,)`` is each ping's line."""
+    north, east = survey.footprints(survey.dr_pose)
+    i = np.rint((north - gridded.north[0]) / gridded.cell_size[0])
+    j = np.rint((east - gridded.east[0]) / gridded.cell_size[1])
+    has = (np.isfinite(survey.beam_depth) & (i >= 0) & (i < gridded.shape[0])
+           & (j >= 0) & (j < gridded.shape[1]))
+    if settings.position_std == 0 or not has.any():
+        return 0.0, 0.0
+    cell = (i * gridded.shape[1] + j)[has].astype(np.int64)
+    line = np.broadcast_to(lines[:, None], has.shape)[has].astype(np.int64)
+    n = np.bincount(np.unique(np.column_stack([cell, line]), axis=0)[:, 0])
+    n = n[n > 0]
+    along = 2.0 * settings.speed * settings.position_time
+    return (float(settings.position_std * np.sqrt(np.mean(1.0 / n))),
+            float(np.sqrt(along * settings.line_spacing * np.mean(n))))
 
 
 def simulate_world(source: BathymetryMap, track: np.ndarray, seafloor: SeafloorSettings,
@@ -253,6 +295,6 @@ def simulate_world(source: BathymetryMap, track: np.ndarray, seafloor: SeafloorS
     """The true seafloor around ``track (K, 2)`` and the prior map gridded from an earlier survey
     of it (module docstring)."""
     truth = true_seafloor(source, track, seafloor, rng=rng)
-    gridded, survey = prior_map(truth, prior, sonar, rng=rng, name=name)
+    gridded, survey, offset = prior_map(truth, prior, sonar, rng=rng, name=name)
     # drawn after the prior map: a world whose seafloor did not change is drawn as before
-    return ScenarioWorld(changed_seafloor(truth, seafloor, rng=rng), gridded, survey)
+    return ScenarioWorld(changed_seafloor(truth, seafloor, rng=rng), gridded, survey, offset)

@@ -266,3 +266,59 @@ def test_the_filter_bound_is_never_below_the_smoother_bound(monkeypatch, exact_p
         pings = np.unique(np.round(np.linspace(0, survey.n_pings - 1, 12)).astype(int))
         np.testing.assert_allclose(filt.position_cov[pings], every[pings], rtol=1e-8,
                                    atol=1e-10 * np.abs(every).max())
+
+
+@pytest.mark.parametrize("kind", ["smoother", "filter"])
+def test_the_maps_offset_is_an_unknown_the_slope_shows_as_the_vehicles_position(kind):
+    # On a plane a rigid offset o of the map is seen exactly as the vehicle's position is
+    # (g . o): the bound equals a dense solve with o two more inputs of prior std 1 m, above
+    # the bound without it.
+    survey, seabed = _survey(), _seabed()
+    model = MODEL.replace(map_offset_std=1.0)
+    a, e, tide_row, var = _design(survey, model)
+    used, turn = _soundings(survey, seabed)
+    ping, _ = np.nonzero(used)
+    h = -(np.array(SLOPE) @ a)[ping] - turn[used][:, None] * e[ping] + tide_row
+    h = np.column_stack([h, np.tile(-np.array(SLOPE), (h.shape[0], 1))])
+    var = np.r_[var, 1.0, 1.0]
+    a = np.concatenate([a, a[:, :, :2]], axis=2)  # the vehicle's position, the offset apart
+    a[:, :, -2:] = 0.0
+    keep = var > 0
+    a, h, var = a[:, :, keep], h[:, keep], var[keep]
+
+    def covariance(rows):
+        return np.linalg.inv(np.diag(1 / var) + h[rows].T @ h[rows] / model.sounding_std**2)
+
+    if kind == "smoother":
+        want = np.einsum("kap,pq,kbq->kab", a, covariance(np.arange(h.shape[0])), a)
+    else:
+        want = np.array([a[k] @ covariance(np.flatnonzero(ping <= k)) @ a[k].T
+                         for k in range(survey.n_pings)])
+    got = posterior_crb(survey, seabed, model, kind=kind).position_cov
+    scale = np.abs(want).max(axis=(1, 2), keepdims=True)
+    assert np.all(np.abs(got - want) <= 1e-8 * scale)
+    assert bound_rmse(posterior_crb(survey, seabed, MODEL, kind=kind)) < np.sqrt(
+        np.mean(np.trace(got, axis1=1, axis2=2)))
+
+
+def test_a_field_of_offsets_is_seen_through_the_slope_and_tends_to_one_offset_at_long_range():
+    survey, seabed = _survey(), _seabed()
+    north, east = survey.footprints(survey.true_pose)
+    used, _ = _soundings(survey, seabed)
+    field = map_error_field(north[used], east[used], map_error(seabed, FIELD), offset=(1.0, 200.0))
+    offsets = field.fields[-2:]
+    assert [f.through[1] for f in offsets] == [0, 1] and all(f.correlation_length == 200.0 for f in offsets)
+    for n, slope in zip((-2, -1), SLOPE, strict=True):  # the bilinear weights times the slope
+        plain = offsets[n].weights(north[used], east[used])
+        _, bilinear = map_field.MapErrorField.weights(
+            map_field.dataclasses.replace(offsets[n], through=None), north[used], east[used])
+        np.testing.assert_allclose(plain[1], slope * bilinear, rtol=1e-9)
+    # with a map whose depth is exact (nothing for the offset to take out of its error), a field
+    # of offsets of a range far beyond the survey is the one offset, and any offset raises the bound
+    rigid = bound_rmse(posterior_crb(survey, seabed, MODEL.replace(map_offset_std=5.0)))
+    for length in (1e5, 60.0, 20.0):
+        model = MODEL.replace(map_offset_std=5.0, map_offset_length=length)
+        got = bound_rmse(posterior_crb(survey, seabed, model))
+        assert got > bound_rmse(posterior_crb(survey, seabed, MODEL))
+        if length == 1e5:
+            assert got == pytest.approx(rigid, rel=1e-3)

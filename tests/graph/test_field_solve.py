@@ -116,6 +116,29 @@ def test_the_covariance_is_the_bound_of_the_same_model():
     assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < bound
 
 
+def test_with_a_field_of_map_offsets_the_covariance_is_the_bound_of_the_same_model():
+    # a map whose stated error counts its soundings' positioning (1 m) through its slope, as a
+    # gridded map's does; with that positioning error held as a field of offsets (range 150 m)
+    # instead, the solve claims what the bound of that model allows (a little more, as above),
+    # more than the depth error alone says, and the track stays within that claim
+    bathymetry = smooth_map()
+    north, east = np.meshgrid(AXIS, AXIS, indexing="ij")
+    slope = np.sum(bathymetry.gradient_at(north, east) ** 2, axis=-1)
+    bathymetry = bathymetry.replace(depth_std=np.sqrt(0.3**2 + slope), correlation_length=30.0)
+    truth, survey = lawnmower(start_error=(0.0, 0.0))
+    survey = noise_free(biased_dr(survey, truth), bathymetry)
+    model = MODEL.replace(map_offset_std=1.0, map_offset_length=150.0)
+    bound = bound_rmse(posterior_crb(survey, bathymetry, model, kind="smoother"))
+    assert bound > 1.2 * bound_rmse(posterior_crb(survey, bathymetry, MODEL, kind="smoother"))
+    config = GraphConfig().replace(smoother_terrain="field", rematch_iterations=0)
+    track = smooth_survey(survey, bathymetry, config, model=model)
+    claimed = np.sqrt(np.mean(np.trace(track.covariance[:, :2, :2], axis1=1, axis2=2)))
+    assert bound <= claimed <= 1.15 * bound
+    assert "map_offset" not in track.meta["soundings"]  # a field, not one offset
+    error = track.pose[:, :2] - truth[:, :2]
+    assert np.sqrt(np.mean(np.sum(error**2, axis=1))) < bound
+
+
 def test_a_nugget_is_shared_by_the_points_of_one_cell_of_nodes():
     # three points in one cell of nodes give each other's nuggets (row sums), a point alone keeps
     # its own; in a combined field each field's cells count apart

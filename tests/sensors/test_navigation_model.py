@@ -58,6 +58,13 @@ def test_from_survey_needs_the_settings():
     settings = {"dead_reckoning": {"speed_noise": 0.1}, "sonar": {"depth_noise": 0.2}}
     model = NavigationModel.from_survey(bare.replace(meta={"settings": settings}))
     assert model.speed_noise == 0.1 and model.sounding_std == pytest.approx(0.3)
+    assert model.map_offset_std == 0.0 and model.map_offset_length == 0.0
+    # a prior map gridded from an earlier survey states the offset its gridding kept
+    placed = {"settings": settings, "seafloor": {"map_offset_std": 1.4, "map_offset_length": 390.0}}
+    model = NavigationModel.from_survey(bare.replace(meta=placed))
+    assert model.map_offset_std == 1.4 and model.map_offset_length == 390.0
+    with pytest.raises(TangraphError, match="map_offset_length must be >= 0"):
+        NavigationModel(map_offset_length=-1.0)
 
 
 def test_toml_file_in_degrees_and_its_errors(tmp_path):

@@ -6,6 +6,7 @@ import numpy as np
 
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import (
+    MapError,
     NavigationModel,
     information_exponent,
     map_error,
@@ -139,3 +140,17 @@ def test_the_map_error_a_windows_soundings_share_in_a_fix():
     bound = (gradients * shared_among(north, east, error)[:, None]).T @ gradients
     assert np.trace(fast) < 0.2 * np.trace(bound)
     assert shared_quadratic(north[:1], east[:1], gradients[:1], error).tolist() == [[0.0, 0.0], [0.0, 0.0]]
+
+
+def test_the_offset_takes_its_part_of_the_stated_error_out_through_the_slope():
+    # a plane of slope 0.1 whose cells state 0.3 m and the 2 m positioning error's 0.2 m through
+    # the slope: held apart, the offset leaves 0.3 m; where the offset would explain more than
+    # three quarters of the stated variance, half the stated std is kept
+    axis = np.arange(0.0, 200.0, 10.0)
+    plane = BathymetryMap(axis, axis, 30.0 + 0.1 * axis[:, None] + 0 * axis)
+    stated = np.hypot(0.3, 2.0 * 0.1)
+    error = MapError(plane, np.full(plane.shape, stated), 30.0)
+    np.testing.assert_allclose(error.without_offset(2.0).std, 0.3, rtol=1e-9)
+    assert error.without_offset(0.0) is error
+    np.testing.assert_allclose(error.without_offset(20.0).std, 0.5 * stated, rtol=1e-9)
+    assert error.without_offset(2.0).correlation_length == 30.0

@@ -59,3 +59,32 @@ def test_a_change_in_patches_keeps_its_mean_square_and_has_a_heavy_tail():
 def test_bad_change_settings_are_refused(table, message):
     with pytest.raises(TangraphError, match=message):
         SeafloorSettings.from_table(table, "scenario [seafloor]")
+
+
+def test_the_offset_a_gridded_map_keeps_is_its_positioning_over_the_root_of_its_lines():
+    # one beam under each ping; three east-going lines 100 m apart, each cell under one line;
+    # then the middle line surveyed twice: its cells average two independent errors
+    from tangraph.sim.seafloor import PriorMapSettings, _offset
+    from tangraph.survey import Survey
+
+    axis = np.arange(0.0, 300.0, 10.0)
+    grid = BathymetryMap(axis, axis, np.full((30, 30), 20.0))
+    east = np.arange(0.0, 200.0, 5.0)
+    rows = [(n, e) for n in (50.0, 150.0, 250.0) for e in east]
+    pose = np.column_stack([np.array(rows), np.full(len(rows), np.pi / 2)])
+    k = pose.shape[0]
+    survey = Survey(time=np.arange(float(k)), dr_pose=pose, vehicle_depth=np.zeros(k),
+                    beam_forward=np.zeros((k, 1)), beam_starboard=np.zeros((k, 1)),
+                    beam_depth=np.full((k, 1), 20.0), true_pose=pose)
+    settings = PriorMapSettings(line_spacing=100.0, speed=2.0, position_std=1.5, position_time=60.0)
+    lines = np.repeat([0.0, 1.0, 2.0], east.size)
+    std, length = _offset(survey, lines, grid, settings)
+    assert std == pytest.approx(1.5) and length == pytest.approx(np.sqrt(240.0 * 100.0))
+    twice = np.r_[lines, np.full(east.size, 3.0)]  # the middle line again
+    again = Survey(time=np.arange(k + east.size * 1.0), dr_pose=np.r_[pose, pose[east.size:2 * east.size]],
+                   vehicle_depth=np.zeros(k + east.size), beam_forward=np.zeros((k + east.size, 1)),
+                   beam_starboard=np.zeros((k + east.size, 1)), beam_depth=np.full((k + east.size, 1), 20.0))
+    std, length = _offset(again, twice, grid, settings)
+    assert std == pytest.approx(1.5 * np.sqrt((1 + 0.5 + 1) / 3))
+    assert length == pytest.approx(np.sqrt(240.0 * 100.0 * 4 / 3))
+    assert _offset(survey, lines, grid, PriorMapSettings(position_std=0.0)) == (0.0, 0.0)
