@@ -48,7 +48,6 @@ __all__ = ["PriorMapSettings", "ScenarioWorld", "SeafloorSettings", "changed_sea
 log = logging.getLogger(__name__)
 
 
-
 def _known_keys(cls, table: dict, where: str) -> None:
     allowed = {f.name for f in dataclasses.fields(cls)}
     unknown = sorted(set(table) - allowed)
