@@ -301,6 +301,8 @@ def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str 
             continue
         # the cells the refinement changed, as a map: a sounding counts where all four around it did
         moved = np.abs(refined.depth - bathymetry.depth) > 1e-3
+        if not moved.any():  # the refinement changed no cell: nothing to check it on
+            continue
         changed = bathymetry.replace(depth=np.where(moved, 1.0, np.nan), depth_std=None)
         for other, held in march.items():
             if other == name:
