@@ -333,7 +333,7 @@ def smooth_survey(survey: Survey, bathymetry: BathymetryMap, config: GraphConfig
         log.info("re-match %d: %d fixes accepted", rounds, sum(r.accepted for r in records))
     soundings = refined = None
     if config.batch.smoother_terrain != "fixes":
-        solution, soundings, refined = terrain_solve(nav, start_kept, solution, config)
+        solution, soundings, refined = terrain_solve(nav, start_kept, solution, records, config)
         dense = dense_track(survey, nav.white, solution, nav.origin)
         log.info("terrain solve: %d of %d soundings used", soundings["soundings_used"],
                  soundings["soundings"])

@@ -6,7 +6,10 @@ each a terrain factor on a key pose at its ping (:mod:`tangraph.graph.terrain_fa
 Gauss-Newton from the fixes' solution, with a tide variable, re-linearised at every iteration;
 the soundings judged as innovations of the fixes' solution, one by one and ping by ping, again
 after each converged solve; their variances grown by the scatter of the solution's own windows
-(an a posteriori variance factor) while it moves.
+(an a posteriori variance factor) while it moves. A ping that windows refused as multimodal
+cover, and no accepted one, is left to the fixes (:func:`placed_pings`): the search found
+several places around the track there, and a linearised sounding would claim the slope's
+information about a place the track may not be.
 
 With ``"field"`` the map's error is a field of unknowns solved with the track
 (:mod:`tangraph.graph.field_solve`) instead of a variance each sounding is widened by: the
@@ -26,6 +29,7 @@ import numpy as np
 
 from tangraph.eval.map_field import map_error_field
 from tangraph.eval.windows import window_scores
+from tangraph.fix_records import FixStatus
 from tangraph.geometry import wrap_near
 from tangraph.graph import batch, field_solve, terrain_factors
 from tangraph.graph.batch import SmootherSolution
@@ -35,7 +39,7 @@ from tangraph.graph.keyposes import PoseGraph, increments
 from tangraph.graph.online import GraphNavigator
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["SOUNDING_GATE", "WINDOW", "terrain_solve"]
+__all__ = ["SOUNDING_GATE", "WINDOW", "placed_pings", "terrain_solve"]
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +54,7 @@ WINDOW = 50.0
 _FACTOR_ROUNDS = 4  # solves at most while the variance factor the windows show still moves
 
 
-def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution,
+def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution, records,
                   config: GraphConfig) -> tuple[SmootherSolution, dict, BathymetryMap | None]:  # fmt: skip
     """The batch solve with every sounding as a terrain factor instead of the fixes
     (:mod:`tangraph.graph.terrain_factors`), from ``solution``, on a key pose at every ping
@@ -58,8 +62,10 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
     and all): Gauss-Newton on the odometry, the priors (the start's if the robust solve kept
     it), the tide's and the soundings, the soundings re-gated at each converged solve; with
     ``config.batch.smoother_terrain = "field"`` and a map that states its error, the map's error
-    solved with them (:func:`_field_solve`). Returns the solution (its keys every ping), what it
-    used and the refined map (None but with ``"field"``)."""
+    solved with them (:func:`_field_solve`). The pings that windows of ``records`` refused as
+    multimodal cover, and no accepted one, are not terrain factors (:func:`placed_pings`).
+    Returns the solution (its keys every ping), what it used and the refined map (None but with
+    ``"field"``)."""
     started = _time.perf_counter()
     fixes_solution = solution
     graph = _ping_graph(nav)
@@ -81,6 +87,13 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
         start = float(np.median(finite)) if finite.size else terrain.tide
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
+    placed = placed_pings(nav, records)
+    if not placed.all():
+        log.info("terrain solve: %d of %d pings lie where windows found several places: left to the fixes",
+                 int((~placed).sum()), placed.size)
+        terrain = dataclasses.replace(terrain, depth=np.where(placed[:, None], terrain.depth, np.nan))
+        if not placed.any():
+            return _nothing_fits(fixes_solution, terrain, "every window found several places")
     if config.batch.smoother_terrain == "field" and nav.map_error is not None:
         if nav.model.map_offset_std > 0 and nav.model.map_offset_length == 0:  # one for the survey
             terrain = dataclasses.replace(terrain, map_offset_std=float(nav.model.map_offset_std))
@@ -123,11 +136,35 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
                             iterations, float(error), timings), used_info, None
 
 
-def _nothing_fits(fixes_solution: SmootherSolution, terrain) -> tuple[SmootherSolution, dict, None]:
-    """The fixes' solution when no sounding passes the gate (nothing would tie ``c`` and the
-    tide to the poses, and METIS fails on that)."""
-    log.warning("terrain solve: no sounding fits the map within %.2f sigma; the fixes' solution is kept",
-                SOUNDING_GATE)
+def placed_pings(nav: GraphNavigator, records) -> np.ndarray:
+    """The pings ``(n,)`` the terrain solve may linearise: every ping of the window of a fix of
+    ``records`` the solve accepted, and every ping that no window refused as multimodal covers
+    (``FixStatus.MULTIMODAL``: several places fit, and ``GraphConfig.fixes.accept_multimodal =
+    False`` refuses such fixes). Where the windows' search found several places around the
+    track, a Gauss-Newton solve from the fixes' solution stays in whichever dip of the map it
+    starts in and takes the slope there for information: on a flat lake shelf where 90 of 119
+    windows were multimodal, 20 000 soundings linearised along a dead-reckoned track 24 m off
+    did not move it and gave it a std of 2 m. A window with one place, or none that stands out
+    (a plane tells the position across its slope and nothing along it, its best match anywhere
+    along the slope, on the search's edge too), leaves its pings to the linearisation, which
+    weighs what their slopes tell."""
+    accepted = np.zeros(nav.survey.n_pings, bool)
+    ambiguous = np.zeros(nav.survey.n_pings, bool)
+    for record in records:
+        window = slice(max(int(nav.window_first[record.index]), 0), record.index + 1)
+        if record.accepted:
+            accepted[window] = True
+        elif record.status is FixStatus.MULTIMODAL:
+            ambiguous[window] = True
+    return accepted | ~ambiguous
+
+
+def _nothing_fits(fixes_solution: SmootherSolution, terrain,
+                  why: str = f"no sounding fits the map within {SOUNDING_GATE:.2f} sigma"
+                  ) -> tuple[SmootherSolution, dict, None]:  # fmt: skip
+    """The fixes' solution when no sounding passes the gate, or none may be linearised (nothing
+    would tie ``c`` and the tide to the poses, and METIS fails on that)."""
+    log.warning("terrain solve: %s; the fixes' solution is kept", why)
     return fixes_solution, {"soundings": int(np.isfinite(terrain.depth).sum()), "soundings_used": 0,
                             "tide": float(terrain.tide), "variance_factor": 1.0}, None
 

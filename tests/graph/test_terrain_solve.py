@@ -90,3 +90,46 @@ def test_no_sounding_on_the_map_keeps_the_fixes_solution(caplog):
     assert with_soundings.meta["soundings"]["soundings_used"] == 0
     assert "no sounding fits the map" in caplog.text
     np.testing.assert_array_equal(with_soundings.pose, with_fixes.pose)
+
+
+def test_only_pings_that_ambiguous_windows_alone_cover_are_left_out():
+    # an accepted window's pings are linearised even where another window found several places;
+    # a window with one place or none standing out (uninformative, or its best on the search's
+    # edge: a plane's strip) leaves its pings to the linearisation; a multimodal one's others
+    # are left out
+    from types import SimpleNamespace
+
+    from tangraph.fix_records import FixRecord, FixStatus
+    from tangraph.graph.terrain_solve import placed_pings
+
+    nav = SimpleNamespace(survey=SimpleNamespace(n_pings=10), window_first={3: -2, 6: 2, 9: 5})
+
+    def records(last):
+        statuses = [(3, FixStatus.MULTIMODAL), (6, FixStatus.ACCEPTED), (9, last)]
+        return [FixRecord.of(end, None, status, float("nan"), 10.0) for end, status in statuses]
+
+    kept = [False, False, True, True, True, True, True]
+    np.testing.assert_array_equal(placed_pings(nav, records(FixStatus.MULTIMODAL)), kept + [False] * 3)
+    for status in (FixStatus.UNINFORMATIVE, FixStatus.OUTSIDE_SEARCH):
+        np.testing.assert_array_equal(placed_pings(nav, records(status)), kept + [True] * 3)
+    assert placed_pings(nav, []).all()
+
+
+def test_an_egg_crate_seabed_whose_windows_fit_in_many_places_keeps_the_fixes_solution(caplog):
+    # a seabed repeating every 12 m, searched around a DR start 6 m off with 10 m stated, its
+    # multimodal fixes refused: every window fits in several places, so the soundings linearised
+    # along the DR track would each take the slope under it for information (and narrow the
+    # track to a dip of the egg crate); they are left out, and the track and its covariance are
+    # the fixes'
+    n, e = AXIS[:, None], AXIS[None, :]
+    crate = BathymetryMap(AXIS, AXIS, 50.0 + 2.0 * np.sin(np.pi * n / 6.0) * np.sin(np.pi * e / 6.0))
+    model = NavigationModel(sounding_std=0.1, tide_std=1.0, speed_noise=0.02, initial_position_std=10.0)
+    _, survey = lawnmower()
+    survey = noise_free(survey, crate)
+    with_fixes = smooth(survey, crate, "fixes", model, accept_multimodal=False)
+    assert {record.status.value for record in with_fixes.fixes} == {"multimodal"}
+    with_soundings = smooth(survey, crate, "soundings", model, accept_multimodal=False)
+    assert "every window found several places; the fixes' solution is kept" in caplog.text
+    assert with_soundings.meta["soundings"]["soundings_used"] == 0
+    np.testing.assert_array_equal(with_soundings.pose, with_fixes.pose)
+    np.testing.assert_array_equal(with_soundings.covariance, with_fixes.covariance)
