@@ -33,7 +33,7 @@ def track_report(track: Track, survey: Survey) -> dict:
                            "rejected": int(meta.get("n_fixes_rejected", 0)),
                            "by_outcome": dict(sorted(outcomes.items(), key=lambda kv: -kv[1]))}
     if "soundings" in meta:  # the smoother on every sounding
-        counts = ("soundings", "soundings_used", "field_nodes")
+        counts = ("soundings", "soundings_used", "field_nodes", "pings_left_out")
         report["soundings"] = {k: int(v) if k in counts else float(v) for k, v in meta["soundings"].items()}
     if "n_divergences" in meta:
         report["divergences"] = int(meta["n_divergences"])
@@ -69,9 +69,10 @@ def track_summary(track: Track, survey: Survey) -> str:
                      f"rejected ({detail})")
     if "soundings" in r:
         snd = r["soundings"]
+        left = snd.get("pings_left_out", 0)
+        by = f"the gate, and the {left} pings where windows found several places" if left else "the gate"
         lines.append(f"soundings    {snd['soundings_used']} of {snd['soundings']} weighed (the others left "
-                     f"out by the gate), tide {snd['tide']:+.2f} m, variances x "
-                     f"{snd['variance_factor']:.2f}^2")
+                     f"out by {by}), tide {snd['tide']:+.2f} m, variances x {snd['variance_factor']:.2f}^2")
         if "field_factor" in snd:
             lines.append(f"map error    estimated with the track on {snd['field_nodes']} nodes "
                          f"{snd['field_spacing']:.0f} m apart, its stated std x {snd['field_factor']:.2f} "

@@ -64,13 +64,29 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
     ``config.batch.smoother_terrain = "field"`` and a map that states its error, the map's error
     solved with them (:func:`_field_solve`). The pings that windows of ``records`` refused as
     multimodal cover, and no accepted one, are not terrain factors (:func:`placed_pings`).
-    Returns the solution (its keys every ping), what it used and the refined map (None but with
-    ``"field"``)."""
+    Returns the solution (its keys every ping), what it used (``soundings``, all of them;
+    ``soundings_used``; ``pings_left_out``; the tide and the variance factors) and the refined
+    map (None but with ``"field"``)."""
+    placed = placed_pings(nav, records)
+    if not placed.all():
+        log.info("terrain solve: %d of %d pings lie where windows found several places: left to the fixes",
+                 int((~placed).sum()), placed.size)
+    solved, used, refined = _solve(nav, start_kept, solution, placed, config)
+    used.update(soundings=int(np.isfinite(nav.survey.beam_depth).sum()), pings_left_out=int((~placed).sum()))
+    return solved, used, refined
+
+
+def _solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution, placed: np.ndarray,
+           config: GraphConfig) -> tuple[SmootherSolution, dict, BathymetryMap | None]:  # fmt: skip
+    """:func:`terrain_solve` with the soundings of the pings ``placed``."""
     started = _time.perf_counter()
     fixes_solution = solution
     graph = _ping_graph(nav)
     terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
                                            nav.origin, graph.calibrated)
+    terrain = dataclasses.replace(terrain, depth=np.where(placed[:, None], terrain.depth, np.nan))
+    if not placed.any():
+        return _nothing_fits(fixes_solution, terrain, "every window found several places")
     factors = graph.with_fixes([], start=start_kept).factor_graph()
     world, world_cov = batch.dense_track(nav.survey, nav.white, solution, nav.origin)
     # the soundings are judged as innovations of the fixes' solution, whose uncertainty this is
@@ -87,13 +103,6 @@ def terrain_solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolut
         start = float(np.median(finite)) if finite.size else terrain.tide
         values.insert(TIDE, np.array([start]))
     state = _unpack(values, terrain, solution.pose)
-    placed = placed_pings(nav, records)
-    if not placed.all():
-        log.info("terrain solve: %d of %d pings lie where windows found several places: left to the fixes",
-                 int((~placed).sum()), placed.size)
-        terrain = dataclasses.replace(terrain, depth=np.where(placed[:, None], terrain.depth, np.nan))
-        if not placed.any():
-            return _nothing_fits(fixes_solution, terrain, "every window found several places")
     if config.batch.smoother_terrain == "field" and nav.map_error is not None:
         if nav.model.map_offset_std > 0 and nav.model.map_offset_length == 0:  # one for the survey
             terrain = dataclasses.replace(terrain, map_offset_std=float(nav.model.map_offset_std))

@@ -131,5 +131,11 @@ def test_an_egg_crate_seabed_whose_windows_fit_in_many_places_keeps_the_fixes_so
     with_soundings = smooth(survey, crate, "soundings", model, accept_multimodal=False)
     assert "every window found several places; the fixes' solution is kept" in caplog.text
     assert with_soundings.meta["soundings"]["soundings_used"] == 0
+    assert with_soundings.meta["soundings"]["soundings"] == survey.beam_depth.size
+    assert with_soundings.meta["soundings"]["pings_left_out"] == survey.n_pings
     np.testing.assert_array_equal(with_soundings.pose, with_fixes.pose)
     np.testing.assert_array_equal(with_soundings.covariance, with_fixes.covariance)
+    from tangraph.navigation import track_summary
+
+    assert f"0 of {survey.beam_depth.size} weighed (the others left out by the gate, and the " \
+        f"{survey.n_pings} pings where windows found several places)" in track_summary(with_soundings, survey)
