@@ -8,7 +8,7 @@ Configs are frozen dataclasses validated in ``__post_init__``: a bad value raise
 from __future__ import annotations
 
 import dataclasses
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
@@ -205,6 +205,12 @@ class PMFConfig:
         Gauss-Hermite nodes of the calibration bank along the principal axes of the
         calibration's covariance (first: the speed scale's, second: the heading error's; 1 on an
         axis whose std is 0, whatever is asked).
+    calibration : {"bank", "points"}
+        How the DR's constant errors are held: ``"bank"``, the Gauss-Hermite bank of
+        ``calibration_points`` nodes, each with its own grid; ``"points"``, one grid whose every
+        point carries the calibration's Gaussian posterior given that the vehicle is there
+        (Rao-Blackwellised, :mod:`tangraph.filters.pmf_points`: one grid to weigh, and a heading
+        error that changes at turns keeps one continuous density).
     lost_alpha, lost_pings : float, int
         A ping is inconsistent when its innovation is beyond the ``1 - lost_alpha`` chi-square
         quantile; ``lost_pings`` in a row flag the filter lost.
@@ -240,6 +246,7 @@ class PMFConfig:
     grid_sigmas: float = 5.0
     min_spacing: float = 0.01
     calibration_points: tuple[int, int] = (3, 3)
+    calibration: Literal["bank", "points"] = "bank"
     lost_alpha: float = 1e-3
     lost_pings: int = 5
     ping_gate: bool = False
@@ -260,6 +267,8 @@ class PMFConfig:
                 or any(isinstance(p, bool) or not isinstance(p, (int, np.integer)) or p < 1 for p in points)):
             raise TangraphError(f"PMFConfig.calibration_points must be two integers >= 1, got {points!r}")
         object.__setattr__(self, "calibration_points", (int(points[0]), int(points[1])))
+        if self.calibration not in ("bank", "points"):
+            raise TangraphError(f"PMFConfig.calibration must be 'bank' or 'points', got {self.calibration!r}")
         check_number(self, "lost_alpha", low=0.0, open_low=True, high=0.5)
         check_count(self, "lost_pings", low=1)
         object.__setattr__(self, "ping_gate", bool(self.ping_gate))

@@ -79,6 +79,7 @@ from typing import Any
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.filters import pmf_points
 from tangraph.filters.belief import Belief
 from tangraph.filters.config import PMFConfig
 from tangraph.filters.likelihood import FilterDivergence, log_normalise
@@ -106,7 +107,9 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     around ``centre``, the calibration and the tide at their priors."""
     cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)
     cal_std = np.asarray(navigation.calibration_std, dtype=np.float64)
-    nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2), config.calibration_points)
+    per_point = config.calibration == "points"
+    nodes, log_weight = _place_nodes(cal_mean, np.diag(cal_std**2),
+                                     (1, 1) if per_point else config.calibration_points)
     s = navigation.initial_position_std if std is None else std
     axes = grid.axes(np.eye(2) * s**2)
     h = (grid.n - 1) / 2.0
@@ -116,14 +119,29 @@ def _start(navigation: NavigationModel, centre: np.ndarray, grid: _Grid, config:
     density = (log_weight[:, None] + log_p[None]).reshape(len(nodes), grid.n, grid.n)
     _, log_total = log_normalise(density.ravel(), where="pmf")
     area = float(abs(np.linalg.det(axes)))
-    return PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
-                     density - log_total - np.log(area), np.full(density.shape, navigation.tide),
-                     navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
-                     (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape))
+    state = PointMass(nodes, log_weight, np.tile(centre, (len(nodes), 1)), axes,
+                      density - log_total - np.log(area), np.full(density.shape, navigation.tide),
+                      navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, np.diag(cal_std**2)),
+                      (cal_mean, cal_std), tide_drift=TideDrift.start(navigation, density.shape))
+    return _per_point(state, cal_mean, np.diag(cal_std**2)) if per_point else state
+
+
+def _per_point(state: PointMass, cal_mean: np.ndarray, cal_cov: np.ndarray) -> PointMass:
+    """``state`` (one member) with every point's calibration at ``(cal_mean, cal_cov)``."""
+    size = state.log_density.size
+    state.point_cal = np.tile(cal_mean, (size, 1))
+    state.shift = np.zeros((size, 2))
+    state.joint = pmf_points.start_joint(cal_cov)
+    return state
 
 
 def _predict(state: PointMass, ping: Ping, model: FilterModel) -> None:
     if ping.first:
+        return
+    if state.point_cal is not None:
+        pmf_points.predict(state, ping, model.motion)
+        state.tide, state.tide_var, state.tide_drift = predict_tide(
+            state.tide, state.tide_var, state.tide_drift, model.navigation, ping)
         return
     step = rotate(-state.nodes[:, 1], np.broadcast_to(ping.increment, state.centres.shape))
     state.centres = state.centres + step / (1.0 + state.nodes[:, 0])[:, None]
@@ -150,7 +168,7 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     weights = np.exp(log_mass)
     points = np.take(state.points(), live, axis=0)
     tide = state.tide.ravel()[live]
-    turn = state.nodes[live // (state.n * state.n), 1]
+    turn = state.heading_errors()[live]
     resolution = float(np.trace(state.axes.T @ slope @ state.axes)) / 12.0
     update = model.terrain.evaluate(
         points, tide, state.tide_var, ping, turn, weights=weights, scale=state.misfit,
@@ -234,11 +252,12 @@ def _relocalised(state: PointMass, bathymetry: BathymetryMap, navigation: Naviga
     cal_mean = np.asarray(navigation.calibration_prior, dtype=np.float64)  # a lost filter's: suspect
     cal_cov = np.diag(np.asarray(navigation.calibration_std, dtype=np.float64) ** 2)
     area = float(abs(np.linalg.det(axes))) * n * n
-    return PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
-                     np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
-                     navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
-                     (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit,
-                     TideDrift.start(navigation, (1, n, n)))
+    out = PointMass(cal_mean[None, :], np.zeros(1), (0.5 * (low + high))[None, :], axes,
+                    np.full((1, n, n), -np.log(area)), np.full((1, n, n), navigation.tide),
+                    navigation.tide_variance, np.zeros((2, 2)), 0.0, (cal_mean, cal_cov),
+                    (cal_mean, np.sqrt(np.maximum(np.diag(cal_cov), 0.0))), state.misfit,
+                    TideDrift.start(navigation, (1, n, n)))
+    return _per_point(out, cal_mean, cal_cov) if config.calibration == "points" else out
 
 
 @dataclasses.dataclass(eq=False)
@@ -282,9 +301,24 @@ class _Run:
             self.off_map_steps.append(ping.index)
         if check is not None or update is False:
             state = self.lost_test(state, ping, check, update)
+        if state.point_cal is not None:
+            return self.regrid_points(state)
         if self.grid.needs_regrid(state, state.within()) or (self.estimate and _calibration_moved(state)):
             state = _regrid(state, self.grid, self.config, self.estimate)
             self.n_regrids += 1
+        return state
+
+    def regrid_points(self, state: PointMass) -> PointMass:
+        """With the calibration per point: a new grid when the density needs one, else the same
+        grid once the points' shared spread reaches half a step
+        (:func:`~tangraph.filters.pmf_points.regrid`)."""
+        spread = state.joint[:2, :2] if state.joint is not None else np.zeros((2, 2))
+        if self.grid.needs_regrid(state, state.within() + spread):
+            self.n_regrids += 1
+            return pmf_points.regrid(state, self.grid)
+        inv = np.linalg.inv(state.axes)
+        if np.max(np.linalg.eigvalsh(inv @ spread @ inv.T)) >= pmf_points.SPREAD:
+            return pmf_points.regrid(state, self.grid, keep=True)
         return state
 
     def reopen(self, state: PointMass, ping: Ping) -> PointMass:
@@ -359,7 +393,8 @@ def _check_memory(config: PMFConfig, n_beams: int) -> None:
     machine's memory (every point of every calibration node holds a few values and, while a ping
     is weighed, one residual per sounding)."""
     total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    grids = [("grid_points", config.grid_points, math.prod(config.calibration_points))]
+    nodes = 1 if config.calibration == "points" else math.prod(config.calibration_points)
+    grids = [("grid_points", config.grid_points, nodes)]
     if config.relocalise:
         grids.append(("relocalise_points", config.relocalise_points, 1))
     for name, points, nodes in grids:
@@ -381,8 +416,8 @@ def start_run(survey: Survey, bathymetry: BathymetryMap, navigation: NavigationM
     _check_memory(config, survey.beam_depth.shape[1])
     filter_model = FilterModel.from_model(navigation, bathymetry)
     grid = _Grid(config, config.min_spacing)
-    estimate = any(c > 1 and s > 0
-                   for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
+    estimate = config.calibration == "bank" and any(
+        c > 1 and s > 0 for c, s in zip(config.calibration_points, navigation.calibration_std, strict=True))
     state = _start(navigation, survey.dr_pose[0, :2].astype(np.float64), grid, config)
     state.misfit = filter_model.misfit_prior()
     run = _Run(bathymetry, navigation, filter_model, config, grid, slope_moment(bathymetry), estimate)

@@ -36,7 +36,7 @@ _SPREAD_RATIO = 1.6
 _DEPENDS = {
     "offsets": ("axes",),  # and the grid's size: in its key
     "masses": ("log_density",),
-    "member_moments": ("log_density", "nodes", "axes", "centres"),
+    "member_moments": ("log_density", "nodes", "axes", "centres", "shift"),
     "member_log_mass": ("log_density", "nodes", "axes"),
 }
 
@@ -54,7 +54,11 @@ class PointMass:
     its log mass at placement; ``placed (mean, std)`` is the Gaussian the nodes were placed on;
     ``misfit`` the local misfit scale the density shares (:mod:`tangraph.sensors.misfit`; None:
     the stated errors trusted); ``tide_drift`` the drifting part of the points' tide posteriors
-    (:mod:`tangraph.filters.tide`, its mean ``(M, n, n)``; None: a constant tide)."""
+    (:mod:`tangraph.filters.tide`, its mean ``(M, n, n)``; None: a constant tide). With the
+    calibration held per point (:mod:`tangraph.filters.pmf_points`; one member) ``point_cal (n *
+    n, 2)`` is each point's calibration mean, ``shift (n * n, 2)`` its move since the grid was
+    laid and ``joint (4, 4)`` the covariance of the position's deviation since then and the
+    calibration's, which the points share (None, None, None with the bank)."""
 
     nodes: np.ndarray
     node_base: np.ndarray
@@ -69,6 +73,9 @@ class PointMass:
     placed: tuple[np.ndarray, np.ndarray]
     misfit: MisfitScale | None = None
     tide_drift: TideDrift | None = None
+    point_cal: np.ndarray | None = None
+    shift: np.ndarray | None = None
+    joint: np.ndarray | None = None
     # what the methods below derive from the fields (read-only arrays), each dropped when a field
     # it depends on (_DEPENDS) is set: the fields are replaced, never changed in place
     _cache: dict[str, np.ndarray | tuple[np.ndarray, ...]] = dataclasses.field(
@@ -106,7 +113,8 @@ class PointMass:
     def points(self) -> np.ndarray:
         """Every member's points, ``(M * n * n, 2)``."""
         offsets = self.offsets()  # (the same sums as broadcasting, a faster layout)
-        return np.tile(offsets, (len(self.centres), 1)) + np.repeat(self.centres, len(offsets), axis=0)
+        points = np.tile(offsets, (len(self.centres), 1)) + np.repeat(self.centres, len(offsets), axis=0)
+        return points if self.shift is None else points + self.shift
 
     @property
     def cell_area(self) -> float:
@@ -130,7 +138,7 @@ class PointMass:
         # principal axes (the grid's, at a re-grid) are chosen by its round-off
         mass = self.masses().reshape(len(self.nodes), -1)
         weight = mass.sum(axis=1)
-        offsets = self.offsets()
+        offsets = self.offsets() if self.shift is None else self.offsets() + self.shift
         with np.errstate(invalid="ignore", divide="ignore"):
             w = np.where(weight[:, None] > 0, mass / weight[:, None], 0.0)
         local = w @ offsets
@@ -150,7 +158,7 @@ class PointMass:
         total = weight @ mean
         d = mean - total
         pooled = np.einsum("m,mij->ij", weight, cov) + (d * weight[:, None]).T @ d
-        return total, pooled + self.pending
+        return total, pooled + (self.pending if self.joint is None else self.joint[:2, :2])
 
     def member_log_mass(self) -> np.ndarray:
         """Each member's log mass ``(M,)`` (computed in logs: no underflow however unlikely)."""
@@ -163,9 +171,21 @@ class PointMass:
         with np.errstate(divide="ignore"):
             return safe + np.log(np.sum(np.exp(flat - safe[:, None]), axis=1)) + np.log(self.cell_area)
 
+    def heading_errors(self) -> np.ndarray:
+        """Every point's heading error ``(M * n * n,)`` (its member's node's, or its own)."""
+        if self.point_cal is not None:
+            return self.point_cal[:, 1]
+        return np.repeat(self.nodes[:, 1], self.n * self.n)
+
     def calibration(self) -> tuple[np.ndarray, np.ndarray]:
         """The calibration's posterior mean ``(2,)`` and covariance ``(2, 2)``: the prior at
-        placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`)."""
+        placement times the evidence since, fitted at the nodes (:func:`_evidence_fit`); with
+        the calibration per point, the points' mixture."""
+        if self.point_cal is not None and self.joint is not None:
+            w = self.masses().ravel()
+            mean = w @ self.point_cal
+            d = self.point_cal - mean
+            return mean, self.joint[2:, 2:] + (d * w[:, None]).T @ d
         return _evidence_fit(self.nodes, self.member_log_mass() - self.node_base, *self.prior)[:2]
 
 
