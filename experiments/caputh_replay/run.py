@@ -374,7 +374,7 @@ def estimator(cfg: dict, case: str, method: str):
     config = default_config(method)
     if hasattr(config, "n_particles"):  # the point-mass filter has no particles
         config = dataclasses.replace(config, n_particles=cfg["filters"]["n_particles"])
-    return model, config
+    return model, dataclasses.replace(config, **cfg["filters"].get(method, {}))  # [filters.METHOD]
 
 
 def scores(track, survey, gps_std: float) -> dict:
