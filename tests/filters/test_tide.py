@@ -78,6 +78,7 @@ def test_every_filter_carries_its_tide_posterior_through_the_drift(drift):
         tide = np.linspace(0.0, 2.0, 20).reshape(1, 4, 5)
         tide_var = 0.3
         tide_drift = TideDrift(np.linspace(-0.5, 0.5, 20).reshape(1, 4, 5), 0.02, 0.05)
+        point_cal = None  # the bank's state
 
     grid = State()
     _predict(grid, ping(1, [40.0], dt=10.0), model)  # type: ignore[arg-type]
