@@ -7,20 +7,23 @@ there: the Rao-Blackwellised point-mass filter (Šmídl and Gašperin, "Rao-Blac
 mass filter for reliable state estimation", FUSION 2013), the position's density non-parametric
 and the calibration, which only moves the position linearly over a short stretch, Gaussian.
 
-- **Between re-grids** each point moves by the DR increment calibrated with its own mean,
+- **Between convolutions** each point moves by the DR increment calibrated with its own mean,
   ``R(-b_i) u / (1 + k_i)`` (the points part as their calibrations differ: the grid shears), and
-  one joint covariance of the position's deviation since the re-grid and the calibration's,
+  one joint covariance of the position's deviation since the last and the calibration's,
   ``[[S_xx, S_xc], [S_cx, S_cc]]``, shared by the points, grows as a Kalman prediction: the
   white DR noise into ``S_xx``, the heading walk into ``S_cc``, and the calibration's effect
   ``J c`` (``J`` the increment's derivative at the mean calibration) into both and their
   correlation.
-- **A re-grid** (once ``S_xx`` reaches 0.7 grid spacings, or when the density needs a new grid)
-  spreads every point's mass over the new grid's points by the Gaussian of ``S_xx``, at least
-  0.7 steps wide (normalised per point: no mass is lost), and gives each new point the
-  calibration conditioned on having arrived there, ``c_i + S_cx S_xx^-1 (x_j - x_i)`` with
-  ``S_cc - S_cx S_xx^-1 S_xc``; a new point's calibration is the moment match of what arrives
-  (the spread of the arriving means joins the shared ``S_cc``: no variance is lost). The tide
-  means are carried as the density is (interpolated, as the bank's re-grid does).
+- **A convolution** (once ``S_xx`` reaches half a grid step, and before every new lattice)
+  fits the lattice to the points as they have moved (:func:`refit`) and spreads every point's
+  mass over its neighbours by a lattice kernel of covariance ``S_xx`` exactly (:func:`_kernel`;
+  at least ``CELL`` each way), each arrival's calibration conditioned on where it arrives,
+  ``c_i + S_cx S_xx^-1 (x_j - x_i)`` with ``S_cc - S_cx S_xx^-1 S_xc``; a point's calibration is
+  the moment match of what arrives (the spread of the arriving means joins the shared ``S_cc``,
+  so the calibration's variance is kept), as are its tide means (their spread joins the tide's
+  variance). Points of negligible mass hold the mixture's mean calibration (``NEGLIGIBLE``).
+- **A new lattice** (when the density needs one, as the bank's) reads the density by cubic
+  splines and the calibration and tide means as ratios of bilinear ones.
 
 A heading error that may change at every turn only widens ``S_cc``: the points it moves apart
 stay one continuous density, which the terrain weighs, where the bank's nodes parted into
