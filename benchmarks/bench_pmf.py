@@ -7,8 +7,8 @@ One survey of a scenario (default ``demo``: 1256 pings of 101 soundings) navigat
 1000 particles (the reference, seeded) and by the PMF at its default grid (31 x 31 points per
 calibration node, 3 x 3 nodes), with its calibration per point (``calibration="points"``) and
 at coarser settings. Printed: CPU ms per ping (best of R after a warm-up, this process), its
-ratio to the PF's measured in the same run, and each run's RMSE and final NEES (the goal: the PMF's time per ping at most the PF's at equal or better
-RMSE).
+ratio to the PF's measured in the same run, and each run's RMSE and final NEES (the goal: the
+PMF's time per ping at most the PF's at equal or better RMSE).
 
 2. Relocalisation: one ping of 101 soundings weighed on the global grid (201 x 201 points) over a
    5 x 5 km fractal map of 10 m cells (the goal: under 1 s), against one ping of the default
