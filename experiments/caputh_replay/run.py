@@ -62,10 +62,14 @@ def _import(cfg: dict, data: Path, path: Path, dr_heading: str = "boat"):
     January runs' vertical beams too)."""
     survey = import_run(str(path), str(data / "waterlevel.csv"), dr_heading,
                         tuple(sorted(cfg["import"].items())))
-    if not cfg.get("sounder", {}).get("single_beam", False):
+    if not _single_beam(cfg):
         return survey
     return survey.replace(beam_forward=survey.beam_forward[:, :1],
                           beam_starboard=survey.beam_starboard[:, :1], beam_depth=survey.beam_depth[:, :1])
+
+
+def _single_beam(cfg: dict) -> bool:
+    return bool(cfg.get("sounder", {}).get("single_beam", False))
 
 
 def build_map(cfg: dict, data: Path):
@@ -581,7 +585,7 @@ def main(argv=None) -> int:
     checks = {
         "dr_drift_300s_m": {p.stem: _import(cfg, args.data, p).meta["dr_drift_300s_m"]
                             for p in sorted(args.data.glob("*.sum"))},
-        "slant_beams": [] if cfg.get("sounder", {}).get("single_beam") else beam_check(cfg, args.data),
+        "slant_beams": [] if _single_beam(cfg) else beam_check(cfg, args.data),
         "terrain": {name: terrain(in_map(s, bathymetry), bathymetry, cfg["graph"]["fixes"]["n_pings"])
                     for name, s in march.items()},
         "check_lines": check_lines(cfg, args.data, bathymetry, march),

@@ -24,41 +24,47 @@ from tests.filters.linear_gaussian import (
 from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 
+@pytest.mark.parametrize("calibration", ["bank", "points"])
 @pytest.mark.parametrize(("seed", "tide_sd"), [(0, 0.0), (2, 3.0)])
-def test_the_pmf_matches_the_kalman_filter(seed, tide_sd):
+def test_the_pmf_matches_the_kalman_filter(seed, tide_sd, calibration):
     """Deterministic, so the tolerance is the grid's (31 points over +-5 std: at most 0.08 std
     on the mean and 3.1 % on the variance in seeds 0-2): a tenth of a posterior std on the mean,
-    5 % on the variance."""
+    5 % on the variance; the same with the calibration per point (nothing to learn here)."""
     q, sigma, p0 = 2.0, 1.0, 30.0
     survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
     x_kf, p_kf, _ = kalman(survey, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
     model = linear_model(q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
-    track = point_mass_filter(survey, sloped_seabed(), model=model)
+    track = point_mass_filter(survey, sloped_seabed(), PMFConfig(calibration=calibration), model=model)
     x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
     assert np.all(np.abs(x - x_kf) < 0.1 * np.sqrt(np.diag(p_kf))), (x, x_kf)
     np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.05)
 
 
-def test_the_pmf_with_a_speed_scale_matches_the_exact_posterior():
-    """A DVL reading 4 % fast (prior std of k 3 %): the bank's position and k against the exact
+@pytest.mark.parametrize(("calibration", "k_tol", "k_sd_rtol"), [("bank", 0.4, 0.1), ("points", 0.5, 0.12)])
+def test_the_pmf_with_a_speed_scale_matches_the_exact_posterior(calibration, k_tol, k_sd_rtol):
+    """A DVL reading 4 % fast (prior std of k 3 %): the position and k against the exact
     mixture of Kalman filters over quadrature nodes of k. The bank's error is its quadrature and
     its Gaussian re-placements: in seeds 5-6 at pings 10, 30, 59 at most 0.13 std on the
-    position, 8 % on its variance, 0.33 std on k and 8 % on its std (the 3 x 3 default)."""
+    position, 8 % on its variance, 0.33 std on k and 8 % on its std (the 3 x 3 default). The
+    calibration per point learns only where its shared spread is convolved in and the lattice
+    rounds it: in seed 5 the position is 0.07 std off with 5-6 % more variance, k 0.37 std off
+    with a std 8 % small."""
     q, sigma, p0, scale_sd = 0.5, 1.0, 30.0, 0.03
     survey = linear_gaussian_run(5, k=60, q=q, sigma=sigma, p0=p0, scale=0.04)
     x_kf, p_kf, k_kf, k_sd = kalman_mixture(survey, q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
     model = linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
-    track = point_mass_filter(survey, sloped_seabed(), model=model)
+    track = point_mass_filter(survey, sloped_seabed(), PMFConfig(calibration=calibration), model=model)
     x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
     assert np.all(np.abs(x - x_kf) < 0.2 * np.sqrt(np.diag(p_kf))), (x, x_kf)
     np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.1)
-    calibration = track.meta["calibration"]
-    assert abs(calibration["speed_scale"] - k_kf) < 0.4 * k_sd, (calibration, k_kf)
-    np.testing.assert_allclose(calibration["speed_scale_std"], k_sd, rtol=0.1)
+    found = track.meta["calibration"]
+    assert abs(found["speed_scale"] - k_kf) < k_tol * k_sd, (found, k_kf)
+    np.testing.assert_allclose(found["speed_scale_std"], k_sd, rtol=k_sd_rtol)
     assert k_sd < 0.5 * scale_sd  # the soundings did teach the filter the scale
 
 
-def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
+@pytest.mark.parametrize("calibration", ["bank", "points"])
+def test_on_a_flat_seabed_the_density_is_the_dead_reckonings(calibration):
     """No terrain information: the density is the DR's, a mixture over the unknown speed scale
     of the white-noise Gaussians around ``x_0 + S / (1 + k)`` (exact moments from 80
     Gauss-Hermite nodes; the bank's 3 x 3 nodes and grids within 2 % on the variance)."""
@@ -68,7 +74,8 @@ def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
     survey = survey.replace(beam_depth=500.0 + noise)  # soundings of the flat seabed
     flat = sloped_seabed()
     flat = dataclasses.replace(flat, depth=np.full(flat.depth.shape, 500.0))
-    track = point_mass_filter(survey, flat, model=linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd))
+    track = point_mass_filter(survey, flat, PMFConfig(calibration=calibration),
+                              model=linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd))
     z, w = np.polynomial.hermite_e.hermegauss(80)
     w = w / w.sum()
     run = survey.dr_pose[-1, :2] - survey.dr_pose[0, :2]
@@ -81,22 +88,23 @@ def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
     assert track.meta["calibration"]["speed_scale_std"] == pytest.approx(scale_sd, rel=0.02)
 
 
-def test_the_pmf_finds_the_vehicle_and_its_calibration_on_rough_terrain():
+@pytest.mark.parametrize("calibration", ["bank", "points"])
+def test_the_pmf_finds_the_vehicle_and_its_calibration_on_rough_terrain(calibration):
     """A multibeam run over rough terrain with a DR 3 deg off and 2 % fast: the density ends near
     the truth, with the truth inside its covariance and the heading error found."""
     bathymetry = rough_map(1)
     dr = DeadReckoningModel(heading_bias=np.radians(3.0), speed_scale=0.02, speed_noise=0.05)
     survey = multibeam_survey(bathymetry, seed=4, pings=120, dr_model=dr)
     model = navigation(survey)
-    track = point_mass_filter(survey, bathymetry, model=model)
+    track = point_mass_filter(survey, bathymetry, PMFConfig(calibration=calibration), model=model)
     error = track.pose[-1, :2] - survey.true_pose[-1, :2]
     dr_error = survey.dr_pose[-1, :2] - survey.true_pose[-1, :2]
     assert np.hypot(*error) < 0.1 * np.hypot(*dr_error), (error, dr_error)
     assert error @ np.linalg.solve(track.covariance[-1, :2, :2], error) < 13.8  # chi2(2) at 0.999
-    calibration = track.meta["calibration"]
+    found = track.meta["calibration"]
     truth = survey.dr_pose[-1, 2] - survey.true_pose[-1, 2]
-    assert abs(calibration["heading_error"] - truth) < 3 * calibration["heading_error_std"]
-    assert calibration["heading_error_std"] < 0.5 * model.calibration_std[1]
+    assert abs(found["heading_error"] - truth) < 3 * found["heading_error_std"]
+    assert found["heading_error_std"] < 0.5 * model.calibration_std[1]
 
 
 def test_a_survey_off_the_map_keeps_the_dead_reckoning_and_says_so():
@@ -165,7 +173,8 @@ def test_the_spacing_floor_is_honoured():
     assert across[2.0] > 2.0 * across[0.01]
 
 
-def test_a_start_far_off_is_found_again_on_the_global_grid():
+@pytest.mark.parametrize("calibration", ["bank", "points"])
+def test_a_start_far_off_is_found_again_on_the_global_grid(calibration):
     """The DR starts 200 m from the truth while the model says 10 m: the filter finds itself
     lost, starts afresh on the global grid over the map and ends at the truth, with no pose
     confidently wrong unflagged (NEES over 20 only where it said it was lost) after the first
@@ -174,7 +183,8 @@ def test_a_start_far_off_is_found_again_on_the_global_grid():
     survey = multibeam_survey(bathymetry, seed=4, pings=80)
     shifted = survey.replace(dr_pose=survey.dr_pose + np.array([150.0, -130.0, 0.0]))
     model = navigation(shifted)
-    track = point_mass_filter(shifted, bathymetry, PMFConfig(relocalise=True), model=model)
+    config = PMFConfig(relocalise=True, calibration=calibration)
+    track = point_mass_filter(shifted, bathymetry, config, model=model)
     assert track.meta["relocalisation_steps"], track.meta
     error = track.pose[-1, :2] - shifted.true_pose[-1, :2]
     assert np.hypot(*error) < 3.0, error
@@ -185,22 +195,28 @@ def test_a_start_far_off_is_found_again_on_the_global_grid():
     assert not np.any(((nees > 20) & ~flagged)[1:]), np.flatnonzero((nees > 20) & ~flagged)
 
 
+@pytest.mark.parametrize("calibration", ["bank", "points"])
 @pytest.mark.parametrize("seed", [2, 3])
-def test_the_ping_gate_keeps_a_block_of_biased_depths_out(seed):
+def test_the_ping_gate_keeps_a_block_of_biased_depths_out(seed, calibration):
     """A block of 20 pings whose depths are all 3-10 m off drags the density of the plain filter
-    metres off for good; with the ping gate exactly that block is gated and the track stays
-    where the clean pings put it."""
+    with the bank metres off for good; with the ping gate exactly that block is gated and the
+    track stays where the clean pings put it. (With the calibration per point the plain filter
+    ends 1.1 and 2.4 m off in these seeds, the gated one 1.6 m: the gate is not what saves it
+    here, so only the gating is asserted.)"""
     bathymetry = rough_map(1)
     survey = multibeam_survey(bathymetry, seed=4, pings=120)
     model = navigation(survey)
     bad = outlier_blocks(survey, "depth_bias", 20 / 120, rng=np.random.default_rng(seed))
     final = {}
     for gate in (False, True):
-        track = point_mass_filter(bad, bathymetry, PMFConfig(ping_gate=gate), model=model)
+        config = PMFConfig(ping_gate=gate, calibration=calibration)
+        track = point_mass_filter(bad, bathymetry, config, model=model)
         final[gate] = float(np.hypot(*(track.pose[-1, :2] - bad.true_pose[-1, :2])))
     gated = track.meta["gated_steps"]
     assert len(gated) == 20 and np.ptp(gated) == 19, gated
-    assert final[True] < 2.0 and final[False] > 3.0 * final[True], final
+    assert final[True] < 2.0, final
+    if calibration == "bank":
+        assert final[False] > 3.0 * final[True], final
 
 
 def test_a_start_on_biased_depths_is_undone_by_putting_the_tide_back_at_its_prior():

@@ -1,7 +1,7 @@
-"""The point-mass filter with its calibration per point (``PMFConfig(calibration="points")``,
+"""The point-mass filter's calibration per point (``PMFConfig(calibration="points")``,
 :mod:`tangraph.filters.pmf_points`): its lattice kernel's moments, a convolution's conservation,
-and the filter against the exact answers the bank is held to (Kalman filter, the exact mixture
-posterior of an unknown speed scale, the DR's spread on a flat seabed)."""
+the tails' calibration. The filter itself is held to the bank's exact answers in
+``tests/filters/test_pmf.py`` (each case run with both)."""
 
 from __future__ import annotations
 
@@ -12,17 +12,12 @@ import pytest
 
 from tangraph.filters import PMFConfig
 from tangraph.filters import pmf_points as pp
-from tangraph.filters.pmf import point_mass_filter, start_run
-from tangraph.sensors import DeadReckoningModel
-from tangraph.sim.faults import outlier_blocks
+from tangraph.filters.pmf import start_run
 from tests.filters.linear_gaussian import (
-    kalman,
-    kalman_mixture,
     linear_gaussian_run,
     linear_model,
     sloped_seabed,
 )
-from tests.filters.synthetic import multibeam_survey, navigation, rough_map
 
 POINTS = PMFConfig(calibration="points")
 
@@ -86,80 +81,6 @@ def test_a_convolution_keeps_the_mass_the_mean_and_the_calibrations_spread():
     np.testing.assert_allclose(new_cal_cov, cal_cov, rtol=0.02, atol=1e-12)
 
 
-@pytest.mark.parametrize(("seed", "tide_sd"), [(0, 0.0), (2, 3.0)])
-def test_with_no_calibration_to_learn_it_matches_the_kalman_filter(seed, tide_sd):
-    """As the bank's test: a tenth of a posterior std on the mean, 5 % on the variance."""
-    q, sigma, p0 = 2.0, 1.0, 30.0
-    survey = linear_gaussian_run(seed, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
-    x_kf, p_kf, _ = kalman(survey, q=q, sigma=sigma, p0=p0, tide_sd=tide_sd)
-    track = point_mass_filter(survey, sloped_seabed(), POINTS,
-                              model=linear_model(q=q, sigma=sigma, p0=p0, tide_sd=tide_sd))
-    x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
-    assert np.all(np.abs(x - x_kf) < 0.1 * np.sqrt(np.diag(p_kf))), (x, x_kf)
-    np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.05)
-    assert track.meta["n_points"] == 31**2
-
-
-def test_an_unknown_speed_scale_matches_the_exact_posterior():
-    """A DVL reading 4 % fast (prior std 3 %), against the exact mixture of Kalman filters. The
-    per-point calibration is learnt only where the shared spread is convolved in (a few times a
-    minute here) and the lattice rounds it: in seed 5 the position is 0.07 std off with 5-6 %
-    more variance, ``k`` 0.37 std off with a std 8 % small."""
-    q, sigma, p0, scale_sd = 0.5, 1.0, 30.0, 0.03
-    survey = linear_gaussian_run(5, k=60, q=q, sigma=sigma, p0=p0, scale=0.04)
-    x_kf, p_kf, k_kf, k_sd = kalman_mixture(survey, q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
-    track = point_mass_filter(survey, sloped_seabed(), POINTS,
-                              model=linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd))
-    x, p = track.pose[-1, :2], track.covariance[-1, :2, :2]
-    assert np.all(np.abs(x - x_kf) < 0.2 * np.sqrt(np.diag(p_kf))), (x, x_kf)
-    np.testing.assert_allclose(np.diag(p), np.diag(p_kf), rtol=0.1)
-    calibration = track.meta["calibration"]
-    assert abs(calibration["speed_scale"] - k_kf) < 0.5 * k_sd, (calibration, k_kf)
-    np.testing.assert_allclose(calibration["speed_scale_std"], k_sd, rtol=0.12)
-
-
-def test_on_a_flat_seabed_the_density_is_the_dead_reckonings():
-    """No terrain information: the mixture over the unknown speed scale of the white-noise
-    Gaussians around ``x_0 + S / (1 + k)`` (exact moments from 80 Gauss-Hermite nodes), within
-    2 % on the covariance, and the speed scale's prior kept."""
-    q, sigma, p0, scale_sd = 0.5, 1.0, 10.0, 0.03
-    survey = linear_gaussian_run(3, k=40, q=q, sigma=sigma, p0=p0)
-    noise = sigma * np.random.default_rng(3).standard_normal(survey.beam_depth.shape)
-    survey = survey.replace(beam_depth=500.0 + noise)
-    flat = sloped_seabed()
-    flat = dataclasses.replace(flat, depth=np.full(flat.depth.shape, 500.0))
-    model = linear_model(q=q, sigma=sigma, p0=p0, scale_sd=scale_sd)
-    track = point_mass_filter(survey, flat, POINTS, model=model)
-    z, w = np.polynomial.hermite_e.hermegauss(80)
-    w = w / w.sum()
-    run = survey.dr_pose[-1, :2] - survey.dr_pose[0, :2]
-    means = survey.dr_pose[0, :2] + run / (1.0 + scale_sd * z)[:, None]
-    mean = w @ means
-    d = means - mean
-    cov = (p0**2 + (survey.n_pings - 1) * q**2) * np.eye(2) + (d * w[:, None]).T @ d
-    np.testing.assert_allclose(track.pose[-1, :2], mean, atol=0.02 * np.sqrt(cov[0, 0]))
-    np.testing.assert_allclose(track.covariance[-1, :2, :2], cov, rtol=0.02, atol=0.02 * cov[0, 0])
-    assert track.meta["calibration"]["speed_scale_std"] == pytest.approx(scale_sd, rel=0.02)
-
-
-def test_it_finds_the_vehicle_and_its_heading_error_on_rough_terrain():
-    """The bank's rough-terrain case: a DR 3 deg off and 2 % fast ends near the truth, inside
-    its covariance, the heading error found."""
-    bathymetry = rough_map(1)
-    dr = DeadReckoningModel(heading_bias=np.radians(3.0), speed_scale=0.02, speed_noise=0.05)
-    survey = multibeam_survey(bathymetry, seed=4, pings=120, dr_model=dr)
-    model = navigation(survey)
-    track = point_mass_filter(survey, bathymetry, POINTS, model=model)
-    error = track.pose[-1, :2] - survey.true_pose[-1, :2]
-    dr_error = survey.dr_pose[-1, :2] - survey.true_pose[-1, :2]
-    assert np.hypot(*error) < 0.1 * np.hypot(*dr_error), (error, dr_error)
-    assert error @ np.linalg.solve(track.covariance[-1, :2, :2], error) < 13.8  # chi2(2) at 0.999
-    calibration = track.meta["calibration"]
-    truth = survey.dr_pose[-1, 2] - survey.true_pose[-1, 2]
-    assert abs(calibration["heading_error"] - truth) < 3 * calibration["heading_error_std"]
-    assert calibration["heading_error_std"] < 0.5 * model.calibration_std[1]
-
-
 def test_the_tails_hold_the_calibrations_mean():
     """Points of negligible mass carry the mixture's mean calibration after a convolution, not
     the conditional means extrapolated to them (which ran away over a long run)."""
@@ -171,28 +92,3 @@ def test_the_tails_hold_the_calibrations_mean():
     expected = (mass / mass.sum()) @ fields["point_cal"]
     np.testing.assert_allclose(fields["point_cal"][tails], np.broadcast_to(expected, (tails.sum(), 2)),
                                atol=1e-9)
-
-
-def test_a_start_far_off_is_found_again_on_the_global_grid():
-    """The bank's case: a DR 200 m off (10 m stated) is found lost, started afresh on the global
-    grid (each point at the calibration's prior) and ends at the truth."""
-    bathymetry = rough_map(1)
-    survey = multibeam_survey(bathymetry, seed=4, pings=80)
-    shifted = survey.replace(dr_pose=survey.dr_pose + np.array([150.0, -130.0, 0.0]))
-    track = point_mass_filter(shifted, bathymetry, dataclasses.replace(POINTS, relocalise=True),
-                              model=navigation(shifted))
-    assert track.meta["relocalisation_steps"], track.meta
-    assert np.hypot(*(track.pose[-1, :2] - shifted.true_pose[-1, :2])) < 3.0
-
-
-def test_the_ping_gate_keeps_a_block_of_biased_depths_out():
-    """The bank's case: 20 pings 3-10 m off are gated, exactly them, and the track stays where
-    the clean pings put it."""
-    bathymetry = rough_map(1)
-    survey = multibeam_survey(bathymetry, seed=4, pings=120)
-    bad = outlier_blocks(survey, "depth_bias", 20 / 120, rng=np.random.default_rng(2))
-    track = point_mass_filter(bad, bathymetry, dataclasses.replace(POINTS, ping_gate=True),
-                              model=navigation(survey))
-    gated = track.meta["gated_steps"]
-    assert len(gated) == 20 and np.ptp(gated) == 19, gated
-    assert np.hypot(*(track.pose[-1, :2] - bad.true_pose[-1, :2])) < 2.0
