@@ -179,9 +179,16 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
     view = Belief(points, log_mass - np.log(weights.sum()), tide, state.tide_var,
                   np.empty((points.shape[0], 0)), np.empty(0))
     check = innovation(view, update, ping, model)
+    log_likelihood = update.log_likelihood
+    if state.point_cal is not None:  # the swath's evidence on each point's heading error
+        log_likelihood = pmf_points.swath_heading(
+            state, live, log_mass, log_likelihood, lambda sub, turn, move: model.terrain.evaluate(
+                points[sub] + move, tide[sub], state.tide_var, ping, turn, weights=weights[sub],
+                exponent=update.exponent, scale=state.misfit, extra_variance=resolution).log_likelihood,
+            ping.offsets)
     flat = state.log_density.ravel()
     posterior = np.full(flat.shape, -np.inf)
-    posterior[live] = flat[live] + update.log_likelihood
+    posterior[live] = flat[live] + log_likelihood
     _, log_total = log_normalise(posterior, where=f"pmf ping {ping.index}")
     state.log_density = (posterior - log_total - np.log(state.cell_area)).reshape(state.log_density.shape)
     flat_tide = state.tide.ravel().copy()

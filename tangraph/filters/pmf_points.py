@@ -22,6 +22,13 @@ and the calibration, which only moves the position linearly over a short stretch
   the moment match of what arrives (the spread of the arriving means joins the shared ``S_cc``,
   so the calibration's variance is kept), as are its tide means (their spread joins the tide's
   variance). Points of negligible mass hold the mixture's mean calibration (``NEGLIGIBLE``).
+- **A ping of a swath** tells each point's heading error too (it turns the soundings about the
+  point; :func:`swath_heading`): the ping's log-likelihood at the point's heading mean and one
+  shared std either side, fitted by a quadratic, conditions the point's Gaussian (a Kalman
+  update of its mean, the shared covariance by the points' mean curvature), and the point is
+  weighed by its likelihood with the heading error integrated out. The bank's nodes get this
+  evidence by being weighed at their different headings; without it the points learnt the
+  heading error from the motion alone (15 % less accurate on ``wang2019``'s swath).
 - **A new lattice** (when the density needs one, as the bank's) reads the density by cubic
   splines and the calibration and tide means as ratios of bilinear ones.
 
@@ -55,6 +62,13 @@ NEGLIGIBLE = 1e-10
 # the narrowest spread (grid steps^2) convolved in, each way: a narrower one would send a little
 # mass a whole step, and an arrival that far on a spread that small implies an extreme calibration
 CELL = 1.0 / 48.0
+# a swath's evidence on the heading error (:func:`swath_heading`): only the points that hold all
+# but exp(-REACH) of a ping's posterior are weighed again; a ping moves a point's heading error by
+# at most MAX_MOVE of its std (the quadratic is fitted over one std each way); below
+# MIN_HEADING_VAR (rad^2) the heading error is known
+REACH = 20.0
+MAX_MOVE = 2.0
+MIN_HEADING_VAR = 1e-10
 
 
 def start_joint(cal_cov: np.ndarray) -> np.ndarray:
@@ -81,6 +95,52 @@ def predict(state, ping, motion) -> None:
     noise[:2, :2] = motion.noise_covariance(ping)
     noise[3, 3] = motion.walk_variance(ping)
     state.joint = f @ state.joint @ f.T + noise
+
+
+def swath_heading(state, live: np.ndarray, log_mass: np.ndarray, log_likelihood: np.ndarray,
+                  evaluate, offsets: np.ndarray) -> np.ndarray:
+    """A ping's evidence on every point's heading error: at a point the heading error turns the
+    swath's soundings about it, so a swath beside the track tells it (a single beam does not). The
+    log-likelihood ``log_likelihood (L,)`` of the points ``live (L,)`` (their prior ``log_mass``)
+    is evaluated again at ``b_i -+ s`` (``s`` the shared std of the heading error; the position
+    moved with it by the joint's regression, ``S_xb / S_bb``) by ``evaluate(sub, heading_error
+    (len(sub),), move (2,))`` for the points ``live[sub]``, and fitted by a quadratic in ``b``
+    (its curvature ``h_i`` made a likelihood's, at least 0). Each point's Gaussian (position
+    deviation, calibration) is conditioned on it, its mean moving by ``S e g_i / (1 + h_i
+    S_bb)`` (at most ``MAX_MOVE`` std), the shared joint covariance by the points' mean
+    curvature; the points' likelihoods with the heading error integrated out are returned. Only
+    the points that hold all but ``exp(-REACH)`` of the ping's posterior are weighed again.
+    Replaces ``state.point_cal``, ``shift`` and ``joint`` (never changed in place)."""
+    joint = state.joint
+    s_bb = float(joint[3, 3])
+    if s_bb <= MIN_HEADING_VAR or not np.any(np.abs(offsets) > 1e-6):
+        return log_likelihood
+    post = log_mass + log_likelihood
+    sub = np.flatnonzero(post > np.max(post) - REACH)
+    delta = np.sqrt(s_bb)
+    b = state.point_cal[live[sub], 1]
+    along = joint[:2, 3] / s_bb * delta
+    lo, hi = evaluate(sub, b - delta, -along), evaluate(sub, b + delta, along)
+    ok = np.isfinite(lo) & np.isfinite(hi)
+    lo, hi, mid = np.where(ok, lo, 0.0), np.where(ok, hi, 0.0), log_likelihood[sub]
+    g = np.where(ok, (hi - lo) / (2.0 * delta), 0.0)
+    h = np.where(ok, np.maximum((2.0 * mid - lo - hi) / s_bb, 0.0), 0.0)
+    gain = g / (1.0 + h * s_bb)
+    gain *= np.minimum(1.0, MAX_MOVE * delta / np.maximum(np.abs(gain) * s_bb, 1e-300))
+    move = gain[:, None] * joint[:, 3][None, :]  # (position deviation, k, b) of each point
+    db = move[:, 3]
+    evidence = g * db - 0.5 * (1.0 / s_bb + h) * db**2 - 0.5 * np.log1p(h * s_bb)
+    out = log_likelihood.copy()
+    out[sub] += evidence
+    cal, shift = state.point_cal.copy(), state.shift.copy()
+    cal[live[sub]] += move[:, 2:]
+    shift[live[sub]] += move[:, :2]
+    w = np.exp(post[sub] + evidence - np.max(post[sub] + evidence))
+    h_bar = float(w @ h / w.sum())
+    column = joint[:, 3]
+    state.joint = joint - np.outer(column, column) * h_bar / (1.0 + h_bar * s_bb)
+    state.point_cal, state.shift = cal, shift
+    return out
 
 
 @numba.njit(cache=True, nogil=True)

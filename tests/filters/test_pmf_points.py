@@ -92,3 +92,64 @@ def test_the_tails_hold_the_calibrations_mean():
     expected = (mass / mass.sum()) @ fields["point_cal"]
     np.testing.assert_allclose(fields["point_cal"][tails], np.broadcast_to(expected, (tails.sum(), 2)),
                                atol=1e-9)
+
+
+def _with_heading_spread(state, s_bb: float = 4e-3):
+    """``state`` with a heading error of variance ``s_bb`` correlated with the speed scale and the
+    position's deviation, and the points' heading means spread about zero."""
+    joint = state.joint.copy()
+    joint[3, 3] = s_bb
+    joint[2, 3] = joint[3, 2] = 0.5 * np.sqrt(joint[2, 2] * s_bb)
+    joint[0, 3] = joint[3, 0] = 0.02
+    joint[:2, :2] += 0.1 * np.eye(2)
+    state.joint = joint
+    cal = state.point_cal.copy()
+    cal[:, 1] = np.linspace(-0.05, 0.05, cal.shape[0])
+    state.point_cal = cal
+    return state
+
+
+def test_a_swaths_heading_evidence_is_the_kalman_update():
+    """A ping whose log-likelihood is exactly Gaussian in the heading error, ``N(b*; b, r)``,
+    conditions every point's Gaussian as a Kalman filter would: its mean by ``S e (b* - b_i) /
+    (S_bb + r)`` (position deviation and speed scale by their correlation), the shared
+    covariance to ``S - S e e^T S / (S_bb + r)``, and the points' likelihoods become the
+    marginal ``N(b*; b_i, S_bb + r)`` up to a constant (a quadratic fit at ``b_i -+ s`` is exact
+    here)."""
+    state = _with_heading_spread(_state_after(5))
+    joint, cal, shift = state.joint.copy(), state.point_cal.copy(), state.shift.copy()
+    size = cal.shape[0]
+    live = np.arange(size)
+    target, r = 0.01, 2e-3
+    offsets = np.array([[0.0, -20.0], [0.0, 20.0]])
+
+    def evaluate(sub, heading, move):
+        assert move.shape == (2,)
+        return -0.5 * (heading - target) ** 2 / r + 3.0  # the same for every point but its heading
+
+    base = evaluate(live, cal[:, 1], np.zeros(2))
+    out = pp.swath_heading(state, live, np.zeros(size), base, evaluate, offsets)
+    s = joint[:, 3]
+    gain = (target - cal[:, 1]) / (joint[3, 3] + r)
+    np.testing.assert_allclose(state.point_cal, cal + gain[:, None] * s[None, 2:], atol=1e-12)
+    np.testing.assert_allclose(state.shift, shift + gain[:, None] * s[None, :2], atol=1e-12)
+    np.testing.assert_allclose(state.joint, joint - np.outer(s, s) / (joint[3, 3] + r), atol=1e-12)
+    marginal = -0.5 * (target - cal[:, 1]) ** 2 / (joint[3, 3] + r)
+    np.testing.assert_allclose(out - out[0], marginal - marginal[0], atol=1e-9)
+
+
+def test_a_single_beam_says_nothing_of_the_heading_error():
+    """Soundings right under the vehicle are not turned by its heading error: the points'
+    likelihoods and calibrations are left as they are, and nothing is evaluated again."""
+    state = _with_heading_spread(_state_after(5))
+    cal, joint = state.point_cal.copy(), state.joint.copy()
+    live = np.arange(cal.shape[0])
+    base = np.linspace(-3.0, 0.0, cal.shape[0])
+
+    def evaluate(sub, heading, move):
+        raise AssertionError("a single beam is not weighed again")
+
+    out = pp.swath_heading(state, live, np.zeros(cal.shape[0]), base, evaluate, np.zeros((1, 2)))
+    np.testing.assert_array_equal(out, base)
+    np.testing.assert_array_equal(state.point_cal, cal)
+    np.testing.assert_array_equal(state.joint, joint)
