@@ -7,7 +7,10 @@ is no evidence, MBARI's exponents, the tide marginalised exactly: each point car
 Gaussian tide posterior, of the datum and its drift with a drifting tide, :mod:`tangraph.filters.tide`).
 It is deterministic and keeps a multimodal density as it is.
 
-**The DR's constant errors** ``(k, b)`` (speed scale, heading error) are handled by a bank: the
+**The DR's constant errors** ``(k, b)`` (speed scale, heading error) are held by default per
+grid point: every point carries their Gaussian given that the vehicle is there (a
+Rao-Blackwellised point-mass filter, :mod:`tangraph.filters.pmf_points`, where it is
+described). With ``PMFConfig(calibration="bank")`` they are held by a bank instead: the
 joint density of ``(position, k, b)`` is held at the nodes of a product Gauss-Hermite rule of a
 Gaussian in the calibration (``calibration_points`` per principal axis), each node a member with
 its own position grid and a mass. Between pings a member's grid moves by its own calibrated
@@ -47,7 +50,8 @@ variance of the map's depth across a cell, ``sum_i a_i^T G a_i / 12`` for the gr
 sharp likelihood it cannot resolve (negligible once the grid is finer than the likelihood).
 
 The track is the density's mean and covariance (with the white noise not yet convolved in), the
-heading the dead-reckoned one; ``meta["calibration"]`` is the bank's mean and std of ``(k, b)``.
+heading the dead-reckoned one; ``meta["calibration"]`` is the mean and std of ``(k, b)`` (the
+points' mixture, or the bank's).
 A ping whose mean sounding's innovation is inconsistent with the density's predictive spread
 (:class:`~tangraph.filters.steps.Innovation`'s ``nis``) for ``lost_pings`` pings in a row is
 flagged lost with them (``meta["lost_steps"]``) and, with ``relocalise`` set, the filter starts
@@ -291,6 +295,8 @@ class _Run:
     def step(self, state: PointMass, ping: Ping) -> PointMass:
         """The state after ``ping``: predicted, weighed, tested for lost, re-gridded if due."""
         _predict(state, ping, self.model)
+        if state.point_cal is not None:  # the spread in before the ping weighs it (as the bank's noise)
+            state = self.regrid_points(state)
         if self.config.ping_gate and self.streak == self.config.gate_pings - 1:
             state = self.reopen(state, ping)
         predicted = state
@@ -316,8 +322,8 @@ class _Run:
         return state
 
     def regrid_points(self, state: PointMass) -> PointMass:
-        """With the calibration per point: a new grid when the density needs one, else the same
-        grid once the points' shared spread reaches half a step
+        """With the calibration per point: a new grid when the density with the points' shared
+        spread needs one, else the same grid once the spread reaches half a step
         (:func:`~tangraph.filters.pmf_points.regrid`)."""
         spread = state.joint[:2, :2] if state.joint is not None else np.zeros((2, 2))
         if self.grid.needs_regrid(state, state.within() + spread):
@@ -448,7 +454,7 @@ def point_mass_filter(
     -------
     Track
         The density's mean track and covariance (heading: dead reckoning, its variance NaN);
-        ``meta``: ``calibration`` (the bank's mean and std), ``n_lost``, ``lost_steps``,
+        ``meta``: ``calibration`` (its mean and std), ``n_lost``, ``lost_steps``,
         ``n_off_map``, ``off_map_steps`` (pings no point had the map under),
         ``relocalisation_steps`` (pings after which it started afresh on the global grid),
         ``n_regrids``,

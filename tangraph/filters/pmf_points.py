@@ -14,8 +14,9 @@ and the calibration, which only moves the position linearly over a short stretch
   white DR noise into ``S_xx``, the heading walk into ``S_cc``, and the calibration's effect
   ``J c`` (``J`` the increment's derivative at the mean calibration) into both and their
   correlation.
-- **A convolution** (once ``S_xx`` reaches half a grid step, and before every new lattice)
-  fits the lattice to the points as they have moved (:func:`refit`) and spreads every point's
+- **A convolution** (once ``S_xx`` reaches half a grid step, checked before a ping weighs the
+  density and after, and before every new lattice; a spread wider than the lattice holds
+  after the new lattice, laid for it) fits the lattice to the points as they have moved (:func:`refit`) and spreads every point's
   mass over its neighbours by a lattice kernel of covariance ``S_xx`` exactly (:func:`_kernel`;
   at least ``CELL`` each way), each arrival's calibration conditioned on where it arrives,
   ``c_i + S_cx S_xx^-1 (x_j - x_i)`` with ``S_cc - S_cx S_xx^-1 S_xc``; a point's calibration is
@@ -259,7 +260,10 @@ def convolve(state, carried: list[np.ndarray]) -> dict:
     conditional = state.joint[2:, 2:] - a @ s_cx.T
     weight = state.masses().ravel()
     stacked = np.column_stack(carried) if carried else np.zeros((weight.size, 0))
-    mass, c1, c2, m1 = _spread(weight, np.ascontiguousarray(state.point_cal, dtype=np.float64),
+    # about the mixture's mean: the arrivals' spread is then not the difference of two large
+    # second moments (a known calibration, all points alike, keeps a spread of exactly 0)
+    ref = weight @ state.point_cal / weight.sum()
+    mass, c1, c2, m1 = _spread(weight, np.ascontiguousarray(state.point_cal - ref, dtype=np.float64),
                                np.ascontiguousarray(stacked, dtype=np.float64), table,
                                np.ascontiguousarray(gain), n)
     total = mass.sum()
@@ -270,6 +274,7 @@ def convolve(state, carried: list[np.ndarray]) -> dict:
     second = c2 / safe[:, None]
     spread = np.stack([second[:, 0] - cal[:, 0] ** 2, second[:, 1] - cal[:, 0] * cal[:, 1],
                        second[:, 2] - cal[:, 1] ** 2])
+    cal = cal + ref
     within = np.where(live, spread, 0.0) @ mass / total  # kk, kb, bb
     within = np.array([[within[0], within[1]], [within[1], within[2]]])
     values, vectors = np.linalg.eigh(within)
@@ -286,12 +291,26 @@ def convolve(state, carried: list[np.ndarray]) -> dict:
 
 def regrid(state: PointMass, grid: _Grid, keep: bool = False) -> PointMass:
     """The state with its calibration per point: its shared spread convolved in on its own
-    lattice (:func:`convolve`), then, unless ``keep``, re-sampled onto the grid rule's new
-    lattice about its mean (the density by cubic splines, its calibration and tide means as the
-    bank's re-grid reads them)."""
-    joint, point_cal = state.joint, state.point_cal
-    assert joint is not None and point_cal is not None  # (a state with its calibration per point)
-    if keep or np.any(joint[:2, :2]):
+    lattice (:func:`_convolved`), then, unless ``keep``, re-sampled onto the grid rule's new
+    lattice about its mean (:func:`_relattice`). A spread wider than the density's target on
+    its lattice (``(n - 1) / 2 / sigmas`` steps std: a kernel that would reach past the lattice's
+    edges) is convolved in after the new lattice, laid for the density with the spread."""
+    assert state.joint is not None and state.point_cal is not None  # (calibration per point)
+    inv = np.linalg.inv(state.axes)
+    target = (state.n - 1) / 2.0 / grid.sigmas
+    wide = np.max(np.linalg.eigvalsh(inv @ state.joint[:2, :2] @ inv.T)) > target**2
+    if wide and not keep:
+        return _convolved(_relattice(state, grid))
+    state = _convolved(state)
+    return state if keep else _relattice(state, grid)
+
+
+def _convolved(state: PointMass) -> PointMass:
+    """``state`` with its shared spread convolved in on its lattice (:func:`convolve`; the tide
+    means mixed as the density is)."""
+    joint = state.joint
+    assert joint is not None
+    if np.any(joint[:2, :2]):
         # the tide means mix as the density does; the spread of the mixed means joins the
         # variance (as :func:`_diffuse`)
         carried = [t.ravel() for t in _point_means(state)]
@@ -309,12 +328,34 @@ def regrid(state: PointMass, grid: _Grid, keep: bool = False) -> PointMass:
             tide_drift=None if drift is None else
             TideDrift(means[1].reshape(1, state.n, state.n), drift.cross + spread[0, 1],
                       drift.var + max(spread[1, 1], 0.0)))
-    if keep:
-        return state
+    return state
+
+
+def _splat(index: np.ndarray, values: list[np.ndarray], n: int) -> list[np.ndarray]:
+    """Each of ``values`` (``(P,)`` each) of points at fractional lattice ``index (P, 2)``
+    spread to the four lattice points around it by bilinear weights and summed, on an ``n x n``
+    lattice (flat, ``(n * n,)`` each; what falls outside is dropped)."""
+    low = np.floor(index).astype(np.int64)
+    t = index - low
+    out = [np.zeros(n * n) for _ in values]
+    for di in (0, 1):
+        for dj in (0, 1):
+            i, j = low[:, 0] + di, low[:, 1] + dj
+            w = (t[:, 0] if di else 1.0 - t[:, 0]) * (t[:, 1] if dj else 1.0 - t[:, 1])
+            inside = (i >= 0) & (i < n) & (j >= 0) & (j < n)
+            for o, v in zip(out, values, strict=True):
+                np.add.at(o, i[inside] * n + j[inside], w[inside] * v[inside])
+    return out
+
+
+def _relattice(state: PointMass, grid: _Grid) -> PointMass:
+    """``state`` re-sampled onto the grid rule's new lattice about its mean, sized for its
+    density with the shared spread convolved in (the density by cubic splines, its calibration
+    and tide means as the bank's re-grid reads them; the joint covariance kept)."""
     joint, point_cal, shift = state.joint, state.point_cal, state.shift
     assert joint is not None and point_cal is not None and shift is not None
     _, centres, _ = state.member_moments()
-    axes = grid.axes(state.within(), _support(state, centres))
+    axes = grid.axes(state.within() + joint[:2, :2], _support(state, centres))
     inv = np.linalg.inv(state.axes)
     h, n = (state.n - 1) / 2.0, grid.n
     q = ((centres[0] + _offsets(n, axes) - state.centres[0]) @ inv.T + h).T
@@ -326,12 +367,22 @@ def regrid(state: PointMass, grid: _Grid, keep: bool = False) -> PointMass:
     p = state.masses()[0]
     sampled = [p, *(p * c for c in point_cal.reshape(state.n, state.n, 2).transpose(2, 0, 1)),
                *(p * t[0] for t in _point_means(state))]
-    # the density by cubic splines (bilinear re-sampling would widen it by up to a quarter of a
-    # step squared each time), the means it carries as ratios of bilinear ones (each new point's
-    # a mean of its old neighbours')
-    value = np.maximum(ndimage.map_coordinates(p, q, order=3, mode="constant", cval=0.0), 0.0)
-    linear, k, b, *tides = (ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0)
-                            for v in sampled)
+    new_inv = np.linalg.inv(axes)
+    if (abs(np.linalg.det(axes)) > abs(np.linalg.det(state.axes))
+            and np.min(np.linalg.eigvalsh(new_inv @ state.within() @ new_inv.T)) < 1.0):
+        # a coarser lattice than a density narrower than its step (a wide spread still to
+        # come): each old point's mass and what it carries go to its four new neighbours
+        # (bilinear weights), so nothing falls between the new points
+        f = (state.points() - centres[0]) @ new_inv.T + (n - 1) / 2.0
+        value, k, b, *tides = _splat(f, [v.ravel() for v in sampled], n)
+        linear = value
+    else:
+        # the density by cubic splines (bilinear re-sampling would widen it by up to a quarter
+        # of a step squared each time), the means it carries as ratios of bilinear ones (each
+        # new point's a mean of its old neighbours')
+        value = np.maximum(ndimage.map_coordinates(p, q, order=3, mode="constant", cval=0.0), 0.0)
+        linear, k, b, *tides = (ndimage.map_coordinates(v, q, order=1, mode="constant", cval=0.0)
+                                for v in sampled)
     total = value.sum()
     if total <= 0:  # (the new lattice is laid about the density's mean: not reached)
         raise FilterDivergence("pmf: the density missed its new grid")

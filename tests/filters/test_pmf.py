@@ -124,7 +124,7 @@ def test_the_pmf_runs_by_name_without_a_random_generator():
     direct = point_mass_filter(survey, sloped_seabed(), model=model)
     by_name = run_filter("pmf", survey, sloped_seabed(), model=model, rng=None)
     np.testing.assert_array_equal(direct.pose, by_name.pose)
-    assert by_name.method == "pmf" and by_name.meta["n_points"] == 9 * 31**2
+    assert by_name.method == "pmf" and by_name.meta["n_points"] == 41**2
 
 
 @pytest.mark.parametrize(
@@ -158,17 +158,22 @@ def test_a_grid_too_large_for_memory_is_refused_before_any_work(settings, field)
     assert "\n" not in str(caught.value)
 
 
-def test_the_spacing_floor_is_honoured():
+@pytest.mark.parametrize("calibration", ["bank", "points"])
+def test_the_spacing_floor_is_honoured(calibration):
     """``min_spacing`` floors the grid: with one 5 cm sounding per ping on the slope the
     posterior across the depth contours narrows to 0.3 m; the default grid follows it (as the
-    Kalman filter), a 2 m floor cannot and stays wider (its cells' depth spread counted)."""
+    Kalman filter), a 2 m floor cannot and stays wider (its cells' depth spread counted). Each
+    ping's DR noise is here wider than the grid's step: it must be in the density before the
+    ping weighs it (the calibration per point once weighed first and ended a ping's noise
+    wide, 11 % over the Kalman filter's variance)."""
     q, sigma, p0 = 0.1, 0.05, 5.0
     survey = linear_gaussian_run(2, k=30, q=q, sigma=sigma, p0=p0)
     model = linear_model(q=q, sigma=sigma, p0=p0)
     _, p_kf, _ = kalman(survey, q=q, sigma=sigma, p0=p0)
     g = np.array([0.05, -0.02]) / np.hypot(0.05, -0.02)
-    across = {s: g @ point_mass_filter(survey, sloped_seabed(), PMFConfig(min_spacing=s),
-                                       model=model).covariance[-1, :2, :2] @ g for s in (0.01, 2.0)}
+    config = {s: PMFConfig(min_spacing=s, calibration=calibration) for s in (0.01, 2.0)}
+    across = {s: g @ point_mass_filter(survey, sloped_seabed(), c, model=model).covariance[-1, :2, :2] @ g
+              for s, c in config.items()}
     assert across[0.01] == pytest.approx(g @ p_kf @ g, rel=0.05)
     assert across[2.0] > 2.0 * across[0.01]
 

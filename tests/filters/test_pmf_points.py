@@ -13,6 +13,7 @@ import pytest
 from tangraph.filters import PMFConfig
 from tangraph.filters import pmf_points as pp
 from tangraph.filters.pmf import start_run
+from tangraph.filters.pmf_grid import _Grid
 from tests.filters.linear_gaussian import (
     linear_gaussian_run,
     linear_model,
@@ -153,3 +154,21 @@ def test_a_single_beam_says_nothing_of_the_heading_error():
     np.testing.assert_array_equal(out, base)
     np.testing.assert_array_equal(state.point_cal, cal)
     np.testing.assert_array_equal(state.joint, joint)
+
+
+@pytest.mark.parametrize("wide", [30.0, 400.0])
+def test_a_spread_wider_than_the_lattice_is_not_cut_off(wide):
+    """A shared spread of ``wide`` steps^2 (beyond the lattice's half-width at 400) re-gridded:
+    the new lattice holds the density with all of it (the mean kept, the covariance the
+    density's plus the spread), where convolving it in on the old lattice first would cut it
+    off at the edges."""
+    state = _state_after(25)
+    joint = state.joint.copy()
+    joint[:2, :2] = wide * state.axes @ state.axes.T
+    state.joint = joint
+    mean, cov = state.moments()
+    out = pp.regrid(state, _Grid(POINTS, POINTS.min_spacing))
+    new_mean, new_cov = out.moments()
+    np.testing.assert_allclose(new_mean, mean, atol=0.02 * np.sqrt(cov[0, 0]))
+    np.testing.assert_allclose(new_cov, cov, rtol=0.03, atol=0.03 * np.sqrt(cov[0, 0] * cov[1, 1]))
+    assert not np.any(out.joint[:2, :2])  # convolved in

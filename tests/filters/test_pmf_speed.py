@@ -31,7 +31,7 @@ def _case(misfit: bool):
     across = np.linspace(-60.0, 60.0, 41)
     ping = Ping(3, np.array([2.0, 0.0]), np.column_stack([np.zeros(41), across]),
                 chart.depth_at(np.full(41, 300.0), 300.0 + across) + 0.2, dt=1.0)
-    config = PMFConfig(grid_points=15)
+    config = PMFConfig(grid_points=15, calibration="bank")
     state = pmf._start(model, np.array([296.0, 303.0]), pmf._Grid(config, config.min_spacing), config)
     density = state.log_density.copy()
     density[:, :4, :] = -np.inf  # a band no mass has reached
