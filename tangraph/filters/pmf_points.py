@@ -16,9 +16,10 @@ and the calibration, which only moves the position linearly over a short stretch
   correlation.
 - **A convolution** (once ``S_xx`` reaches half a grid step, checked before a ping weighs the
   density and after, and before every new lattice; a spread wider than the lattice holds
-  after the new lattice, laid for it) fits the lattice to the points as they have moved (:func:`refit`) and spreads every point's
-  mass over its neighbours by a lattice kernel of covariance ``S_xx`` exactly (:func:`_kernel`;
-  at least ``CELL`` each way), each arrival's calibration conditioned on where it arrives,
+  after the new lattice, laid for it) fits the lattice to the points as they have moved
+  (:func:`refit`) and spreads every point's mass over its neighbours by a lattice kernel of
+  covariance ``S_xx`` exactly (:func:`_kernel`; at least ``CELL`` each way), each arrival's
+  calibration conditioned on where it arrives,
   ``c_i + S_cx S_xx^-1 (x_j - x_i)`` with ``S_cc - S_cx S_xx^-1 S_xc``; a point's calibration is
   the moment match of what arrives (the spread of the arriving means joins the shared ``S_cc``,
   so the calibration's variance is kept), as are its tide means (their spread joins the tide's
@@ -64,11 +65,12 @@ NEGLIGIBLE = 1e-10
 # mass a whole step, and an arrival that far on a spread that small implies an extreme calibration
 CELL = 1.0 / 48.0
 # a swath's evidence on the heading error (:func:`swath_heading`): only the points that hold all
-# but exp(-REACH) of a ping's posterior are weighed again; a ping moves a point's heading error by
-# at most MAX_MOVE of its std (the quadratic is fitted over one std each way); below
-# MIN_HEADING_VAR (rad^2) the heading error is known
+# but exp(-REACH) of a ping's posterior are weighed again; a Newton step moves a point's heading
+# error by at most MAX_MOVE of the std it was fitted over (one std each way), and a point is
+# fitted at most ITERATIONS times; below MIN_HEADING_VAR (rad^2) the heading error is known
 REACH = 20.0
 MAX_MOVE = 2.0
+ITERATIONS = 3
 MIN_HEADING_VAR = 1e-10
 
 
@@ -101,38 +103,70 @@ def predict(state, ping, motion) -> None:
 def swath_heading(state, live: np.ndarray, log_mass: np.ndarray, log_likelihood: np.ndarray,
                   evaluate, offsets: np.ndarray) -> np.ndarray:
     """A ping's evidence on every point's heading error: at a point the heading error turns the
-    swath's soundings about it, so a swath beside the track tells it (a single beam does not). The
-    log-likelihood ``log_likelihood (L,)`` of the points ``live (L,)`` (their prior ``log_mass``)
-    is evaluated again at ``b_i -+ s`` (``s`` the shared std of the heading error; the position
-    moved with it by the joint's regression, ``S_xb / S_bb``) by ``evaluate(sub, heading_error
-    (len(sub),), move (2,))`` for the points ``live[sub]``, and fitted by a quadratic in ``b``
-    (its curvature ``h_i`` made a likelihood's, at least 0). Each point's Gaussian (position
-    deviation, calibration) is conditioned on it, its mean moving by ``S e g_i / (1 + h_i
-    S_bb)`` (at most ``MAX_MOVE`` std), the shared joint covariance by the points' mean
-    curvature; the points' likelihoods with the heading error integrated out are returned. Only
-    the points that hold all but ``exp(-REACH)`` of the ping's posterior are weighed again.
-    Replaces ``state.point_cal``, ``shift`` and ``joint`` (never changed in place)."""
+    swath's soundings about it, so a swath beside the track tells it (a single beam does not).
+
+    The log-likelihood ``log_likelihood (L,)`` of the points ``live (L,)`` (their prior
+    ``log_mass``) is evaluated again at ``b -+ d`` by ``evaluate(sub, heading_error (len(sub),),
+    move (len(sub), 2))`` for the points ``live[sub]`` (the position moved with the heading by
+    the joint's regression, ``S_xb / S_bb``), starting at the point's mean ``b_i`` with ``d``
+    the shared std, and fitted by a quadratic in ``b`` (its curvature ``h`` made a
+    likelihood's, at least 0). A Newton step on the log-posterior (the prior ``N(b_i, S_bb)``)
+    follows, at most ``MAX_MOVE`` ``d``; a point whose step leaves the fitted range (evidence
+    sharper than the prior and not a quadratic there, as a first ping's can be) is weighed
+    where it went: if its log-posterior rose, it is fitted again there, with ``d`` its
+    posterior std (or what is left of the step over ``MAX_MOVE``, never wider), up to
+    ``ITERATIONS`` times (a Laplace approximation); if not, the step is cut to the fitted
+    range. Each point's Gaussian (position deviation, calibration) moves by the regression on
+    its heading's move, the shared joint covariance is conditioned by the points' mean
+    curvature, and the points' likelihoods with the heading error integrated out
+    are returned. Only the points that hold all but ``exp(-REACH)`` of the ping's posterior are
+    weighed again. Replaces ``state.point_cal``, ``shift`` and ``joint`` (never in place)."""
     joint = state.joint
     s_bb = float(joint[3, 3])
     if s_bb <= MIN_HEADING_VAR or not np.any(np.abs(offsets) > 1e-6):
         return log_likelihood
     post = log_mass + log_likelihood
     sub = np.flatnonzero(post > np.max(post) - REACH)
-    delta = np.sqrt(s_bb)
-    b = state.point_cal[live[sub], 1]
-    along = joint[:2, 3] / s_bb * delta
-    lo, hi = evaluate(sub, b - delta, -along), evaluate(sub, b + delta, along)
-    ok = np.isfinite(lo) & np.isfinite(hi)
-    lo, hi, mid = np.where(ok, lo, 0.0), np.where(ok, hi, 0.0), log_likelihood[sub]
-    g = np.where(ok, (hi - lo) / (2.0 * delta), 0.0)
-    h = np.where(ok, np.maximum((2.0 * mid - lo - hi) / s_bb, 0.0), 0.0)
-    gain = g / (1.0 + h * s_bb)
-    gain *= np.minimum(1.0, MAX_MOVE * delta / np.maximum(np.abs(gain) * s_bb, 1e-300))
-    move = gain[:, None] * joint[:, 3][None, :]  # (position deviation, k, b) of each point
-    db = move[:, 3]
-    evidence = g * db - 0.5 * (1.0 / s_bb + h) * db**2 - 0.5 * np.log1p(h * s_bb)
+    b0 = state.point_cal[live[sub], 1]
+    regress = joint[:2, 3] / s_bb  # the position's deviation per unit of heading error
+    at = np.zeros(sub.size)  # each point's heading offset from b_i
+    centre = np.zeros(sub.size)  # where mid, g and h were fitted
+    mid = log_likelihood[sub].copy()
+    d = np.full(sub.size, np.sqrt(s_bb))
+    g, h = np.zeros(sub.size), np.zeros(sub.size)
+    todo = np.arange(sub.size)
+    for iteration in range(ITERATIONS):
+        c, dt = centre[todo], d[todo]
+        lo = evaluate(sub[todo], b0[todo] + c - dt, (c - dt)[:, None] * regress)
+        hi = evaluate(sub[todo], b0[todo] + c + dt, (c + dt)[:, None] * regress)
+        ok = np.isfinite(lo) & np.isfinite(hi)
+        lo, hi = np.where(ok, lo, 0.0), np.where(ok, hi, 0.0)
+        g[todo] = np.where(ok, (hi - lo) / (2.0 * dt), 0.0)
+        h[todo] = np.where(ok, np.maximum((2.0 * mid[todo] - lo - hi) / dt**2, 0.0), 0.0)
+        newton = (g[todo] - c / s_bb) / (h[todo] + 1.0 / s_bb)
+        step = np.clip(newton, -MAX_MOVE * dt, MAX_MOVE * dt)
+        at[todo] = c + step
+        # fitted next over the posterior's std, or over what is left of the step (never wider)
+        d[todo] = np.maximum(1.0 / np.sqrt(h[todo] + 1.0 / s_bb),
+                             np.minimum(dt, np.abs(newton - step) / MAX_MOVE))
+        far = ok & (np.abs(step) > dt)  # beyond the range it was fitted over
+        if iteration == ITERATIONS - 1 or not far.any():
+            break
+        todo, c, step, dt = todo[far], c[far], step[far], dt[far]
+        there = evaluate(sub[todo], b0[todo] + at[todo], at[todo][:, None] * regress)
+        # a step the log-posterior does not rise by is cut back to the fitted range
+        better = np.isfinite(there) & (there - 0.5 * at[todo] ** 2 / s_bb > mid[todo] - 0.5 * c**2 / s_bb)
+        at[todo[~better]] = c[~better] + np.clip(step[~better], -dt[~better], dt[~better])
+        todo, there = todo[better], there[better]
+        if not todo.size:
+            break
+        centre[todo], mid[todo] = at[todo], there
+    step = at - centre
+    evidence = mid - log_likelihood[sub] + g * step - 0.5 * h * step**2 - 0.5 * at**2 / s_bb \
+        - 0.5 * np.log1p(h * s_bb)
     out = log_likelihood.copy()
     out[sub] += evidence
+    move = (at / s_bb)[:, None] * joint[:, 3][None, :]  # (position deviation, k, b) of each point
     cal, shift = state.point_cal.copy(), state.shift.copy()
     cal[live[sub]] += move[:, 2:]
     shift[live[sub]] += move[:, :2]

@@ -125,10 +125,10 @@ def test_a_swaths_heading_evidence_is_the_kalman_update():
     offsets = np.array([[0.0, -20.0], [0.0, 20.0]])
 
     def evaluate(sub, heading, move):
-        assert move.shape == (2,)
+        assert move.shape == (len(sub), 2)
         return -0.5 * (heading - target) ** 2 / r + 3.0  # the same for every point but its heading
 
-    base = evaluate(live, cal[:, 1], np.zeros(2))
+    base = evaluate(live, cal[:, 1], np.zeros((size, 2)))
     out = pp.swath_heading(state, live, np.zeros(size), base, evaluate, offsets)
     s = joint[:, 3]
     gain = (target - cal[:, 1]) / (joint[3, 3] + r)
@@ -172,3 +172,26 @@ def test_a_spread_wider_than_the_lattice_is_not_cut_off(wide):
     np.testing.assert_allclose(new_mean, mean, atol=0.02 * np.sqrt(cov[0, 0]))
     np.testing.assert_allclose(new_cov, cov, rtol=0.03, atol=0.03 * np.sqrt(cov[0, 0] * cov[1, 1]))
     assert not np.any(out.joint[:2, :2])  # convolved in
+
+
+def test_a_sharp_heading_evidence_is_found_where_it_peaks():
+    """A first ping whose evidence on the heading error is far sharper than the prior and not a
+    quadratic across it (here ``-|b - b*| / w``, peaked 3 prior std from the points' means): the
+    fit at one std either side would jump by the step's limit; weighed again where they went,
+    the points end within a tenth of a prior std of the peak, with a std below a tenth of the
+    prior's."""
+    state = _with_heading_spread(_state_after(5), s_bb=1e-4)
+    cal = state.point_cal.copy()
+    cal[:, 1] = 0.0
+    state.point_cal = cal
+    size = cal.shape[0]
+    live = np.arange(size)
+    target, width = 0.03, 2e-4
+
+    def evaluate(sub, heading, move):
+        return -np.abs(heading - target) / width - 0.5 * ((heading - target) / width) ** 2
+
+    pp.swath_heading(state, live, np.zeros(size), evaluate(live, cal[:, 1], None),
+                     evaluate, np.array([[0.0, 30.0]]))
+    np.testing.assert_allclose(state.point_cal[:, 1], target, atol=0.1 * 1e-2)
+    assert np.sqrt(state.joint[3, 3]) < 0.1 * 1e-2
