@@ -111,9 +111,9 @@ def swath_heading(state, live: np.ndarray, log_mass: np.ndarray, log_likelihood:
     the joint's regression, ``S_xb / S_bb``), starting at the point's mean ``b_i`` with ``d``
     the shared std, and fitted by a quadratic in ``b`` (its curvature ``h`` made a
     likelihood's, at least 0). A Newton step on the log-posterior (the prior ``N(b_i, S_bb)``)
-    follows, at most ``MAX_MOVE`` ``d``; a point whose step leaves the fitted range (evidence
-    sharper than the prior and not a quadratic there, as a first ping's can be) is weighed
-    where it went: if its log-posterior rose, it is fitted again there, with ``d`` its
+    follows, at most ``MAX_MOVE`` ``d``; a point whose step leaves the fitted range on evidence
+    sharper than the prior (``h S_bb > 1``; not a quadratic there, as a first ping's can be) is
+    weighed where it went: if its log-posterior rose, it is fitted again there, with ``d`` its
     posterior std (or what is left of the step over ``MAX_MOVE``, never wider), up to
     ``ITERATIONS`` times (a Laplace approximation); if not, the step is cut to the fitted
     range. Each point's Gaussian (position deviation, calibration) moves by the regression on
@@ -149,7 +149,9 @@ def swath_heading(state, live: np.ndarray, log_mass: np.ndarray, log_likelihood:
         # fitted next over the posterior's std, or over what is left of the step (never wider)
         d[todo] = np.maximum(1.0 / np.sqrt(h[todo] + 1.0 / s_bb),
                              np.minimum(dt, np.abs(newton - step) / MAX_MOVE))
-        far = ok & (np.abs(step) > dt)  # beyond the range it was fitted over
+        # beyond the range it was fitted over, on evidence sharper than the prior (a weak
+        # evidence, the map's noise seen through a short lever arm, is not followed further)
+        far = ok & (np.abs(step) > dt) & (h[todo] * s_bb > 1.0)
         if iteration == ITERATIONS - 1 or not far.any():
             break
         todo, c, step, dt = todo[far], c[far], step[far], dt[far]
