@@ -143,7 +143,7 @@ def ipf_step(
     shrunk = shrink_calibration(uniform, moments, bandwidth, floor, rng=rng)
     previous = belief.take(ancestors).replace(calibration=shrunk.calibration)
     children = predict(previous, ping, model, rng=rng)
-    child_update = evaluate(children, ping, model, exponent=update.exponent)
+    child_update = evaluate(children, ping, model, earlier=update)
     measured = children.tide_updated(child_update)
     try:
         new = reweight(

@@ -3,7 +3,14 @@
 The model is :mod:`tangraph.sensors.terrain`'s: sounding ``b`` of a ping measures
 ``z_b = h(x + o_b) + tide + e_b`` with ``h`` the map's bilinear depth (the rules of
 :mod:`tangraph.maps._interp`) and ``e_b`` of variance ``v_b`` (the sounding's noise plus the map
-error it shares with the survey's other soundings: the row-sum bound). For particle ``p`` with
+error it shares with the survey's other soundings: the row-sum bound). Where a map states its
+error per cell, the error is read **where the cloud puts the sounding**: ``v_b = noise^2 +
+sum_f n_fb E_w[g_f(x_p + R(turn_p) o_b)]``, the cloud's weighted mean of each error field's
+variance ``g_f`` at the particles' footprints times the number of the survey's soundings that
+share it (:func:`tangraph.sensors.sounding_map_counts`); judged once per ping, as the exponents
+below are. (At the dead-reckoned footprints, tens of metres off the truth, a sounding in a
+filled gap between the map's lines was trusted as one on a line; the filters then followed the
+gaps' error and held it with confidence.) For particle ``p`` with
 residuals ``r_pb = z_b - m_p - h(x_p + R(turn_p) o_b)`` (``m_p`` its tide mean) and the
 soundings' precisions ``l_b = a_b / v_b``:
 
@@ -20,9 +27,14 @@ soundings' precisions ``l_b = a_b / v_b``:
   sounding of which has the map under the cloud gives ``-inf`` everywhere (:class:`OffMap`);
 - **terrain information gating**: ``a_b`` in [0, 1] is MBARI's modified weighting
   (:func:`tangraph.sensors.information_exponent`) from how far the cloud's predicted depths for
-  sounding ``b`` spread beyond the map's error there (1 with a perfect map); computed once per
-  ping from the weighted cloud and passed back in for the same ping's later evaluations
-  (tempering stages, IPF children) so that their likelihood ratios are of one function.
+  sounding ``b`` spread beyond the map's error there (1 with a perfect map), for a ping whose
+  map error is not placed by the cloud (it carries no ``map_counts``); computed once per ping
+  from the weighted cloud and passed back in for the same ping's later evaluations (tempering
+  stages, IPF children) so that their likelihood ratios are of one function. A ping whose map
+  error the cloud places is weighed whole (``a_b = 1`` where the cloud has the map): the
+  weighting subtracts the map's error from the predictions' spread as if it differed from
+  particle to particle, while it is shared by particles closer than its correlation length, and
+  the row-sum bound has already discounted it: weighed twice, a filter learns too little.
 
 - **a misfit scale of its own** (:mod:`tangraph.sensors.misfit`): given a ``Gamma(shape, rate)``
   on the precision factor shared by the ping's soundings, the quadratic ``Q`` above (the tide
@@ -33,22 +45,23 @@ soundings' precisions ``l_b = a_b / v_b``:
   ``n`` its ``a_b c_b`` (so every particle's Student-t has the same count, and none gains by having
   no map under a sounding).
 
-Constants shared by all particles are dropped: weights are normalised. One kernel computes
-every particle's residuals (each particle's grid coordinates once, its soundings turned by its
-own angle ``turn``: a filter's particle turns them by minus its heading error), a second the
-exponents, the sub-cloud means and every particle's likelihood and tide.
+Constants shared by all particles are dropped: weights are normalised. The kernels are in
+:mod:`tangraph.filters.likelihood_kernels`.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 
-import numba
 import numpy as np
 
 from tangraph.errors import TangraphError
-from tangraph.maps._interp import _FASTMATH, _bilinear
+from tangraph.filters.likelihood_kernels import (
+    _field_variance_kernel,
+    _residual_kernel,
+    _residual_sums_kernel,
+    _update_kernel,
+)
 from tangraph.maps.grid import BathymetryMap
 
 __all__ = [
@@ -61,6 +74,11 @@ __all__ = [
 ]
 
 
+# The cloud's particles (drawn systematically by weight) over which the map's error under each
+# sounding is averaged: a smooth field's mean, to a few per cent, at a small share of a ping's cost.
+JUDGED = 128
+
+
 class FilterDivergence(TangraphError):
     """Every particle has zero likelihood: the filter has lost the vehicle."""
 
@@ -68,187 +86,6 @@ class FilterDivergence(TangraphError):
 class OffMap(FilterDivergence):
     """No sounding of a ping has the map under any particle: the ping says nothing about where
     the vehicle is (it is not evidence against any particle)."""
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
-def _particle_sums(depth, pn, pe, offsets, inv_dn, inv_de, c, s, measured, shift):
-    """``(sum r, sum r^2)`` of ``r = z - shift - h`` for one particle at grid coordinates
-    ``(pn, pe)`` whose soundings' world offsets ``(B, 2)`` (metres) are turned by the angle of
-    cosine ``c`` and sine ``s`` (``R(a) o``, ``a`` clockwise from north); NaN if a sounding falls
-    off the map or by a NaN cell (``_interp._locate``)."""
-    ny, nx = depth.shape
-    s1 = 0.0
-    s2 = 0.0
-    for b in range(offsets.shape[0]):
-        on = c * offsets[b, 0] - s * offsets[b, 1]
-        oe = s * offsets[b, 0] + c * offsets[b, 1]
-        fy = pn + on * inv_dn
-        fx = pe + oe * inv_de
-        if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
-            return np.nan, np.nan
-        i = min(int(fy), ny - 2)
-        j = min(int(fx), nx - 2)
-        r = measured[b] - shift - _bilinear(depth, i, j, fy - i, fx - j)[0]
-        s1 += r
-        s2 += r * r
-    return s1, s2
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
-def _residual_sums_kernel(
-    depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, out
-):  # fmt: skip
-    """``out[p] = (sum r, sum r^2)`` of ``r = z - h(x_p + R(turn_p) o_b)``, NaN rows where a
-    sounding has no map depth."""
-    for p in range(particles.shape[0]):
-        s1, s2 = _particle_sums(
-            depth,
-            (particles[p, 0] - north0) * inv_dn,
-            (particles[p, 1] - east0) * inv_de,
-            offsets,
-            inv_dn,
-            inv_de,
-            np.cos(turn[p]),
-            np.sin(turn[p]),
-            measured,
-            0.0,
-        )
-        out[p, 0] = s1
-        out[p, 1] = s2 if s1 == s1 else np.nan
-
-
-# A sounding weighs the cloud only where particles holding at least this share of its weight have
-# the map under it (MBARI's sub-cloud rule); below it, its weighted spread is numerical noise.
-_MIN_SUBCLOUD = 1e-3
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
-def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offsets, measured, tide, out):
-    """``out[b, p] = z_b - tide_p - h(x_p + R(turn_p) o_b)``, NaN where the map has no depth
-    (sounding-major, so the per-sounding passes run along memory)."""
-    ny, nx = depth.shape
-    for p in range(particles.shape[0]):
-        pn = (particles[p, 0] - north0) * inv_dn
-        pe = (particles[p, 1] - east0) * inv_de
-        c = np.cos(turn[p])
-        s = np.sin(turn[p])
-        for b in range(offsets.shape[0]):
-            fy = pn + (c * offsets[b, 0] - s * offsets[b, 1]) * inv_dn
-            fx = pe + (s * offsets[b, 0] + c * offsets[b, 1]) * inv_de
-            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
-                out[b, p] = np.nan
-                continue
-            i = min(int(fy), ny - 2)
-            j = min(int(fx), nx - 2)
-            out[b, p] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
-def _update_kernel(residual, weights, precision, map_variance, exponent, given, tide_var, shape, rate,
-                   count_weight, log_likelihood, tide_shift, total_precision, residual_sum, mapped,
-                   quadratic, effective):  # fmt: skip
-    """Exponents (unless ``given``), sub-cloud means and every particle's likelihood, tide shift,
-    summed precision, sum of residuals and count of soundings with the map under it, whitened
-    residual sum (at scale 1) and effective count, from the residuals ``(B, N)`` (NaN: no map)
-    and the normalised ``weights (N,)``; ``precision (B,)`` is ``1 / v_b``; ``shape > 0``: the
-    misfit scale's ``Gamma(shape, rate)`` is integrated out (Student-t), else the scale is 1.
-    See the module docstring."""
-    nb, n = residual.shape
-    s1 = np.zeros(n)
-    s2 = np.zeros(n)
-    big_l = np.zeros(n)
-    missing = np.zeros(n)
-    any_map = False
-    for b in range(nb):
-        total = 0.0
-        mean = 0.0
-        square = 0.0
-        squares = 0.0
-        count = 0
-        for p in range(n):
-            r = residual[b, p]
-            w = weights[p]
-            if r == r and w > 0.0:
-                total += w
-                mean += w * r
-                square += w * r * r
-                squares += w * w
-                count += 1
-        if total < _MIN_SUBCLOUD:  # (almost) none of the cloud's weight has the map here
-            exponent[b] = 0.0
-            continue
-        any_map = True
-        if not given:
-            mean /= total
-            # (squares / total) / total: total may be tiny (few particles of tiny weight have the map)
-            spread = square / total - mean * mean - (1.0 - squares / total / total) * map_variance[b]
-            if map_variance[b] <= 0.0:
-                exponent[b] = 1.0
-            elif spread <= 0.0:
-                exponent[b] = 0.0
-            else:
-                exponent[b] = spread / (spread + 2.0 * map_variance[b])
-        lam = exponent[b] * precision[b]
-        imputed = lam * square / total  # with a misfit scale: the sub-cloud's mean square
-        if count < n and shape <= 0.0:  # some particles have no map here: the sub-cloud's mean likelihood
-            top = -np.inf
-            for p in range(n):
-                r = residual[b, p]
-                if r == r and weights[p] > 0.0:
-                    top = max(top, -0.5 * lam * r * r)
-            acc = 0.0
-            for p in range(n):
-                r = residual[b, p]
-                if r == r and weights[p] > 0.0:
-                    acc += weights[p] * np.exp(-0.5 * lam * r * r - top)
-            imputed = top + np.log(acc / total)
-        for p in range(n):
-            r = residual[b, p]
-            if r == r:
-                s1[p] += lam * r
-                s2[p] += lam * r * r
-                big_l[p] += lam
-                residual_sum[p] += r
-                mapped[p] += 1.0
-                effective[p] += exponent[b] * count_weight[b]
-            else:
-                missing[p] += imputed
-                if shape > 0.0:
-                    effective[p] += exponent[b] * count_weight[b]
-    _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
-                 tide_shift, total_precision, quadratic)
-
-
-@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy", inline="always")
-def _likelihoods(s1, s2, big_l, missing, effective, any_map, tide_var, shape, rate, log_likelihood,
-                 tide_shift, total_precision, quadratic):  # fmt: skip
-    """Every particle's likelihood, tide shift, summed precision and whitened residual sum from its
-    sums over the soundings (:func:`_update_kernel`)."""
-    scale = rate / shape if shape > 0.0 else 1.0
-    for p in range(s1.size):
-        if not any_map:
-            log_likelihood[p] = -np.inf
-            tide_shift[p] = 0.0
-            total_precision[p] = 0.0
-            quadratic[p] = np.nan
-            continue
-        log_det = 0.0
-        tide_shift[p] = 0.0
-        total_precision[p] = big_l[p] / scale
-        q = s2[p]
-        if tide_var > 0.0:  # the tide integrated out at the current scale
-            gain = 1.0 / (1.0 / tide_var + big_l[p] / scale)
-            q = s2[p] - gain * s1[p] * s1[p] / scale
-            log_det = -0.5 * np.log1p(tide_var * big_l[p] / scale)
-            tide_shift[p] = gain * s1[p] / scale
-        if shape > 0.0:  # missing[p]: the sub-clouds' mean squares of the soundings it has no map under
-            q += missing[p]
-            half = 0.5 * effective[p]
-            log_likelihood[p] = math.lgamma(shape + half) - math.lgamma(shape) + shape * np.log(rate) \
-                - (shape + half) * np.log(rate + 0.5 * q) + log_det
-        else:  # missing[p]: the sub-clouds' mean log likelihoods
-            log_likelihood[p] = -0.5 * q + log_det + missing[p]
-        quadratic[p] = q
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -259,7 +96,9 @@ class PingLikelihood:
     ``tide (N,)`` and their shared variance ``tide_var``, the mean predicted depth ``predicted
     (N,)`` (the ping's mean measured depth less the particle's mean residual; NaN for a particle
     with the map under none of its soundings), the exponents ``exponent (B,)`` and the share of
-    soundings with the map under each particle, ``mapped (N,)``."""
+    soundings with the map under each particle, ``mapped (N,)``; the soundings' variances
+    ``variance (B,)`` and expected whitened squares ``counts (B,)`` the ping was weighed with
+    (what a later evaluation of the same ping reuses)."""
 
     log_likelihood: np.ndarray
     tide: np.ndarray
@@ -269,6 +108,8 @@ class PingLikelihood:
     mapped: np.ndarray
     quadratic: np.ndarray | None = None
     count: np.ndarray | None = None
+    variance: np.ndarray | None = None
+    counts: np.ndarray | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -279,10 +120,17 @@ class TerrainLikelihood:
     bathymetry: BathymetryMap
     sigma: float
     tide: float = 0.0
+    error_grids: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.sigma) and self.sigma > 0):
             raise TangraphError(f"TerrainLikelihood: sigma must be positive, got {self.sigma!r}")
+        if self.error_grids is not None:
+            grids = np.ascontiguousarray(self.error_grids, dtype=np.float64)
+            if grids.ndim != 3 or grids.shape[:2] != self.bathymetry.shape or not np.all(grids >= 0):
+                raise TangraphError(f"TerrainLikelihood: error_grids must be (ny, nx, F) variances >= 0 on "
+                                    f"the map's {self.bathymetry.shape} grid, got {grids.shape}")
+            object.__setattr__(self, "error_grids", grids)
 
     def log_likelihood(self, particles, offsets, depths, turn=None) -> np.ndarray:
         """Log-likelihood (N,) of particles (N, 2) for soundings at ``offsets`` (B, 2) (world
@@ -347,6 +195,39 @@ class TerrainLikelihood:
                          depths, tide, out)
         return out
 
+    def _judged(self, particles, offsets, turn, weights, map_counts) -> tuple[np.ndarray, np.ndarray]:
+        """Each sounding's map error variance read where the cloud puts it: the bound's share
+        ``sum_f map_counts[b, f] E_w[g_f]`` and its own ``sum_f E_w[g_f]`` ``(B,)``, the cloud's
+        weighted means taken over ``JUDGED`` particles drawn from it systematically (all of a
+        smaller cloud; :func:`_field_variance_kernel`)."""
+        nb = offsets.shape[0]
+        counts = np.asarray(map_counts, dtype=np.float64)
+        fields = 0 if self.error_grids is None else self.error_grids.shape[2]
+        if self.error_grids is None or counts.shape != (nb, fields):
+            raise TangraphError(f"map_counts must have shape ({nb}, {fields}) (the map's error fields), "
+                                f"got {counts.shape}")
+        if particles.shape[0] > JUDGED:  # a systematic draw: deterministic, of equal weights
+            drawn = np.searchsorted(np.cumsum(weights), (np.arange(JUDGED) + 0.5) / JUDGED * weights.sum())
+            drawn = np.minimum(drawn, particles.shape[0] - 1)
+            particles, turn, weights = particles[drawn], turn[drawn], np.ones(JUDGED)
+        field = np.empty((nb, fields))
+        n0, e0, dn, de = self.bathymetry._grid  # type: ignore[attr-defined]
+        _field_variance_kernel(self.bathymetry.depth, self.error_grids, n0, e0, 1.0 / dn, 1.0 / de,
+                               np.ascontiguousarray(particles), np.ascontiguousarray(turn), offsets,
+                               np.ascontiguousarray(weights), field)
+        return np.sum(counts * field, axis=1), np.sum(field, axis=1)
+
+    def _placed(self, particles, offsets, turn, weights, map_counts, noise, counts,
+                misfit: bool) -> tuple[np.ndarray, ...]:  # fmt: skip
+        """A ping's variances (the soundings' ``noise`` plus the map error the cloud places,
+        :meth:`_judged`), map error variances for the exponents (0: they are 1 where the cloud
+        has the map) and, with a ``misfit`` scale, the expected whitened squares of those
+        variances (else ``counts`` as given)."""
+        shared, own = self._judged(particles, offsets, turn, weights, map_counts)
+        if misfit:
+            counts = np.minimum((noise + own) / (noise + shared), 1.0)
+        return noise + shared, np.zeros(noise.shape), counts
+
     def _per_sounding(self, nb: int, variance, map_variance, counts) -> tuple[np.ndarray, ...]:
         """A ping's per-sounding arrays (variances, map error variances, counts) with their
         defaults, of shape ``(nb,)``."""
@@ -359,8 +240,8 @@ class TerrainLikelihood:
         return v, mv, c
 
     def ping_update(self, particles, offsets, depths, tide, tide_var: float, *, turn=None, weights=None,
-                    variance=None, map_variance=None, exponent=None, scale=None,
-                    counts=None) -> PingLikelihood:
+                    variance=None, map_variance=None, exponent=None, scale=None, counts=None,
+                    map_counts=None) -> PingLikelihood:
         """The likelihood of a ping for every particle (module docstring).
 
         Parameters
@@ -380,12 +261,20 @@ class TerrainLikelihood:
             (default 0: a perfect map, exponents 1).
         exponent : (B,), optional
             The exponents of an earlier evaluation of the same ping (default: from this cloud).
+            With ``map_counts``, ``variance`` is each sounding's own noise variance.
         scale : tangraph.sensors.MisfitScale, optional
             The local misfit scale to integrate out (a Student-t likelihood,
             :mod:`tangraph.sensors.misfit`); None: the variances as stated (Gaussian).
         counts : (B,), optional
             Each sounding's expected whitened square (:func:`tangraph.sensors.misfit_counts`;
             default 1), summed into the effective counts the scale is updated with.
+        map_counts : (B, F), optional
+            With the map's error grids (``error_grids``): each sounding's map error is read where
+            the cloud puts it, its variance ``variance_b + sum_f map_counts[b, f] E_w[g_f]``
+            (``g_f`` the variance of the error's field ``f`` at a particle's footprint, ``E_w``
+            the cloud's weighted mean; :func:`tangraph.sensors.sounding_map_counts`), and the
+            exponents are 1 where the cloud has the map (module docstring). The variances
+            judged are returned (``variance``) for later evaluations of the same ping.
 
         Raises
         ------
@@ -395,20 +284,13 @@ class TerrainLikelihood:
         """
         particles, offsets, depths, turn = self._checked(particles, offsets, depths, turn, keep_nan=True)
         n, nb = particles.shape[0], depths.size
-        tide = np.ascontiguousarray(tide, dtype=np.float64)
-        if tide.shape != (n,):
-            raise TangraphError(f"tide must have shape ({n},) as particles, got {tide.shape}")
-        try:
-            t_var = float(tide_var)
-        except (TypeError, ValueError):
-            t_var = np.nan
-        if not (np.isfinite(t_var) and t_var >= 0):
-            raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
+        tide, t_var = _tide(tide, tide_var, n)
         v, mv, c = self._per_sounding(nb, variance, map_variance, counts)
         keep = np.isfinite(depths)
         if not keep.all():
             offsets, depths, v, mv, c = offsets[keep], depths[keep], v[keep], mv[keep], c[keep]
             exponent = None if exponent is None else np.asarray(exponent)[keep]
+            map_counts = None if map_counts is None else np.asarray(map_counts)[keep]
             nb = depths.size
         if not np.all(v > 0):
             raise TangraphError("the soundings' variances must be positive")
@@ -419,15 +301,16 @@ class TerrainLikelihood:
         if w.shape != (n,):
             raise TangraphError(f"weights must have shape ({n},) as particles, got {w.shape}")
         w = w / w.sum()
-        residual = self.residuals(particles, np.ascontiguousarray(offsets), np.ascontiguousarray(depths),
-                                  tide, turn=turn)
+        offsets, depths = np.ascontiguousarray(offsets), np.ascontiguousarray(depths)
+        residual = self.residuals(particles, offsets, depths, tide, turn=turn)
+        if map_counts is not None:
+            v, mv, c = self._placed(particles, offsets, turn, w, map_counts, v, c, counts is not None)
         given = exponent is not None
         alpha = np.array(exponent, dtype=np.float64) if given else np.empty(nb)
         if alpha.shape != (nb,):
             raise TangraphError(f"exponent must have shape ({nb},), got {alpha.shape}")
-        log_likelihood, shift, total = np.empty(n), np.empty(n), np.empty(n)
-        residual_sum, count = np.zeros(n), np.zeros(n)
-        quadratic, effective = np.empty(n), np.zeros(n)
+        log_likelihood, shift, total, quadratic = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+        residual_sum, count, effective = np.zeros(n), np.zeros(n), np.zeros(n)
         shape, rate = (0.0, 1.0) if scale is None else (float(scale.shape), float(scale.rate))
         _update_kernel(residual, w, 1.0 / v, mv, alpha, given, t_var, shape, rate, np.ascontiguousarray(c),
                        log_likelihood, shift, total, residual_sum, count, quadratic, effective)
@@ -435,7 +318,7 @@ class TerrainLikelihood:
             predicted = np.where(count > 0, np.mean(depths) - residual_sum / count, np.nan)
         new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0
         return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, count / nb,
-                              None if scale is None else quadratic, None if scale is None else effective)
+                              *((quadratic, effective) if scale is not None else (None, None)), v, c)
 
     def tide_update(
         self, particles, offsets, depths, tide, tide_var: float, *, turn=None
@@ -451,6 +334,20 @@ class TerrainLikelihood:
         """
         update = self.ping_update(particles, offsets, depths, tide, tide_var, turn=turn)
         return update.log_likelihood, update.tide, update.predicted
+
+
+def _tide(tide, tide_var, n: int) -> tuple[np.ndarray, float]:
+    """The particles' tide means ``(n,)`` and their variance, checked."""
+    tide = np.ascontiguousarray(tide, dtype=np.float64)
+    if tide.shape != (n,):
+        raise TangraphError(f"tide must have shape ({n},) as particles, got {tide.shape}")
+    try:
+        t_var = float(tide_var)
+    except (TypeError, ValueError):
+        t_var = np.nan
+    if not (np.isfinite(t_var) and t_var >= 0):
+        raise TangraphError(f"tide_var must be a finite number >= 0, got {tide_var!r}")
+    return tide, t_var
 
 
 def log_normalise(logw: np.ndarray, *, where: str = "") -> tuple[np.ndarray, float]:

@@ -54,6 +54,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import NavigationModel
 from tangraph.sensors.dead_reckoning import walk_variance
 from tangraph.sensors.misfit import MisfitScale, misfit_counts
+from tangraph.sensors.terrain import map_error_grids
 from tangraph.survey import Survey
 
 __all__ = ["FilterModel", "MotionModel", "Ping", "TerrainModel", "TerrainUpdate", "survey_pings"]
@@ -68,7 +69,9 @@ class Ping:
     heading's ``turn`` (rad, wrapped) since the previous ping, and the terrain measurement
     model's ``variance (B,)`` of each sounding and ``map_variance (B,)`` of
     the map's error under it (:func:`tangraph.sensors.sounding_variances`; None: the filter
-    model's sounding std and a perfect map).
+    model's sounding std and a perfect map), and ``map_counts (B, F)``, how many of the survey's
+    soundings share each field of its map error (:func:`tangraph.sensors.sounding_map_counts`;
+    None: its variance is judged at the dead-reckoned footprint).
 
     Checked on construction: ``index`` an integer >= 0, ``dt`` finite >= 0, ``increment`` finite
     ``(2,)``, ``offsets`` finite ``(B, 2)``, ``depths`` ``(B,)``. A NaN depth (no return) is
@@ -90,6 +93,7 @@ class Ping:
     variance: np.ndarray | None = None
     map_variance: np.ndarray | None = None
     turn: float = 0.0
+    map_counts: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -123,14 +127,14 @@ class Ping:
             )
         keep = ~np.isnan(depths)
         extra = {}
-        for name in ("variance", "map_variance"):
+        for name in ("variance", "map_variance", "map_counts"):
             value = getattr(self, name)
             if value is None:
                 continue
             value = np.asarray(value, dtype=np.float64)
-            if value.shape != depths.shape:
-                raise TangraphError(f"Ping {index}: {name} must have shape {depths.shape} as depths, "
-                                    f"got {value.shape}")
+            if value.shape[:1] != depths.shape or value.ndim != (2 if name == "map_counts" else 1):
+                raise TangraphError(f"Ping {index}: {name} must have shape {depths.shape} as depths"
+                                    f"{' by fields' if name == 'map_counts' else ''}, got {value.shape}")
             if not np.all((value[keep] >= 0) & np.isfinite(value[keep])):
                 raise TangraphError(f"Ping {index}: {name} must be finite and >= 0")
             extra[name] = value[keep]
@@ -169,15 +173,16 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
     navigation model, each sounding carries the terrain measurement model's variance and its
     map error variance (:func:`tangraph.sensors.sounding_variances`, at the dead-reckoned
     footprints)."""
-    from tangraph.sensors.terrain import sounding_map_variances, sounding_variances
+    from tangraph.sensors.terrain import sounding_map_counts, sounding_map_variances, sounding_variances
 
     north, east = survey.footprints()
     dr = survey.dr_pose
     valid = np.isfinite(survey.beam_depth)
-    variance = map_variance = None
+    variance = map_variance = counts = None
     if bathymetry is not None and model is not None:
         variance = sounding_variances(survey, bathymetry, model)
         map_variance = sounding_map_variances(survey, bathymetry, model)
+        counts = sounding_map_counts(survey, bathymetry, model)
         if map_variance is None:
             map_variance = np.zeros(north.shape)
     turned = wrap_angle(np.diff(dr[:, 2]))
@@ -190,7 +195,8 @@ def survey_pings(survey: Survey, bathymetry=None, model: NavigationModel | None 
         pings.append(Ping(k, increment, offsets, survey.beam_depth[k, keep].copy(), first=k == 0, dt=dt,
                           turn=float(turned[k - 1]) if k > 0 else 0.0,
                           variance=None if variance is None else variance[k, keep],
-                          map_variance=None if map_variance is None else map_variance[k, keep]))
+                          map_variance=None if map_variance is None else map_variance[k, keep],
+                          map_counts=None if counts is None else counts[k, keep]))
     return pings
 
 
@@ -285,8 +291,10 @@ class TerrainUpdate:
     ping's soundings ``predicted (N,)`` (map depth plus tide; NaN with no map under any), the
     soundings' information exponents ``exponent (B,)`` (reused by later evaluations of the same
     ping), the share of the ping's soundings with the map under each particle
-    ``mapped (N,)``, and with a misfit scale the ``scale`` the ping was weighed with and each
-    particle's ``quadratic`` and ``count`` (:meth:`tangraph.sensors.MisfitScale.after`)."""
+    ``mapped (N,)``, with a misfit scale the ``scale`` the ping was weighed with and each
+    particle's ``quadratic`` and ``count`` (:meth:`tangraph.sensors.MisfitScale.after`), and the
+    soundings' ``variance (B,)`` and expected whitened squares ``counts (B,)`` the ping was
+    weighed with (reused, with the exponents, by a later evaluation of the same ping)."""
 
     log_likelihood: np.ndarray
     tide: np.ndarray
@@ -297,6 +305,8 @@ class TerrainUpdate:
     scale: MisfitScale | None = None
     quadratic: np.ndarray | None = None
     count: np.ndarray | None = None
+    variance: np.ndarray | None = None
+    counts: np.ndarray | None = None
 
     def scale_after(self, weights: np.ndarray) -> MisfitScale | None:
         """The misfit scale after this ping for the posterior ``weights (N,)`` (None without
@@ -318,39 +328,55 @@ class TerrainModel:
     sounding_std: float
     tide_std: float = 0.0
     noise_std: float | None = None
+    error_grids: np.ndarray | None = dataclasses.field(default=None, repr=False)
     likelihood: TerrainLikelihood = dataclasses.field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "likelihood", TerrainLikelihood(self.bathymetry, self.sounding_std))
+        object.__setattr__(self, "likelihood", TerrainLikelihood(self.bathymetry, self.sounding_std,
+                                                                 error_grids=self.error_grids))
 
     def evaluate(
         self, particles: np.ndarray, tide: np.ndarray, tide_var: float, ping: Ping, heading_error=None,
-        *, weights=None, exponent=None, scale: MisfitScale | None = None, extra_variance: float = 0.0,
+        *, weights=None, earlier: TerrainUpdate | None = None, scale: MisfitScale | None = None,
+        extra_variance: float = 0.0,
     ) -> TerrainUpdate:  # fmt: skip
         """Likelihood of ``ping`` at ``particles (N, 2)`` whose tide posteriors are ``N(tide (N,),
         tide_var)``, whose heading errors are ``heading_error (N,)`` (rad, DR minus true; None:
         0: each particle's soundings are turned by ``-heading_error`` about it) and whose weights
-        are ``weights (N,)`` (None: equal); ``exponent (B,)``: the information exponents of an
-        earlier evaluation of the same ping (None: from this cloud); ``scale``: the local misfit
-        scale before the ping (forgotten here over the ping's step and integrated out; None:
-        the variances as stated); ``extra_variance`` (m^2) is added to every sounding's
-        variance (a grid's resolution). See the module docstring."""
+        are ``weights (N,)`` (None: equal); ``earlier``: an earlier evaluation of the same ping,
+        whose information exponents and soundings' variances are reused (None: judged from this
+        cloud); ``scale``: the local misfit scale before the ping (forgotten here over the ping's
+        step and integrated out; None: the variances as stated); ``extra_variance`` (m^2) is
+        added to every sounding's variance (a grid's resolution). A ping that carries its map
+        error counts (``map_counts``) on a model that holds the map's error grids has its
+        soundings' map error read where the cloud puts them
+        (:func:`tangraph.sensors.sounding_map_counts`). See the module docstring."""
         turn = None if heading_error is None else -np.asarray(heading_error, dtype=np.float64)
-        variance = ping.variance if ping.variance is not None else np.full(ping.n_soundings,
-                                                                          self.sounding_std**2)
-        variance = variance + extra_variance
-        counts = None
+        noise = self.sounding_std if self.noise_std is None else self.noise_std
         if scale is not None:
             scale = scale.forget(float(np.hypot(*ping.increment)))
-            noise = self.sounding_std if self.noise_std is None else self.noise_std
-            counts = misfit_counts(variance, ping.map_variance, noise**2 + extra_variance)
+        map_counts = counts = None
+        if earlier is not None and earlier.variance is not None:  # as judged for this ping before
+            variance, counts = earlier.variance, earlier.counts
+        elif ping.map_counts is not None and self.error_grids is not None:
+            # the sounding's own noise here; its map error where the cloud puts it
+            variance, map_counts = np.full(ping.n_soundings, noise**2 + extra_variance), ping.map_counts
+            counts = None if scale is None else np.ones(ping.n_soundings)
+        else:
+            variance = ping.variance if ping.variance is not None else np.full(ping.n_soundings,
+                                                                              self.sounding_std**2)
+            variance = variance + extra_variance
+            if scale is not None:
+                counts = misfit_counts(variance, ping.map_variance, noise**2 + extra_variance)
         update = self.likelihood.ping_update(
             particles, ping.offsets, ping.depths, tide, tide_var, turn=turn, weights=weights,
-            variance=variance, map_variance=ping.map_variance, exponent=exponent, scale=scale,
-            counts=counts,
+            variance=variance, map_variance=ping.map_variance,
+            exponent=None if earlier is None else earlier.exponent, scale=scale, counts=counts,
+            map_counts=map_counts,
         )  # fmt: skip
         return TerrainUpdate(update.log_likelihood, update.tide, update.tide_var, update.predicted,
-                             update.exponent, update.mapped, scale, update.quadratic, update.count)
+                             update.exponent, update.mapped, scale, update.quadratic, update.count,
+                             update.variance, None if scale is None else update.counts)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -385,7 +411,7 @@ class FilterModel:
         return cls(
             MotionModel.from_model(navigation, floor),
             TerrainModel(bathymetry, navigation.measurement_std, navigation.tide_std,
-                         navigation.sounding_std),
+                         navigation.sounding_std, map_error_grids(bathymetry, navigation)),
             navigation,
         )
 

@@ -188,7 +188,7 @@ def _update(state: PointMass, ping: Ping, model: FilterModel, slope: np.ndarray)
         log_likelihood = pmf_points.swath_heading(
             state, live, log_mass, log_likelihood, lambda sub, turn, move: model.terrain.evaluate(
                 points[sub] + move, tide[sub], state.tide_var, ping, turn, weights=weights[sub],
-                exponent=update.exponent, scale=state.misfit, extra_variance=resolution).log_likelihood,
+                earlier=update, scale=state.misfit, extra_variance=resolution).log_likelihood,
             ping.offsets)
     flat = state.log_density.ravel()
     posterior = np.full(flat.shape, -np.inf)

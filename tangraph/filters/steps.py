@@ -161,14 +161,15 @@ def predict(belief: Belief, ping: Ping, model: FilterModel, *, rng: np.random.Ge
                           tide_drift=drift)
 
 
-def evaluate(belief: Belief, ping: Ping, model: FilterModel, exponent=None) -> TerrainUpdate:
+def evaluate(belief: Belief, ping: Ping, model: FilterModel,
+             earlier: TerrainUpdate | None = None) -> TerrainUpdate:
     """The terrain likelihood of a ping for every particle of a belief (its positions, tide
-    posteriors, heading errors and weights); ``exponent``: the information exponents of an
-    earlier evaluation of the same ping (None: from this belief)."""
+    posteriors, heading errors and weights); ``earlier``: an earlier evaluation of the same ping,
+    whose information exponents and soundings' variances are reused (None: from this belief)."""
     assert belief.calibration is not None  # Belief.__post_init__ fills it
     return model.terrain.evaluate(
         belief.particles, belief.tide, belief.tide_var, ping, heading_error=belief.calibration[:, 1],
-        weights=belief.weights, exponent=exponent, scale=belief.misfit,
+        weights=belief.weights, earlier=earlier, scale=belief.misfit,
     )
 
 
@@ -293,7 +294,7 @@ def measure(
         resampled, _ = resample_belief(weighted, config.resampler, rng=rng)  # type: ignore[union-attr,arg-type]
         floor = np.concatenate([[1e-6, 1e-6], _kernel_floor(model, config)])  # type: ignore[arg-type]
         current = shrink_state(resampled, moments, config.kernel_bandwidth, floor, rng=rng)  # type: ignore[union-attr,arg-type]
-        update = evaluate(current, ping, model, exponent=update.exponent)
+        update = evaluate(current, ping, model, earlier=update)
     new = weighted.tide_updated(update).replace(misfit=update.scale_after(weighted.weights))
     return Measurement(new, update, first, tuple(exponents), tuple(stage_ess))
 

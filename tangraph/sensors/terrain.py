@@ -45,6 +45,13 @@ holds no structure finer than its error's range (a gridded map holds none finer 
 and large for a long-range error over fine terrain. Sums are evaluated on the dead-reckoned
 footprints (:func:`sounding_variances`).
 
+**Where the soundings are.** The row sums above need the map error's std where each sounding
+lies. The fixes and the graph read it at the dead-reckoned footprints; the filters read it
+where their belief puts each sounding (:func:`sounding_map_counts`: the bound in the form
+``a_b^2 n_b``, which needs the std at the sounding's own footprint only), so that a sounding
+the dead reckoning puts on one of the map's lines, but the belief in a filled gap between
+them, counts as little as the gap is known.
+
 A TAP fix, which weighs one window's soundings together, is widened by the map error they share
 among themselves exactly (:func:`shared_quadratic`, the double sum over pairs on the map
 gradients): there the row-sum bound would count the shared error of soundings whose gradients
@@ -82,9 +89,11 @@ __all__ = [
     "MapError",
     "information_exponent",
     "map_error",
+    "map_error_grids",
     "shared_among",
     "shared_map_variances",
     "slope_moment",
+    "sounding_map_counts",
     "sounding_map_variances",
     "sounding_variances",
     "survey_map_error",
@@ -390,4 +399,61 @@ def sounding_map_variances(survey, bathymetry: BathymetryMap, model) -> np.ndarr
     out = np.full(north.shape, np.nan)
     s = error.std_at(north[valid], east[valid])
     out[valid] = np.where(np.isfinite(s), s, error.typical_std) ** 2
+    return out
+
+
+def map_error_grids(bathymetry: BathymetryMap, model) -> np.ndarray | None:
+    """The variance of each field of the map's error (:meth:`MapError.components`) on the map's
+    grid, ``(ny, nx, F)`` (m^2; the field's median where the map has no data, where no residual
+    is made), or None for a perfect map: what a filter reads at each candidate's footprints
+    (:func:`sounding_map_counts`)."""
+    parts = map_error(bathymetry, model).components()
+    if not parts:
+        return None
+    grids = [np.where(np.isfinite(part.std), part.std, part.typical_std) ** 2 for part in parts]
+    return np.ascontiguousarray(np.stack(grids, axis=-1))
+
+
+def sounding_map_counts(survey, bathymetry: BathymetryMap, model, *, poses=None) -> np.ndarray | None:
+    """Per sounding and field of the map's error, ``(K, B, F)``: how many of the survey's
+    soundings share its error, ``n_fb = sum_j rho_f(|p_b - p_j|)`` (``b`` itself included; NaN
+    where a beam has no depth), at the footprints seen from ``poses`` (default: the dead
+    reckoning, whose footprints are placed well relative to each other); None for a perfect map.
+
+    **The bound at any footprint.** For any positive weights ``u``, ``diag(sum_j C_bj u_j /
+    u_b) - C`` is positive semi-definite where ``C`` has non-negative entries (scaled by ``u``,
+    it is a graph Laplacian). With ``u = 1 / a`` the map error's covariance ``a_b a_j rho_bj``
+    is bounded by ``a_b^2 n_b``, which needs the error's std only at the sounding's own
+    footprint. A filter therefore gives sounding ``b`` at candidate ``x`` the variance
+    ``sounding_std^2 + sum_f a_f(x + o_b)^2 n_fb``, read where that candidate puts the
+    sounding: a sounding the candidate places in a filled gap between the map's lines counts
+    as little as the gap is known, though the dead reckoning (tens of metres off) put it on a
+    line.
+
+    Examples
+    --------
+    Nine soundings in one spot share one error: each is counted nine times.
+
+    >>> import numpy as np
+    >>> from tangraph.maps import BathymetryMap
+    >>> from tangraph.sensors import NavigationModel
+    >>> from tangraph.survey import Survey
+    >>> flat = BathymetryMap(np.arange(0.0, 200, 10), np.arange(0.0, 200, 10), np.full((20, 20), 30.0))
+    >>> t = np.arange(9.0)
+    >>> pose = np.column_stack([100 + 0 * t, 100 + 0 * t, 0 * t])
+    >>> s = Survey(time=t, dr_pose=pose, vehicle_depth=0 * t, beam_forward=np.zeros((9, 1)),
+    ...            beam_starboard=np.zeros((9, 1)), beam_depth=np.full((9, 1), 30.0))
+    >>> model = NavigationModel(sounding_std=0.1, map_std=0.2, map_correlation_length=20.0)
+    >>> sounding_map_counts(s, flat, model)[:3, 0, 0].round(3).tolist()
+    [9.0, 9.0, 9.0]
+    """
+    parts = map_error(bathymetry, model).components()
+    if not parts:
+        return None
+    north, east = survey.footprints(poses)
+    has = np.isfinite(survey.beam_depth) & np.isfinite(north) & np.isfinite(east)
+    out = np.full((*north.shape, len(parts)), np.nan)
+    ones = np.ones(int(has.sum()))
+    for f, part in enumerate(parts):
+        out[has, f] = _weighted_correlation_sums(north[has], east[has], ones, part.correlation_length)
     return out

@@ -82,18 +82,32 @@ def test_a_ping_without_soundings_only_predicts():
     assert np.all(np.abs(result.belief.particles - belief.particles - [10.0, 0.0]) < 6 * std)
 
 
-def test_the_information_exponent_is_computed_once_per_ping():
-    """Tempering stages reuse the first evaluation's exponents, so their product is one
-    likelihood raised to the stages' exponents (which sum to one)."""
+def test_a_pings_exponents_and_variances_are_judged_once_per_ping():
+    """Tempering stages reuse the first evaluation's judgement of the ping (its exponents and,
+    where the map's error is read where the cloud puts the soundings, its variances), so their
+    product is one likelihood raised to the stages' exponents (which sum to one); a cloud
+    reweighted and judged afresh weighs the ping otherwise."""
+    import dataclasses
+
+    # a map whose error grows eastwards: where the cloud puts a sounding matters
+    _, east = np.meshgrid(MAP.north, MAP.east, indexing="ij")
+    varying = MAP.replace(depth_std=0.05 + 0.5 * (east - east.min()) / np.ptp(east), correlation_length=20.0)
     model = MODEL.replace(map_std=0.3, map_correlation_length=20.0)
-    fm = FilterModel.from_model(model, MAP)
-    ping = survey_pings(SURVEY, MAP, model)[3]
+    fm = FilterModel.from_model(model, varying)
+    ping = survey_pings(SURVEY, varying, model)[3]
     belief = model_belief(SURVEY.dr_pose[3, :2], fm, 400, rng=np.random.default_rng(2))
-    first = evaluate(belief, ping, fm)
-    assert np.all((first.exponent >= 0) & (first.exponent <= 1)) and np.any(first.exponent < 1)
-    again = evaluate(reweight(belief, first.log_likelihood, where="t"), ping, fm, exponent=first.exponent)
-    np.testing.assert_array_equal(again.exponent, first.exponent)
-    np.testing.assert_allclose(again.log_likelihood, first.log_likelihood, rtol=1e-12)
+    placed = dataclasses.replace(ping, map_counts=None)  # variances at the dead-reckoned footprints
+    for each in (ping, placed):
+        first = evaluate(belief, each, fm)
+        moved = reweight(belief, first.log_likelihood, where="t")
+        again = evaluate(moved, each, fm, earlier=first)
+        np.testing.assert_array_equal(again.exponent, first.exponent)
+        np.testing.assert_array_equal(again.variance, first.variance)
+        np.testing.assert_allclose(again.log_likelihood, first.log_likelihood, rtol=1e-12)
+        assert not np.allclose(evaluate(moved, each, fm).log_likelihood, first.log_likelihood, rtol=1e-6)
+    # the exponents temper a ping whose map error is not placed; a placed one is weighed whole
+    assert np.any(evaluate(belief, placed, fm).exponent < 1)
+    assert np.all(evaluate(belief, ping, fm).exponent == 1.0)
     # without the map error every exponent is one
     plain = evaluate(belief, survey_pings(SURVEY, MAP, MODEL)[3], FilterModel.from_model(MODEL, MAP))
     assert np.all(plain.exponent == 1.0)

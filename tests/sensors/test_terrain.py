@@ -154,3 +154,39 @@ def test_the_offset_takes_its_part_of_the_stated_error_out_through_the_slope():
     assert error.without_offset(0.0) is error
     np.testing.assert_allclose(error.without_offset(20.0).std, 0.5 * stated, rtol=1e-9)
     assert error.without_offset(2.0).correlation_length == 30.0
+
+
+def test_the_count_form_bounds_the_dense_covariance_of_a_varying_error():
+    """``diag(sigma^2 + sum_f a_f(p_b)^2 n_fb) - C`` is positive semi-definite for a map whose
+    error varies across it (two fields: cell-scale and excess, :meth:`MapError.components`),
+    though each sounding's variance needs the error's std at its own footprint only; and it is
+    what the filters' variance grids times the counts give."""
+    from tangraph.sensors import map_error_grids, sounding_map_counts
+
+    rng = np.random.default_rng(4)
+    north, east = np.meshgrid(FLAT.north, FLAT.east, indexing="ij")
+    varying = FLAT.replace(depth_std=0.05 + 0.6 * (east > 350.0) + 0.2 * np.sin(north / 40.0) ** 2,
+                           correlation_length=40.0)
+    model = NavigationModel(sounding_std=0.1)
+    points = rng.uniform(300, 420, (200, 2))
+    survey = scattered_survey(points)
+    counts = sounding_map_counts(survey, varying, model)[:, 0, :]
+    grids = map_error_grids(varying, model)
+    parts = map_error(varying, model).components()
+    assert len(parts) == 2 and counts.shape == (200, 2) and grids.shape == (*FLAT.shape, 2)
+    d = np.sqrt(np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1))
+    dense = 0.1**2 * np.eye(points.shape[0])
+    bound = np.full(points.shape[0], 0.1**2)
+    for f, part in enumerate(parts):
+        a = part.std_at(points[:, 0], points[:, 1])
+        dense = dense + np.outer(a, a) * matern_correlation(d, part.correlation_length)
+        np.testing.assert_allclose(counts[:, f], matern_correlation(d, part.correlation_length).sum(1),
+                                   rtol=0.05)  # (the sums are made on a grid)
+        bound = bound + a**2 * counts[:, f]
+        inside = (points[:, 0] > 10) & (points[:, 1] > 10)
+        grid_field = BathymetryMap(FLAT.north, FLAT.east, grids[:, :, f])
+        # bilinear in the variance, not in the std: never below the square of the std's (Jensen)
+        read = grid_field.depth_at(points[inside, 0], points[inside, 1])
+        assert np.all(read >= a[inside] ** 2 - 1e-12)
+        assert np.mean(read - a[inside] ** 2) < 0.05 * np.mean(a[inside] ** 2)
+    assert np.linalg.eigvalsh(np.diag(bound) - dense).min() > -1e-9
