@@ -301,7 +301,6 @@ class TerrainLikelihood:
         if w.shape != (n,):
             raise TangraphError(f"weights must have shape ({n},) as particles, got {w.shape}")
         w = w / w.sum()
-        offsets, depths = np.ascontiguousarray(offsets), np.ascontiguousarray(depths)
         residual = self.residuals(particles, offsets, depths, tide, turn=turn)
         if map_counts is not None:
             v, mv, c = self._placed(particles, offsets, turn, w, map_counts, v, c, counts is not None)
@@ -317,8 +316,9 @@ class TerrainLikelihood:
         with np.errstate(invalid="ignore", divide="ignore"):
             predicted = np.where(count > 0, np.mean(depths) - residual_sum / count, np.nan)
         new_var = t_var / (1.0 + t_var * float(w @ total)) if t_var > 0 else 0.0
+        held = scale is not None
         return PingLikelihood(log_likelihood, tide + shift, new_var, predicted, alpha, count / nb,
-                              *((quadratic, effective) if scale is not None else (None, None)), v, c)
+                              quadratic if held else None, effective if held else None, v, c)
 
     def tide_update(
         self, particles, offsets, depths, tide, tide_var: float, *, turn=None
