@@ -27,14 +27,14 @@ soundings' precisions ``l_b = a_b / v_b``:
   sounding of which has the map under the cloud gives ``-inf`` everywhere (:class:`OffMap`);
 - **terrain information gating**: ``a_b`` in [0, 1] is MBARI's modified weighting
   (:func:`tangraph.sensors.information_exponent`) from how far the cloud's predicted depths for
-  sounding ``b`` spread beyond the map's error there (1 with a perfect map), for a ping whose
-  map error is not placed by the cloud (it carries no ``map_counts``); computed once per ping
-  from the weighted cloud and passed back in for the same ping's later evaluations (tempering
-  stages, IPF children) so that their likelihood ratios are of one function. A ping whose map
-  error the cloud places is weighed whole (``a_b = 1`` where the cloud has the map): the
-  weighting subtracts the map's error from the predictions' spread as if it differed from
-  particle to particle, while it is shared by particles closer than its correlation length, and
-  the row-sum bound has already discounted it: weighed twice, a filter learns too little.
+  sounding ``b`` spread beyond the map's error there (1 with a perfect map; the map's error
+  read where the cloud puts the sounding when the ping carries ``map_counts``, else at its
+  dead-reckoned footprint); computed once per ping from the weighted cloud and passed back in
+  for the same ping's later evaluations (tempering stages, IPF children) so that their
+  likelihood ratios are of one function. Weighed whole instead (``a_b = 1``), the point-mass
+  filter was more accurate on the simulated realistic maps but over-confident on Lake Caputh,
+  whose map errs beyond its statement in patches (``experiments/caputh_replay``, the section
+  on the map's error read where the belief puts the soundings).
 
 - **a misfit scale of its own** (:mod:`tangraph.sensors.misfit`): given a ``Gamma(shape, rate)``
   on the precision factor shared by the ping's soundings, the quadratic ``Q`` above (the tide
@@ -220,13 +220,13 @@ class TerrainLikelihood:
     def _placed(self, particles, offsets, turn, weights, map_counts, noise, counts,
                 misfit: bool) -> tuple[np.ndarray, ...]:  # fmt: skip
         """A ping's variances (the soundings' ``noise`` plus the map error the cloud places,
-        :meth:`_judged`), map error variances for the exponents (0: they are 1 where the cloud
-        has the map) and, with a ``misfit`` scale, the expected whitened squares of those
-        variances (else ``counts`` as given)."""
+        :meth:`_judged`), the map's own error variance under each sounding where the cloud puts
+        it (for the exponents) and, with a ``misfit`` scale, the expected whitened squares of
+        those variances (else ``counts`` as given)."""
         shared, own = self._judged(particles, offsets, turn, weights, map_counts)
         if misfit:
             counts = np.minimum((noise + own) / (noise + shared), 1.0)
-        return noise + shared, np.zeros(noise.shape), counts
+        return noise + shared, own, counts
 
     def _per_sounding(self, nb: int, variance, map_variance, counts) -> tuple[np.ndarray, ...]:
         """A ping's per-sounding arrays (variances, map error variances, counts) with their
@@ -273,8 +273,8 @@ class TerrainLikelihood:
             the cloud puts it, its variance ``variance_b + sum_f map_counts[b, f] E_w[g_f]``
             (``g_f`` the variance of the error's field ``f`` at a particle's footprint, ``E_w``
             the cloud's weighted mean; :func:`tangraph.sensors.sounding_map_counts`), and the
-            exponents are 1 where the cloud has the map (module docstring). The variances
-            judged are returned (``variance``) for later evaluations of the same ping.
+            exponents are judged against the map's own error there, ``sum_f E_w[g_f]``. The
+            variances judged are returned (``variance``) for later evaluations of the same ping.
 
         Raises
         ------

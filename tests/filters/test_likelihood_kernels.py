@@ -80,7 +80,8 @@ def reference(chart, grids, particles, turn, weights, offsets, residual) -> np.n
 
 def test_a_placed_map_error_is_a_likelihood_of_the_judged_variances():
     """A ping weighed with its map error placed by the cloud is the same likelihood as one given
-    those variances (``noise^2 + sum_f n_f E_w[g_f]``) with exponents of 1, and it returns them."""
+    those variances (``noise^2 + sum_f n_f E_w[g_f]``) and map error variances (``sum_f
+    E_w[g_f]``, which the exponents are judged against), and it returns them."""
     rng = np.random.default_rng(2)
     chart = varying_map()
     grids = map_error_grids(chart, NavigationModel(sounding_std=0.1))
@@ -92,13 +93,13 @@ def test_a_placed_map_error_is_a_likelihood_of_the_judged_variances():
     tide = np.zeros(particles.shape[0])
     placed = like.ping_update(particles, offsets, depths, tide, 0.5, turn=turn, weights=weights,
                               variance=np.full(25, 0.01), map_counts=counts)
-    shared, _ = like._judged(particles, offsets, turn, weights, counts)
+    shared, own = like._judged(particles, offsets, turn, weights, counts)
     given = like.ping_update(particles, offsets, depths, tide, 0.5, turn=turn, weights=weights,
-                             variance=0.01 + shared, exponent=np.ones(25))
+                             variance=0.01 + shared, map_variance=own)
     np.testing.assert_allclose(placed.variance, 0.01 + shared, rtol=1e-12)
     np.testing.assert_allclose(placed.log_likelihood, given.log_likelihood, rtol=1e-10)
     np.testing.assert_allclose(placed.tide, given.tide, rtol=1e-10)
-    assert np.all(placed.exponent == 1.0)
+    np.testing.assert_allclose(placed.exponent, given.exponent, rtol=1e-12)
     # the same ping whose soundings the cloud puts on the better-known west weighs more sharply
     west = particles - [0.0, 150.0]
     sharp = like.ping_update(west, offsets, depths, tide, 0.5, turn=turn, weights=weights,
