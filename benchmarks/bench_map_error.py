@@ -46,7 +46,7 @@ def main(argv=None) -> None:
     from tangraph.filters.likelihood import TerrainLikelihood
     from tangraph.filters.model import FilterModel, survey_pings
     from tangraph.matching import TapConfig, tap_fix, window_patch
-    from tangraph.sensors import NavigationModel, map_error, shared_map_variances, sounding_variances
+    from tangraph.sensors import NavigationModel, map_error, sounding_map_counts, sounding_variances
     from tangraph.sim.scenario import load_scenario, simulate_run
 
     run = simulate_run(load_scenario("demo-map-error"), rng=np.random.default_rng(1))
@@ -91,13 +91,13 @@ def main(argv=None) -> None:
     print(f"   update, the map's error, misfit scale {1e3 * misfit:8.3f} ms  {misfit / reference:.2f} "
           f"({misfit / placed:.2f} x the map's error alone)")
 
-    shared, error = shared_map_variances(survey, prior, model), map_error(prior, model)
+    counts, error = sounding_map_counts(survey, prior, model), map_error(prior, model)
     config = TapConfig(half_width=30.0)
     end = k
     centre = survey.true_pose[end, :2]
     few = max(3, args.repeat // 4)
     tap_plain = best_cpu(lambda: tap_fix(survey, perfect, end, 10, config, prior=centre), few)
-    tap_error = best_cpu(lambda: tap_fix(survey, prior, end, 10, config, prior=centre, shared=shared,
+    tap_error = best_cpu(lambda: tap_fix(survey, prior, end, 10, config, prior=centre, counts=counts,
                                          error=error), few)
     n = window_patch(survey, end, 10).n_soundings
     print(f"2. one TAP fix, 10 pings ({n} soundings), +-30 m (the patch laid, searched, judged)")

@@ -35,7 +35,14 @@ from tangraph.graph.fixes import (
 )
 from tangraph.graph.posterior_fix import GRID_SIGMAS, WindowFix, posterior_fix
 from tangraph.matching import MatchingError, window_patch
-from tangraph.sensors import odometry, slope_moment, sounding_map_variances, sounding_variances
+from tangraph.sensors import (
+    map_error,
+    odometry,
+    placed_map_variances,
+    slope_moment,
+    sounding_map_counts,
+    sounding_variances,
+)
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
@@ -46,7 +53,7 @@ if TYPE_CHECKING:
 
 __all__ = ["MISFIT_WINDOWS", "TIDE_STEP_AGREE", "TIDE_STEP_PINGS", "fix_factor", "grow_window", "grown",
            "judge", "laid_poses", "misfit_noise", "position_tide_prior", "posterior_window_fix", "tide_step",
-           "window_terrain"]
+           "window_terrain", "window_variances"]
 
 log = logging.getLogger("tangraph.graph.online")  # the navigator's messages, one logger for them
 #: The tide steps when the point-mass front end's windows find one depth fault (offsets within
@@ -82,7 +89,7 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
             made: TerrainFix = posterior_window_fix(nav, k, poses, world, cov)
         else:
             made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
-                            poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,
+                            poses=poses, first=nav.window_first.get(k), counts=nav.map_counts,
                             error=nav.map_error, drift=nav.fix_drift)
     except MatchingError as exc:
         return failed(k, exc, half_width)
@@ -122,11 +129,23 @@ def posterior_window_fix(nav: GraphNavigator, k: int, poses, world, cov) -> Wind
     first = nav.window_first[k]
     patch = window_patch(nav.survey, k, k - first + 1, min_soundings=nav.config.fixes.tap.min_soundings,
                          poses=poses)
-    likelihood, variance, map_variance, slope = nav._terrain
+    likelihood, variance, map_variance, slope = window_variances(nav, patch)
     mean, prior = position_tide_prior(nav, k, world, cov)
-    return posterior_fix(patch, likelihood, variance[patch.ping, patch.beam],
-                         None if map_variance is None else map_variance[patch.ping, patch.beam],
-                         slope, mean, prior, tide_factor=nav.tide)
+    return posterior_fix(patch, likelihood, variance, map_variance, slope, mean, prior, tide_factor=nav.tide)
+
+
+def window_variances(nav: GraphNavigator, patch):
+    """The terrain likelihood, the ``patch``'s soundings' variances and map error variances
+    ``(N,)`` (None: a perfect map) read where the patch lies (laid from the prediction), not at
+    the dead-reckoned footprints (:func:`tangraph.sensors.placed_map_variances`), and the map's
+    slope moment."""
+    likelihood, variance, counts, error, slope = nav._terrain
+    variance = variance[patch.ping, patch.beam]
+    if counts is None:
+        return likelihood, variance, None, slope
+    north, east = (patch.reference_position + patch.offsets).T
+    shared, own = placed_map_variances(error, counts[patch.ping, patch.beam], north, east)
+    return likelihood, float(nav.model.sounding_std) ** 2 + shared, own, slope
 
 
 def fix_factor(nav: GraphNavigator, key: int, fix) -> gtsam.NonlinearFactor | None:
@@ -183,11 +202,13 @@ def grown(nav: GraphNavigator, fix: TerrainFix, laid, joint) -> TerrainFix:
 
 def window_terrain(survey: Survey, bathymetry: BathymetryMap, model: NavigationModel):
     """What the point-mass front end weighs soundings with: the terrain likelihood, every
-    sounding's variance and map error variance ``(K, B)`` (None: a perfect map) at the DR's
-    footprints (as the filters'), and the map's slope moment."""
-    return (TerrainLikelihood(bathymetry, model.measurement_std),
-            sounding_variances(survey, bathymetry, model),
-            sounding_map_variances(survey, bathymetry, model), slope_moment(bathymetry))
+    sounding's variance ``(K, B)`` at the DR's footprints, the map error's counts and the map's
+    error (None: a perfect map; read where a window lies, :func:`window_variances`), and the
+    map's slope moment."""
+    counts = sounding_map_counts(survey, bathymetry, model)
+    error = None if counts is None else map_error(bathymetry, model)
+    likelihood = TerrainLikelihood(bathymetry, model.measurement_std)
+    return likelihood, sounding_variances(survey, bathymetry, model), counts, error, slope_moment(bathymetry)
 
 
 def tide_step(nav: GraphNavigator, k: int) -> None:

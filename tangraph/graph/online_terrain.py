@@ -16,7 +16,9 @@ iterated: ``START_ITERATIONS``.)
 ping and those before the new key, less any ping a window took) enter iSAM2 as one factor on
 that key pose, the calibration and the tide. This is the batch smoother's terrain model
 (:mod:`tangraph.graph.terrain_factors`): every sounding's residual against the map's depth at its
-footprint, with the row-sum variance of the map's error, judged at the prediction and
+footprint, with the row-sum variance of the map's error read where the prediction puts it
+(:meth:`OnlineTerrain.placed`; the dead reckoning, metres to tens of metres off, would put a
+sounding of a filled gap between the map's lines on a line), judged at the prediction and
 linearised at the mode of the key's belief given them (:func:`_mode`: an iterated Kalman
 update's point), with the white DR noise between the key and each ping integrated out exactly:
 all soundings of a ping share its noise, and each ping that of the pings before it
@@ -77,14 +79,22 @@ from tangraph.graph.calibration import CALIBRATION, world_covariance
 from tangraph.graph.factors import compose, propagate_joint
 from tangraph.graph.lost import _isam_index
 from tangraph.graph.terrain_factors import (
+    NONLINEAR_SIGMAS,
     PingTerrain,
     _evaluate,
     chain_information,
     footprints,
     gate,
     information_factor,
+    tangent_departure,
 )
-from tangraph.sensors import sounding_map_variances, sounding_variances
+from tangraph.sensors import (
+    MapError,
+    map_error,
+    placed_map_variances,
+    sounding_map_counts,
+    sounding_variances,
+)
 
 if TYPE_CHECKING:
     from tangraph.graph.online import GraphNavigator
@@ -95,9 +105,6 @@ __all__ = ["CHECK_PROBABILITY", "CHECK_WINDOWS", "MIN_EXPONENT", "MISFIT_KEYS", 
 #: Tracking ends when the map's departure from its tangent plane over the belief
 #: (:func:`_nonlinearity`) grows beyond this many times the soundings' variance (it starts at 1).
 NONLINEAR_STOP = 4.0
-#: ... over the points this many stds along the principal axes of the belief (its 2-sigma ellipse:
-#: where the vehicle is, not only its centre)
-NONLINEAR_SIGMAS = 2.0
 #: Tracking ends when more than half of the pings of this many keys in a row fail the ping test.
 MISFIT_KEYS = 2
 #: Tracking ends after this many windows in a row whose check fix (used or not) is surprising to
@@ -138,14 +145,29 @@ class OnlineTerrain:
     soundings: int = 0
     episodes: list[list[int]] = dataclasses.field(default_factory=list)
     found: bool = False  # the fix policy has used a unimodal fix (since tracking last ended)
-    map_variance: np.ndarray | None = None  # (K, B) the map's own error variance under each sounding
+    counts: np.ndarray | None = None  # (K, B, F) how many soundings share each field of its map error
+    error: MapError | None = None  # the map's error, read where the prediction puts the soundings
     _judged: object = None  # the navigator's latest window outcome, looked at for that
     _first: tuple = (None, 0, 0)  # the factor of the latest episode's first key, its pings and soundings
 
     @classmethod
     def of(cls, nav: GraphNavigator) -> OnlineTerrain:
-        return cls(sounding_variances(nav.survey, nav.bathymetry, nav.model),
-                   map_variance=sounding_map_variances(nav.survey, nav.bathymetry, nav.model))
+        counts = sounding_map_counts(nav.survey, nav.bathymetry, nav.model)
+        error = None if counts is None else map_error(nav.bathymetry, nav.model)
+        return cls(sounding_variances(nav.survey, nav.bathymetry, nav.model), counts=counts, error=error)
+
+    def placed(self, nav: GraphNavigator, key: int, pings) -> tuple[PingTerrain, np.ndarray | None]:
+        """The ``pings`` hung from key ``key``, each sounding's variance read where the prediction
+        puts it (:func:`tangraph.sensors.placed_map_variances`; a filter's, where its cloud does),
+        not at its dead-reckoned footprint, and the map's own error variance there ``(K, B)``."""
+        terrain = _terrain(nav, key, pings, self.variance[pings])
+        if self.counts is None or self.error is None:
+            return terrain, None  # a perfect map
+        north, east = footprints(terrain, nav.bathymetry, nav._key_pose[None], nav.calibration)
+        shared, own = placed_map_variances(self.error, self.counts[pings], north, east)
+        noise = float(nav.model.sounding_std) ** 2
+        variance = np.where(np.isfinite(terrain.variance), noise + shared, np.nan)
+        return dataclasses.replace(terrain, variance=variance), own
 
     def meta(self) -> dict:
         """What ``Track.meta["terrain"]`` says: factors, pings and soundings used, and the
@@ -211,7 +233,7 @@ class OnlineTerrain:
             self._stop()
             return
         pings = np.arange(first, k)
-        terrain = _terrain(nav, prev, pings, self.variance[pings])
+        terrain, own = self.placed(nav, prev, pings)
         bent = _nonlinearity(nav, terrain, prev, pings)
         # (pings with no sounding on the map tell nothing: tracking carries the DR over them)
         if not (bent <= (NONLINEAR_STOP if self.tracking else 1.0) or (np.isnan(bent) and self.tracking)):
@@ -223,7 +245,7 @@ class OnlineTerrain:
             nav._extra_iterations = START_ITERATIONS
         self.next_ping = self.free_ping = max(self.free_ping, k)
         counts = (self.pings, self.soundings)
-        factor, failed = self._factor(nav, prev, pings, terrain)
+        factor, failed = self._factor(nav, prev, pings, terrain, own)
         if self.episodes[-1][1] == prev:  # the episode's first factor: what undoing it takes back
             self._first = (factor, self.pings - counts[0], self.soundings - counts[1])
         self.failed = [*self.failed[-(MISFIT_KEYS - 1):], failed] if MISFIT_KEYS > 1 else [failed]
@@ -253,7 +275,7 @@ class OnlineTerrain:
         if not self.tracking or first > k:
             return None
         pings = np.arange(first, k + 1)
-        terrain = _terrain(nav, nav._key_of, pings, self.variance[pings])
+        terrain, own = self.placed(nav, nav._key_of, pings)
         tide, tide_var = (nav._tide_mean, float(nav._tide_joint[5, 5])) if nav.tide else (nav.model.tide, 0.0)
         key = nav._key_pose[None]
         key_cov = nav._world(nav._key_pose, nav._key_joint)[1][:2, :2]
@@ -265,7 +287,7 @@ class OnlineTerrain:
             return None
         residual, _, _, grad, _, _, noise = _evaluate(terrain, nav.bathymetry, key, nav.calibration, tide,
                                                       jacobian=False, noise=True)
-        exponent = self._exponents(pings, grad, prior)  # weighed as judged, at the prediction
+        exponent = self._exponents(own, grad, prior)  # weighed as judged, at the prediction
         used &= exponent > MIN_EXPONENT
         if not used.any():
             return None
@@ -297,7 +319,7 @@ class OnlineTerrain:
             self.failed = []
             self.surprises = 0
 
-    def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain):
+    def _factor(self, nav: GraphNavigator, prev: int, pings: np.ndarray, terrain: PingTerrain, own):
         """The factor of the ``pings`` hung from key ``prev`` (None when no sounding passes)
         and the share of those pings with soundings on the map that failed."""
         tide, tide_var = _tide_belief(nav, prev)
@@ -316,7 +338,7 @@ class OnlineTerrain:
             if _innovation(terrain, used, residual, grad, noise, drift, prior[0], tide_var) > gate_nis:
                 used[:] = False  # the soundings together pull the belief beyond its gate
                 failed = 1.0
-        exponent = self._exponents(pings, grad, prior)
+        exponent = self._exponents(own, grad, prior)
         used &= exponent > MIN_EXPONENT
         if not used.any():
             return None, failed
@@ -347,17 +369,18 @@ class OnlineTerrain:
             at.insert(keys[-1], np.array([tide]))
         return gtsam.LinearContainerFactor(factor, at), failed
 
-    def _exponents(self, pings, grad, position_cov) -> np.ndarray:
-        """The information exponents ``(K, B)`` of the ``pings``' soundings (the filters' MBARI
+    @staticmethod
+    def _exponents(map_variance, grad, position_cov) -> np.ndarray:
+        """The information exponents ``(K, B)`` of soundings (the filters' MBARI
         weighting, :func:`tangraph.sensors.information_exponent`, linearised): with ``D^2`` the
         spread of the depths the belief predicts for a sounding, ``g^T P g`` (``g`` the map's
         gradient under it, ``P`` its ping's position covariance ``position_cov (K, 2, 2)``),
         less what the map's noise ``s^2`` alone would spread, ``D^2 / (D^2 + 2 s^2)``: 1 on a
         perfect map, near 0 where the belief is too narrow for the terrain under it to rise
         above the map's noise."""
-        if self.map_variance is None:
+        if map_variance is None:
             return np.ones(grad.shape[:2])
-        s2 = np.nan_to_num(self.map_variance[pings])
+        s2 = np.nan_to_num(map_variance)
         spread = np.maximum(np.einsum("kbi,kij,kbj->kb", grad, position_cov, grad) - s2, 0.0)
         with np.errstate(invalid="ignore", divide="ignore"):
             return np.where(s2 > 0, spread / (spread + 2.0 * s2), 1.0)
@@ -452,29 +475,6 @@ def _ping_covariances(nav: GraphNavigator, prev: int, pings: np.ndarray) -> np.n
     joint[pings == prev] = nav._key_joint
     pose[pings == prev] = nav._key_pose
     return world_covariance(pose, joint, nav.calibration, nav.origin)[:, :2, :2]
-
-
-def tangent_departure(bathymetry, north, east, variance, cov) -> float:
-    """How far the map departs from its tangent plane over a belief of position covariance ``cov
-    (2, 2)``, or one per ping ``(K, 2, 2)``, against the soundings' noise: the mean over the
-    soundings at ``north, east (K, B)`` on the map (their variances ``variance``) and the four
-    points ``NONLINEAR_SIGMAS`` stds along the principal axes of their ping's covariance of
-    ``(h(f + d) - h(f) - g^T d)^2 / v``. At most 1, a Gauss-Newton step on the soundings errs less
-    than they do; NaN with no sounding on the map."""
-    cov = np.broadcast_to(np.asarray(cov, float), (np.shape(north)[0], 2, 2))
-    values, vectors = np.linalg.eigh(cov)
-    # (K, 2 axes, 2 coordinates): the steps along each ping's principal axes
-    steps = np.swapaxes(vectors * NONLINEAR_SIGMAS * np.sqrt(np.maximum(values, 0.0))[:, None, :], 1, 2)
-    depth = bathymetry.depth_at(north, east)
-    grad = bathymetry.gradient_at(north, east)
-    parts = []
-    for d in (steps[:, 0], steps[:, 1], -steps[:, 0], -steps[:, 1]):
-        dn, de = d[:, 0, None], d[:, 1, None]
-        bent = bathymetry.depth_at(north + dn, east + de) - depth - (grad[..., 0] * dn + grad[..., 1] * de)
-        parts.append(bent**2 / variance)
-    bent = np.stack(parts)
-    ok = np.isfinite(bent)
-    return float(np.mean(bent[ok])) if ok.any() else float("nan")
 
 
 def _tide_belief(nav: GraphNavigator, key: int) -> tuple[float, float]:

@@ -39,11 +39,16 @@ from tangraph.graph.keyposes import increments
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors import rotation_matrix, sounding_variances
 
-__all__ = ["PingTerrain", "chain_information", "footprints", "gate", "information_factor", "linear_factors",
-           "ping_terrain", "sounding_jacobians", "terrain_cost", "terrain_residuals"]
+__all__ = ["NONLINEAR_SIGMAS", "PingTerrain", "chain_information", "footprints", "gate", "information_factor",
+           "linear_factors", "ping_terrain", "sounding_jacobians", "tangent_departure", "terrain_cost",
+           "terrain_residuals"]
 
 _J = np.array([[0.0, -1.0], [1.0, 0.0]])  # d R(a) / da = R(a) J
 PING_PROBABILITY = 0.999  #: a ping's soundings together beyond this chi-square quantile: left out
+#: How far a belief reaches when :func:`tangent_departure` tests the map's tangent plane over it:
+#: the points this many stds along its principal axes (its 2-sigma ellipse: where the vehicle
+#: is, not only its centre)
+NONLINEAR_SIGMAS = 2.0
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -89,16 +94,18 @@ class PingTerrain:
 
 
 def ping_terrain(survey, bathymetry: BathymetryMap, model, keys, white, origin,
-                 calibrated: bool) -> PingTerrain:  # fmt: skip
+                 calibrated: bool, poses=None) -> PingTerrain:  # fmt: skip
     """Hang every ping of ``survey`` from the last key pose at or before it (``keys``, ping
     indices ascending, the first at ping 0); ``white`` is the DR's white error model,
-    ``model`` the :class:`~tangraph.sensors.NavigationModel` (sounding and map error, tide)."""
+    ``model`` the :class:`~tangraph.sensors.NavigationModel` (sounding and map error, tide).
+    Each sounding's variance is read at its footprint from ``poses (K, 3)`` (world poses; an
+    estimate of the track: default the dead reckoning, tens of metres off by mid-survey)."""
     keys = np.asarray(keys, np.int64)
     ping = np.arange(survey.n_pings)
     index = np.searchsorted(keys, ping, side="right") - 1
     increment, cov = increments(white, survey.time, survey.dr_pose, keys[index], ping)
     offsets = np.stack([survey.beam_forward, survey.beam_starboard], axis=-1).astype(float)
-    variance = sounding_variances(survey, bathymetry, model)
+    variance = sounding_variances(survey, bathymetry, model, poses=poses)
     return PingTerrain(keys, index, increment, cov, offsets, np.asarray(survey.beam_depth, float), variance,
                        np.asarray(origin, float), bool(calibrated), float(model.tide), float(model.tide_std))
 
@@ -327,3 +334,26 @@ def chain_information(a, a_noise, residual, weight, increment_cov) -> tuple[np.n
         eta -= cross @ gain @ eta[p:]
         lam -= cross @ gain @ cross.T
     return lam[:p, :p], eta[:p]  # u = 0 at the key
+
+
+def tangent_departure(bathymetry, north, east, variance, cov) -> float:
+    """How far the map departs from its tangent plane over a belief of position covariance ``cov
+    (2, 2)``, or one per ping ``(K, 2, 2)``, against the soundings' noise: the mean over the
+    soundings at ``north, east (K, B)`` on the map (their variances ``variance``) and the four
+    points ``NONLINEAR_SIGMAS`` stds along the principal axes of their ping's covariance of
+    ``(h(f + d) - h(f) - g^T d)^2 / v``. At most 1, a Gauss-Newton step on the soundings errs less
+    than they do; NaN with no sounding on the map."""
+    cov = np.broadcast_to(np.asarray(cov, float), (np.shape(north)[0], 2, 2))
+    values, vectors = np.linalg.eigh(cov)
+    # (K, 2 axes, 2 coordinates): the steps along each ping's principal axes
+    steps = np.swapaxes(vectors * NONLINEAR_SIGMAS * np.sqrt(np.maximum(values, 0.0))[:, None, :], 1, 2)
+    depth = bathymetry.depth_at(north, east)
+    grad = bathymetry.gradient_at(north, east)
+    parts = []
+    for d in (steps[:, 0], steps[:, 1], -steps[:, 0], -steps[:, 1]):
+        dn, de = d[:, 0, None], d[:, 1, None]
+        bent = bathymetry.depth_at(north + dn, east + de) - depth - (grad[..., 0] * dn + grad[..., 1] * de)
+        parts.append(bent**2 / variance)
+    bent = np.stack(parts)
+    ok = np.isfinite(bent)
+    return float(np.mean(bent[ok])) if ok.any() else float("nan")

@@ -82,13 +82,14 @@ def _solve(nav: GraphNavigator, start_kept: bool, solution: SmootherSolution, pl
     started = _time.perf_counter()
     fixes_solution = solution
     graph = _ping_graph(nav)
+    world, world_cov = batch.dense_track(nav.survey, nav.white, solution, nav.origin)
+    # the map's error read where the fixes' solution puts the soundings, not the DR
     terrain = terrain_factors.ping_terrain(nav.survey, nav.bathymetry, nav.model, graph.keys, nav.white,
-                                           nav.origin, graph.calibrated)
+                                           nav.origin, graph.calibrated, poses=world)
     terrain = dataclasses.replace(terrain, depth=np.where(placed[:, None], terrain.depth, np.nan))
     if not placed.any():
         return _nothing_fits(fixes_solution, terrain, "every window found several places")
     factors = graph.with_fixes([], start=start_kept).factor_graph()
-    world, world_cov = batch.dense_track(nav.survey, nav.white, solution, nav.origin)
     # the soundings are judged as innovations of the fixes' solution, whose uncertainty this is
     prior = np.where(np.isfinite(world_cov[:, :2, :2]), world_cov[:, :2, :2], 0.0)
     initial = batch.frame_poses(world, solution.calibration, nav.origin) if graph.calibrated else world

@@ -90,6 +90,7 @@ __all__ = [
     "information_exponent",
     "map_error",
     "map_error_grids",
+    "placed_map_variances",
     "shared_among",
     "shared_map_variances",
     "slope_moment",
@@ -250,21 +251,23 @@ def shared_map_variances(survey, bathymetry: BathymetryMap, model, *, poses=None
     return _map_variances(survey, bathymetry, model, poses)[1]
 
 
-# survey -> map -> {model: (shared variances, error)}: weak keys, so nothing outlives its survey or
+# survey -> map -> {model: (map error counts, error)}: weak keys, so nothing outlives its survey or
 # map and a new map never meets an old one's entry (surveys and maps hash by identity)
 _SURVEY_MAP_ERRORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def survey_map_error(survey, bathymetry: BathymetryMap, model) -> tuple[np.ndarray | None, MapError | None]:
-    """The survey's :func:`shared_map_variances` at its dead-reckoned footprints and the map's
-    error (:func:`map_error`), computed once per survey, map and model; ``(None, None)`` with a
-    perfect map. What every fix of a run is widened by (TAP in the graph, MLE, TERCOM-PF)."""
+    """The survey's :func:`sounding_map_counts` (how many of its soundings share each one's
+    map error, from the dead reckoning's geometry) and the map's error (:func:`map_error`),
+    computed once per survey, map and model; ``(None, None)`` with a perfect map. What every fix
+    of a run is widened by (TAP in the graph, MLE, TERCOM-PF), read where the fix puts the
+    soundings (:func:`placed_map_variances`)."""
     per_map = _SURVEY_MAP_ERRORS.setdefault(survey, weakref.WeakKeyDictionary())
     per_model = per_map.setdefault(bathymetry, {})
     if model not in per_model:
         error = map_error(bathymetry, model)
         per_model[model] = (None, None) if error.is_zero else \
-            (shared_map_variances(survey, bathymetry, model), error)
+            (sounding_map_counts(survey, bathymetry, model), error)
     return per_model[model]
 
 
@@ -457,3 +460,21 @@ def sounding_map_counts(survey, bathymetry: BathymetryMap, model, *, poses=None)
     for f, part in enumerate(parts):
         out[has, f] = _weighted_correlation_sums(north[has], east[has], ones, part.correlation_length)
     return out
+
+
+def placed_map_variances(error: MapError, counts, north, east) -> tuple[np.ndarray, np.ndarray]:
+    """The map error of soundings placed at ``north, east`` (any shape ``S``; an estimate's
+    footprints, not the dead reckoning's) with their counts ``counts (*S, F)``
+    (:func:`sounding_map_counts`): the variance the row-sum bound gives each, ``sum_f a_f^2
+    n_fb``, and the map's own error variance under it, ``sum_f a_f^2`` (the fields' stds ``a_f``
+    read there, their median off the map's data). What a graph weighs a sounding by where its
+    belief puts it, as a filter does where its cloud does (:func:`sounding_map_counts`)."""
+    north, east = np.asarray(north, float), np.asarray(east, float)
+    counts = np.asarray(counts, float)
+    shared, own = np.zeros(north.shape), np.zeros(north.shape)
+    for f, part in enumerate(error.components()):
+        s = part.std_at(north, east)
+        a2 = np.where(np.isfinite(s), s, part.typical_std) ** 2
+        shared += a2 * counts[..., f]
+        own += a2
+    return shared, own

@@ -272,15 +272,13 @@ def test_the_tracking_exponents_are_the_filters_weighting_linearised():
     grad = np.array([[[0.05, 0.02], [0.2, -0.1], [0.01, 0.0]]])  # (1 ping, 3 soundings, 2)
     cov = np.array([[[9.0, 2.0], [2.0, 4.0]]])
     map_variance = np.full((1, 3), 0.04)
-    terrain = OnlineTerrain(np.full((1, 3), 0.05), map_variance=map_variance)
-    exponent = terrain._exponents(np.array([0]), grad, cov)
+    exponent = OnlineTerrain._exponents(map_variance, grad, cov)
     cloud = rng.multivariate_normal(np.zeros(2), cov[0], 200_000)
     predicted = cloud @ grad[0].T  # the plane's depths under each sounding, (N, B)
     filters = information_exponent(predicted, np.full(len(cloud), 1.0 / len(cloud)), map_variance[0])
     np.testing.assert_allclose(exponent[0], filters, atol=0.01)
     assert exponent[0, 2] == 0.0 and 0.5 < exponent[0, 1] < 1.0  # flat: nothing; steep: most
-    perfect = OnlineTerrain(np.full((1, 3), 0.05))
-    np.testing.assert_array_equal(perfect._exponents(np.array([0]), grad, cov), 1.0)
+    np.testing.assert_array_equal(OnlineTerrain._exponents(None, grad, cov), 1.0)
 
 
 def test_a_keys_soundings_are_linearised_at_their_mode_not_at_the_prediction(small_survey, rough_map,
@@ -334,3 +332,33 @@ def test_a_check_on_the_search_edge_ends_tracking_only_if_its_region_leaves_the_
     taken = terrain.window(nav, 9, np.zeros(3), np.eye(5))
     assert terrain.tracking is holds and taken is not holds
     assert [r.status for r in nav.fixes] == ([FixStatus.CHECKED] if holds else [])
+
+
+def test_tracking_reads_the_map_error_where_the_prediction_puts_the_soundings(small_survey, rough_map):
+    """A tracking factor's soundings take the map's error where the key's estimate puts them
+    (the count form, :func:`tangraph.sensors.placed_map_variances`), not at their dead-reckoned
+    footprints: the same pings laid from a key moved onto a stretch known ten times worse read
+    that stretch's error, with the counts of their own geometry."""
+    from tangraph.graph.terrain_factors import footprints
+    from tangraph.sensors import map_error, placed_map_variances
+
+    east = np.broadcast_to(rough_map.east, rough_map.shape)
+    cut = float(np.median(small_survey.true_pose[:, 1])) + 400.0
+    prior = rough_map.replace(depth_std=np.where(east > cut, 1.0, 0.1), correlation_length=20.0)
+    model = NavigationModel.from_survey(small_survey)
+    nav = GraphNavigator(small_survey, prior, SOUNDINGS, model=model).run()
+    terrain, key = nav.terrain, nav._key_of
+    pings = np.arange(key, small_survey.n_pings)
+    noise, error = model.sounding_std**2, map_error(prior, model)
+    own_by_place = []
+    for shift in (0.0, 600.0):  # the key's estimate as it is, and moved east onto the poor stretch
+        nav._key_pose = nav._key_pose + np.array([0.0, shift, 0.0])
+        laid, own = terrain.placed(nav, key, pings)
+        north, east_ = footprints(laid, prior, nav._key_pose[None], nav.calibration)
+        shared, expected_own = placed_map_variances(error, terrain.counts[pings], north, east_)
+        seen = np.isfinite(laid.variance)
+        np.testing.assert_allclose(laid.variance[seen], noise + shared[seen], rtol=1e-12)
+        np.testing.assert_allclose(own, expected_own, rtol=1e-12)
+        own_by_place.append(float(np.median(own[seen])))
+    assert own_by_place[0] == pytest.approx(0.1**2, rel=0.05)
+    assert own_by_place[1] == pytest.approx(1.0**2, rel=0.05)

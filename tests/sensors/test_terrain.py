@@ -190,3 +190,33 @@ def test_the_count_form_bounds_the_dense_covariance_of_a_varying_error():
         assert np.all(read >= a[inside] ** 2 - 1e-12)
         assert np.mean(read - a[inside] ** 2) < 0.05 * np.mean(a[inside] ** 2)
     assert np.linalg.eigvalsh(np.diag(bound) - dense).min() > -1e-9
+
+
+def test_placed_variances_are_the_count_form_read_where_the_soundings_are_put():
+    """With one error field of uniform std the count form is the row sum: placed at their own
+    footprints the soundings get :func:`sounding_variances`. Placed 300 m east, in a stretch
+    known ten times worse, each reads that stretch's error with the counts of its own
+    geometry (a dead reckoning's footprints are placed well relative to each other)."""
+    from tangraph.sensors import placed_map_variances, sounding_map_counts
+
+    rng = np.random.default_rng(5)
+    points = rng.uniform(300, 400, (120, 2))
+    survey = scattered_survey(points)
+    model = NavigationModel(sounding_std=0.1, map_std=0.2, map_correlation_length=15.0)
+    even = FLAT.replace(depth_std=np.full(FLAT.shape, 0.2), correlation_length=15.0)
+    counts = sounding_map_counts(survey, even, model)
+    shared, own = placed_map_variances(map_error(even, model), counts, points[:, None, 0], points[:, None, 1])
+    np.testing.assert_allclose(0.1**2 + shared, sounding_variances(survey, even, model), rtol=1e-12)
+    np.testing.assert_allclose(own, 0.2**2)
+
+    east = np.broadcast_to(FLAT.east, FLAT.shape)
+    two = FLAT.replace(depth_std=np.where(east >= 600.0, 2.0, 0.2), correlation_length=15.0)
+    error = map_error(two, model)
+    counts = sounding_map_counts(survey, two, model)
+    here = placed_map_variances(error, counts, points[:, None, 0], points[:, None, 1])
+    there = placed_map_variances(error, counts, points[:, None, 0], points[:, None, 1] + 300.0)
+    np.testing.assert_allclose(here[1], 0.2**2, rtol=1e-12)
+    np.testing.assert_allclose(there[1], 2.0**2, rtol=1e-12)  # every field's variance, summed
+    fields = [part.std_at(points[:, 0], points[:, 1] + 300.0) ** 2 for part in error.components()]
+    np.testing.assert_allclose(there[0][:, 0], sum(f * counts[:, 0, i] for i, f in enumerate(fields)), rtol=1e-12)
+    assert np.all(there[0] > 50 * here[0])
