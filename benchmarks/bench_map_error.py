@@ -17,9 +17,12 @@ process (best of R after a warm-up), as ratios:
    :mod:`tangraph.sensors.misfit`, through the filters' terrain model, and the scale's update).
 2. One TAP fix of a 10-ping window (the demo's multibeam) on the demo-map-error scenario's prior
    map: without and with the map error its soundings share (among themselves for its regions,
-   with the survey for its covariance), both with the ping jackknife as the graph calls it.
-3. The per-sounding variances of a whole survey (:func:`tangraph.sensors.sounding_variances`,
-   computed once per run), against one PF run of the same survey.
+   with the survey for its covariance, read where the fix puts them), both with the ping
+   jackknife as the graph calls it.
+3. What a run computes once of the whole survey: the per-sounding variances
+   (:func:`tangraph.sensors.sounding_variances`) and the map error's counts the filters, the
+   fixes and the graph read where their estimate puts the soundings
+   (:func:`tangraph.sensors.sounding_map_counts`), against one PF run of the same survey.
 
 Nothing is asserted.
 """
@@ -105,13 +108,15 @@ def main(argv=None) -> None:
     print(f"   the map's error       {1e3 * tap_error:8.2f} ms  {tap_error / tap_plain:.2f}")
 
     variances = best_cpu(lambda: sounding_variances(survey, prior, model), 3)
+    counted = best_cpu(lambda: sounding_map_counts(survey, prior, model), 3)
     from tangraph.filters import default_config, run_filter
 
     t0 = time.process_time()
     run_filter("pf", survey, prior, default_config("pf"), model=model, rng=np.random.default_rng(3))
     pf = time.process_time() - t0
     print(f"3. the survey's per-sounding variances ({survey.n_pings} pings): {variances:.2f} s, "
-          f"{variances / pf:.2f} of one PF run ({pf:.1f} s)")
+          f"{variances / pf:.2f} of one PF run ({pf:.1f} s); its map error counts: {counted:.2f} s, "
+          f"{counted / pf:.2f}")
 
 
 if __name__ == "__main__":

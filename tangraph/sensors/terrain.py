@@ -46,11 +46,12 @@ and large for a long-range error over fine terrain. Sums are evaluated on the de
 footprints (:func:`sounding_variances`).
 
 **Where the soundings are.** The row sums above need the map error's std where each sounding
-lies. The fixes and the graph read it at the dead-reckoned footprints; the filters read it
-where their belief puts each sounding (:func:`sounding_map_counts`: the bound in the form
-``a_b^2 n_b``, which needs the std at the sounding's own footprint only), so that a sounding
-the dead reckoning puts on one of the map's lines, but the belief in a filled gap between
-them, counts as little as the gap is known.
+lies. Every estimator reads it where its own estimate puts each sounding, in the bound's form
+``a_b^2 n_b``, which needs the std at the sounding's own footprint only (:func:`sounding_map_counts`,
+:func:`placed_map_variances`): the filters where their belief puts it, a fix where it puts its
+window, the graph's tracking at its prediction, so that a sounding the dead reckoning puts on
+one of the map's lines, but the estimate in a filled gap between them, counts as little as the
+gap is known.
 
 A TAP fix, which weighs one window's soundings together, is widened by the map error they share
 among themselves exactly (:func:`shared_quadratic`, the double sum over pairs on the map
