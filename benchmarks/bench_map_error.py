@@ -17,11 +17,10 @@ process (best of R after a warm-up), as ratios:
    :mod:`tangraph.sensors.misfit`, through the filters' terrain model, and the scale's update).
 2. One TAP fix of a 10-ping window (the demo's multibeam) on the demo-map-error scenario's prior
    map: without and with the map error its soundings share (among themselves for its regions,
-   with the survey for its covariance, read where the fix puts them), both with the ping
-   jackknife as the graph calls it.
+   with the survey for its covariance), both with the ping jackknife as the graph calls it.
 3. What a run computes once of the whole survey: the per-sounding variances
-   (:func:`tangraph.sensors.sounding_variances`) and the map error's counts the filters, the
-   fixes and the graph read where their estimate puts the soundings
+   (:func:`tangraph.sensors.sounding_variances`) and the map error's counts the filters and the
+   graph read where their estimate puts the soundings
    (:func:`tangraph.sensors.sounding_map_counts`), against one PF run of the same survey.
 
 Nothing is asserted.
@@ -49,7 +48,13 @@ def main(argv=None) -> None:
     from tangraph.filters.likelihood import TerrainLikelihood
     from tangraph.filters.model import FilterModel, survey_pings
     from tangraph.matching import TapConfig, tap_fix, window_patch
-    from tangraph.sensors import NavigationModel, map_error, sounding_map_counts, sounding_variances
+    from tangraph.sensors import (
+        NavigationModel,
+        map_error,
+        shared_map_variances,
+        sounding_map_counts,
+        sounding_variances,
+    )
     from tangraph.sim.scenario import load_scenario, simulate_run
 
     run = simulate_run(load_scenario("demo-map-error"), rng=np.random.default_rng(1))
@@ -94,13 +99,13 @@ def main(argv=None) -> None:
     print(f"   update, the map's error, misfit scale {1e3 * misfit:8.3f} ms  {misfit / reference:.2f} "
           f"({misfit / placed:.2f} x the map's error alone)")
 
-    counts, error = sounding_map_counts(survey, prior, model), map_error(prior, model)
+    shared, error = shared_map_variances(survey, prior, model), map_error(prior, model)
     config = TapConfig(half_width=30.0)
     end = k
     centre = survey.true_pose[end, :2]
     few = max(3, args.repeat // 4)
     tap_plain = best_cpu(lambda: tap_fix(survey, perfect, end, 10, config, prior=centre), few)
-    tap_error = best_cpu(lambda: tap_fix(survey, prior, end, 10, config, prior=centre, counts=counts,
+    tap_error = best_cpu(lambda: tap_fix(survey, prior, end, 10, config, prior=centre, shared=shared,
                                          error=error), few)
     n = window_patch(survey, end, 10).n_soundings
     print(f"2. one TAP fix, 10 pings ({n} soundings), +-30 m (the patch laid, searched, judged)")

@@ -155,9 +155,8 @@ def attempt_fix(
     ``MATCH_FAILED`` when no match can be made). ``initial_std`` (the
     model's start std) is the smallest half-width when ``search.min_half_width`` is None (with
     3 map cells). ``model``: the run's navigation model, whose map error widens the fix by what
-    its soundings share with the survey's others where the fix puts them
-    (:func:`tangraph.sensors.survey_map_error`, computed once per survey, map and model).
-    ``calibration``: the filter's estimate of the DR's
+    its soundings share with the survey's others (:func:`tangraph.sensors.shared_map_variances`,
+    computed once per survey, map and model). ``calibration``: the filter's estimate of the DR's
     constant errors ``(k, b)`` and their covariance ``(2, 2)``; the window is then laid with the
     dead reckoning they correct (:func:`tangraph.matching.calibrated_window`), not the raw one,
     and the fix's covariance grows by what is still uncertain of that laying (the model's white
@@ -171,12 +170,12 @@ def attempt_fix(
     half_width = float(np.clip(search.search_sigmas * spread, low, max(low, search.max_half_width)))
     config = TapConfig(half_width=half_width, criterion=getattr(search, "criterion", Criterion.MLE))
     try:
-        counts, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
+        shared, error = (None, None) if model is None else survey_map_error(survey, bathymetry, model)
         if calibration is None:
-            fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, counts=counts, error=error,
+            fix = tap_fix(survey, bathymetry, index, window, config, prior=prior, shared=shared, error=error,
                           drift=None if model is None else model.tide_drift)
         else:
-            fix = _calibrated_fix(survey, bathymetry, index, window, config, prior, counts, error,
+            fix = _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error,
                                   calibration, model)
     except MatchingError as exc:
         _log.info("fix at ping %d: %s", index, exc)
@@ -186,13 +185,13 @@ def attempt_fix(
     return fix, FixRecord.of(index, fix, status, np.nan, half_width, "; ".join(fix.quality.reasons))
 
 
-def _calibrated_fix(survey, bathymetry, index, window, config, prior, counts, error, calibration,
+def _calibrated_fix(survey, bathymetry, index, window, config, prior, shared, error, calibration,
                     model) -> TapFix:
     """The TAP fix of a window laid with the calibrated DR, grown by the laying's uncertainty."""
     mean, cov = calibration
     poses, jac = calibrated_window(survey, index, window, mean)
     patch = window_patch(survey, index, window, min_soundings=config.min_soundings, poses=poses,
-                         counts=counts, error=error, drift=model.tide_drift)
+                         shared=shared, error=error, drift=model.tide_drift)
     fix = tap_fix_patch(patch, bathymetry, config, prior=prior)
     grown = fix.covariance + shape_covariance(survey, model.dead_reckoning, fix.first, fix.index, jac, cov)
     return dataclasses.replace(fix, covariance=0.5 * (grown + grown.T))

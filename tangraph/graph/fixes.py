@@ -164,15 +164,15 @@ def window_noise(fix: Fix, survey: Survey, white: DeadReckoningModel, shape_jaco
 
 
 def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphConfig, prior,
-             half_width: float, *, poses=None, first: int | None = None, counts=None,
+             half_width: float, *, poses=None, first: int | None = None, shared=None,
              error=None, drift: tuple[float, float] | None = None) -> TapFix:
     """The TAP fix of the window of pings ``first`` (default ``end - config.fixes.n_pings + 1``) to
     ``end``, searched within ``half_width`` of ``prior``; the patch is laid with ``poses``, the
-    poses of the window's pings (default: their DR poses); ``counts (K, B, F)``: the survey's
-    map error counts (:func:`tangraph.sensors.sounding_map_counts`; None: a perfect map), which
-    widen the fix's covariance by the map error shared where the fix puts the soundings,
-    ``error`` the map's error, whose part shared among the window's soundings widens its regions,
-    and ``drift`` the tide's drift (``NavigationModel.tide_drift``: :func:`tangraph.matching.tap_fix`).
+    poses of the window's pings (default: their DR poses); ``shared (K, B)``: the survey's
+    shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
+    map), which widen the fix's covariance, ``error`` the map's error, whose part shared
+    among the window's soundings widens its regions, and ``drift`` the tide's drift
+    (``NavigationModel.tide_drift``: :func:`tangraph.matching.tap_fix`).
 
     Raises
     ------
@@ -185,7 +185,7 @@ def make_fix(survey: Survey, bathymetry: BathymetryMap, end: int, config: GraphC
     if not np.isfinite(survey.beam_depth[first : end + 1]).any():
         raise MatchingError(f"window of pings {first}..{end} has no sounding")
     patch = window_patch(survey, end, end - first + 1, min_soundings=config.fixes.tap.min_soundings,
-                         poses=poses, counts=counts, error=error, drift=drift)
+                         poses=poses, shared=shared, error=error, drift=drift)
     tap = dataclasses.replace(config.fixes.tap, half_width=float(half_width),
                               step=search_step(config, bathymetry))
     return tap_fix_patch(patch, bathymetry, tap, prior=np.asarray(prior, float))

@@ -103,7 +103,7 @@ class GraphNavigator:
         self.white = self.model.dead_reckoning
         self.fix_drift = fix_drift(self.model, self.config, survey.time)  # what widens each fix's window
         # (the map error each sounding shares with the survey's others: it widens every fix)
-        self.map_counts, self.map_error = survey_map_error(survey, bathymetry, self.model)
+        self.shared_map_variance, self.map_error = survey_map_error(survey, bathymetry, self.model)
         c = self.config
         n = survey.n_pings
         self.origin = np.asarray(survey.dr_pose[0, :2], float).copy()

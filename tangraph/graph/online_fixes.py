@@ -89,7 +89,7 @@ def judge(nav: GraphNavigator, k: int, pose, joint, fix: TerrainFix | None,
             made: TerrainFix = posterior_window_fix(nav, k, poses, world, cov)
         else:
             made = make_fix(nav.survey, nav.bathymetry, k, nav.config, world[:2], half_width,
-                            poses=poses, first=nav.window_first.get(k), counts=nav.map_counts,
+                            poses=poses, first=nav.window_first.get(k), shared=nav.shared_map_variance,
                             error=nav.map_error, drift=nav.fix_drift)
     except MatchingError as exc:
         return failed(k, exc, half_width)

@@ -124,7 +124,7 @@ def _rematch(nav: GraphNavigator, pose, cov, solution: SmootherSolution) -> list
         window = slice(nav.window_first[end], end + 1)
         try:
             fix = make_fix(nav.survey, nav.bathymetry, end, config, pose[end, :2], half_width,
-                           poses=pose[window], first=window.start, counts=nav.map_counts,
+                           poses=pose[window], first=window.start, shared=nav.shared_map_variance,
                            error=nav.map_error, drift=nav.fix_drift)
             laid = None if window.start < 0 else frame_poses(pose[window], solution.calibration, nav.origin)
             # laid with the smoothed calibration: the model's noise is the misfit reference

@@ -28,9 +28,8 @@ class Patch:
     dead reckoning sees them (DR increments inside the window are trusted; the window's absolute
     position is what matching estimates); ``depths (N,)`` the measured depths; ``ping (N,)`` the
     ping of each sounding; ``beam (N,)`` its beam. ``reference_position`` is the DR position of
-    ping ``reference``. ``counts (N, F)``: how many of the survey's soundings share each field of
-    each sounding's map error (:func:`tangraph.sensors.sounding_map_counts`; None: none), whose
-    shared variance is read where the fix puts the soundings, and
+    ping ``reference``. ``shared (N,)``: the map error variance each sounding shares with the
+    survey's other soundings (:func:`tangraph.sensors.shared_map_variances`; None: none), and
     ``error`` the map's error (:class:`tangraph.sensors.MapError`; None: none), from which what
     the window's own soundings share is computed where the fix is made
     (:func:`tangraph.sensors.shared_quadratic`). ``drift (P, P)``: the covariance of the tide's
@@ -46,7 +45,7 @@ class Patch:
     first: int
     reference_position: np.ndarray
     n_dropped: int
-    counts: np.ndarray | None = None
+    shared: np.ndarray | None = None
     error: MapError | None = None
     drift: np.ndarray | None = None
 
@@ -60,11 +59,11 @@ class Patch:
 
 
 def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int = 10, poses=None,
-                 counts=None, error=None, drift: tuple[float, float] | None = None) -> Patch:
+                 shared=None, error=None, drift: tuple[float, float] | None = None) -> Patch:
     """The patch of the ``n_pings`` pings ending at ping ``end`` (NaN soundings dropped, counted),
     laid with ``poses`` (the window's ``(n_pings, 3)`` poses; default their DR poses). Only the
-    window's footprints are computed. ``counts (K, B, F)``: the survey's soundings' map error
-    counts (:func:`tangraph.sensors.sounding_map_counts`), kept for the window's;
+    window's footprints are computed. ``shared (K, B)``: the survey's soundings' shared map
+    error variances (:func:`tangraph.sensors.shared_map_variances`), kept for the window's;
     ``error``: the map's error (:func:`tangraph.sensors.map_error`), kept (:attr:`Patch.error`)
     unless it is zero; ``drift``: the tide's drift ``(std, time)`` (m, s;
     ``NavigationModel.tide_drift``), whose covariance between the window's pings is kept.
@@ -108,7 +107,7 @@ def window_patch(survey: Survey, end: int, n_pings: int, *, min_soundings: int =
         first=first,
         reference_position=ref,
         n_dropped=int((~keep).sum()),
-        counts=None if counts is None else np.asarray(counts, float)[window][keep],
+        shared=None if shared is None else np.asarray(shared, float)[window][keep],
         error=None if error is None or error.is_zero else error,
         drift=None if drift is None else _drift_covariance(survey.time[window], *drift),
     )

@@ -12,12 +12,10 @@ tide ``t(X)`` is the mean residual and ``sigma^2(X)`` the residual variance; the
   cluster-robust (per ping) sandwich ratio of the score's variance for errors shared by a ping's
   beams (attitude), times the lag-one AR(1) factor ``(1 + r) / (1 - r)`` along each beam's track.
 
-The map's error. Where the patch carries how many of the survey's soundings share each
-sounding's map error (``Patch.counts``, :func:`tangraph.sensors.sounding_map_counts`, the
-terrain measurement model's row-sum bound), the fix's covariance is at least the least-squares
-fix's covariance with the soundings' variances ``s^2 + shared_b`` (a sandwich on the map
-gradients at the fix), ``shared_b`` read where the fix puts each sounding (a dead reckoning tens
-of metres off would put a sounding of a filled gap between the map's lines on a line): the
+The map's error. Where the patch carries the map error its soundings share with the survey's
+other soundings (:func:`tangraph.sensors.shared_map_variances`, the terrain measurement model's
+row-sum bound), the fix's covariance is at least the least-squares fix's covariance with the
+soundings' variances ``s^2 + shared_b`` (a sandwich on the map gradients at the fix): the
 residual scatter cannot show an error the window's soundings share with each other or with the
 survey's other passes over the same cells, and a graph that adds every window's fix must not
 count that error once per window. The regions and the quality flags are those of the window's
@@ -130,15 +128,14 @@ def tap_fix(
     config: TapConfig | None = None,
     *,
     prior=None,
-    counts=None,
+    shared=None,
     error=None,
     drift: tuple[float, float] | None = None,
 ) -> TapFix:
     """A fix of the window of ``n_pings`` pings ending at ``end``, searched around ``prior``
-    (default: the dead-reckoned position of ping ``end``); ``counts (K, B, F)``: the survey's
-    map error counts (:func:`tangraph.sensors.sounding_map_counts`; None: a perfect map), the
-    map error the window's soundings share with the survey's others, read where the fix puts
-    them, which widens the fix, and ``error`` the map's error
+    (default: the dead-reckoned position of ping ``end``); ``shared (K, B)``: the survey's
+    shared map error variances (:func:`tangraph.sensors.shared_map_variances`; None: a perfect
+    map), which widen the fix, and ``error`` the map's error
     (:func:`tangraph.sensors.map_error`), whose part shared among the window's own soundings
     widens its regions; ``drift``: the tide's drift ``(std, time)``
     (``NavigationModel.tide_drift``), whose change within the window widens the fix's
@@ -151,7 +148,7 @@ def tap_fix(
         sounding on the map.
     """
     config = config or TapConfig()
-    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, counts=counts, error=error,
+    patch = window_patch(survey, end, n_pings, min_soundings=config.min_soundings, shared=shared, error=error,
                          drift=drift)
     return tap_fix_patch(patch, bathymetry, config, prior=prior)
 
@@ -212,12 +209,12 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
 
     inflation = _variance_inflation(bathymetry, patch, position, tide) if config.calibrate else 1.0
     s2 = _residual_variance(q_min, n)
-    has_error = patch.counts is not None or patch.error is not None or patch.drift is not None
+    has_error = patch.shared is not None or patch.error is not None or patch.drift is not None
     gradient = _gradient(bathymetry, patch, position) if has_error else None
     within = _window_sandwich(gradient, s2, patch, position)
     if within is not None:  # the map error the window's own soundings share shapes its likelihood
         inflation = max(inflation, within)
-    shared = _map_sandwich(gradient, s2, _shared_at(patch, position))
+    shared = _map_sandwich(gradient, s2, patch.shared)
     covariances = _covariances(
         q, q_min, s2 * inflation, grid, i, j, step, bathymetry, patch, position
     )
@@ -255,17 +252,3 @@ def tap_fix_patch(patch: Patch, bathymetry: BathymetryMap, config: TapConfig, *,
         variance_inflation=float(inflation),
         prior=prior,
     )
-
-
-def _shared_at(patch: Patch, position) -> np.ndarray | None:
-    """The map error variance each of the patch's soundings shares with the survey's others
-    ``(N,)``, read where the fix at ``position`` puts them (the row-sum bound in its count form,
-    :func:`tangraph.sensors.placed_map_variances`, less the sounding's own error), not at the
-    dead-reckoned footprints; None without counts."""
-    if patch.counts is None or patch.error is None:
-        return None
-    from tangraph.sensors.terrain import placed_map_variances
-
-    shared, own = placed_map_variances(patch.error, patch.counts, position[0] + patch.offsets[:, 0],
-                                       position[1] + patch.offsets[:, 1])
-    return np.maximum(shared - own, 0.0)

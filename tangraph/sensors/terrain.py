@@ -46,12 +46,16 @@ and large for a long-range error over fine terrain. Sums are evaluated on the de
 footprints (:func:`sounding_variances`).
 
 **Where the soundings are.** The row sums above need the map error's std where each sounding
-lies. Every estimator reads it where its own estimate puts each sounding, in the bound's form
-``a_b^2 n_b``, which needs the std at the sounding's own footprint only (:func:`sounding_map_counts`,
-:func:`placed_map_variances`): the filters where their belief puts it, a fix where it puts its
-window, the graph's tracking at its prediction, so that a sounding the dead reckoning puts on
-one of the map's lines, but the estimate in a filled gap between them, counts as little as the
-gap is known.
+lies. The filters, the graph's tracking factors and point-mass windows and the smoother's
+terrain solve read it where their estimate puts each sounding, in the bound's form ``a_b^2
+n_b``, which needs the std at the sounding's own footprint only (:func:`sounding_map_counts`,
+:func:`placed_map_variances`), so that a sounding the dead reckoning puts on one of the map's
+lines, but the estimate in a filled gap between them, counts as little as the gap is known.
+TAP fixes still read it at the dead-reckoned footprints (:func:`survey_map_error`): read where
+the fix puts its window (or averaged over the window's likelihood) the simulated surveys gained,
+but on Lake Caputh's long run the graph's fixes became over-confident (the lake's map errs
+beyond its statement where its fixes land, on the flat shelf); the map's statement, not the
+placing, is what is wrong there.
 
 A TAP fix, which weighs one window's soundings together, is widened by the map error they share
 among themselves exactly (:func:`shared_quadratic`, the double sum over pairs on the map
@@ -252,23 +256,23 @@ def shared_map_variances(survey, bathymetry: BathymetryMap, model, *, poses=None
     return _map_variances(survey, bathymetry, model, poses)[1]
 
 
-# survey -> map -> {model: (map error counts, error)}: weak keys, so nothing outlives its survey or
+# survey -> map -> {model: (shared variances, error)}: weak keys, so nothing outlives its survey or
 # map and a new map never meets an old one's entry (surveys and maps hash by identity)
 _SURVEY_MAP_ERRORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def survey_map_error(survey, bathymetry: BathymetryMap, model) -> tuple[np.ndarray | None, MapError | None]:
-    """The survey's :func:`sounding_map_counts` (how many of its soundings share each one's
-    map error, from the dead reckoning's geometry) and the map's error (:func:`map_error`),
-    computed once per survey, map and model; ``(None, None)`` with a perfect map. What every fix
-    of a run is widened by (TAP in the graph, MLE, TERCOM-PF), read where the fix puts the
-    soundings (:func:`placed_map_variances`)."""
+    """The survey's :func:`shared_map_variances` at its dead-reckoned footprints and the map's
+    error (:func:`map_error`), computed once per survey, map and model; ``(None, None)`` with a
+    perfect map. What every fix of a run is widened by (TAP in the graph, MLE, TERCOM-PF): read
+    at the dead-reckoned footprints, not where the fix puts the window (the module docstring
+    says why)."""
     per_map = _SURVEY_MAP_ERRORS.setdefault(survey, weakref.WeakKeyDictionary())
     per_model = per_map.setdefault(bathymetry, {})
     if model not in per_model:
         error = map_error(bathymetry, model)
         per_model[model] = (None, None) if error.is_zero else \
-            (sounding_map_counts(survey, bathymetry, model), error)
+            (shared_map_variances(survey, bathymetry, model), error)
     return per_model[model]
 
 

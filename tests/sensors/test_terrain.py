@@ -218,5 +218,6 @@ def test_placed_variances_are_the_count_form_read_where_the_soundings_are_put():
     np.testing.assert_allclose(here[1], 0.2**2, rtol=1e-12)
     np.testing.assert_allclose(there[1], 2.0**2, rtol=1e-12)  # every field's variance, summed
     fields = [part.std_at(points[:, 0], points[:, 1] + 300.0) ** 2 for part in error.components()]
-    np.testing.assert_allclose(there[0][:, 0], sum(f * counts[:, 0, i] for i, f in enumerate(fields)), rtol=1e-12)
+    expected = sum(f * counts[:, 0, i] for i, f in enumerate(fields))
+    np.testing.assert_allclose(there[0][:, 0], expected, rtol=1e-12)
     assert np.all(there[0] > 50 * here[0])
