@@ -18,6 +18,20 @@ from tangraph.maps._interp import _FASTMATH, _bilinear
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
+def _footprint_cell(pn, pe, c, s, forward, right, inv_dn, inv_de, ny, nx):
+    """The map cell ``(i, j)`` and the fractions ``(ty, tx)`` within it of the footprint ``R(a)
+    o`` (``o = (forward, right)``, world metres, turned by the angle of cosine ``c`` and sine
+    ``s``) seen from grid coordinates ``(pn, pe)``; ``i = -1`` off the map."""
+    fy = pn + (c * forward - s * right) * inv_dn
+    fx = pe + (s * forward + c * right) * inv_de
+    if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+        return -1, -1, 0.0, 0.0
+    i = min(int(fy), ny - 2)
+    j = min(int(fx), nx - 2)
+    return i, j, fy - i, fx - j
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FASTMATH, inline="always")
 def _particle_sums(depth, pn, pe, offsets, inv_dn, inv_de, c, s, measured, shift):
     """``(sum r, sum r^2)`` of ``r = z - shift - h`` for one particle at grid coordinates
     ``(pn, pe)`` whose soundings' world offsets ``(B, 2)`` (metres) are turned by the angle of
@@ -27,15 +41,10 @@ def _particle_sums(depth, pn, pe, offsets, inv_dn, inv_de, c, s, measured, shift
     s1 = 0.0
     s2 = 0.0
     for b in range(offsets.shape[0]):
-        on = c * offsets[b, 0] - s * offsets[b, 1]
-        oe = s * offsets[b, 0] + c * offsets[b, 1]
-        fy = pn + on * inv_dn
-        fx = pe + oe * inv_de
-        if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+        i, j, ty, tx = _footprint_cell(pn, pe, c, s, offsets[b, 0], offsets[b, 1], inv_dn, inv_de, ny, nx)
+        if i < 0:
             return np.nan, np.nan
-        i = min(int(fy), ny - 2)
-        j = min(int(fx), nx - 2)
-        r = measured[b] - shift - _bilinear(depth, i, j, fy - i, fx - j)[0]
+        r = measured[b] - shift - _bilinear(depth, i, j, ty, tx)[0]
         s1 += r
         s2 += r * r
     return s1, s2
@@ -80,14 +89,11 @@ def _residual_kernel(depth, north0, east0, inv_dn, inv_de, particles, turn, offs
         c = np.cos(turn[p])
         s = np.sin(turn[p])
         for b in range(offsets.shape[0]):
-            fy = pn + (c * offsets[b, 0] - s * offsets[b, 1]) * inv_dn
-            fx = pe + (s * offsets[b, 0] + c * offsets[b, 1]) * inv_de
-            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+            i, j, ty, tx = _footprint_cell(pn, pe, c, s, offsets[b, 0], offsets[b, 1], inv_dn, inv_de, ny, nx)
+            if i < 0:
                 out[b, p] = np.nan
                 continue
-            i = min(int(fy), ny - 2)
-            j = min(int(fx), nx - 2)
-            out[b, p] = measured[b] - tide[p] - _bilinear(depth, i, j, fy - i, fx - j)[0]
+            out[b, p] = measured[b] - tide[p] - _bilinear(depth, i, j, ty, tx)[0]
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FASTMATH)
@@ -110,13 +116,9 @@ def _field_variance_kernel(depth, grids, north0, east0, inv_dn, inv_de, particle
         c = np.cos(turn[p])
         s = np.sin(turn[p])
         for b in range(offsets.shape[0]):
-            fy = pn + (c * offsets[b, 0] - s * offsets[b, 1]) * inv_dn
-            fx = pe + (s * offsets[b, 0] + c * offsets[b, 1]) * inv_de
-            if not (fy >= 0.0 and fy <= ny - 1 and fx >= 0.0 and fx <= nx - 1):
+            i, j, ty, tx = _footprint_cell(pn, pe, c, s, offsets[b, 0], offsets[b, 1], inv_dn, inv_de, ny, nx)
+            if i < 0:
                 continue
-            i = min(int(fy), ny - 2)
-            j = min(int(fx), nx - 2)
-            ty, tx = fy - i, fx - j
             h = _bilinear(depth, i, j, ty, tx)[0]
             if h != h:
                 continue
