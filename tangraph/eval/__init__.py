@@ -4,7 +4,8 @@
 NEES and its chi-square band); :mod:`tangraph.eval.crb` computes the physical limit of a survey,
 the posterior Cramér-Rao bound (PCRB) of its linearised error-state model, to report next to an
 estimator's RMSE; where the map has an error, the bound carries it as a Gaussian-Markov random
-field (:mod:`tangraph.eval.map_field`) solved sparsely (:mod:`tangraph.eval.selected_inverse`);
+field (:mod:`tangraph.eval.map_field`) solved sparsely with the track (:mod:`tangraph.eval.field_bound`,
+:mod:`tangraph.eval.selected_inverse`);
 :mod:`tangraph.eval.map_check` tests a gridded map's stated error against held-out surveys (check
 lines). Nothing here touches files.
 """

@@ -453,7 +453,7 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     """The bound with the map's error as a field of nodes (``f, q, p0`` in the scaled units of
     ``scale``): position covariances (K, 2, 2) in m^2, the constants' covariance (n, n; only the
     calibration and tide entries are set) and the bound's fields that describe the field."""
-    from tangraph.eval import map_field  # numba loads here, not with tangraph.eval
+    from tangraph.eval import field_bound, map_field  # numba loads here, not with tangraph.eval
 
     truth = survey.true_pose
     assert truth is not None
@@ -462,7 +462,7 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
     fine = kind == "smoother"  # the filter bound's, solved 60 times, no finer than the map's cell
     most = map_field.BOUND_MAX_NODES if fine else map_field.MAX_NODES
     field = map_field.map_error_field(north[used], east[used], error, finer_than_cell=fine, max_nodes=most,
-                                      offset=(model.map_offset_std, model.map_offset_length))
+                                      offset=(model.map_offset_std, model.map_offset_length), trim=True)
     node, weight = field.weights(north[used], east[used])
     std = np.ones(used.shape)  # each sounding's noise: its own and the field's nugget
     std[used] = np.sqrt(model.sounding_std**2 + field.nugget(node, weight))
@@ -472,8 +472,8 @@ def _field_bound(survey: Survey, model: NavigationModel, error: MapError, kind: 
         known = covariance_filter(p0, f, q, factor)[0][:, :2, :2]
     constant = np.zeros(layout.n, dtype=bool)
     constant[layout.constants] = True
-    state = map_field.ErrorState(f=f, q=q, p0=np.diag(p0), constant=constant, ping=np.nonzero(used)[0],
+    state = field_bound.ErrorState(f=f, q=q, p0=np.diag(p0), constant=constant, ping=np.nonzero(used)[0],
                                  jacobian=features[used] @ _sounding_jacobian(layout).T * scale)
-    position, constants = map_field.field_bound(state, field, node, weight, std[used], known_filter=known)
+    position, constants = field_bound.field_bound(state, field, node, weight, std[used], known_filter=known)
     extra = {"map_error": True, "field_nodes": field.n_nodes, "field_spacing": field.spacing}
     return position * np.outer(scale[:2], scale[:2]), constants * np.outer(scale, scale), extra

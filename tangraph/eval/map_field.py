@@ -1,6 +1,6 @@
-"""The map's error as a Gaussian-Markov random field on a grid of nodes, and the bound's sparse
-joint solve with it (:func:`field_bound`; the model and its approximations are in the notes of
-:mod:`tangraph.eval.crb`).
+"""The map's error as a Gaussian-Markov random field on a grid of nodes (the bound's sparse joint
+solve with it is :mod:`tangraph.eval.field_bound`; the model and its approximations are in the
+notes of :mod:`tangraph.eval.crb`).
 
 :func:`map_error_field` lays a regular grid of nodes over the soundings' footprints and writes
 the map's error ``d`` (:mod:`tangraph.sensors.terrain`: zero mean, ``cov(d(p), d(q)) = s(p)
@@ -32,10 +32,11 @@ against Matérn's 0.140), made coarser (the nugget then takes more) where the gr
 soundings there share (a multibeam's beams lie a fraction of a metre apart): taken as
 independent it claims more than there is, and at ``h = L`` (a cell-scale error on the map's
 own cells) it is two thirds of the variance at a node cell's centre, at ``L / 3`` a third. So the
-bound is solved at ``L / 3`` (:data:`BOUND_MAX_NODES`; at ``L / 5`` the simulated realistic
-maps' bounds move by 1 %), while a solve that estimates the field may keep its nodes no finer
-than the map's cell (``finer_than_cell=False``), where the map says nothing of its error, and
-share the nugget among the soundings of a cell instead
+bound is solved at ``L / 3`` (on at most :data:`BOUND_MAX_NODES` nodes a field, those within
+the margin of a footprint: at ``L / 5`` the simulated realistic maps' bounds move by 1 %, at
+``L / 2`` the long strip of ``han2020-map-error`` by less than 0.01 %), while a solve that
+estimates the field may keep its nodes no finer than the map's cell (``finer_than_cell=False``),
+where the map says nothing of its error, and share the nugget among the soundings of a cell instead
 (:func:`tangraph.graph.field_solve.shared_nugget`).
 """
 
@@ -47,19 +48,15 @@ from typing import Any
 import numpy as np
 from scipy import sparse
 
-from tangraph.eval import selected_inverse as si
+from tangraph.errors import TangraphError
 from tangraph.sensors.terrain import MapError
 
 __all__ = [
     "BOUND_MAX_NODES",
-    "FILTER_PINGS",
     "MARGIN_LENGTHS",
     "MAX_NODES",
-    "ZERO_VARIANCE",
     "CombinedField",
-    "ErrorState",
     "MapErrorField",
-    "field_bound",
     "lattice_correlation",
     "map_error_field",
     "sparse_sum",
@@ -72,15 +69,8 @@ NODES_PER_LENGTH = 3
 MARGIN_LENGTHS = 2.0
 #: most nodes of a grid (the spacing grows beyond it)
 MAX_NODES = 40_000
-#: most nodes of the bound's grid
-BOUND_MAX_NODES = 100_000
-#: the filter bound is solved at this many pings at most (interpolated in between)
-FILTER_PINGS = 60
-#: the variance (in units of the state's natural spread squared) given to a step of the error
-#: state whose variance is zero (a DR without speed noise): an information matrix cannot hold
-#: an exact constraint. It moves the bound by about this much times the pings (relative); the
-#: rounding of the stiffer system grows as it shrinks.
-ZERO_VARIANCE = 1e-8
+#: most nodes of each of the bound's grids
+BOUND_MAX_NODES = 50_000
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -106,6 +96,10 @@ class MapErrorField:
     through : (BathymetryMap, int), optional
         A field of the map's horizontal offset along axis 0 (north) or 1 (east), seen through
         the map's slope along it: a point's weights are times the gradient (0 where none).
+    kept : ndarray of int, optional
+        The lattice indices (ascending) of the nodes the field holds, when it holds only those
+        near its points (``map_error_field(..., trim=True)``); ``std``, ``precision`` and the
+        node indices of :meth:`weights` are then over these nodes, in this order.
     """
 
     origin: tuple[float, float]
@@ -116,14 +110,16 @@ class MapErrorField:
     correlation: np.ndarray
     correlation_length: float
     through: tuple[Any, int] | None = None
+    kept: np.ndarray | None = None
 
     @property
     def n_nodes(self) -> int:
-        return int(self.shape[0] * self.shape[1])
+        return int(self.shape[0] * self.shape[1]) if self.kept is None else int(self.kept.size)
 
     def nodes(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(north, east)`` of every node (ny * nx,), in index order."""
-        i, j = np.divmod(np.arange(self.n_nodes), self.shape[1])
+        """``(north, east)`` of every node (n_nodes,), in index order."""
+        lattice = np.arange(self.n_nodes) if self.kept is None else self.kept
+        i, j = np.divmod(lattice, self.shape[1])
         return self.origin[0] + i * self.spacing, self.origin[1] + j * self.spacing
 
     def weights(self, north: np.ndarray, east: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -137,6 +133,11 @@ class MapErrorField:
         nx = self.shape[1]
         index = np.stack([i * nx + j, i * nx + j + 1, (i + 1) * nx + j, (i + 1) * nx + j + 1], axis=-1)
         weight = np.stack([(1 - ty) * (1 - tx), (1 - ty) * tx, ty * (1 - tx), ty * tx], axis=-1)
+        if self.kept is not None:
+            slot = np.searchsorted(self.kept, index)
+            if np.any(self.kept[np.minimum(slot, self.kept.size - 1)] != index):
+                raise TangraphError("map_error_field: a point lies beyond the nodes the field keeps")
+            index = slot
         if self.through is not None:  # the offset seen through the slope along its axis
             bathymetry, axis = self.through
             slope = bathymetry.gradient_at(north, east)[..., axis]
@@ -180,10 +181,12 @@ def lattice_correlation(c: float) -> tuple[float, np.ndarray]:
     return float(cov[0, 0]), np.array([cov[0, 0], cov[0, 1], cov[1, 1]]) / cov[0, 0]
 
 
-def spde_precision(shape: tuple[int, int], c: float) -> sparse.csc_array:
+def spde_precision(shape: tuple[int, int], c: float, kept: np.ndarray | None = None) -> sparse.csc_array:
     """The unit-variance SPDE precision ``Q = v M^2`` on a ``(ny, nx)`` grid, ``M = c^2 I +
     Lap`` (``Lap`` the graph Laplacian: free edges), ``v`` the infinite lattice's variance of
-    ``M^2`` (:func:`lattice_correlation`); ``c = kappa h = sqrt(8) h / L``."""
+    ``M^2`` (:func:`lattice_correlation`); ``c = kappa h = sqrt(8) h / L``. With ``kept``
+    (lattice indices, ascending) on those nodes alone, ``Lap`` the Laplacian of the lattice's
+    edges between them (free edges where the others were left out)."""
     ny, nx = shape
 
     def path(n: int) -> sparse.csr_array:
@@ -191,21 +194,30 @@ def spde_precision(shape: tuple[int, int], c: float) -> sparse.csc_array:
         degree[[0, -1]] = 1.0
         return sparse.diags_array([degree, -np.ones(n - 1), -np.ones(n - 1)], offsets=[0, -1, 1]).tocsr()
 
-    lap = sparse.kron(sparse.eye_array(ny), path(nx)) + sparse.kron(path(ny), sparse.eye_array(nx))
-    m = sparse.eye_array(ny * nx) * c**2 + lap
+    lap = sparse.csr_array(sparse.kron(sparse.eye_array(ny), path(nx))
+                           + sparse.kron(path(ny), sparse.eye_array(nx)))
+    if kept is not None:
+        edges = lap[kept][:, kept]
+        edges.setdiag(0.0)
+        lap = sparse.csr_array(edges - sparse.diags_array(np.asarray(edges.sum(axis=1)).ravel()))
+    m = sparse.eye_array(lap.shape[0]) * c**2 + lap
     variance, _ = lattice_correlation(c)
     return sparse.csc_array(m @ m * variance)
 
 
 def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *, max_nodes: int = MAX_NODES,
-                    finer_than_cell: bool = False,
-                    offset: tuple[float, float] | None = None) -> MapErrorField | CombinedField:
+                    finer_than_cell: bool = False, offset: tuple[float, float] | None = None,
+                    trim: bool = False) -> MapErrorField | CombinedField:
     """The map error's field on a grid of nodes over the points ``north, east`` (the soundings'
     true footprints), one grid per independent field of the error
     (:meth:`~tangraph.sensors.MapError.components`: the cell-scale error and the excess of the
     interpolated parts, each with its own range), each with a margin of
     :data:`MARGIN_LENGTHS` ranges and at most ``max_nodes`` nodes, its spacing a third of its
     range, but never finer than the map's cell unless ``finer_than_cell`` (module docstring).
+    ``trim``: only the nodes within the margin of some point (``MapErrorField.kept``; the count
+    ``max_nodes`` is of those), the grid's edges being as far from every point as the bounding
+    box's: the bound is the same, on fewer nodes where the points do not fill their box (a
+    survey's lines, a loop).
 
     Examples
     --------
@@ -224,16 +236,16 @@ def map_error_field(north: np.ndarray, east: np.ndarray, error: MapError, *, max
     the offset leaves (:meth:`~tangraph.sensors.MapError.without_offset`)."""
     std, length = offset if offset is not None and min(offset) > 0 else (0.0, 0.0)
     error = error.without_offset(std)
-    fields = [_one_field(north, east, part, max_nodes, finer_than_cell) for part in error.components()]
+    fields = [_one_field(north, east, part, max_nodes, finer_than_cell, trim) for part in error.components()]
     if std > 0:  # its std at every node (off the map's data a field's nodes take its median)
         base = _one_field(north, east, MapError(error.bathymetry, np.full(error.std.shape, std), length),
-                          max_nodes, True)
+                          max_nodes, True, trim)
         fields += [dataclasses.replace(base, through=(error.bathymetry, axis)) for axis in (0, 1)]
     return fields[0] if len(fields) == 1 else CombinedField(tuple(fields))
 
 
 def _one_field(north: np.ndarray, east: np.ndarray, error: MapError, max_nodes: int,
-               finer_than_cell: bool) -> MapErrorField:
+               finer_than_cell: bool, trim: bool) -> MapErrorField:
     length = error.correlation_length
     spacing = length / NODES_PER_LENGTH
     if not finer_than_cell:
@@ -242,17 +254,33 @@ def _one_field(north: np.ndarray, east: np.ndarray, error: MapError, max_nodes: 
     low = np.array([np.min(north), np.min(east)]) - margin
     extent = np.array([np.max(north), np.max(east)]) + margin - low
     while True:
-        shape = tuple(int(n) for n in np.ceil(extent / spacing).astype(np.int64) + 1)
-        if shape[0] * shape[1] <= max_nodes:
+        shape = (int(np.ceil(extent[0] / spacing)) + 1, int(np.ceil(extent[1] / spacing)) + 1)
+        kept = _near(north, east, low, spacing, shape, margin) if trim else None
+        if (shape[0] * shape[1] if kept is None else kept.size) <= max_nodes:
             break
-        spacing *= max(np.sqrt(shape[0] * shape[1] / max_nodes), 1.01)
+        spacing *= max(np.sqrt((shape[0] * shape[1] if kept is None else kept.size) / max_nodes), 1.01)
     c = np.sqrt(8.0) * spacing / length
-    i, j = np.divmod(np.arange(shape[0] * shape[1]), shape[1])
+    i, j = np.divmod(np.arange(shape[0] * shape[1]) if kept is None else kept, shape[1])
     std = error.std_at(low[0] + i * spacing, low[1] + j * spacing)
-    return MapErrorField(origin=(float(low[0]), float(low[1])), spacing=float(spacing),
-                         shape=(shape[0], shape[1]), std=np.where(np.isfinite(std), std, error.typical_std),
-                         precision=spde_precision((shape[0], shape[1]), c),
-                         correlation=lattice_correlation(c)[1], correlation_length=length)
+    return MapErrorField(origin=(float(low[0]), float(low[1])), spacing=float(spacing), shape=shape,
+                         std=np.where(np.isfinite(std), std, error.typical_std),
+                         precision=spde_precision(shape, c, kept), correlation=lattice_correlation(c)[1],
+                         correlation_length=length, kept=kept)
+
+
+def _near(north: np.ndarray, east: np.ndarray, low: np.ndarray, spacing: float, shape: tuple[int, int],
+          margin: float) -> np.ndarray:
+    """Lattice indices (ascending) of the nodes of a ``shape`` grid from ``low`` within ``margin``
+    of a point (a superset: within ``margin`` plus a node spacing of the nodes around a point)."""
+    from scipy.ndimage import distance_transform_edt
+
+    i = np.clip(np.floor((np.asarray(north) - low[0]) / spacing).astype(np.int64), 0, shape[0] - 2)
+    j = np.clip(np.floor((np.asarray(east) - low[1]) / spacing).astype(np.int64), 0, shape[1] - 2)
+    empty = np.ones(shape, dtype=bool)
+    for di in (0, 1):
+        for dj in (0, 1):
+            empty[i + di, j + dj] = False
+    return np.flatnonzero(distance_transform_edt(empty, sampling=spacing) <= margin + spacing)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -297,162 +325,6 @@ class CombinedField:
 
 
 # -- the joint solve: the error state and the field ---------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class ErrorState:
-    """The survey's linearised error state, as :mod:`tangraph.eval.crb` writes it (each state
-    in units of its natural spread): ``x_{k+1} = F_k x_k + N(0, Q_k)`` with ``f, q`` (K-1, n, n)
-    (``Q_k`` diagonal), ``x_0 ~ N(0, diag(p0))``; the states where ``constant`` (n,) is True stay
-    constant (one unknown for the survey); sounding ``j`` has the Jacobian ``jacobian[j]`` (n,) on
-    the state of ping ``ping[j]`` (pings ascending). States 0 and 1 are the position error."""
-
-    f: np.ndarray
-    q: np.ndarray
-    p0: np.ndarray
-    constant: np.ndarray
-    ping: np.ndarray
-    jacobian: np.ndarray
-
-
-def field_bound(state: ErrorState, field: MapErrorField | CombinedField, node: np.ndarray, weight: np.ndarray,
-                noise: np.ndarray, *,
-                known_filter: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Every ping's position covariance (K, 2, 2) and the constants' covariance (n, n; zero but
-    for the constants) in the state's units, with the map's error the field ``field``: sounding
-    ``j`` sees the field at its nodes ``node[j]`` (4,) with the weights ``weight[j]`` and has the
-    independent noise std ``noise[j]`` (m).
-
-    The smoother bound unless ``known_filter`` is given: the filter bound were the map error
-    known (K, 2, 2), around which the filter bound is interpolated between the pings where it
-    is solved (:func:`_filter_positions`).
-    """
-    var = _Variables.of(state.constant, state.f.shape[0] + 1, field.n_nodes)
-    relations, relation_ping = _relation_rows(var, state.f, state.q, state.p0)
-    soundings = _sounding_rows(var, state, field, node, weight, noise)
-    rows = sparse.vstack([relations, soundings], format="csr")
-    row_ping = np.concatenate([relation_ping, state.ping])
-    sort = np.argsort(row_ping, kind="stable")
-    # A state whose prior variance is zero (the walk at the first ping) is zero: it leaves every
-    # row and keeps a unit diagonal of its own.
-    pinned = var.column(np.flatnonzero(state.p0 == 0), 0)
-    keep = np.ones(var.n)
-    keep[pinned] = 0.0
-    rows, row_ping = sparse.csr_array(rows[sort] @ sparse.diags_array(keep)), row_ping[sort]
-    base = sparse_sum(_field_prior(var, field), sparse.coo_array((1.0 - keep[pinned], (pinned, pinned)),
-                                                           shape=(var.n, var.n)))
-    information = sparse_sum(base, rows.T @ rows)
-    order = si.fill_reducing_order(information)
-    factor = si.factor(information, order)
-    z = si.selected_inverse(factor)
-    dp = var.positions(np.arange(var.n_pings))  # (K, 2)
-    position = si.inverse_entries(factor, z, dp[:, :, None], dp[:, None, :])
-    n = state.p0.size
-    constants = np.zeros((n, n))
-    held = np.flatnonzero(state.constant)
-    at = var.column(held, 0)
-    constants[np.ix_(held, held)] = si.inverse_entries(factor, z, at[:, None], at[None, :])
-    if known_filter is not None:
-        position = _filter_positions(var, rows, row_ping, base, order, position, known_filter)
-    return position, constants
-
-
-@dataclasses.dataclass(frozen=True)
-class _Variables:
-    """Columns of the joint unknowns: the error states held per ping (``dp``, walk, white),
-    ping by ping; then the constants (scale, bias, tide) once; then the field's nodes."""
-
-    where: np.ndarray  # (n,) column of each state at ping 0
-    step: np.ndarray  # (n,) columns per ping (0 for a constant)
-    n_pings: int
-    n_field: int
-
-    @classmethod
-    def of(cls, constant: np.ndarray, n_pings: int, n_field: int) -> _Variables:
-        per_ping = int(np.sum(~constant))
-        where = np.empty(constant.size, dtype=np.int64)
-        where[~constant] = np.arange(per_ping)
-        where[constant] = n_pings * per_ping + np.arange(int(constant.sum()))
-        return cls(where, np.where(constant, 0, per_ping), n_pings, n_field)
-
-    @property
-    def per_ping(self) -> int:
-        return int(self.step.max())
-
-    @property
-    def n_states(self) -> int:
-        return self.n_pings * self.per_ping + int(np.sum(self.step == 0))
-
-    @property
-    def n(self) -> int:
-        return self.n_states + self.n_field
-
-    def column(self, state, ping) -> np.ndarray:
-        return self.where[state] + self.step[state] * np.asarray(ping)
-
-    def positions(self, ping: np.ndarray) -> np.ndarray:
-        """Columns ``(dp_north, dp_east)`` (len(ping), 2) of the pings."""
-        return self.where[:2] + self.per_ping * np.asarray(ping)[:, None]
-
-    def active(self, last: int) -> np.ndarray:
-        """Columns of the survey cut after ping ``last``: its pings' states, constants, field."""
-        return np.r_[0:(last + 1) * self.per_ping, self.n_pings * self.per_ping:self.n]
-
-
-def _relation_rows(var: _Variables, f: np.ndarray, q: np.ndarray,
-                   p0: np.ndarray) -> tuple[sparse.csr_array, np.ndarray]:
-    """The prior ``x_0 ~ N(0, p0)`` and the transitions ``x_{k+1} - F_k x_k ~ N(0, Q_k)`` of the
-    states held per ping as rows divided by their std (information ``rows^T rows``), with the
-    ping each belongs to (the constants' rows of ``F`` say they stay constant: they are one
-    variable)."""
-    n = p0.size
-    rows, cols, vals, variance = [np.arange(n)], [var.column(np.arange(n), 0)], [np.ones(n)], [p0]
-    ping = [np.zeros(n, dtype=np.int64)]
-    held = np.flatnonzero(var.step > 0)
-    if var.n_pings > 1:
-        k, i = np.meshgrid(np.arange(var.n_pings - 1), held, indexing="ij")
-        row = n + np.arange(k.size).reshape(k.shape)
-        rows.append(row.ravel())
-        cols.append(var.column(i, k + 1).ravel())
-        vals.append(np.ones(k.size))
-        variance.append(q[k, i, i].ravel())
-        ping.append((k + 1).ravel())
-        a, b, c = np.nonzero(f[:, held, :])
-        rows.append(row[a, b])
-        cols.append(var.column(c, a))
-        vals.append(-f[a, held[b], c])
-    variance[0] = np.where(p0 > 0, p0, 1.0)  # a zero prior variance: see the caller
-    std = np.sqrt(np.maximum(np.concatenate(variance), ZERO_VARIANCE))
-    row_index = np.concatenate(rows)
-    out = sparse.csr_array((np.concatenate(vals) / std[row_index], (row_index, np.concatenate(cols))),
-                           shape=(std.size, var.n))
-    return out, np.concatenate(ping)
-
-
-def _sounding_rows(var: _Variables, state: ErrorState, field, node: np.ndarray,
-                   weight: np.ndarray, noise: np.ndarray) -> sparse.csr_array:
-    """Every sounding's row divided by its noise std: its Jacobian on its ping's states and the
-    constants, ``s_a w_a`` on the field's nodes ``node`` (M, 4) around its true footprint."""
-    m = state.jacobian.shape[0]
-    row, i = np.nonzero(state.jacobian)
-    rows = np.concatenate([row, np.repeat(np.arange(m), node.shape[1])])
-    cols = np.concatenate([var.column(i, state.ping[row]), var.n_states + node.ravel()])
-    vals = np.concatenate([state.jacobian[row, i], (weight * field.std[node]).ravel()]) / noise[rows]
-    return sparse.csr_array((vals, (rows, cols)), shape=(m, var.n))
-
-
-def _field_prior(var: _Variables, field) -> sparse.csc_array:
-    """The field's precision on its nodes' columns, and explicit zeros where the bound reads the
-    inverse (each ping's ``dp_north, dp_east`` and the constants among themselves), so that
-    those entries are on the factor's pattern."""
-    prior = sparse.coo_array(field.precision)
-    dp = var.positions(np.arange(var.n_pings))
-    constants = var.column(np.flatnonzero(var.step == 0), 0)
-    a, b = np.meshgrid(constants, constants)
-    rows = np.concatenate([prior.row + var.n_states, dp[:, 0], dp[:, 1], a.ravel()])
-    cols = np.concatenate([prior.col + var.n_states, dp[:, 1], dp[:, 0], b.ravel()])
-    vals = np.concatenate([prior.data, np.zeros(2 * var.n_pings + a.size)])
-    return sparse.csc_array(sparse.coo_array((vals, (rows, cols)), shape=(var.n, var.n)))
-
-
 def sparse_sum(*terms) -> sparse.csc_array:
     """The sum of sparse matrices keeping every stored entry, explicit zeros too (``+`` drops
     them, and with them the entries the bound reads)."""
@@ -460,40 +332,3 @@ def sparse_sum(*terms) -> sparse.csc_array:
     data = np.concatenate([p.data for p in parts])
     index = (np.concatenate([p.row for p in parts]), np.concatenate([p.col for p in parts]))
     return sparse.csc_array(sparse.coo_array((data, index), shape=parts[0].shape))
-
-
-def _filter_positions(var: _Variables, rows: sparse.csr_array, row_ping: np.ndarray,
-                      base: sparse.csc_array, order: np.ndarray, smoother: np.ndarray,
-                      known_field: np.ndarray) -> np.ndarray:
-    """The filter bound. At the pings of an evenly spaced subset (all of a survey of at most
-    ``FILTER_PINGS`` pings; the first and last always), the bound of the survey cut after the
-    ping, read at it (its position ordered last: the inverse of the factor's trailing 2 x 2
-    block). In between, the filter bound were the field known (``known_field``, a Kalman filter
-    at every ping) plus what the field adds to it, interpolated linearly between the subset's
-    pings; then never below the smoother bound (the excess over it made positive
-    semi-definite)."""
-    k = var.n_pings
-    pings = np.unique(np.round(np.linspace(0, k - 1, min(k, FILTER_PINGS))).astype(np.int64))
-    ends = np.searchsorted(row_ping, pings, side="right")
-    rank = np.empty(var.n, dtype=np.int64)
-    rank[order] = np.arange(var.n)
-    information = base
-    added = np.empty((pings.size, 2, 2))
-    start = 0
-    for t, (ping, end) in enumerate(zip(pings, ends, strict=True)):
-        new = rows[start:end]
-        information = sparse_sum(information, new.T @ new)
-        start = end
-        active = var.active(int(ping))
-        local = np.argsort(rank[active], kind="stable")
-        last = ping * var.per_ping + np.arange(2)  # dp of the ping: local = global index here
-        local = np.concatenate([local[~np.isin(local, last)], last])
-        factor = si.factor(information[active][:, active], local)
-        z = si.selected_inverse(factor, first=active.size - 2)
-        added[t] = si.inverse_entries(factor, z, last[:, None], last[None, :]) - known_field[ping]
-    out = known_field.copy()
-    for a in range(2):
-        for b in range(2):
-            out[:, a, b] += np.interp(np.arange(k), pings, added[:, a, b])
-    value, vector = np.linalg.eigh(out - smoother)
-    return smoother + (vector * np.maximum(value, 0.0)[:, None, :]) @ np.swapaxes(vector, 1, 2)
