@@ -45,6 +45,7 @@ def _survey(k: int = 40, beams: int = 7, *, rng_seed: int = 3, width: float = 40
 
 MODEL = NavigationModel(speed_noise=0.1, heading_noise=0.01, heading_walk=0.002, speed_scale_std=0.02,
                         heading_bias_std=0.03, initial_position_std=5.0, sounding_std=0.3, tide_std=0.5)
+FIELD = MODEL.replace(map_std=0.3, map_correlation_length=60.0)  # a map error of 0.3 m over 60 m
 
 
 def _jd(d: np.ndarray) -> np.ndarray:

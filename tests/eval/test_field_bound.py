@@ -17,9 +17,7 @@ from tangraph.eval.map_field import map_error_field
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel, map_error
 from tangraph.survey import Survey
-from tests.eval.crb_cases import MODEL, SLOPE, _design, _seabed, _soundings, _survey
-
-FIELD = MODEL.replace(map_std=0.3, map_correlation_length=60.0)
+from tests.eval.crb_cases import FIELD, MODEL, SLOPE, _design, _seabed, _soundings, _survey
 
 
 @pytest.mark.parametrize("kind", ["smoother", "filter"])

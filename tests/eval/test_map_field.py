@@ -21,9 +21,7 @@ from tangraph.eval.map_field import (
 )
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel, map_error, matern_correlation
-from tests.eval.crb_cases import MODEL, SLOPE, _seabed, _soundings, _survey
-
-FIELD = MODEL.replace(map_std=0.3, map_correlation_length=60.0)
+from tests.eval.crb_cases import FIELD, MODEL, SLOPE, _seabed, _soundings, _survey
 
 
 def _covariance_column(shape, c, node):
