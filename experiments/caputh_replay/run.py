@@ -236,47 +236,21 @@ def check_lines(cfg: dict, data: Path, bathymetry, march: dict, window: float = 
 
 def error_by_cell(cfg: dict, data: Path, grid, march: dict) -> dict:
     """Does the map's stated error hold where its cells have data and where its gaps were filled?
-    Every sounding's residual (its survey's median removed) against the map at its GPS position,
-    over the std the map states there with the sounding noise: the robust spread of the residuals
-    (m), the median std stated and the robust spread of the standardised residuals (1 where the
-    statement holds), in the cells with data and in the filled cells; for each January run held
-    out from a map of the others (gridded with the study's settings) and for the March runs
-    against the study's map (``grid``, a :class:`~tangraph.maps.SoundingGrid`)."""
-    from tangraph.gridding_surveys import grid_surveys
-    from tangraph.sensors import NavigationModel, map_error
+    Every sounding against the map at its GPS position, one by one
+    (:func:`tangraph.eval.map_check.cell_scores`): for each January run held out from a map of
+    the others (gridded with the study's settings) and for the March runs against the study's
+    map (``grid``, a :class:`~tangraph.maps.SoundingGrid`)."""
+    from tangraph.eval.map_check import cell_scores, cells_summary, check_map_error
+    from tangraph.sensors import NavigationModel
 
     m = cfg["map"]
     model = NavigationModel(sounding_std=cfg["navigation"]["boat"]["sounding_std"])
     prior = [_import(cfg, data, p) for month in m["months"] for p in run_files(data, month)]
-
-    def others(i):
-        return grid_surveys([s for j, s in enumerate(prior) if j != i], cell=m["cell"],
-                            statistic=m["statistic"],
-                            fill=m["fill"], position_std=m.get("position_std", 0.0))
-
-    pairs = {"prior_runs_held_out": [(s, others(i)) for i, s in enumerate(prior)],
-             "march_against_map": [(s, grid) for s in march.values()]}
-    out = {}
-    for name, items in pairs.items():
-        parts = []
-        for survey, g in items:
-            survey = in_map(survey, g.depth)
-            north, east = survey.footprints(survey.true_pose)
-            r = survey.beam_depth - g.depth.depth_at(north, east)
-            std = map_error(g.depth, model).std_at(north, east)
-            i, j = (np.rint((p - axis[0]) / (axis[1] - axis[0])) for p, axis in
-                    ((north, g.depth.north), (east, g.depth.east)))
-            ok = np.isfinite(r) & np.isfinite(std) & (i >= 0) & (i < g.count.shape[0]) & (j >= 0) \
-                & (j < g.count.shape[1])
-            r = r[ok] - np.median(r[ok])
-            parts.append((r, std[ok], g.count[i[ok].astype(int), j[ok].astype(int)] > 0))
-        r, std, measured = (np.concatenate([p[k] for p in parts]) for k in range(3))
-        z = r / np.sqrt(std**2 + model.sounding_std**2)
-        out[name] = {kind: {"soundings": int(sel.sum()), "robust_residual_m": round(_robust(r[sel]), 4),
-                            "median_std_m": round(float(np.median(std[sel])), 4),
-                            "robust_z": round(_robust(z[sel]), 3)}
-                     for kind, sel in (("data_cells", measured), ("filled_cells", ~measured))}
-    return out
+    held_out = check_map_error(prior, cell=m["cell"], statistic=m["statistic"], fill=m["fill"], model=model,
+                               position_std=m.get("position_std", 0.0))
+    later = [cell_scores(in_map(s, grid.depth), grid, model) for s in march.values()]
+    return {"prior_runs_held_out": held_out.by_cell(),
+            "march_against_map": cells_summary(*(np.concatenate([c[k] for c in later]) for k in range(3)))}
 
 
 def _robust(r: np.ndarray) -> float:

@@ -180,6 +180,10 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
         print(f"{row['survey']},{row['windows']},{row['rms']:.3f},{row['robust']:.3f},{row['share_beyond_3']:.3f}")
     print(f"all: {check.summary()}")
     print(_drift_line(check))
+    kinds = check.by_cell().items()
+    print("soundings one by one: " + "; ".join(
+        f"{kind.replace('_', ' ')} {v['soundings']}, residual spread {v['robust_residual_m']:.3f} m against "
+        f"{v['median_std_m']:.3f} m stated, robust z {v['robust_z']:.2f}" for kind, v in kinds))
 
 
 # -- the parsers --------------------------------------------------------------------------------

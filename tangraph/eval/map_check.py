@@ -31,6 +31,12 @@ its prior (:mod:`tangraph.sensors.misfit`: the error of most of the map as state
 several times it). A Gaussian tail gives the scale of the RMS (the variance the windows really
 show). A map is never made better than its gridding says: the scale is at least 1.
 
+Windows mix the map's measured cells with its filled gaps, whose error the gridding states
+differently (:mod:`tangraph.maps.gridding_error`). :func:`cell_scores` scores the held-out
+soundings one by one and tells which kind of cell each lies in; :meth:`MapCheck.by_cell` and
+:func:`cells_summary` give each kind's robust spread of the residuals and of the standardised
+residuals (1 where the statement holds there).
+
 Nothing here touches files.
 """
 
@@ -49,7 +55,8 @@ from tangraph.geometry import wrap_angle
 from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.survey import Survey
 
-__all__ = ["MapCheck", "calibrate_error", "check_map_error", "survey_lines", "window_scores"]
+__all__ = ["MapCheck", "calibrate_error", "cell_scores", "cells_summary", "check_map_error", "survey_lines",
+           "window_scores"]
 
 MIN_WINDOWS = 10  # a calibration rests on at least this many windows
 DRIFT_P_VALUE = 0.01  # a map states the drift its check lines found when the F test gives less
@@ -71,11 +78,18 @@ class MapCheck:
     time: np.ndarray | None = None  #: each window's mean time (s), with ``mean`` and ``variance``
     mean: np.ndarray | None = None  #: each window's mean residual (m), its survey's median removed
     variance: np.ndarray | None = None  #: the variance (m^2) the stated errors give ``mean``
+    #: every held-out sounding's ``(residual, stated std, measured)`` (:func:`cell_scores`)
+    cells: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
     def windows(self) -> int:
         """How many windows were scored."""
         return int(self.scores.size)
+
+    def by_cell(self) -> dict[str, dict[str, float]]:
+        """The held-out soundings one by one, in the cells with data and in the filled cells
+        (:func:`cells_summary`); empty without them."""
+        return cells_summary(*self.cells) if self.cells is not None else {}
 
     @property
     def rms(self) -> float:
@@ -298,22 +312,64 @@ def check_map_error(
     names = tuple(names)
     model = NavigationModel() if model is None else model
     columns: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    cells: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     owner = []
     for i, held in enumerate(surveys):
         if held.true_pose is None:
             raise TangraphError(f"check_map_error: survey {names[i]!r} has no reference track (true_pose)")
         others = [s for j, s in enumerate(surveys) if j != i]
-        bathymetry = grid_surveys(others, cell=cell, fill=fill,
-                                  statistic=cast(Literal["mean", "median"], statistic),
-                                  name=f"without {names[i]}", position_std=position_std).depth
-        part = window_residuals(in_map_frame(held, bathymetry), bathymetry, model, window=window)
-        columns.append(part)
-        owner.append(np.full(part[0].size, i))
+        grid = grid_surveys(others, cell=cell, fill=fill, name=f"without {names[i]}",
+                            statistic=cast(Literal["mean", "median"], statistic), position_std=position_std)
+        placed = in_map_frame(held, grid.depth)
+        columns.append(window_residuals(placed, grid.depth, model, window=window))
+        cells.append(cell_scores(placed, grid, model))
+        owner.append(np.full(columns[-1][0].size, i))
         if progress is not None:
             progress(i + 1, len(surveys))
     time, mean, variance = (np.concatenate([c[k] for c in columns]) for k in range(3))
     return MapCheck(mean / np.sqrt(variance), np.concatenate(owner), names, float(window), time, mean,
-                    variance)
+                    variance, tuple(np.concatenate([c[k] for c in cells]) for k in range(3)))  # type: ignore[arg-type]
+
+
+def cell_scores(survey: Survey, grid, model: NavigationModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every sounding of ``survey`` (at its reference track, in the frame of ``grid``, a
+    :class:`~tangraph.maps.SoundingGrid`) against the grid's map one by one: its residual less
+    the survey's median (m), the std the map states there with the model's sounding noise (m),
+    and whether its cell holds soundings (else the gap fill made it); soundings off the map's
+    data are left out. The marginal check of the map's statement, where the windows of
+    :func:`check_map_error` test what the soundings share."""
+    from tangraph.sensors.terrain import map_error
+
+    bathymetry = grid.depth
+    north, east = survey.footprints(survey.true_pose)
+    residual = survey.beam_depth - bathymetry.depth_at(north, east)
+    std = map_error(bathymetry, model).std_at(north, east)
+    i, j = (np.rint((p - axis[0]) / (axis[1] - axis[0])) for p, axis in
+            ((north, bathymetry.north), (east, bathymetry.east)))
+    ok = np.isfinite(residual) & np.isfinite(std) & (i >= 0) & (i < grid.count.shape[0]) & (j >= 0) \
+        & (j < grid.count.shape[1])
+    if not ok.any():
+        return np.empty(0), np.empty(0), np.empty(0, dtype=bool)
+    measured = grid.count[i[ok].astype(np.int64), j[ok].astype(np.int64)] > 0
+    stated = np.sqrt(std[ok] ** 2 + float(model.sounding_std) ** 2)
+    return residual[ok] - np.median(residual[ok]), stated, measured
+
+
+def cells_summary(residual: np.ndarray, std: np.ndarray, measured: np.ndarray) -> dict[str, dict[str, float]]:
+    """Per kind of cell (``"data_cells"``, ``"filled_cells"``) of soundings scored by
+    :func:`cell_scores`: how many, the robust spread of their residuals (m: 1.4826 times the
+    median absolute deviation), the median std stated and the robust spread of the residuals
+    over it (1 where the statement holds; the factor its std would have to take)."""
+    def spread(x: np.ndarray) -> float:
+        return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else float("nan")
+
+    out = {}
+    for kind, sel in (("data_cells", measured), ("filled_cells", ~measured)):
+        r, s = residual[sel], std[sel]
+        out[kind] = {"soundings": int(sel.sum()), "robust_residual_m": round(spread(r), 4),
+                     "median_std_m": round(float(np.median(s)), 4) if s.size else float("nan"),
+                     "robust_z": round(spread(r / s), 3) if s.size else float("nan")}
+    return out
 
 
 def calibrate_error(grid, check: MapCheck):

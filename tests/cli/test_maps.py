@@ -267,7 +267,9 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     assert f"a Student-t tail of {dof:.3g} degrees of freedom; wrote {checked}" in out
     # the same figures from `maps check`
     assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
-    assert f"Student-t of scale {scale:.2f}" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert f"Student-t of scale {scale:.2f}" in out
+    assert "soundings one by one: data cells " in out and "; filled cells " in out
     # one survey: its lines against each other (--lines), or a one-line error naming the option
     assert main(["maps", "check", paths[0], "--cell", "5", "--lines"]) == 0
     assert f"{paths[0]} line 19," in capsys.readouterr().out

@@ -204,3 +204,34 @@ def test_calibrate_error_gives_the_map_the_drift_its_check_lines_found():
     assert drifting.meta["check_lines"]["drift_p_value"] == pytest.approx(drift["p_value"], abs=1e-6)
     steady = calibrate_error(grid, planted_windows(0.0, np.random.default_rng(3)))
     assert steady.error_drift is None and steady.depth.error_drift is None
+
+
+def test_each_sounding_is_scored_in_a_cell_with_data_or_a_filled_gap():
+    from tangraph.eval.map_check import cell_scores, cells_summary
+    from tangraph.gridding_surveys import grid_surveys
+
+    rng = np.random.default_rng(5)
+    model = NavigationModel(sounding_std=SOUNDING_STD)
+    prior = line_survey(seafloor, rng, lines=np.arange(20.0, 380.0, 20.0))
+    grid = grid_surveys([prior], cell=5.0, fill=3)
+    on = line_survey(seafloor, rng, lines=[100.0, 200.0], offsets=(0.0,))  # on the gridded lines
+    between = line_survey(seafloor, rng, lines=[110.0, 210.0], offsets=(0.0,))  # midway: filled cells
+    r_on, s_on, measured_on = cell_scores(on, grid, model)
+    r_between, s_between, measured_between = cell_scores(between, grid, model)
+    assert measured_on.all() and not measured_between.any()
+    assert r_on.size == measured_on.size > 3000 and np.median(r_on) == pytest.approx(0.0, abs=1e-12)
+    assert np.all(s_on >= SOUNDING_STD) and np.median(s_between) > np.median(s_on)
+    summary = cells_summary(np.r_[r_on, r_between], np.r_[s_on, s_between],
+                            np.r_[measured_on, measured_between])
+    assert summary["data_cells"]["soundings"] == r_on.size
+    assert summary["filled_cells"]["soundings"] == r_between.size
+    z = r_on / s_on
+    spread = 1.4826 * np.median(np.abs(z - np.median(z)))
+    assert summary["data_cells"]["robust_z"] == pytest.approx(spread, abs=1e-3)
+    # the map's cells with data err as stated (the sounding noise and the cells' own error)
+    assert 0.7 < summary["data_cells"]["robust_z"] < 1.3
+    # held out in turn, every sounding on the map is scored in one kind of cell or the other
+    check = check_map_error([prior, on, between], cell=5.0, fill=3, model=model, window=100.0)
+    kinds = check.by_cell()
+    assert set(kinds) == {"data_cells", "filled_cells"}
+    assert check.cells is not None and sum(v["soundings"] for v in kinds.values()) == check.cells[0].size
