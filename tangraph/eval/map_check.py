@@ -340,12 +340,15 @@ def cell_scores(survey: Survey, grid, model: NavigationModel) -> tuple[np.ndarra
     :func:`check_map_error` test what the soundings share."""
     from tangraph.sensors.terrain import map_error
 
+    if survey.true_pose is None:
+        raise TangraphError(f"cell_scores: survey {survey.meta.get('name', '')!r} has no reference track "
+                            "(true_pose) to score the map with")
     bathymetry = grid.depth
     north, east = survey.footprints(survey.true_pose)
     residual = survey.beam_depth - bathymetry.depth_at(north, east)
     std = map_error(bathymetry, model).std_at(north, east)
-    i, j = (np.rint((p - axis[0]) / (axis[1] - axis[0])) for p, axis in
-            ((north, bathymetry.north), (east, bathymetry.east)))
+    i = np.rint((north - bathymetry.north[0]) / bathymetry.cell_size[0])
+    j = np.rint((east - bathymetry.east[0]) / bathymetry.cell_size[1])
     ok = np.isfinite(residual) & np.isfinite(std) & (i >= 0) & (i < grid.count.shape[0]) & (j >= 0) \
         & (j < grid.count.shape[1])
     if not ok.any():
@@ -360,6 +363,7 @@ def cells_summary(residual: np.ndarray, std: np.ndarray, measured: np.ndarray) -
     :func:`cell_scores`: how many, the robust spread of their residuals (m: 1.4826 times the
     median absolute deviation), the median std stated and the robust spread of the residuals
     over it (1 where the statement holds; the factor its std would have to take)."""
+
     def spread(x: np.ndarray) -> float:
         return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else float("nan")
 

@@ -235,3 +235,5 @@ def test_each_sounding_is_scored_in_a_cell_with_data_or_a_filled_gap():
     kinds = check.by_cell()
     assert set(kinds) == {"data_cells", "filled_cells"}
     assert check.cells is not None and sum(v["soundings"] for v in kinds.values()) == check.cells[0].size
+    with pytest.raises(TangraphError, match="no reference track"):
+        cell_scores(on.replace(true_pose=None), grid, model)
