@@ -1,4 +1,5 @@
-"""``tangraph maps``: list, describe, plot and mesh maps; grid soundings into one; check lines."""
+"""``tangraph maps``: list, describe, plot and mesh maps; grid soundings into one; check lines; the
+seafloor's change since a map."""
 
 from __future__ import annotations
 
@@ -186,6 +187,21 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
         f"{v['median_std_m']:.3f} m stated, robust z {v['robust_z']:.2f}" for kind, v in kinds))
 
 
+def cmd_maps_change(args: argparse.Namespace) -> None:
+    from tangraph.eval.map_change import measure_change
+    from tangraph.sensors import NavigationModel
+    from tangraph.survey import read_survey
+
+    bathymetry = load_map(args)
+    surveys = [read_survey(path) for path in args.inputs]
+    change = measure_change(surveys, bathymetry, NavigationModel(sounding_std=args.sounding_std),
+                            window=args.window)
+    print(change.summary())
+    print("# the navigation model's fields (a --dr-model file) that state it:")
+    for key, value in change.model_fields().items():
+        print(f"{key} = {value:g}")
+
+
 # -- the parsers --------------------------------------------------------------------------------
 def _gridding_options(p: argparse.ArgumentParser) -> None:
     """``--cell``, ``--statistic`` and ``--fill``: how soundings are gridded into a map."""
@@ -219,7 +235,8 @@ def _check_line_options(p: argparse.ArgumentParser, prefix: str = "") -> None:
 
 def add_parser(subparsers) -> None:
     """``maps`` and its subcommands."""
-    maps = subparsers.add_parser("maps", help="bathymetry maps: list, inspect, plot, mesh, grid, check")
+    maps = subparsers.add_parser("maps",
+                                 help="bathymetry maps: list, inspect, plot, mesh, grid, check, change")
     maps_sub = maps.add_subparsers(dest="maps_command", required=True)
     p = maps_sub.add_parser("list", help="list the map catalogue")
     p.set_defaults(func=cmd_maps_list)
@@ -261,6 +278,20 @@ def add_parser(subparsers) -> None:
     _gridding_options(p)
     _check_line_options(p)
     p.set_defaults(func=cmd_maps_check)
+    p = maps_sub.add_parser(
+        "change",
+        help="how much has the seafloor changed since a map was made? later surveys' check lines",
+        description="Compare later surveys' soundings (.nc, at their reference track) with MAP where "
+        "it states at most its median error, one by one and in windows of track, and print the "
+        "change since the map (its std and range) that would make the map's stated error hold, "
+        "with the navigation model's map_change_std and map_change_length that state it.",
+    )
+    map_argument(p)
+    p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY", help="later survey files (.nc)")
+    p.add_argument("--window", type=WINDOW, default=50.0, help="window of track (m; default 50)")
+    p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
+                   help="the soundings' own noise std (m; default 0.1)")
+    p.set_defaults(func=cmd_maps_change)
 
 
 def _add_grid(maps_sub) -> None:

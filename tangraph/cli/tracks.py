@@ -51,7 +51,7 @@ def cmd_smooth(args: argparse.Namespace) -> None:
                               "error (no depth_std layer, and the navigation model's map_std is 0), so "
                               "there is nothing to refine; give a map error (map_std in --dr-model)")
     if args.refined_map is not None and bathymetry.depth_std is None and model is not None \
-            and model.map_std == 0:
+            and model.map_std == 0 and model.map_change_std == 0:
         raise unrefined
     track = navigate(survey, bathymetry, "smoother", config, model=model, progress=progress(args),
                      other_map=args.other_map)

@@ -464,7 +464,7 @@ def scaled_error(error: MapError, field: Field, factor: np.ndarray) -> MapError:
     std = np.array(error.std, float)
     node, weight = field.weights(north[inside], east[inside])
     std[inside] *= np.sqrt(variance_ratio(field, node, weight, factor))
-    return MapError(error.bathymetry, std, error.correlation_length)
+    return dataclasses.replace(error, std=std)
 
 
 def _inside(field: Field, north, east) -> np.ndarray:

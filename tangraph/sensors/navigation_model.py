@@ -83,6 +83,12 @@ class NavigationModel:
         Range (m) of the map error's spatial correlation where the map states none; 0: one
         cell of the map. Soundings closer than this share their map error, so they count as
         fewer independent ones (:func:`~tangraph.sensors.terrain.sounding_variances`).
+    map_change_std, map_change_length : float
+        The seafloor's change since the map was surveyed (m; 0, the default: none): a field of
+        this std everywhere the map has data, of range ``map_change_length`` (m; 0: the map error's
+        correlation length), added to the map's own stated error (which can only say how well the
+        earlier surveys knew the seafloor then). A later survey's check lines against the map
+        measure both (:func:`tangraph.eval.map_change.measure_change`, ``tangraph maps change``).
     misfit_dof, misfit_length : float
         The local misfit scale (:mod:`tangraph.sensors.misfit`): the filters hold how far the
         soundings err beyond the stated sounding and map errors as a variable shared along the
@@ -167,6 +173,8 @@ class NavigationModel:
     sounding_std: float = 0.5
     map_std: float = 0.0
     map_correlation_length: float = 0.0
+    map_change_std: float = 0.0
+    map_change_length: float = 0.0
     misfit_dof: float = 0.0
     misfit_length: float = 200.0
     tide: float = 0.0
@@ -184,6 +192,7 @@ class NavigationModel:
     def __post_init__(self) -> None:
         for name in ("speed_noise", "heading_noise", "heading_walk", "heading_turn_std",
                      "dropout_speed_noise", "map_std", "map_correlation_length", "tide_std",
+                     "map_change_std", "map_change_length",
                      "tide_drift_time",
                      "map_offset_std", "map_offset_length", "speed_scale_std", "heading_bias_std"):
             _number(self, name, low=0.0)
@@ -247,8 +256,9 @@ class NavigationModel:
 
     @property
     def measurement_std(self) -> float:
-        """Std (m) of one sounding's residual against the map: sounding and map errors."""
-        return float(np.hypot(self.sounding_std, self.map_std))
+        """Std (m) of one sounding's residual against the map: sounding and map errors, and the
+        seafloor's change since the map."""
+        return float(np.sqrt(self.sounding_std**2 + self.map_std**2 + self.map_change_std**2))
 
     def replace(self, **changes: Any) -> NavigationModel:
         """A copy with some fields changed (checked again)."""
@@ -302,7 +312,8 @@ class NavigationModel:
         and ``tide_drift_time`` say; with a prior map gridded from an earlier survey (a
         ``[prior_map]``, :mod:`tangraph.sim.seafloor`), the map's horizontal offset that its
         gridding kept of that survey's GPS error (``meta["seafloor"]``'s ``map_offset_std``
-        and ``map_offset_length``).
+        and ``map_offset_length``) and the seafloor's change since (``map_change_std`` and
+        ``map_change_length``: the RMS and range of the change the world drew).
         ``overrides`` replace any field.
 
         Raises
@@ -338,11 +349,11 @@ class NavigationModel:
                  for k in ("tide_drift_std", "tide_drift_time")]
         if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in drift):
             terrain["tide_drift_std"], terrain["tide_drift_time"] = float(drift[0]), float(drift[1])
-        world = survey.meta.get("seafloor")  # the offset a prior map's gridding kept
-        placed = [world.get(k, 0.0) if isinstance(world, dict) else 0.0
-                  for k in ("map_offset_std", "map_offset_length")]
-        if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in placed):
-            terrain["map_offset_std"], terrain["map_offset_length"] = float(placed[0]), float(placed[1])
+        world = survey.meta.get("seafloor")  # the offset a prior map's gridding kept, the change since
+        for keys in (("map_offset_std", "map_offset_length"), ("map_change_std", "map_change_length")):
+            values = [world.get(k, 0.0) if isinstance(world, dict) else 0.0 for k in keys]
+            if all(isinstance(v, (int, float)) and np.isfinite(v) and v > 0 for v in values):
+                terrain |= {k: float(v) for k, v in zip(keys, values, strict=True)}
         return cls.from_dead_reckoning(dr, **(terrain | overrides))
 
     @classmethod

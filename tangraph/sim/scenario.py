@@ -388,8 +388,11 @@ def simulate_run(
         "dvl_dropouts": int(dr.n_dropouts),
     }
     if world is not None:
+        drawn = scenario.seafloor  # the change since the earlier survey: its RMS and range
+        change = (drawn.change_std, drawn.correlation_length) if drawn and drawn.change_std else (0.0, 0.0)
         meta["seafloor"] = {"source_map": source.name, "map_error_rms": _rms(world.map_error()),
-                            "map_offset_std": world.offset[0], "map_offset_length": world.offset[1]}
+                            "map_offset_std": world.offset[0], "map_offset_length": world.offset[1],
+                            "map_change_std": change[0], "map_change_length": change[1]}
     survey = Survey(
         time=time,
         dr_pose=dr.pose,

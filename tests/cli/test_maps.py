@@ -399,3 +399,23 @@ def test_maps_grid_gives_the_map_the_drift_its_check_lines_find(tmp_path, capsys
         assert f"a drift along a track of {stated[0]:.3g} m" in printed
     else:
         assert stated is None and "a drift along a track" not in printed
+
+
+def test_maps_change_prints_the_librarys_change_and_the_model_fields(tmp_path, capsys):
+    from tangraph.eval.map_change import measure_change
+    from tangraph.sensors import NavigationModel
+    from tests.eval.test_map_change import _later_survey, _map
+
+    survey, earlier = _later_survey(5, 0.25), _map()
+    write_map(earlier, tmp_path / "earlier.nc")
+    write_survey(survey, tmp_path / "later.nc")
+    assert main(["maps", "change", str(tmp_path / "earlier.nc"), str(tmp_path / "later.nc"),
+                 "--sounding-std", "0.1", "--window", "60"]) == 0
+    out = capsys.readouterr().out
+    found = measure_change([read_survey(tmp_path / "later.nc")], read_map(tmp_path / "earlier.nc"),
+                           NavigationModel(sounding_std=0.1), window=60.0)
+    assert found.summary() in out
+    assert f"map_change_std = {found.model_fields()['map_change_std']:g}\n" in out
+    assert f"map_change_length = {found.model_fields()['map_change_length']:g}\n" in out
+    assert main(["maps", "change", str(tmp_path / "earlier.nc"), str(tmp_path / "missing.nc")]) == 2
+    assert "missing.nc" in capsys.readouterr().err

@@ -117,6 +117,21 @@ def test_the_map_error_never_lowers_the_bound(kind):
         assert bound_rmse(with_field) > bound_rmse(without)
 
 
+def test_the_change_since_the_map_is_a_field_of_the_bound():
+    """A stated change adds a field of its own: the bound on the map's error and the change
+    exceeds the bound on the map's error alone, and equals the bound on a map that states both
+    as one field of the same std and range (the change's fields add up like the map's own)."""
+    survey, seabed = _survey(), _seabed()
+    model = FIELD.replace(map_correlation_length=60.0)
+    alone = posterior_crb(survey, seabed, model)
+    changed = posterior_crb(survey, seabed, model.replace(map_change_std=0.3, map_change_length=60.0))
+    assert bound_rmse(changed) > bound_rmse(alone)
+    assert changed.field_nodes == pytest.approx(2 * alone.field_nodes, rel=0.01)
+    std = float(np.hypot(FIELD.map_std, 0.3))
+    one = posterior_crb(survey, seabed, model.replace(map_std=std))
+    assert bound_rmse(changed) == pytest.approx(bound_rmse(one), rel=1e-3)
+
+
 def _two_passes(passes: int) -> Survey:
     """North along a line at 2 m/s, one ping a second (``passes=2``: then back south on it)."""
     t = np.arange(200.0 * passes)

@@ -63,6 +63,14 @@ def test_from_survey_needs_the_settings():
     placed = {"settings": settings, "seafloor": {"map_offset_std": 1.4, "map_offset_length": 390.0}}
     model = NavigationModel.from_survey(bare.replace(meta=placed))
     assert model.map_offset_std == 1.4 and model.map_offset_length == 390.0
+    assert model.map_change_std == 0.0
+    # a seafloor that changed since the earlier survey states the change the world drew
+    changed = {"settings": settings, "seafloor": {"map_change_std": 0.3, "map_change_length": 30.0}}
+    model = NavigationModel.from_survey(bare.replace(meta=changed))
+    assert (model.map_change_std, model.map_change_length, model.map_offset_std) == (0.3, 30.0, 0.0)
+    assert model.measurement_std == pytest.approx(np.sqrt(0.3**2 + 0.3**2))
+    with pytest.raises(TangraphError, match="map_change_std must be >= 0"):
+        NavigationModel(map_change_std=-0.1)
     with pytest.raises(TangraphError, match="map_offset_length must be >= 0"):
         NavigationModel(map_offset_length=-1.0)
 

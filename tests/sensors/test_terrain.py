@@ -89,6 +89,47 @@ def test_a_map_with_gaps_splits_its_error_by_scale():
     assert len(map_error(gappy.replace(correlation_length=10.0), NavigationModel()).components()) == 1
 
 
+def test_the_change_since_the_map_is_a_field_of_its_own():
+    """The model's change adds to every cell in quadrature, as a uniform field of its own range
+    beside the map's own statement, which keeps its split; the offset leaves the change whole."""
+    std = np.where(np.arange(100)[None, :] < 50, 0.1, 0.4) * np.ones((100, 1))
+    gappy = FLAT.replace(depth_std=std, correlation_length=40.0)
+    error = map_error(gappy, NavigationModel(map_change_std=0.2, map_change_length=25.0))
+    np.testing.assert_allclose(error.std**2, std**2 + 0.04)
+    cell, excess, change = error.components()
+    assert [p.correlation_length for p in (cell, excess, change)] == [10.0, 40.0, 25.0]
+    np.testing.assert_allclose(cell.std**2 + excess.std**2, std**2)
+    np.testing.assert_allclose(change.std, 0.2)
+    np.testing.assert_allclose(error.own.std, std)
+    # the map's own correlation length when the change states none; none at all on a perfect map
+    assert map_error(gappy, NavigationModel(map_change_std=0.2)).change_length == 40.0
+    alone = map_error(FLAT, NavigationModel(map_change_std=0.2)).components()
+    assert len(alone) == 1 and alone[0].correlation_length == 10.0
+    # more error shared: a sounding among others counts for less
+    points = np.array([[300.0, 300.0], [300.0, 310.0], [310.0, 300.0]])
+    survey = scattered_survey(points)
+    told = NavigationModel(sounding_std=0.1, map_std=0.1, map_change_std=0.2, map_change_length=50.0)
+    added = sounding_variances(survey, FLAT, told) - sounding_variances(survey, FLAT,
+                                                                        told.replace(map_change_std=0))
+    d = np.sqrt(np.sum((points[:, None, :] - points[None, :, :]) ** 2, axis=-1))
+    np.testing.assert_allclose(added[:, 0], 0.04 * matern_correlation(d, 50.0).sum(axis=1), rtol=0.05)
+    plane = BathymetryMap(FLAT.north, FLAT.east, 30.0 + 0.1 * FLAT.north[:, None] + 0 * FLAT.east)
+    offset = map_error(plane, NavigationModel(map_std=0.3, map_change_std=0.2)).without_offset(2.0)
+    np.testing.assert_allclose(offset.std**2, 0.3**2 - (2.0 * 0.1) ** 2 + 0.2**2, rtol=1e-9)
+    assert offset.change_std == 0.2
+
+
+def test_a_change_larger_than_the_std_it_is_part_of_is_refused():
+    import pytest
+
+    from tangraph.errors import TangraphError
+
+    with pytest.raises(TangraphError, match="change since the map .0.3 m. is part of its std"):
+        MapError(FLAT, np.full(FLAT.shape, 0.2), 20.0, change_std=0.3)
+    with pytest.raises(TangraphError, match="change_std and change_length must be >= 0"):
+        MapError(FLAT, np.full(FLAT.shape, 0.2), 20.0, change_std=-0.1)
+
+
 def test_the_error_a_windows_soundings_share_among_themselves():
     """``shared_among`` of some points is the shared variance of a survey made of them alone."""
     from tangraph.sensors import shared_among
