@@ -253,6 +253,31 @@ def error_by_cell(cfg: dict, data: Path, grid, march: dict) -> dict:
             "march_against_map": cells_summary(*(np.concatenate([c[k] for c in later]) for k in range(3)))}
 
 
+def map_change(cfg: dict, data: Path, grid, march: dict) -> dict:
+    """With ``[map] change = "leave-one-run-out"``: for each March run and DR source, the
+    seafloor's change since the map measured by the *other* March runs at their GPS positions
+    (:func:`tangraph.eval.map_change.measure_change`: the map's measured cells, the source's
+    navigation model's sounding noise and drift, ``[reference] gps_std``), which the run is then
+    navigated with; the run's own soundings are not used. Else none."""
+    from tangraph.eval.map_change import measure_change
+    from tangraph.sensors import NavigationModel
+
+    how = cfg["map"].get("change")
+    if how is None:
+        return {}
+    if how != "leave-one-run-out":
+        raise SystemExit(f"[map] change = {how!r}: the only way is 'leave-one-run-out'")
+    placed = {name: in_map(s, grid.depth) for name, s in march.items()}
+    out: dict = {}
+    for name in placed:
+        others = [s for other, s in placed.items() if other != name]
+        for source, table in cfg["navigation"].items():
+            found = measure_change(others, grid.depth, NavigationModel.from_mapping(table),
+                                   measured=grid.count > 0, position_std=cfg["reference"]["gps_std"])
+            out.setdefault(name, {})[source] = {**found.model_fields(), "summary": found.summary()}
+    return out
+
+
 def _robust(r: np.ndarray) -> float:
     """1.4826 x the median absolute deviation from the median, or NaN below 200 values."""
     r = r[np.isfinite(r)]
@@ -375,6 +400,9 @@ def one_run(config: dict, *, rng: np.random.Generator) -> dict:
     bathymetry = _map(config["map"])
     survey = dr_case(cfg, data, Path(config["file"]), config["case"], bathymetry)
     model, settings = estimator(cfg, config["case"], config["method"])
+    change = config.get("change", {}).get(config["case"].split("+")[0])
+    if change is not None:  # the change the other March runs measured ([map] change)
+        model = model.replace(**{k: change[k] for k in ("map_change_std", "map_change_length")})
     method = config["method"]
     t0 = time.perf_counter()
     track = navigate(survey, bathymetry, method, settings, rng=rng, model=model)
@@ -611,13 +639,14 @@ def main(argv=None) -> int:
         "error_by_cell": error_by_cell(cfg, args.data, grid, march),
         "run_offsets": run_offsets(cfg, args.data, bathymetry, march),
         "map_drift": {k: v for k, v in grid.meta.get("check_lines", {}).items() if k.startswith("drift_")},
+        "map_change": map_change(cfg, args.data, grid, march),
     }
     if cfg["graph"].get("batch", {}).get("smoother_terrain") == "field" and "smoother" in args.methods:
         checks["refined_map"] = refined_map_check(cfg, args.data, bathymetry, march)
     seeds = 1 if args.quick else int(args.runs or cfg["filters"]["seeds"])
     configs = [
         {"cfg": cfg, "data": str(args.data), "map": str(map_path), "file": str(r), "survey": r.stem,
-         "case": case, "method": method, "replica": replica}
+         "case": case, "method": method, "replica": replica, "change": checks["map_change"].get(r.stem, {})}
         for r in runs for case in args.cases for method in args.methods
         for replica in range(1 if method in DETERMINISTIC else seeds)
     ]

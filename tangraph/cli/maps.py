@@ -189,13 +189,15 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
 
 def cmd_maps_change(args: argparse.Namespace) -> None:
     from tangraph.eval.map_change import measure_change
+    from tangraph.maps.netcdf import measured_cells
     from tangraph.sensors import NavigationModel
     from tangraph.survey import read_survey
 
     bathymetry = load_map(args)
     surveys = [read_survey(path) for path in args.inputs]
+    measured = measured_cells(args.map, bathymetry) if Path(args.map).is_file() else None
     change = measure_change(surveys, bathymetry, NavigationModel(sounding_std=args.sounding_std),
-                            window=args.window)
+                            window=args.window, measured=measured, position_std=args.position_std)
     print(change.summary())
     print("# the navigation model's fields (a --dr-model file) that state it:")
     for key, value in change.model_fields().items():
@@ -282,15 +284,19 @@ def add_parser(subparsers) -> None:
         "change",
         help="how much has the seafloor changed since a map was made? later surveys' check lines",
         description="Compare later surveys' soundings (.nc, at their reference track) with MAP where "
-        "it states at most its median error, one by one and in windows of track, and print the "
-        "change since the map (its std and range) that would make the map's stated error hold, "
-        "with the navigation model's map_change_std and map_change_length that state it.",
+        "it was measured (a map 'maps grid' wrote: its cells holding soundings; else where it states "
+        "at most its median error), one by one and in windows of track, and print the change since "
+        "the map (its std and range) that would make the map's stated error hold, with the "
+        "navigation model's map_change_std and map_change_length that state it.",
     )
     map_argument(p)
     p.add_argument("inputs", type=Path, nargs="+", metavar="SURVEY", help="later survey files (.nc)")
     p.add_argument("--window", type=WINDOW, default=50.0, help="window of track (m; default 50)")
     p.add_argument("--sounding-std", type=SOUNDING_STD, default=0.1,
                    help="the soundings' own noise std (m; default 0.1)")
+    p.add_argument("--position-std", type=POSITION_STD, default=0.0, metavar="M",
+                   help="std (m per axis) of the surveys' reference track (their GPS): its error seen "
+                   "through the map's slope is not counted as change (default: 0)")
     p.set_defaults(func=cmd_maps_change)
 
 

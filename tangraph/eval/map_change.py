@@ -8,21 +8,27 @@ compares them with the map and finds the change a navigation model states
 (``map_change_std``, ``map_change_length``; :mod:`tangraph.sensors.terrain`):
 
 - its **std** ``c``, from the soundings one by one: the ``c`` at which their residuals (each
-  survey's median removed: its datum) over ``sqrt(s^2 + sounding_std^2 + c^2)`` (``s`` the std
-  the map states at the sounding) have a robust spread of 1 (1.4826 times their median absolute
-  value). Only the soundings where the map states at most its median error count: its
-  well-surveyed cells, where the statement is the data's own. A gridded map states its filled
-  gaps' error from the terrain's variogram, on the safe side, and there the change would hide
-  in what the gaps are said to err;
+  survey's median removed: its datum) over ``sqrt(s^2 + sounding_std^2 + (p |g|)^2 + d^2 + c^2)``
+  (``s`` the std the map states at the sounding, ``p`` the reference track's position std,
+  ``g`` the map's slope, ``d^2`` the variance of the drift of the depths' offset about the
+  survey's mean, as the model states it or the map does,
+  :meth:`~tangraph.sensors.NavigationModel.with_map`) have a robust spread of 1 (1.4826 times
+  their median absolute value).
+  Only the soundings in the map's measured cells count, where its statement is the data's own
+  (``measured``: a gridded map's cells that hold soundings, its ``count > 0``; without it, the
+  cells where the map states at most its median error). A gridded map states its filled gaps'
+  error from the terrain's variogram, on the safe side, and there the change would hide in
+  what the gaps are said to err;
 - its **range** ``L``, from the same soundings in windows of track
   (:func:`~tangraph.eval.windows.window_residuals`, with the change a field of std ``c`` and range
-  ``L`` beside the map's own): the ``L`` at which the windows' standardised mean residuals have
-  a robust spread of 1. A longer range shares more of the change among a window's soundings, so
-  the spread falls as ``L`` grows. ``L`` is searched between one map cell and
-  :data:`MAX_LENGTH_WINDOWS` windows; a bound reached is said (``MapChange.length_bound``).
+  ``L`` beside the map's own, and the drift averaged over a window): the
+  ``L`` at which the windows' standardised mean residuals have a robust spread of 1. A longer
+  range shares more of the change among a window's soundings, so the spread falls as ``L``
+  grows. ``L`` is searched between one map cell and :data:`MAX_LENGTH_WINDOWS` windows; a bound
+  reached is said (``MapChange.length_bound``).
 
-The reference track's own error adds to the residuals through the map's slope, so the change
-found errs on the large side (the cautious one for an estimator that states it).
+What is measured is the change beyond what the model states already: a model that states a
+large drift leaves less of the residuals to the change.
 
 Nothing here touches files.
 """
@@ -30,6 +36,7 @@ Nothing here touches files.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Sequence
 
 import numpy as np
@@ -54,8 +61,9 @@ class MapChange:
     """The seafloor's change since a map (:func:`measure_change`): its ``std`` and ``length`` (m;
     length 0 when there is no change), the soundings and windows they rest on, the robust spread
     of the standardised residuals against the map's own statement (``sounding_z``,
-    ``window_z``; 1 where the map's statement holds a survey later) and, when the range search
-    ended at a bound, which (``"lower"``: no more shared than a map cell; ``"upper"``)."""
+    ``window_z``; 1 where the map's statement holds a survey later), which cells were used
+    (``cells``: ``"measured"`` or ``"at most the median std"``) and, when the range search ended at
+    a bound, which (``"lower"``: no more shared than a map cell; ``"upper"``)."""
 
     std: float
     length: float
@@ -64,6 +72,7 @@ class MapChange:
     sounding_z: float
     window_z: float
     window: float
+    cells: str = "measured"
     length_bound: str | None = None
 
     def model_fields(self) -> dict[str, float]:
@@ -76,23 +85,25 @@ class MapChange:
                  "upper": f" (at the longest range searched, {MAX_LENGTH_WINDOWS:g} windows)"}.get(
                      self.length_bound or "", "")
         return (f"change since the map: std {self.std:.3f} m, range {self.length:.1f} m{bound}; from "
-                f"{self.soundings} soundings where the map states at most its median error (robust z "
+                f"{self.soundings} soundings in cells {self.cells} (robust z "
                 f"{self.sounding_z:.2f} against the map's own statement) and {self.windows} windows of "
                 f"{self.window:g} m (robust z {self.window_z:.2f})")
 
 
 def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: NavigationModel | None = None,
-                   *, window: float = 50.0) -> MapChange:
+                   *, window: float = 50.0, measured: np.ndarray | None = None,
+                   position_std: float = 0.0) -> MapChange:
     """The seafloor's change since ``bathymetry`` was surveyed, measured by ``surveys`` (later
-    surveys with a reference track, put in the map's frame) as the module docstring says;
-    ``model`` gives the sounding noise and, for a map that states no error, the map's std (its
-    own ``map_change_std`` is not used).
+    surveys with a reference track of position std ``position_std`` m per axis, put in the map's
+    frame) as the module docstring says, in the cells ``measured (ny, nx)`` (bool) holds;
+    ``model`` gives the sounding noise, the drift of the depths' offset and, for a map that
+    states no error, the map's std (its own ``map_change_std`` is not used).
 
     Raises
     ------
     TangraphError
-        No survey, a survey without a reference track, ``window <= 0``, or fewer than
-        ``MIN_SOUNDINGS`` soundings where the map states at most its median error.
+        No survey, a survey without a reference track, ``window <= 0``, ``measured`` not of the
+        map's shape, or fewer than ``MIN_SOUNDINGS`` soundings in the cells used.
     """
     from tangraph.map_frame import in_map_frame
 
@@ -100,8 +111,13 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
         raise TangraphError(f"measure_change: window must be > 0 m, got {window!r}")
     if not surveys:
         raise TangraphError("measure_change: no survey given (later surveys with a reference track)")
+    if measured is not None and np.shape(measured) != bathymetry.shape:
+        raise TangraphError(f"measure_change: measured cells of shape {np.shape(measured)}, the map "
+                            f"{bathymetry.name!r} {bathymetry.shape}")
     model = (NavigationModel() if model is None else model).replace(map_change_std=0.0, map_change_length=0.0)
+    model = model.with_map(bathymetry)
     stated = map_error(bathymetry, model)
+    cells = stated.std <= stated.typical_std if measured is None else np.asarray(measured, bool)
     placed, used, residual, std = [], [], [], []
     for survey in surveys:
         name = survey.meta.get("name", "")
@@ -111,35 +127,78 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
         north, east = survey.footprints(survey.true_pose)
         r = survey.beam_depth - bathymetry.depth_at(north, east)
         s = stated.std_at(north, east)
-        ok = np.isfinite(r) & np.isfinite(s) & (s <= stated.typical_std)
+        ok = np.isfinite(r) & np.isfinite(s) & _in_cells(cells, bathymetry, north, east)
         if ok.any():
+            slope = np.sum(bathymetry.gradient_at(north[ok], east[ok]) ** 2, axis=-1)
             placed.append(survey)
             used.append(ok)
             residual.append(r[ok] - np.median(r[ok]))
-            std.append(np.sqrt(s[ok] ** 2 + model.sounding_std**2))
+            drift = _drift_variance(survey, model, survey.time[-1] - survey.time[0])
+            std.append(np.sqrt(s[ok] ** 2 + model.sounding_std**2 + position_std**2 * np.nan_to_num(slope)
+                               + drift))
     count = int(sum(r.size for r in residual))
+    where = "measured" if measured is not None else "at most the median std"
     if count < MIN_SOUNDINGS:
         raise TangraphError(
-            f"measure_change: {count} soundings of the surveys lie where map {bathymetry.name!r} states at "
-            f"most its median error, fewer than {MIN_SOUNDINGS}: surveys that cross the map's surveyed cells")
+            f"measure_change: {count} soundings of the surveys lie in the cells of map {bathymetry.name!r} "
+            f"{where}, fewer than {MIN_SOUNDINGS}: surveys that cross the map's surveyed cells")
     r, s = np.concatenate(residual), np.concatenate(std)
     sounding_z = _spread(r / s)
     change, _ = _root(lambda c: _spread(r / np.sqrt(s**2 + c**2)) - 1.0, 0.0, 10.0 * _spread(r))
+
+    shared = [_drift_variance(p, model, p.time[-1] - p.time[0], window) for p in placed]
 
     def windows(length: float, c: float = change) -> np.ndarray:
         told = model.replace(map_change_std=c, map_change_length=length)
         parts = [window_residuals(p, bathymetry, told, window=window, used=u)
                  for p, u in zip(placed, used, strict=True)]
-        return np.concatenate([m / np.sqrt(v) for _, m, v in parts])
+        return np.concatenate([m / np.sqrt(v + d) for (_, m, v), d in zip(parts, shared, strict=True)])
 
     cell = float(max(bathymetry.cell_size))
     before = windows(cell, 0.0)
+    found = functools.partial(MapChange, soundings=count, windows=int(before.size), sounding_z=sounding_z,
+                              window_z=_spread(before), window=window, cells=where)
     if change == 0 or before.size == 0:
-        return MapChange(change, 0.0, count, int(before.size), sounding_z, _spread(before), window)
+        return found(change, 0.0)
     low, high = np.log(cell), np.log(max(MAX_LENGTH_WINDOWS * window, cell))
     log_length, bound = _root(lambda x: _spread(windows(float(np.exp(x)))) - 1.0, low, high)
-    return MapChange(change, float(np.exp(log_length)), count, int(before.size), sounding_z, _spread(before),
-                     window, bound)
+    return found(change, float(np.exp(log_length)), length_bound=bound)
+
+
+def _in_cells(cells: np.ndarray, bathymetry: BathymetryMap, north, east) -> np.ndarray:
+    """Whether each point lies in one of the map's ``cells (ny, nx)`` (its nearest cell centre)."""
+    i = np.rint((np.asarray(north) - bathymetry.north[0]) / bathymetry.cell_size[0])
+    j = np.rint((np.asarray(east) - bathymetry.east[0]) / bathymetry.cell_size[1])
+    inside = np.isfinite(i) & np.isfinite(j) & (i >= 0) & (i < cells.shape[0]) & (j >= 0) \
+        & (j < cells.shape[1])
+    out = np.zeros(np.shape(north), dtype=bool)
+    out[inside] = cells[i[inside].astype(np.int64), j[inside].astype(np.int64)]
+    return out
+
+
+def _drift_variance(survey: Survey, model: NavigationModel, duration: float, window: float = 0.0) -> float:
+    """The variance (m^2) the drift of the depths' offset (``model.tide_drift``: a Gauss-Markov
+    process of std ``sigma`` forgetting over ``tau``) gives a sounding's residual (``window``
+    0), or a window's mean residual, less the mean over the survey's ``duration`` (s):
+    ``sigma^2 (m(T_w) - m(T))``, ``m(T) = 2 (x - 1 + exp(-x)) / x^2`` (``x = T / tau``) the mean
+    of its correlation over a time ``T``, ``T_w`` the window's duration at the survey's median
+    speed."""
+    if model.tide_drift is None:
+        return 0.0
+    sigma, tau = model.tide_drift
+    pose = survey.true_pose
+    assert pose is not None  # the caller's surveys have their reference track
+    step = np.hypot(*np.diff(pose[:, :2], axis=0).T)
+    dt = np.diff(survey.time)
+    moving = (dt > 0) & (step > 0)
+    speed = float(np.median(step[moving] / dt[moving])) if moving.any() else 0.0
+    seconds = window / speed if window > 0 and speed > 0 else 0.0
+    return float(sigma**2 * max(_mean_correlation(seconds / tau) - _mean_correlation(duration / tau), 0.0))
+
+
+def _mean_correlation(x: float) -> float:
+    """The mean of ``exp(-|t - s| / tau)`` over ``t, s`` in a span of ``x tau``."""
+    return 1.0 if x < 1e-6 else float(2.0 * (x - 1.0 + np.exp(-x)) / x**2)
 
 
 def _spread(z: np.ndarray) -> float:

@@ -38,7 +38,7 @@ from tangraph.maps.grid import (
 )
 from tangraph.outputs import write_atomically
 
-__all__ = ["NETCDF_SUFFIXES", "read_netcdf", "write_netcdf", "write_sounding_grid"]
+__all__ = ["NETCDF_SUFFIXES", "measured_cells", "read_netcdf", "write_netcdf", "write_sounding_grid"]
 
 NETCDF_SUFFIXES = (".nc", ".grd", ".cdf", ".nc4")
 
@@ -365,3 +365,23 @@ def write_sounding_grid(grid, path: str | os.PathLike, *, overwrite: bool = Fals
         attrs["tangraph_error_semivariance_m2"] = grid.error.semivariance
     write_atomically(p, overwrite, lambda tmp: write_netcdf(grid.depth, tmp, extra, attrs))
     return p
+
+
+def measured_cells(path: str | os.PathLike, bathymetry: BathymetryMap) -> np.ndarray | None:
+    """The cells of ``bathymetry`` (read from ``path``) that hold soundings: the ``count`` layer
+    :func:`write_sounding_grid` writes, above 0, on the map's grid (bool ``(ny, nx)``); None for
+    a file of another format, without that layer, or whose grid is not the map's."""
+    import xarray as xr
+
+    if Path(path).suffix.lower() not in NETCDF_SUFFIXES:
+        return None
+    with xr.open_dataset(path) as ds:
+        if "count" not in ds or ds["count"].dims != ("y", "x"):
+            return None
+        count = ds["count"].sortby("y").sortby("x")
+        north = count["y"].values - bathymetry.origin[0]
+        east = count["x"].values - bathymetry.origin[1]
+        if north.shape != bathymetry.north.shape or east.shape != bathymetry.east.shape \
+                or not (np.allclose(north, bathymetry.north) and np.allclose(east, bathymetry.east)):
+            return None
+        return np.asarray(count.values) > 0

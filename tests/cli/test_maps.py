@@ -419,3 +419,26 @@ def test_maps_change_prints_the_librarys_change_and_the_model_fields(tmp_path, c
     assert f"map_change_length = {found.model_fields()['map_change_length']:g}\n" in out
     assert main(["maps", "change", str(tmp_path / "earlier.nc"), str(tmp_path / "missing.nc")]) == 2
     assert "missing.nc" in capsys.readouterr().err
+
+
+def test_maps_change_uses_the_cells_a_gridded_map_measured(tmp_path, capsys):
+    from tangraph.eval.map_change import measure_change
+    from tangraph.maps.netcdf import measured_cells
+    from tangraph.sensors import NavigationModel
+
+    seabed = smooth_map()
+    surveys = [simulated_survey(seabed, seed) for seed in (1, 2)]
+    grid = grid_surveys(surveys[:1], cell=5.0, fill=3)
+    path = tmp_path / "grid.nc"
+    from tangraph.maps.io import write_sounding_grid
+
+    write_sounding_grid(grid, path)
+    write_survey(surveys[1], tmp_path / "later.nc")
+    cells = measured_cells(path, read_map(path))
+    np.testing.assert_array_equal(cells, grid.count > 0)
+    assert measured_cells(path, read_map(path).crop(north=(0.0, 100.0))) is None  # not the map's grid
+    assert main(["maps", "change", str(path), str(tmp_path / "later.nc"), "--position-std", "1"]) == 0
+    out = capsys.readouterr().out
+    found = measure_change([read_survey(tmp_path / "later.nc")], read_map(path),
+                           NavigationModel(sounding_std=0.1), measured=cells, position_std=1.0)
+    assert found.cells == "measured" and found.summary() in out

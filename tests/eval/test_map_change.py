@@ -80,5 +80,46 @@ def test_bad_input_is_refused():
     with pytest.raises(TangraphError, match="'gps-less' has no reference track"):
         measure_change([survey.replace(true_pose=None, meta={"name": "gps-less"})], _map())
     far = _map().replace(north=AXIS_MAP_N + 5000.0)
-    with pytest.raises(TangraphError, match="0 soundings of the surveys lie where map"):
+    with pytest.raises(TangraphError, match="0 soundings of the surveys lie in the cells of map 'earlier'"):
         measure_change([survey], far)
+    with pytest.raises(TangraphError, match=r"measured cells of shape \(3, 3\), the map 'earlier' \(100"):
+        measure_change([survey], _map(), measured=np.ones((3, 3), bool))
+
+
+def test_only_the_measured_cells_count_and_a_gap_stated_wide_hides_no_change():
+    """The map's eastern half was filled and states a wide error (1 m): measured where its data
+    are, the change is found as before; taken everywhere, the gaps' wide statement would hide
+    it. Told the cells, only those count."""
+    survey, earlier = _later_survey(6, 0.25), _map()
+    gaps = np.zeros(earlier.shape, bool)
+    gaps[:, 250:] = True
+    wide = earlier.replace(depth_std=np.where(gaps, 1.0, MAP_STD))
+    found = measure_change([survey], wide, MODEL, measured=~gaps)
+    assert found.cells == "measured" and found.std == pytest.approx(0.25, rel=0.12)
+    assert 20_000 < found.soundings < 27_000  # about half the soundings
+    median = measure_change([survey], wide, MODEL)  # no cells told: where it states at most its median
+    assert median.cells == "at most the median std" and median.std == pytest.approx(found.std, rel=0.05)
+
+
+def test_the_reference_tracks_error_and_the_datums_drift_are_not_change():
+    """The later survey's soundings are placed at a reference track 2 m off, on a map of slope
+    0.1, and its depths' offset drifts by 0.3 m over 300 s: stated (``position_std``, the model's
+    drift), neither is taken for a change of the seafloor."""
+    rng = np.random.default_rng(7)
+    tilted = lambda north, east: seafloor(north, east) + 0.1 * east  # noqa: E731
+    survey = line_survey(tilted, rng, lines=np.arange(30.0, 380.0, 45.0), name="tilted")
+    nn, ee = np.meshgrid(AXIS_MAP_N, AXIS_MAP_E, indexing="ij")
+    earlier = BathymetryMap(AXIS_MAP_N, AXIS_MAP_E, tilted(nn, ee), depth_std=np.full(nn.shape, MAP_STD))
+    error = _field(MAP_STD, MAP_LENGTH, rng)
+    north, east = survey.footprints(survey.true_pose)
+    drift = np.zeros(survey.time.size)
+    for k in range(1, drift.size):  # a Gauss-Markov drift, 0.3 m forgetting over 300 s
+        keep = np.exp(-1 / 300)
+        drift[k] = drift[k - 1] * keep + 0.3 * np.sqrt(1 - keep**2) * rng.standard_normal()
+    off = survey.replace(true_pose=survey.true_pose + np.array([0.0, 2.0, 0.0]),
+                         beam_depth=survey.beam_depth + error.depth_at(north, east) + drift[:, None])
+    told = MODEL.replace(tide_drift_std=0.3, tide_drift_time=300.0)
+    found = measure_change([off], earlier, told, position_std=2.0)
+    assert found.std < 0.08
+    careless = measure_change([off], earlier, MODEL)
+    assert careless.std > 0.15 and careless.window_z > 2.0 * found.window_z
