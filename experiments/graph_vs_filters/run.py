@@ -32,7 +32,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 SCENARIOS = ("demo", "wang2019", "han2020", "chen2022", "demo-flat", "demo-map-error", "wang2019-map-error",
              "han2020-map-error", "singlebeam", "singlebeam-map-error", "demo-patch-error",
-             "singlebeam-patch-error", "demo-compass", "demo-drift")
+             "singlebeam-patch-error", "demo-compass", "demo-drift", "demo-change")
 FILTERS = ("pf", "ipf", "sjcpf", "jbpf", "tercom-pf", "mle", "pmf")
 GRAPH = ("isam2", "smoother")
 

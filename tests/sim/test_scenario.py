@@ -164,3 +164,33 @@ def test_a_drifting_tide_moves_every_sounding_of_a_ping_alike_and_nothing_else()
     assert NavigationModel.from_survey(a).tide_drift is None
     with pytest.raises(TangraphError, match="tide_drift_time must be > 0 s with tide_drift_std = 0.3 m"):
         dataclasses.replace(still.sonar, tide_drift_std=std)
+
+
+def test_a_seafloor_that_changed_since_the_prior_survey_states_the_change():
+    """``demo-change``: the survey sees the seafloor plus a change of 0.3 m drawn after the prior
+    map (the same map as without it, the same seed), which the survey's metadata and so the
+    navigation model of the simulated survey state."""
+    from tangraph.sensors import NavigationModel
+    from tangraph.sim.scenario import simulate_run
+
+    line = {"kind": "line", "start": [1750.0, 850.0], "heading_deg": 80.0, "speed": 2.0, "duration": 300.0}
+    changed = dataclasses.replace(load_scenario("demo-change"), trajectory=line)
+    unchanged = dataclasses.replace(changed, seafloor=dataclasses.replace(changed.seafloor, change_std=0.0))
+    residuals, maps, surveys = [], [], []
+    for scenario in (unchanged, changed):
+        run = simulate_run(scenario, rng=np.random.default_rng(5), seed=5)
+        north, east = run.survey.footprints(run.survey.true_pose)
+        r = (run.survey.beam_depth - run.bathymetry.depth_at(north, east)).ravel()
+        residuals.append(r[np.isfinite(r)])
+        maps.append(run.bathymetry.depth)
+        surveys.append(run.survey)
+    without, survey = surveys
+    np.testing.assert_array_equal(*maps)  # the change is drawn after the prior map
+    added = residuals[1].var() - residuals[0].var()
+    assert 0.03 < added < 0.3  # 0.09 m^2 expected: 0.3 m over a 600 m line, a few dozen ranges of 30 m
+    stated = survey.meta["seafloor"]
+    assert (stated["map_change_std"], stated["map_change_length"]) == (0.3, 30.0)
+    model = NavigationModel.from_survey(survey)
+    assert (model.map_change_std, model.map_change_length) == (0.3, 30.0)
+    assert without.meta["seafloor"]["map_change_std"] == 0.0
+    assert NavigationModel.from_survey(without).map_change_std == 0.0
