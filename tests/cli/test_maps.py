@@ -404,9 +404,9 @@ def test_maps_grid_gives_the_map_the_drift_its_check_lines_find(tmp_path, capsys
 def test_maps_change_prints_the_librarys_change_and_the_model_fields(tmp_path, capsys):
     from tangraph.eval.map_change import measure_change
     from tangraph.sensors import NavigationModel
-    from tests.eval.test_map_change import _later_survey, _map
+    from tests.eval.line_cases import earlier_map, later_survey
 
-    survey, earlier = _later_survey(5, 0.25), _map()
+    survey, earlier = later_survey(5, 0.25), earlier_map()
     write_map(earlier, tmp_path / "earlier.nc")
     write_survey(survey, tmp_path / "later.nc")
     assert main(["maps", "change", str(tmp_path / "earlier.nc"), str(tmp_path / "later.nc"),

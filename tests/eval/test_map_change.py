@@ -9,45 +9,28 @@ from tangraph.errors import TangraphError
 from tangraph.eval.map_change import MapChange, measure_change
 from tangraph.maps import BathymetryMap
 from tangraph.sensors import NavigationModel
-from tangraph.sensors.matern import matern_field
-from tests.eval.line_cases import AXIS_E, AXIS_N, SOUNDING_STD, line_survey, seafloor
+from tests.eval.line_cases import (
+    AXIS_MAP_E,
+    AXIS_MAP_N,
+    MAP_LENGTH,
+    MAP_STD,
+    SOUNDING_STD,
+    earlier_map,
+    field_on_lines,
+    later_survey,
+    line_survey,
+    seafloor,
+)
 
-MAP_STD, MAP_LENGTH = 0.1, 8.0  # the map's own statement: its error as it was gridded
-AXIS_MAP_N, AXIS_MAP_E = np.arange(0.0, 400.0, 4.0), np.arange(0.0, 2000.0, 4.0)
 MODEL = NavigationModel(sounding_std=SOUNDING_STD)
 
-
-def _map() -> BathymetryMap:
-    nn, ee = np.meshgrid(AXIS_MAP_N, AXIS_MAP_E, indexing="ij")
-    return BathymetryMap(AXIS_MAP_N, AXIS_MAP_E, seafloor(nn, ee), depth_std=np.full(nn.shape, MAP_STD),
-                         correlation_length=MAP_LENGTH, name="earlier")
-
-
-def _field(std: float, length: float, rng) -> BathymetryMap:
-    return BathymetryMap(AXIS_N, AXIS_E, matern_field(AXIS_N, AXIS_E, std, length, rng=rng))
-
-
-def _later_survey(seed: int, change_std: float, change_length: float = 40.0):
-    """Lines over the seafloor as it is now: the map, its own error as stated, and a change of
-    ``change_std`` and range ``change_length`` since."""
-    rng = np.random.default_rng(seed)
-    error = _field(MAP_STD, MAP_LENGTH, rng)
-    change = _field(change_std, change_length, rng) if change_std > 0 else None
-
-    def now(north, east):
-        depth = seafloor(north, east) + error.depth_at(north, east)
-        return depth if change is None else depth + change.depth_at(north, east)
-
-    return line_survey(now, rng, lines=np.arange(30.0, 380.0, 45.0), name=f"later {seed}")
-
-
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_known_change_is_recovered_from_a_later_survey(seed):
+def test_a_known_change_is_recovered_from_alater_survey(seed):
     """A change of 0.25 m and range 40 m: its std within 12 % (about three times the spread of
     the robust estimate over 47 000 soundings, sharing their change over 8 lines of 2 km), its
     range within a factor of 2 (about 300 windows of 50 m, a few dozen independent ones per
     line: the range moves their spread little)."""
-    found = measure_change([_later_survey(seed, 0.25)], _map(), MODEL)
+    found = measure_change([later_survey(seed, 0.25)], earlier_map(), MODEL)
     assert isinstance(found, MapChange)
     assert found.std == pytest.approx(0.25, rel=0.12)
     assert 20.0 < found.length < 80.0 and found.length_bound is None
@@ -59,38 +42,38 @@ def test_a_known_change_is_recovered_from_a_later_survey(seed):
     # the model's fields state it, and the map's error then carries it as a field of its own
     from tangraph.sensors import map_error
 
-    error = map_error(_map(), MODEL.replace(**found.model_fields()))
+    error = map_error(earlier_map(), MODEL.replace(**found.model_fields()))
     lengths = [p.correlation_length for p in error.components()]
     assert lengths == [MAP_LENGTH, pytest.approx(found.length, abs=0.1)]
     assert float(error.std[0, 0]) == pytest.approx(np.hypot(MAP_STD, found.std), abs=1e-4)
 
 
 def test_an_unchanged_seafloor_shows_no_change():
-    found = measure_change([_later_survey(3, 0.0)], _map(), MODEL.replace(map_change_std=0.5))
+    found = measure_change([later_survey(3, 0.0)], earlier_map(), MODEL.replace(map_change_std=0.5))
     assert found.std < 0.03  # the model's own change is not what is measured
     assert found.sounding_z == pytest.approx(1.0, abs=0.1)
 
 
 def test_bad_input_is_refused():
-    survey = _later_survey(4, 0.0)
+    survey = later_survey(4, 0.0)
     with pytest.raises(TangraphError, match="window must be > 0"):
-        measure_change([survey], _map(), window=0.0)
+        measure_change([survey], earlier_map(), window=0.0)
     with pytest.raises(TangraphError, match="no survey given"):
-        measure_change([], _map())
+        measure_change([], earlier_map())
     with pytest.raises(TangraphError, match="'gps-less' has no reference track"):
-        measure_change([survey.replace(true_pose=None, meta={"name": "gps-less"})], _map())
-    far = _map().replace(north=AXIS_MAP_N + 5000.0)
+        measure_change([survey.replace(true_pose=None, meta={"name": "gps-less"})], earlier_map())
+    far = earlier_map().replace(north=AXIS_MAP_N + 5000.0)
     with pytest.raises(TangraphError, match="0 soundings of the surveys lie in the cells of map 'earlier'"):
         measure_change([survey], far)
     with pytest.raises(TangraphError, match=r"measured cells of shape \(3, 3\), the map 'earlier' \(100"):
-        measure_change([survey], _map(), measured=np.ones((3, 3), bool))
+        measure_change([survey], earlier_map(), measured=np.ones((3, 3), bool))
 
 
 def test_only_the_measured_cells_count_and_a_gap_stated_wide_hides_no_change():
     """The map's eastern half was filled and states a wide error (1 m): measured where its data
     are, the change is found as before; taken everywhere, the gaps' wide statement would hide
     it. Told the cells, only those count."""
-    survey, earlier = _later_survey(6, 0.25), _map()
+    survey, earlier = later_survey(6, 0.25), earlier_map()
     gaps = np.zeros(earlier.shape, bool)
     gaps[:, 250:] = True
     wide = earlier.replace(depth_std=np.where(gaps, 1.0, MAP_STD))
@@ -110,7 +93,7 @@ def test_the_reference_tracks_error_and_the_datums_drift_are_not_change():
     survey = line_survey(tilted, rng, lines=np.arange(30.0, 380.0, 45.0), name="tilted")
     nn, ee = np.meshgrid(AXIS_MAP_N, AXIS_MAP_E, indexing="ij")
     earlier = BathymetryMap(AXIS_MAP_N, AXIS_MAP_E, tilted(nn, ee), depth_std=np.full(nn.shape, MAP_STD))
-    error = _field(MAP_STD, MAP_LENGTH, rng)
+    error = field_on_lines(MAP_STD, MAP_LENGTH, rng)
     north, east = survey.footprints(survey.true_pose)
     drift = np.zeros(survey.time.size)
     for k in range(1, drift.size):  # a Gauss-Markov drift, 0.3 m forgetting over 300 s
