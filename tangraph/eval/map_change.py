@@ -25,7 +25,8 @@ compares them with the map and finds the change a navigation model states
   ``L`` at which the windows' standardised mean residuals have a robust spread of 1. A longer
   range shares more of the change among a window's soundings, so the spread falls as ``L``
   grows. ``L`` is searched between one map cell and :data:`MAX_LENGTH_WINDOWS` windows; a bound
-  reached is said (``MapChange.length_bound``).
+  reached is said (``MapChange.length_bound``). Fewer than :data:`MIN_WINDOWS` windows leave it
+  to the map's correlation length.
 
 What is measured is the change beyond what the model states already: a model that states a
 large drift leaves less of the residuals to the change.
@@ -49,10 +50,11 @@ from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.sensors.terrain import map_error
 from tangraph.survey import Survey
 
-__all__ = ["MAX_LENGTH_WINDOWS", "MapChange", "measure_change"]
+__all__ = ["MAX_LENGTH_WINDOWS", "MIN_SOUNDINGS", "MIN_WINDOWS", "MapChange", "measure_change"]
 
 MAX_LENGTH_WINDOWS = 10.0  #: the longest range searched, in windows
 MIN_SOUNDINGS = 100  #: a change rests on at least this many soundings
+MIN_WINDOWS = 10  #: its range on at least this many windows (else the map's correlation length)
 _NORMAL_MAD = 1.4826  # a Gaussian's std over its median absolute deviation
 
 
@@ -63,7 +65,8 @@ class MapChange:
     of the standardised residuals against the map's own statement (``sounding_z``,
     ``window_z``; 1 where the map's statement holds a survey later), which cells were used
     (``cells``: ``"measured"`` or ``"at most the median std"``) and, when the range search ended at
-    a bound, which (``"lower"``: no more shared than a map cell; ``"upper"``)."""
+    a bound, which (``"lower"``: no more shared than a map cell; ``"upper"``; ``"unmeasured"``:
+    fewer than ``MIN_WINDOWS`` windows, the length 0 that states the map's correlation length)."""
 
     std: float
     length: float
@@ -82,7 +85,8 @@ class MapChange:
     def summary(self) -> str:
         """One line: the figures and what they rest on."""
         bound = {"lower": " (no more shared than one map cell)",
-                 "upper": f" (at the longest range searched, {MAX_LENGTH_WINDOWS:g} windows)"}.get(
+                 "upper": f" (at the longest range searched, {MAX_LENGTH_WINDOWS:g} windows)",
+                 "unmeasured": " (too few windows to measure it: the map's correlation length)"}.get(
                      self.length_bound or "", "")
         return (f"change since the map: std {self.std:.3f} m, range {self.length:.1f} m{bound}; from "
                 f"{self.soundings} soundings in cells {self.cells} (robust z "
@@ -158,8 +162,10 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
     before = windows(cell, 0.0)
     found = functools.partial(MapChange, soundings=count, windows=int(before.size), sounding_z=sounding_z,
                               window_z=_spread(before), window=window, cells=where)
-    if change == 0 or before.size == 0:
+    if change == 0:
         return found(change, 0.0)
+    if before.size < MIN_WINDOWS:
+        return found(change, 0.0, length_bound="unmeasured")
     low, high = np.log(cell), np.log(max(MAX_LENGTH_WINDOWS * window, cell))
     log_length, bound = _root(lambda x: _spread(windows(float(np.exp(x)))) - 1.0, low, high)
     return found(change, float(np.exp(log_length)), length_bound=bound)

@@ -69,6 +69,15 @@ def test_bad_input_is_refused():
         measure_change([survey], earlier_map(), measured=np.ones((3, 3), bool))
 
 
+def test_a_range_rests_on_enough_windows():
+    """One line of 400 m: 8 windows of 50 m, too few for a range, which is left to the map's."""
+    survey = later_survey(8, 0.25).pings(0, 400)
+    found = measure_change([survey], earlier_map(), MODEL)
+    assert found.windows < 10 and found.std > 0.15
+    assert (found.length, found.length_bound) == (0.0, "unmeasured")
+    assert "too few windows to measure it" in found.summary()
+
+
 def test_only_the_measured_cells_count_and_a_gap_stated_wide_hides_no_change():
     """The map's eastern half was filled and states a wide error (1 m): measured where its data
     are, the change is found as before; taken everywhere, the gaps' wide statement would hide
