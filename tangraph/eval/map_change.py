@@ -49,6 +49,7 @@ from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.navigation_model import NavigationModel
 from tangraph.sensors.terrain import map_error
 from tangraph.survey import Survey
+from tangraph.validation import number
 
 __all__ = ["MAX_LENGTH_WINDOWS", "MIN_SOUNDINGS", "MIN_WINDOWS", "MapChange", "measure_change"]
 
@@ -106,8 +107,8 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
     Raises
     ------
     TangraphError
-        No survey, a survey without a reference track, ``window <= 0``, ``measured`` not of the
-        map's shape, or fewer than ``MIN_SOUNDINGS`` soundings in the cells used.
+        No survey, a survey without a reference track, ``window <= 0``, ``position_std < 0``,
+        ``measured`` not of the map's shape, or fewer than ``MIN_SOUNDINGS`` soundings in the cells used.
     """
     from tangraph.map_frame import in_map_frame
 
@@ -115,6 +116,7 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
         raise TangraphError(f"measure_change: window must be > 0 m, got {window!r}")
     if not surveys:
         raise TangraphError("measure_change: no survey given (later surveys with a reference track)")
+    position_std = number(position_std, "measure_change: position_std")
     if measured is not None and np.shape(measured) != bathymetry.shape:
         raise TangraphError(f"measure_change: measured cells of shape {np.shape(measured)}, the map "
                             f"{bathymetry.name!r} {bathymetry.shape}")

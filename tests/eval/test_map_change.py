@@ -58,6 +58,8 @@ def test_bad_input_is_refused():
     survey = later_survey(4, 0.0)
     with pytest.raises(TangraphError, match="window must be > 0"):
         measure_change([survey], earlier_map(), window=0.0)
+    with pytest.raises(TangraphError, match="measure_change: position_std must be >= 0"):
+        measure_change([survey], earlier_map(), position_std=-1.0)
     with pytest.raises(TangraphError, match="no survey given"):
         measure_change([], earlier_map())
     with pytest.raises(TangraphError, match="'gps-less' has no reference track"):
