@@ -280,8 +280,10 @@ def map_change(cfg: dict, data: Path, grid, march: dict) -> dict:
 
 def _robust(r: np.ndarray) -> float:
     """1.4826 x the median absolute deviation from the median, or NaN below 200 values."""
+    from tangraph.eval.metrics import robust_spread
+
     r = r[np.isfinite(r)]
-    return float(1.4826 * np.median(np.abs(r - np.median(r)))) if r.size >= 200 else np.nan
+    return robust_spread(r) if r.size >= 200 else np.nan
 
 
 def _best_shift(depth, north, east, bathymetry, shifts) -> np.ndarray:
@@ -343,6 +345,7 @@ def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str 
     with the refined one over the cells the refinement changed: their robust spread (1.4826 x
     the median absolute deviation) and RMS, m, over the soundings whose four surrounding cells
     the refinement changed."""
+    from tangraph.eval.metrics import robust_spread
     from tangraph.navigation import navigate
 
     rows = []
@@ -371,7 +374,7 @@ def refined_map_check(cfg: dict, data: Path, bathymetry, march: dict, case: str 
                 ok = under & np.isfinite(r)
                 r = r[ok] - np.median(r[ok]) if ok.any() else r[ok]
                 row["soundings"] = int(ok.sum())
-                row[f"{label}_robust"] = float(1.4826 * np.median(np.abs(r))) if r.size else np.nan
+                row[f"{label}_robust"] = robust_spread(r, about=0.0)
                 row[f"{label}_rms"] = float(np.sqrt(np.mean(r**2))) if r.size else np.nan
             rows.append(row)
     return rows

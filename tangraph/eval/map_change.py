@@ -44,6 +44,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from tangraph.errors import TangraphError
+from tangraph.eval.metrics import robust_spread
 from tangraph.eval.windows import window_residuals
 from tangraph.maps.grid import BathymetryMap
 from tangraph.sensors.navigation_model import NavigationModel
@@ -56,7 +57,6 @@ __all__ = ["MAX_LENGTH_WINDOWS", "MIN_SOUNDINGS", "MIN_WINDOWS", "MapChange", "m
 MAX_LENGTH_WINDOWS = 10.0  #: the longest range searched, in windows
 MIN_SOUNDINGS = 100  #: a change rests on at least this many soundings
 MIN_WINDOWS = 10  #: its range on at least this many windows (else the map's correlation length)
-_NORMAL_MAD = 1.4826  # a Gaussian's std over its median absolute deviation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,8 +149,9 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
             f"measure_change: {count} soundings of the surveys lie in the cells of map {bathymetry.name!r} "
             f"{where}, fewer than {MIN_SOUNDINGS}: surveys that cross the map's surveyed cells")
     r, s = np.concatenate(residual), np.concatenate(std)
-    sounding_z = _spread(r / s)
-    change, _ = _root(lambda c: _spread(r / np.sqrt(s**2 + c**2)) - 1.0, 0.0, 10.0 * _spread(r))
+    sounding_z = robust_spread(r / s, about=0.0)
+    change, _ = _root(lambda c: robust_spread(r / np.sqrt(s**2 + c**2), about=0.0) - 1.0, 0.0,
+                      10.0 * robust_spread(r, about=0.0))
 
     shared = [_drift_variance(p, model, p.time[-1] - p.time[0], window) for p in placed]
 
@@ -163,25 +164,20 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
     cell = float(max(bathymetry.cell_size))
     before = windows(cell, 0.0)
     found = functools.partial(MapChange, soundings=count, windows=int(before.size), sounding_z=sounding_z,
-                              window_z=_spread(before), window=window, cells=where)
+                              window_z=robust_spread(before, about=0.0), window=window, cells=where)
     if change == 0:
         return found(change, 0.0)
     if before.size < MIN_WINDOWS:
         return found(change, 0.0, length_bound="unmeasured")
     low, high = np.log(cell), np.log(max(MAX_LENGTH_WINDOWS * window, cell))
-    log_length, bound = _root(lambda x: _spread(windows(float(np.exp(x)))) - 1.0, low, high)
+    log_length, bound = _root(lambda x: robust_spread(windows(float(np.exp(x))), about=0.0) - 1.0, low, high)
     return found(change, float(np.exp(log_length)), length_bound=bound)
 
 
 def _in_cells(cells: np.ndarray, bathymetry: BathymetryMap, north, east) -> np.ndarray:
     """Whether each point lies in one of the map's ``cells (ny, nx)`` (its nearest cell centre)."""
-    i = np.rint((np.asarray(north) - bathymetry.north[0]) / bathymetry.cell_size[0])
-    j = np.rint((np.asarray(east) - bathymetry.east[0]) / bathymetry.cell_size[1])
-    inside = np.isfinite(i) & np.isfinite(j) & (i >= 0) & (i < cells.shape[0]) & (j >= 0) \
-        & (j < cells.shape[1])
-    out = np.zeros(np.shape(north), dtype=bool)
-    out[inside] = cells[i[inside].astype(np.int64), j[inside].astype(np.int64)]
-    return out
+    i, j = bathymetry.nearest_cells(north, east)
+    return (i >= 0) & cells[np.maximum(i, 0), np.maximum(j, 0)]
 
 
 def _drift_variance(survey: Survey, model: NavigationModel, duration: float, window: float = 0.0) -> float:
@@ -207,11 +203,6 @@ def _drift_variance(survey: Survey, model: NavigationModel, duration: float, win
 def _mean_correlation(x: float) -> float:
     """The mean of ``exp(-|t - s| / tau)`` over ``t, s`` in a span of ``x tau``."""
     return 1.0 if x < 1e-6 else float(2.0 * (x - 1.0 + np.exp(-x)) / x**2)
-
-
-def _spread(z: np.ndarray) -> float:
-    """The robust spread of zero-centred scores: 1.4826 times their median absolute value."""
-    return float(_NORMAL_MAD * np.median(np.abs(z))) if z.size else float("nan")
 
 
 def _root(f, low: float, high: float) -> tuple[float, str | None]:

@@ -50,6 +50,7 @@ from typing import Literal, cast
 import numpy as np
 
 from tangraph.errors import TangraphError
+from tangraph.eval.metrics import robust_spread
 from tangraph.eval.windows import window_residuals, window_scores
 from tangraph.geometry import wrap_angle
 from tangraph.sensors.navigation_model import NavigationModel
@@ -99,8 +100,9 @@ class MapCheck:
 
     @property
     def robust(self) -> float:
-        """The median ``|score|`` over its Gaussian value (0.6745): the scale of the bulk."""
-        return float(np.median(np.abs(self.scores)) / 0.6745) if self.scores.size else float("nan")
+        """The median ``|score|`` over its Gaussian value (0.6745): the scale of the bulk
+        (:func:`~tangraph.eval.metrics.robust_spread` about 0)."""
+        return robust_spread(self.scores, about=0.0)
 
     @property
     def share_beyond_3(self) -> float:
@@ -347,13 +349,11 @@ def cell_scores(survey: Survey, grid, model: NavigationModel) -> tuple[np.ndarra
     north, east = survey.footprints(survey.true_pose)
     residual = survey.beam_depth - bathymetry.depth_at(north, east)
     std = map_error(bathymetry, model).std_at(north, east)
-    i = np.rint((north - bathymetry.north[0]) / bathymetry.cell_size[0])
-    j = np.rint((east - bathymetry.east[0]) / bathymetry.cell_size[1])
-    ok = np.isfinite(residual) & np.isfinite(std) & (i >= 0) & (i < grid.count.shape[0]) & (j >= 0) \
-        & (j < grid.count.shape[1])
+    i, j = bathymetry.nearest_cells(north, east)
+    ok = np.isfinite(residual) & np.isfinite(std) & (i >= 0)
     if not ok.any():
         return np.empty(0), np.empty(0), np.empty(0, dtype=bool)
-    measured = grid.count[i[ok].astype(np.int64), j[ok].astype(np.int64)] > 0
+    measured = grid.count[i[ok], j[ok]] > 0
     stated = np.sqrt(std[ok] ** 2 + float(model.sounding_std) ** 2)
     return residual[ok] - np.median(residual[ok]), stated, measured
 
@@ -364,15 +364,12 @@ def cells_summary(residual: np.ndarray, std: np.ndarray, measured: np.ndarray) -
     median absolute deviation), the median std stated and the robust spread of the residuals
     over it (1 where the statement holds; the factor its std would have to take)."""
 
-    def spread(x: np.ndarray) -> float:
-        return float(1.4826 * np.median(np.abs(x - np.median(x)))) if x.size else float("nan")
-
     out = {}
     for kind, sel in (("data_cells", measured), ("filled_cells", ~measured)):
         r, s = residual[sel], std[sel]
-        out[kind] = {"soundings": int(sel.sum()), "robust_residual_m": round(spread(r), 4),
+        out[kind] = {"soundings": int(sel.sum()), "robust_residual_m": round(robust_spread(r), 4),
                      "median_std_m": round(float(np.median(s)), 4) if s.size else float("nan"),
-                     "robust_z": round(spread(r / s), 3) if s.size else float("nan")}
+                     "robust_z": round(robust_spread(r / s), 3) if s.size else float("nan")}
     return out
 
 

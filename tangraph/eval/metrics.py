@@ -15,7 +15,7 @@ from tangraph.geometry import mahalanobis2
 from tangraph.track import Track, position_errors
 
 __all__ = ["anees_band", "bound_rmse", "format_figure", "metrics_with_bound", "position_nees",
-           "track_metrics"]
+           "robust_spread", "track_metrics"]
 
 
 def position_nees(track: Track, true_pose: np.ndarray) -> np.ndarray:
@@ -91,6 +91,23 @@ def track_metrics(track: Track, true_pose: np.ndarray, *, skip: int = 0,
         "final_nees": float(nees[-1]),
         "nees_fraction_known": float(np.mean(known)),
     }
+
+
+def robust_spread(values, about: float | None = None) -> float:
+    """The robust spread of ``values``: their median absolute deviation from their median (or
+    from ``about``: 0 for scores centred by construction) scaled to a Gaussian's std
+    (``scipy.stats.median_abs_deviation``, ``scale="normal"``, 1.4826 times it); NaN for none.
+
+    >>> round(robust_spread([1.0, 2.0, 3.0, 4.0, 100.0]), 4)
+    1.4826
+    >>> round(robust_spread([-1.0, 1.0, 3.0], about=0.0), 4)
+    1.4826
+    """
+    values = np.ravel(np.asarray(values, dtype=np.float64))
+    if not values.size:
+        return float("nan")
+    centre = np.median if about is None else (lambda x, axis: float(about))
+    return float(stats.median_abs_deviation(values, center=centre, scale="normal"))
 
 
 def format_figure(value) -> str:

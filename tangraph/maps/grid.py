@@ -288,16 +288,20 @@ class BathymetryMap:
         """True where :meth:`depth_at` returns data: inside the grid and not next to a NaN."""
         return np.isfinite(self.depth_at(north, east))
 
+    def nearest_cells(self, north, east) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column (int64) of the cell whose centre is nearest to each point; -1 for both
+        off the grid or NaN."""
+        i = np.rint((np.asarray(north, np.float64) - self.north[0]) / self.cell_size[0])
+        j = np.rint((np.asarray(east, np.float64) - self.east[0]) / self.cell_size[1])
+        inside = (i >= 0) & (i < self.shape[0]) & (j >= 0) & (j < self.shape[1])  # (False for NaN)
+        return np.where(inside, i, -1).astype(np.int64), np.where(inside, j, -1).astype(np.int64)
+
     def cells_under(self, north, east) -> np.ndarray:
         """The cells ``(ny, nx)`` whose centre is the nearest to any of the points (points off
         the grid or NaN are ignored)."""
-        north, east = np.ravel(north), np.ravel(east)
-        i = np.rint((north - self.north[0]) / self.cell_size[0])
-        j = np.rint((east - self.east[0]) / self.cell_size[1])
-        inside = (np.isfinite(i) & np.isfinite(j) & (i >= 0) & (i < self.shape[0])
-                  & (j >= 0) & (j < self.shape[1]))
+        i, j = self.nearest_cells(np.ravel(north), np.ravel(east))
         out = np.zeros(self.shape, dtype=bool)
-        out[i[inside].astype(np.int64), j[inside].astype(np.int64)] = True
+        out[i[i >= 0], j[i >= 0]] = True
         return out
 
     # -- new maps from this one -----------------------------------------------------------

@@ -77,3 +77,17 @@ def test_bound_rmse_and_the_ratio_to_a_track_rmse():
     with pytest.raises(TangraphError, match="rmse"):
         metrics_with_bound({"anees": 1.0}, bound)
     assert not bound.position_cov.flags.writeable
+
+
+def test_robust_spread_is_a_gaussians_std_and_holds_against_a_few_outliers():
+    from tangraph.eval.metrics import robust_spread
+
+    x = np.random.default_rng(3).normal(0.5, 2.0, 100_000)
+    # the MAD's std error for a Gaussian: about 1.67 sigma / sqrt(n); 5 of them
+    tolerance = 5 * 1.67 * 2.0 / np.sqrt(x.size)
+    assert abs(robust_spread(x) - 2.0) < tolerance
+    assert abs(robust_spread(x - 0.5, about=0.0) - 2.0) < tolerance
+    assert robust_spread(x, about=0.0) > robust_spread(x)  # about 0, off the median, is wider
+    x[:1000] = 1e6  # 1 % wild values move it by about 1 %
+    assert abs(robust_spread(x) - 2.0) < 0.03 * 2.0 + tolerance
+    assert np.isnan(robust_spread([]))

@@ -46,6 +46,10 @@ def test_cells_under_points_are_the_nearest_cells_on_the_grid():
     under = m.cells_under([11.0, 12.4, 14.0, 500.0, np.nan], [-50.0, -47.9, -48.1, 0.0, 0.0])
     assert under.shape == m.shape
     assert sorted(zip(*np.nonzero(under), strict=True)) == [(0, 0), (0, 1), (1, 0)]
+    i, j = m.nearest_cells([[11.0, 12.4], [14.0, 500.0]], [[-50.0, -47.9], [-48.1, 0.0]])
+    assert i.shape == (2, 2) and i.dtype == np.int64
+    assert i.tolist() == [[0, 0], [1, -1]] and j.tolist() == [[0, 1], [0, -1]]
+    assert m.nearest_cells(np.nan, 0.0) == (-1, -1) and m.nearest_cells(12.6, 66.0 + 1.9) == (1, 29)
 
 
 def test_crop_keeps_cells_inside_bounds():
