@@ -226,7 +226,8 @@ def test_smooth_writes_the_refined_map(tmp_path, capsys):
             "-o", str(out)]
     # a map that states no error has nothing to refine: said in one line, nothing written
     assert main([*base, "--refined-map", str(refined)]) == 2
-    assert "states no error" in capsys.readouterr().err and not refined.exists() and not out.exists()
+    err = capsys.readouterr().err
+    assert "states no error" in err and "map_change_std" in err and not refined.exists() and not out.exists()
     assert main([*base, "--refined-map", str(tmp_path / "refined.map")]) == 2
     assert "cannot tell the format" in capsys.readouterr().err
     model.write_text(model.read_text() + "map_std = 0.2\nmap_correlation_length = 30.0\n")
