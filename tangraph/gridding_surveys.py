@@ -29,7 +29,7 @@ from tangraph.maps._grid_checks import check_cell
 from tangraph.maps.gridding import SoundingGrid, Statistic, block_reduce, fill_gaps
 from tangraph.survey import Survey
 
-__all__ = ["DEFAULT_VERTICAL_DATUM", "grid_surveys"]
+__all__ = ["DEFAULT_VERTICAL_DATUM", "check_distinct", "grid_surveys"]
 
 DEFAULT_VERTICAL_DATUM = "water surface"  # what a survey without meta["vertical_datum"] means
 
@@ -160,6 +160,24 @@ def grid_surveys(
     return fill_gaps(grid, fill) if fill else grid
 
 
+def check_distinct(surveys: Sequence[Survey], names: Sequence[str], where: str) -> None:
+    """Refuse two surveys that hold the same pings (the same times and depths, not all one value:
+    one survey given twice, perhaps imported in another CRS), whose soundings would count twice
+    as evidence."""
+    for a in range(len(surveys)):
+        for b in range(a + 1, len(surveys)):
+            s, t = surveys[a], surveys[b]
+            common, i, j = np.intersect1d(s.time, t.time, assume_unique=True, return_indices=True)
+            if not common.size or s.beam_depth.shape[1] != t.beam_depth.shape[1]:
+                continue
+            depth = s.beam_depth[i]
+            finite = depth[np.isfinite(depth)]
+            if finite.size and np.ptp(finite) > 0 and np.array_equal(depth, t.beam_depth[j], equal_nan=True):
+                raise TangraphError(f"{where}: {names[a]} and {names[b]} hold the same {common.size} pings "
+                                    "(their times and depths): a survey given twice counts its soundings "
+                                    "twice; give each once")
+
+
 def _checked_names(surveys: list[Survey], names: Sequence[str] | None, position_std) -> list[str]:
     """The surveys' names (by default ``survey 1``, ...), once the surveys and ``position_std``
     are checked."""
@@ -172,6 +190,7 @@ def _checked_names(surveys: list[Survey], names: Sequence[str] | None, position_
     names = [f"survey {k + 1}" for k in range(len(surveys))] if names is None else [str(n) for n in names]
     if len(names) != len(surveys):
         raise TangraphError(f"grid_surveys: {len(names)} names for {len(surveys)} surveys")
+    check_distinct(surveys, names, "grid_surveys")
     return names
 
 

@@ -23,7 +23,12 @@ MIN_MAP_OVERLAP = 0.05
 _OVERLAP_BEAMS = 16
 
 
-def check_overlap(survey: Survey, bathymetry: BathymetryMap) -> None:
+_NAVIGATE_ANYWAY = ("pass the map of the survey's area (or other_map=True, CLI: --other-map, to run it on "
+                    "this one anyway)")
+
+
+def check_overlap(survey: Survey, bathymetry: BathymetryMap, *, where: str = "",
+                  remedy: str = _NAVIGATE_ANYWAY) -> None:
     """Refuse a survey that (nearly) never meets the map's data.
 
     The survey is put into the map's frame (:func:`in_map_frame`) and its soundings laid with
@@ -42,17 +47,18 @@ def check_overlap(survey: Survey, bathymetry: BathymetryMap) -> None:
     Raises
     ------
     TangraphError
-        One line naming how many pings meet the map, the survey's extent and the map's (in
-        latitude/longitude where both have a CRS, else in the map's local metres), the two CRSs
-        where they differ, and the option that navigates it anyway (``other_map=True``, CLI:
-        ``--other-map``).
+        One line (after ``where``) naming how many pings meet the map, the survey's extent and
+        the map's (in latitude/longitude where both have a CRS, else in the map's local metres),
+        the two CRSs where they differ, and ``remedy`` (by default the option that navigates it
+        anyway: ``other_map=True``, CLI: ``--other-map``).
     """
-    problem = _overlap_problem(in_map_frame(survey, bathymetry), bathymetry, survey)
+    problem = _overlap_problem(in_map_frame(survey, bathymetry), bathymetry, survey, remedy)
     if problem:
-        raise TangraphError(problem)
+        raise TangraphError(where + problem)
 
 
-def _overlap_problem(framed: Survey, bathymetry: BathymetryMap, original: Survey) -> str | None:
+def _overlap_problem(framed: Survey, bathymetry: BathymetryMap, original: Survey,
+                     remedy: str = _NAVIGATE_ANYWAY) -> str | None:
     """Why ``framed`` (in the map's frame) is not to be navigated on the map, or None;
     ``original`` is the survey as given (its own CRS), for its extent in latitude/longitude."""
     n_beams = framed.beam_depth.shape[1]
@@ -94,8 +100,7 @@ def _overlap_problem(framed: Survey, bathymetry: BathymetryMap, original: Survey
     return (
         f"the survey does not overlap map {bathymetry.name!r}: {met} of its {total} pings with soundings "
         f"({met / total:.1%}; at least {MIN_MAP_OVERLAP:.0%} needed) have a sounding on the map's data; "
-        f"the survey spans {survey_text}, the map's data {data_text}{apart}; pass the map of the "
-        "survey's area (or other_map=True, CLI: --other-map, to run it on this one anyway)"
+        f"the survey spans {survey_text}, the map's data {data_text}{apart}; {remedy}"
     )
 
 

@@ -130,7 +130,7 @@ class Survey:
             if not np.all(np.isfinite(a)):
                 raise SurveyError(
                     f"survey: {name} holds non-finite values at pings "
-                    f"{_first(~np.isfinite(a.reshape(k, -1)).any(axis=1))}"
+                    f"{_first((~np.isfinite(a.reshape(k, -1))).any(axis=1))}"
                 )
         beams = [arr(n, 2) for n in ("beam_forward", "beam_starboard", "beam_depth")]
         if any(b.shape != beams[2].shape or b.shape[0] != k for b in beams):

@@ -36,14 +36,15 @@ def simulated_survey(bathymetry: BathymetryMap, seed=1, **sonar) -> Survey:
     return simulate(scenario, rng=np.random.default_rng(seed), bathymetry=bathymetry, seed=seed)
 
 
-def nadir_survey(points, *, origin, crs=CRS, truth=True, datum=None) -> Survey:
-    """A single-beam survey whose soundings lie exactly at its poses."""
+def nadir_survey(points, *, origin, crs=CRS, truth=True, datum=None, start=0.0) -> Survey:
+    """A single-beam survey whose soundings lie exactly at its poses, a ping a second from
+    ``start`` (s: another survey of the same points is another time)."""
     k = len(points)
     pose = np.column_stack([points[:, 0], points[:, 1], np.zeros(k)])
     meta = {"crs": crs, "origin": list(origin)}
     if datum is not None:
         meta["vertical_datum"] = datum
-    return Survey(time=np.arange(k, dtype=float), dr_pose=pose + 3.0, vehicle_depth=np.zeros(k),
+    return Survey(time=start + np.arange(k, dtype=float), dr_pose=pose + 3.0, vehicle_depth=np.zeros(k),
                   beam_forward=np.zeros((k, 1)), beam_starboard=np.zeros((k, 1)),
                   beam_depth=points[:, 2:3], true_pose=pose if truth else None, meta=meta)
 

@@ -50,7 +50,7 @@ def test_two_surveys_with_different_origins_land_in_one_frame():
     pts = random_soundings()
     a = nadir_survey(pts, origin=(5.8e6, 4.0e5))
     shift = np.array([100.0, -50.0, 0.0])  # b's origin is 100 m north, 50 m west of a's
-    b = nadir_survey(pts - shift, origin=(5.8e6 + 100, 4.0e5 - 50))
+    b = nadir_survey(pts - shift, origin=(5.8e6 + 100, 4.0e5 - 50), start=1e5)  # a later survey of them
     one = grid_surveys([a], cell=10.0)
     both = grid_surveys([a, b], cell=10.0, names=["a.nc", "b.nc"])
     np.testing.assert_array_equal(both.mean.north, one.mean.north)
@@ -74,7 +74,7 @@ def test_a_survey_in_another_crs_is_reprojected():
     x, y = to_other.transform(pts[:, 1] + origin[1], pts[:, 0] + origin[0])
     other_origin = (float(np.floor(y.min())), float(np.floor(x.min())))
     b = nadir_survey(np.column_stack([y - other_origin[0], x - other_origin[1], pts[:, 2]]),
-                     origin=other_origin, crs="EPSG:25832")
+                     origin=other_origin, crs="EPSG:25832", start=1e5)
     one = grid_surveys([a], cell=10.0)
     both = grid_surveys([a, b], cell=10.0)
     np.testing.assert_array_equal(both.count, 2 * one.count)
@@ -84,12 +84,12 @@ def test_a_survey_in_another_crs_is_reprojected():
 def test_mixed_vertical_datums_and_frames_are_refused():
     pts = random_soundings(n=200)
     surface = nadir_survey(pts, origin=(0, 0))  # no key: water surface
-    level = nadir_survey(pts, origin=(0, 0), datum="water level file zero: LEVEL.csv")
+    level = nadir_survey(pts, origin=(0, 0), datum="water level file zero: LEVEL.csv", start=1e5)
     with pytest.raises(TangraphError, match=r"vertical datums: a\.nc 'water surface', b\.nc 'water level"):
         grid_surveys([surface, level], cell=10.0, names=["a.nc", "b.nc"])
-    explicit = nadir_survey(pts, origin=(0, 0), datum="water surface")
+    explicit = nadir_survey(pts, origin=(0, 0), datum="water surface", start=1e5)
     assert grid_surveys([surface, explicit], cell=10.0).meta["vertical_datum"] == "water surface"
-    nowhere = nadir_survey(pts, origin=(0, 0), crs=None)
+    nowhere = nadir_survey(pts, origin=(0, 0), crs=None, start=1e5)
     with pytest.raises(TangraphError, match=r"a\.nc has CRS 'EPSG:32633', b\.nc has None"):
         grid_surveys([surface, nowhere], cell=10.0, names=["a.nc", "b.nc"])
 
@@ -110,3 +110,18 @@ def test_the_positioning_std_must_be_a_length():
     for bad in (-1.0, float("nan"), True, "3"):
         with pytest.raises(TangraphError, match="position_std must be a number of metres >= 0"):
             grid_surveys(_plane_survey(0.0, n_lines=2), cell=10.0, position_std=bad)
+
+
+def test_a_survey_given_twice_is_refused_even_in_another_frame():
+    pts = random_soundings(n=300)
+    a = nadir_survey(pts, origin=(5.8e6, 4.0e5))
+    moved = nadir_survey(pts - np.array([100.0, -50.0, 0.0]), origin=(5.8e6 + 100, 4.0e5 - 50))
+    for twice in ([a, a], [a, moved]):
+        with pytest.raises(TangraphError, match=r"grid_surveys: a\.nc and b\.nc hold the same 300 pings "
+                                                "\\(their times and depths\\): a survey given twice"):
+            grid_surveys(twice, cell=10.0, names=["a.nc", "b.nc"])
+    # two surveys of a flat seafloor at the same times are two surveys: nothing tells them apart
+    flat = pts.copy()
+    flat[:, 2] = 30.0
+    assert grid_surveys([nadir_survey(flat, origin=(0, 0)), nadir_survey(flat, origin=(0, 0))],
+                        cell=10.0).count.sum() == 600

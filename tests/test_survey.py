@@ -257,3 +257,11 @@ def test_cf_checker_finds_no_error_or_warning(tmp_path):
                    "-r", str(tables / "regions.xml"), str(path)]
         out = subprocess.run(command, capture_output=True, text=True, check=False).stdout
         assert "ERRORS detected: 0" in out and "WARNINGS given: 0" in out, out
+
+
+def test_non_finite_poses_name_the_pings_that_hold_them():
+    survey = make_survey(k=6)
+    pose = survey.true_pose.copy()
+    pose[2, 0], pose[4, 2] = np.nan, np.inf  # one component of two pings
+    with pytest.raises(SurveyError, match=r"true_pose holds non-finite values at pings \[2, 4\]"):
+        survey.replace(true_pose=pose)

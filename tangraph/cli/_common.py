@@ -36,8 +36,10 @@ DPI = _bounded(int, 20, 1200, "the resolution (dpi)")
 CELL = _bounded(float, 0.01, 100_000.0, "the cell size (m)")
 FILL = _bounded(int, 0, 1000, "the fill distance (cells)")
 WINDOW = _bounded(float, 0.01, 1e6, "the window length (m)")
-SOUNDING_STD = _bounded(float, 0.0, 1000.0, "the sounding std (m)")
+SOUNDING_STD = _bounded(float, 0.001, 1000.0, "the sounding std (m)")
+MAP_STD = _bounded(float, 0.0, 1000.0, "the map's error std (m)")
 POSITION_STD = _bounded(float, 0.0, 100_000.0, "the position std (m)")
+DECLINATION = _bounded(float, -180.0, 180.0, "the declination (deg)")
 
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):

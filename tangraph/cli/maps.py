@@ -13,6 +13,7 @@ from tangraph.cli._common import (
     CELL,
     DPI,
     FILL,
+    MAP_STD,
     POSITION_STD,
     SOUNDING_STD,
     WINDOW,
@@ -196,8 +197,9 @@ def cmd_maps_change(args: argparse.Namespace) -> None:
     bathymetry = load_map(args)
     surveys = [read_survey(path) for path in args.inputs]
     measured = measured_cells(args.map, bathymetry) if Path(args.map).is_file() else None
-    change = measure_change(surveys, bathymetry, NavigationModel(sounding_std=args.sounding_std),
-                            window=args.window, measured=measured, position_std=args.position_std)
+    model = NavigationModel(sounding_std=args.sounding_std, map_std=args.map_std)
+    change = measure_change(surveys, bathymetry, model, window=args.window, measured=measured,
+                            position_std=args.position_std, names=[str(path) for path in args.inputs])
     print(change.summary())
     print("# the navigation model's fields (a --dr-model file) that state it:")
     for key, value in change.model_fields().items():
@@ -297,6 +299,9 @@ def add_parser(subparsers) -> None:
     p.add_argument("--position-std", type=POSITION_STD, default=0.0, metavar="M",
                    help="std (m per axis) of the surveys' reference track (their GPS): its error seen "
                    "through the map's slope is not counted as change (default: 0)")
+    p.add_argument("--map-std", type=MAP_STD, default=0.0, metavar="M",
+                   help="for a map that states no error (no depth_std layer): the std it errs by "
+                   "(m); without it such a map's own error cannot be told from a change")
     p.set_defaults(func=cmd_maps_change)
 
 

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from tangraph.cli._common import (
+    DECLINATION,
     figure_file,
     json_option,
     map_read_options,
@@ -169,7 +170,7 @@ def _add_import(survey_sub) -> None:
     p.add_argument("--draft", type=float, metavar="M", help="sontek-sum: transducer depth (m)")
     p.add_argument("--dr-heading", choices=["boat", "compass"],
                    help="sontek-sum: DR along the boat direction (default) or the compass heading")
-    p.add_argument("--declination", type=float, metavar="DEG",
+    p.add_argument("--declination", type=DECLINATION, metavar="DEG",
                    help="sontek-sum: added to the compass heading (deg)")
     output_option(p, "survey file (.nc)")
     p.set_defaults(func=cmd_survey_import)

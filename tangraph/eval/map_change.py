@@ -97,20 +97,23 @@ class MapChange:
 
 def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: NavigationModel | None = None,
                    *, window: float = 50.0, measured: np.ndarray | None = None,
-                   position_std: float = 0.0) -> MapChange:
+                   position_std: float = 0.0, names: Sequence[str] | None = None) -> MapChange:
     """The seafloor's change since ``bathymetry`` was surveyed, measured by ``surveys`` (later
     surveys with a reference track of position std ``position_std`` m per axis, put in the map's
-    frame) as the module docstring says, in the cells ``measured (ny, nx)`` (bool) holds;
-    ``model`` gives the sounding noise, the drift of the depths' offset and, for a map that
-    states no error, the map's std (its own ``map_change_std`` is not used).
+    frame; ``names`` for errors, default their ``meta["name"]``) as the module docstring says, in
+    the cells ``measured (ny, nx)`` (bool) holds; ``model`` gives the sounding noise, the drift of
+    the depths' offset and, for a map that states no error, the map's std (its own
+    ``map_change_std`` is not used).
 
     Raises
     ------
     TangraphError
-        No survey, a survey without a reference track, ``window <= 0``, ``position_std < 0``,
-        ``measured`` not of the map's shape, or fewer than ``MIN_SOUNDINGS`` soundings in the cells used.
+        No survey, a survey without a reference track, one given twice or off the map's data,
+        ``window <= 0``, ``position_std < 0``, ``measured`` not of the map's shape, or fewer than
+        ``MIN_SOUNDINGS`` soundings in the cells used.
     """
-    from tangraph.map_frame import in_map_frame
+    from tangraph.gridding_surveys import check_distinct
+    from tangraph.map_frame import check_overlap, in_map_frame
 
     if not (np.isfinite(window) and window > 0):
         raise TangraphError(f"measure_change: window must be > 0 m, got {window!r}")
@@ -123,12 +126,22 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
     model = (NavigationModel() if model is None else model).replace(map_change_std=0.0, map_change_length=0.0)
     model = model.with_map(bathymetry)
     stated = map_error(bathymetry, model)
+    if stated.is_zero:
+        raise TangraphError(f"measure_change: map {bathymetry.name!r} states no error (no depth_std layer, "
+                            "and the model's map_std is 0), so a change cannot be told from its own error: "
+                            "give the map's error (a map 'maps grid' wrote, or map_std; CLI --map-std)")
     cells = stated.std <= stated.typical_std if measured is None else np.asarray(measured, bool)
+    names = [repr(str(name)) for name in names] if names is not None else [
+        repr(str(s.meta.get("name") or f"survey {k + 1}")) for k, s in enumerate(surveys)]
+    if len(names) != len(surveys):
+        raise TangraphError(f"measure_change: {len(names)} names for {len(surveys)} surveys")
+    check_distinct(surveys, names, "measure_change")
     placed, used, residual, std = [], [], [], []
-    for survey in surveys:
-        name = survey.meta.get("name", "")
+    for survey, name in zip(surveys, names, strict=True):
         if survey.true_pose is None:
-            raise TangraphError(f"measure_change: survey {name!r} has no reference track (true_pose)")
+            raise TangraphError(f"measure_change: survey {name} has no reference track (true_pose)")
+        check_overlap(survey, bathymetry, where=f"measure_change: survey {name}: ",
+                      remedy="measure with surveys of the map's area")
         survey = in_map_frame(survey, bathymetry)
         north, east = survey.footprints(survey.true_pose)
         r = survey.beam_depth - bathymetry.depth_at(north, east)

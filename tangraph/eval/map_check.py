@@ -289,9 +289,10 @@ def check_map_error(
     Raises
     ------
     TangraphError
-        Fewer than two surveys, a survey without a reference track, ``window <= 0``.
+        Fewer than two surveys, a survey without a reference track or given twice, ``window <= 0``,
+        no window of a held-out survey on the map of the others.
     """
-    from tangraph.gridding_surveys import grid_surveys
+    from tangraph.gridding_surveys import check_distinct, grid_surveys
     from tangraph.map_frame import in_map_frame
 
     surveys = list(surveys)
@@ -312,6 +313,7 @@ def check_map_error(
         raise TangraphError(f"check_map_error: needs at least two {what} (one held out, the others "
                             f"gridded), got {len(surveys)}{hint}")
     names = tuple(names)
+    check_distinct(surveys, names, "check_map_error")
     model = NavigationModel() if model is None else model
     columns: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     cells: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -329,6 +331,10 @@ def check_map_error(
         if progress is not None:
             progress(i + 1, len(surveys))
     time, mean, variance = (np.concatenate([c[k] for c in columns]) for k in range(3))
+    if not mean.size:
+        raise TangraphError(f"check_map_error: no window of {window:g} m of a held-out survey lies on the "
+                            "map of the others (the surveys do not cross, or are shorter than a window): "
+                            "surveys that overlap, or a shorter window")
     return MapCheck(mean / np.sqrt(variance), np.concatenate(owner), names, float(window), time, mean,
                     variance, tuple(np.concatenate([c[k] for c in cells]) for k in range(3)))  # type: ignore[arg-type]
 

@@ -1,11 +1,35 @@
-"""Checks every importer makes of its options: the target CRS and the clock's time zone."""
+"""Checks every importer makes of its options and what it read: the target CRS, the clock's time
+zone, and soundings within an echo sounder's reach of the vehicle."""
 
 from __future__ import annotations
 
 import dataclasses
 from typing import Any
 
+import numpy as np
+
 from tangraph.survey import SurveyError
+
+#: A sounding lies at most this many times its depth below the vehicle from it (a beam 85 deg off
+#: the vertical), and never farther than ``MIN_REACH`` m beyond that
+REACH_PER_DEPTH = 11.5
+MIN_REACH = 100.0
+
+
+def check_reach(forward, starboard, depth, vehicle_depth, where: str) -> None:
+    """Refuse soundings farther from the vehicle than an echo sounder reaches: ``sqrt(forward^2 +
+    starboard^2) > max(MIN_REACH, REACH_PER_DEPTH * |depth - vehicle_depth|)`` (m; ``(K, B)``,
+    ``vehicle_depth (K,)``), which columns in the wrong order (x and y, latitude and longitude),
+    another CRS or a clock offset between the files make. The first such sounding is named."""
+    reach = np.hypot(forward, starboard)
+    limit = np.maximum(MIN_REACH, REACH_PER_DEPTH * np.abs(depth - np.asarray(vehicle_depth)[:, None]))
+    far = np.isfinite(reach) & np.isfinite(limit) & (reach > limit)
+    if far.any():
+        k, b = (int(v) for v in np.argwhere(far)[0])
+        raise SurveyError(
+            f"{where}: {int(far.sum())} soundings lie farther from the vehicle than an echo sounder reaches "
+            f"(ping {k}: {reach[k, b]:,.0f} m away, {abs(depth[k, b] - vehicle_depth[k]):.1f} m below it): "
+            "the x and y (or latitude and longitude) columns swapped, another CRS, or the clocks apart?")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -18,7 +18,7 @@ from typing import Literal, cast
 
 import numpy as np
 
-from tangraph.formats._checks import projected_crs, time_zone
+from tangraph.formats._checks import check_reach, projected_crs, time_zone
 from tangraph.survey import Survey, SurveyError, to_body
 
 __all__ = ["import_csv_xyz"]
@@ -352,6 +352,7 @@ def _survey_from_files(navigation, soundings, sign, crs, columns, header, time_f
         "n_dropped_outside_navigation": n_dropped,
     }
     vehicle_depth = np.interp(ping_time, t_nav, nav.numbers(*cols["depth"])[order]) * depth_unit
+    check_reach(forward, starboard, depth, vehicle_depth, str(xyz_path))
     if absolute:
         meta["start_time"] = _utc_iso(float(ping_time[0]))
         ping_time = ping_time - ping_time[0]

@@ -253,6 +253,7 @@ def import_sontek_sum(
     """
     files = [paths] if isinstance(paths, str | os.PathLike) else list(paths)
     azimuths, draft = _checked_options(files, timezone, crs, dr_heading, beam_azimuths_deg, draft)
+    declination_deg = _checked_declination(declination_deg)
     records, rec, t_utc, steps = _read_run(files, timezone)
     return _survey_of_run(records, rec, t_utc, steps, crs=crs, timezone=timezone, water_level=water_level,
                           water_level_interpolate=water_level_interpolate, draft=draft, dr_heading=dr_heading,
@@ -282,6 +283,18 @@ def _checked_options(files, timezone, crs, dr_heading, beam_azimuths_deg, draft)
     if not (np.isfinite(draft) and 0.0 <= draft < 5.0):
         raise SurveyError(f"draft must be between 0 and 5 m, got {draft!r}")
     return azimuths, draft
+
+
+def _checked_declination(declination_deg) -> float:
+    """The magnetic declination (deg, east positive) as a float in [-180, 180]."""
+    try:
+        value = float(declination_deg)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (np.isfinite(value) and -180.0 <= value <= 180.0):
+        raise SurveyError(f"declination_deg (--declination) must be between -180 and 180 deg, "
+                          f"got {declination_deg!r}")
+    return value
 
 
 def _read_run(files: list, timezone):

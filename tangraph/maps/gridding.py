@@ -35,6 +35,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: The most cells a grid of soundings may have (each layer 8 bytes a cell: a few GB for all)
+MAX_CELLS = 100_000_000
+
 Statistic = Literal["mean", "median"]
 
 
@@ -147,6 +150,11 @@ def _cells(pts: np.ndarray, cell: float, extent, where: str):
     n_lo, n_hi, e_lo, e_hi = _extent(pts, cell, extent, where)
     north = cell_axis(n_lo, n_hi, cell, "north", where)
     east = cell_axis(e_lo, e_hi, cell, "east", where)
+    if north.size * east.size > MAX_CELLS:
+        raise TangraphError(
+            f"{where}: a grid of {north.size:,} x {east.size:,} cells of {cell:g} m over "
+            f"{(n_hi - n_lo) / 1e3:,.1f} x {(e_hi - e_lo) / 1e3:,.1f} km is too large (at most {MAX_CELLS:,} "
+            "cells): use a larger cell, or soundings of one area (surveys far apart, or in other CRSs?)")
     i = np.rint((pts[:, 0] - n_lo) / cell).astype(np.int64)
     j = np.rint((pts[:, 1] - e_lo) / cell).astype(np.int64)
     inside = (i >= 0) & (i < north.size) & (j >= 0) & (j < east.size)

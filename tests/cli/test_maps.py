@@ -271,8 +271,11 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     assert f"Student-t of scale {scale:.2f}" in out
     assert "soundings one by one: data cells " in out and "; filled cells " in out
     # one survey: its lines against each other (--lines), or a one-line error naming the option
-    assert main(["maps", "check", paths[0], "--cell", "5", "--lines"]) == 0
+    assert main(["maps", "check", paths[0], "--cell", "5", "--lines", "--fill", "1"]) == 0
     assert f"{paths[0]} line 19," in capsys.readouterr().out
+    # lines 5 m apart whose swaths never meet: no window to score, said in one line
+    assert main(["maps", "check", paths[0], "--cell", "5", "--lines"]) == 2
+    assert "no window of 50 m of a held-out survey lies on the map of the others" in capsys.readouterr().err
     assert main(["maps", "check", paths[0], "--cell", "5"]) == 2
     assert "CLI --lines" in capsys.readouterr().err
     xyz = tmp_path / "s.xyz"
@@ -286,15 +289,15 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     # one survey whose lines, 5 m apart, do not overlap in the map's cells: nothing to check with
     assert main(["maps", "grid", paths[0], "--cell", "5", "--check-lines", "--lines",
                  "-o", str(tmp_path / "one.nc")]) == 2
-    assert "the check lines scored 0 windows" in capsys.readouterr().err
+    assert "no window of 50 m of a held-out survey lies on the map of the others" in capsys.readouterr().err
     assert not (tmp_path / "one.nc").exists()
     # by default its lines are tried, and the map keeps the gridding's error, saying why
     assert main(["maps", "grid", paths[0], "--cell", "5", "-o", str(tmp_path / "one.nc")]) == 0
     out = capsys.readouterr().out
-    assert "check lines: not made (calibrate_error: the check lines scored 0 windows" in out
+    assert "check lines: not made (check_map_error: no window of 50 m" in out
     with xr.open_dataset(tmp_path / "one.nc") as ds:
         skipped = json.loads(ds.attrs["tangraph_meta"])["check_lines_skipped"]
-    assert "the check lines scored 0 windows" in skipped
+    assert "no window of 50 m of a held-out survey" in skipped
 
 
 def test_cli_grids_surveys_end_to_end(tmp_path, capsys):
@@ -333,7 +336,8 @@ def test_cli_user_errors_are_one_line_and_status_2(tmp_path, capsys):
     pts = random_soundings(n=300)
     plain = write_survey(nadir_survey(pts, origin=(0, 0)), tmp_path / "plain.nc")
     dr_only = write_survey(nadir_survey(pts, origin=(0, 0), truth=False), tmp_path / "dr.nc")
-    level = write_survey(nadir_survey(pts, origin=(0, 0), datum="chart datum"), tmp_path / "level.nc")
+    level = write_survey(nadir_survey(pts, origin=(0, 0), datum="chart datum", start=1e5),
+                         tmp_path / "level.nc")
     xyz = tmp_path / "s.xyz"
     np.savetxt(xyz, pts[:, [1, 0, 2]])
     out = str(tmp_path / "out.nc")
@@ -419,6 +423,16 @@ def test_maps_change_prints_the_librarys_change_and_the_model_fields(tmp_path, c
     assert f"map_change_length = {found.model_fields()['map_change_length']:g}\n" in out
     assert main(["maps", "change", str(tmp_path / "earlier.nc"), str(tmp_path / "missing.nc")]) == 2
     assert "missing.nc" in capsys.readouterr().err
+    # a survey given twice, and a map that states no error, are refused in one line naming them
+    later = str(tmp_path / "later.nc")
+    assert main(["maps", "change", str(tmp_path / "earlier.nc"), later, later]) == 2
+    err = capsys.readouterr().err
+    assert f"'{later}' and '{later}' hold the same" in err and err.count("\n") == 1
+    write_map(earlier.replace(depth_std=None, correlation_length=None), tmp_path / "bare.nc")
+    assert main(["maps", "change", str(tmp_path / "bare.nc"), later]) == 2
+    assert "states no error" in capsys.readouterr().err
+    assert main(["maps", "change", str(tmp_path / "bare.nc"), later, "--map-std", "0.1"]) == 0
+    assert "change since the map: std" in capsys.readouterr().out
 
 
 def test_maps_change_uses_the_cells_a_gridded_map_measured(tmp_path, capsys):

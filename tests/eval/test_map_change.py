@@ -65,8 +65,23 @@ def test_bad_input_is_refused():
     with pytest.raises(TangraphError, match="'gps-less' has no reference track"):
         measure_change([survey.replace(true_pose=None, meta={"name": "gps-less"})], earlier_map())
     far = earlier_map().replace(north=AXIS_MAP_N + 5000.0)
-    with pytest.raises(TangraphError, match="0 soundings of the surveys lie in the cells of map 'earlier'"):
+    with pytest.raises(TangraphError, match="measure_change: survey 'later 4': the survey does not overlap "
+                                            "map 'earlier'.*; measure with surveys of the map's area"):
         measure_change([survey], far)
+    with pytest.raises(TangraphError, match="0 soundings of the surveys lie in the cells of map 'earlier'"):
+        measure_change([survey], earlier_map(), measured=np.zeros(earlier_map().shape, bool))
+    # a survey given twice (here under another name and shifted into another frame) counts twice
+    moved = survey.replace(meta={"name": "again", "origin": [0.0, 0.0]})
+    with pytest.raises(TangraphError, match="measure_change: 'a.nc' and 'b.nc' hold the same 15680 pings"):
+        measure_change([survey, moved], earlier_map(), names=["a.nc", "b.nc"])
+    with pytest.raises(TangraphError, match="2 names for 1 surveys"):
+        measure_change([survey], earlier_map(), names=["a.nc", "b.nc"])
+    # a map that states no error: its own error cannot be told from a change, unless the model states it
+    bare = earlier_map().replace(depth_std=None, correlation_length=None)
+    with pytest.raises(TangraphError, match="map 'earlier' states no error .* CLI --map-std"):
+        measure_change([survey], bare)
+    assert measure_change([survey], bare, MODEL.replace(map_std=MAP_STD, map_correlation_length=MAP_LENGTH),
+                          measured=np.ones(bare.shape, bool)).std < 0.03
     with pytest.raises(TangraphError, match=r"measured cells of shape \(3, 3\), the map 'earlier' \(100"):
         measure_change([survey], earlier_map(), measured=np.ones((3, 3), bool))
 

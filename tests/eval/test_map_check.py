@@ -35,8 +35,14 @@ def test_check_map_error_refuses_bad_input():
         check_map_error([one], cell=5.0)
     with pytest.raises(TangraphError, match="window must be > 0"):
         check_map_error([one, one], cell=5.0, window=0.0)
+    two = line_survey(seafloor, rng, lines=[70.0], name="t")  # 20 m beside it: they never cross
     with pytest.raises(TangraphError, match="no reference track"):
-        check_map_error([one, one.replace(true_pose=None, meta={"name": "dr only"})], cell=5.0)
+        check_map_error([one, two.replace(true_pose=None, meta={"name": "dr only"})], cell=5.0)
+    with pytest.raises(TangraphError, match="check_map_error: s and s again hold the same 1960 pings"):
+        check_map_error([one, one.replace(meta={"name": "s again"})], cell=5.0)
+    with pytest.raises(TangraphError, match="no window of 50 m of a held-out survey lies on the map of the "
+                                            "others .*: surveys that overlap, or a shorter window"):
+        check_map_error([one, two], cell=5.0)
 
 
 def test_calibrate_error_scales_the_map_error_by_the_check():

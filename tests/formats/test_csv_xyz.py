@@ -122,6 +122,17 @@ def test_a_geographic_or_unknown_crs_is_refused_naming_the_option(tmp_path):
         import_csv_xyz(nav, xyz, crs="EPSG:99999")
 
 
+def test_soundings_beyond_an_echo_sounders_reach_are_refused(tmp_path):
+    log = latlon_log()
+    swapped = log["sounding"].copy()
+    swapped[:, [1, 2]] = swapped[:, [2, 1]]  # latitude where the longitude belongs
+    nav, xyz = write_latlon(tmp_path, {**log, "sounding": swapped})
+    with pytest.raises(SurveyError, match=r"s.xyz: 90 soundings lie farther from the vehicle than an "
+                                          r"echo sounder reaches \(ping 0: .* m away, 26.0 m below it\): "
+                                          "the x and y"):
+        import_csv_xyz(nav, xyz, crs="EPSG:25833")
+
+
 def test_an_impossible_latitude_is_named(tmp_path):
     log = latlon_log()
     log["lat"] = log["lat"].copy()
@@ -257,7 +268,7 @@ def test_soundings_on_another_clock_than_the_log_are_refused(tmp_path):
     np.savetxt(xyz, np.column_stack([ms, 0 * ms, 0 * ms, 0 * ms + 20]))
     with pytest.raises(SurveyError, match=r"do not fit the log's .* are both in seconds on one clock"):
         import_csv_xyz(nav, xyz)
-    np.savetxt(xyz, np.column_stack([ms / 1000, 0 * ms, 0 * ms, 0 * ms + 20]))
+    np.savetxt(xyz, np.column_stack([ms / 1000, 0 * ms, 10 * ms / 1000, 0 * ms + 20]))  # under the vehicle
     assert import_csv_xyz(nav, xyz).n_pings == ms.size
 
 

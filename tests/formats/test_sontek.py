@@ -150,6 +150,9 @@ def test_refusals_of_the_options(tmp_path, caputh):
         import_sontek_sum(path, crs="EPSG:32610", timezone="UTC")  # UTM zone 10 N: California
     with pytest.raises(SurveyError, match="timezone=.Europe/Potsdam. is not a known time zone"):
         import_sontek_sum(path, crs="EPSG:25833", timezone="Europe/Potsdam")
+    for bad in (float("nan"), float("inf"), 400.0, "east"):
+        with pytest.raises(SurveyError, match=r"declination_deg \(--declination\) must be between -180"):
+            import_sontek_sum(path, declination_deg=bad, **OPTIONS)
     # the table has 16.01. and 18.01.2025 but not the survey's 17.01.
     with pytest.raises(SurveyError, match="no water level for 2025-01-17; pass .*--water-level-interpolate"):
         import_sontek_sum(caputh / "20250117160335.sum", water_level=caputh / "waterlevel.csv", **OPTIONS)

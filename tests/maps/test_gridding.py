@@ -92,6 +92,17 @@ def test_block_reduce_drops_nan_rows_and_refuses_bad_weights():
         block_reduce(pts, cell=1.0, weights=[1, 1])
 
 
+def test_a_grid_too_large_for_memory_is_refused_before_it_is_made():
+    # soundings of two areas 16 000 km apart (another CRS), or a cell far finer than the data
+    far = np.array([[0.0, 0.0, 10.0], [16e6, 4e6, 12.0]])
+    with pytest.raises(TangraphError, match=r"soundings 'far': a grid of 3,200,001 x 800,001 cells of 5 m "
+                                            r"over 16,000.0 x 4,000.0 km is too large \(at most 100,000,000 "
+                                            r"cells\): use a larger cell, or soundings of one area"):
+        block_reduce(far, cell=5.0, name="far")
+    with pytest.raises(TangraphError, match="a grid of 10,001 x 10,001 cells of 0.01 m"):
+        block_reduce(np.array([[0.0, 0.0, 10.0], [100.0, 100.0, 12.0]]), cell=0.01)
+
+
 # -- gap filling -------------------------------------------------------------------------------
 def test_fill_gaps_fills_a_one_cell_hole_and_leaves_far_cells_nan():
     nn, ee = np.meshgrid(np.arange(9.0), np.arange(12.0), indexing="ij")
