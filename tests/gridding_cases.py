@@ -70,7 +70,7 @@ def _plane_survey(offset_std: float, seed: int = 0, n_lines: int = 12, north_slo
         starboard = np.tile([-2.0, 0.0, 2.0], (east.size, 1))
         n_true = truth[:, :1] - starboard  # heading east: starboard is south
         depth = 30.0 + north_slope * n_true + 0.05 * truth[:, 1:2]
-        surveys.append(Survey(time=east.copy(), dr_pose=placed, vehicle_depth=np.zeros(east.size),
+        surveys.append(Survey(time=1000.0 * line + east, dr_pose=placed, vehicle_depth=np.zeros(east.size),
                               beam_forward=np.zeros((east.size, 3)), beam_starboard=starboard,
                               beam_depth=depth, true_pose=placed))
     return surveys

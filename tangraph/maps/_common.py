@@ -79,11 +79,17 @@ def resolve_sign(values: np.ndarray, attrs: dict, variable: str, given: str | No
     variable's name, checked against the data in both directions (a "depth" mostly negative, or
     an "elevation" of a water-named variable mostly positive, is refused naming ``sign=``).
     """
+    positive = str(attrs.get("positive", "")).lower()
     if given is not None:
         if given not in ("depth", "elevation"):
             raise TangraphError(f"sign must be 'depth' or 'elevation', got {given!r}")
+        if positive in ("down", "up") and (positive == "down") != (given == "depth"):
+            kind = "depths" if positive == "down" else "elevations"
+            raise MapFormatError(
+                f"{where}: variable {variable!r} states positive={positive!r} ({kind}), and sign={given!r} "
+                "(CLI: --sign) says otherwise; leave sign out (it is for files that do not say) or mend "
+                "the file's attribute")
         return 1.0 if given == "depth" else -1.0
-    positive = str(attrs.get("positive", "")).lower()
     if positive in ("down", "up"):
         return 1.0 if positive == "down" else -1.0
     standard = str(attrs.get("standard_name", "")).lower()
@@ -161,11 +167,20 @@ def unit_factor(unit: str, where: str, what: str) -> float:
 
 
 def _depth_factor(attr_unit, given: str | None, crs_unit: float, where: str, variable: str) -> float:
-    """Metres per unit of the depths: the variable's ``units`` attribute, else ``units=``; a file
-    whose CRS is not in metres and that says nothing about its depths is refused."""
+    """Metres per unit of the depths: the variable's ``units`` attribute, else ``units=`` (which
+    may not contradict a unit the file states and tangraph knows); a file whose CRS is not in
+    metres and that says nothing about its depths is refused."""
+    stated = attr_unit is not None and str(attr_unit).strip()
     if given is not None:
-        return unit_factor(given, where, "units=")
-    if attr_unit is not None and str(attr_unit).strip():
+        factor = unit_factor(given, where, "units=")
+        if stated and str(attr_unit).strip().lower() in _UNITS \
+                and not math.isclose(factor, _UNITS[str(attr_unit).strip().lower()], rel_tol=1e-9):
+            raise MapFormatError(
+                f"{where}: variable {variable!r} states its units, {str(attr_unit)!r}, and units={given!r} "
+                "(CLI: --units) says otherwise; leave units out (it is for files that do not say) or mend "
+                "the file's attribute")
+        return factor
+    if stated:
         return unit_factor(str(attr_unit), where, f"variable {variable!r}")
     if crs_unit != 1.0:
         raise MapFormatError(
@@ -173,6 +188,20 @@ def _depth_factor(attr_unit, given: str | None, crs_unit: float, where: str, var
             "attribute; pass units='m' (or 'ft', 'US survey foot') (CLI: --units)"
         )
     return 1.0
+
+
+def check_given_crs(given: str | None, stated: str | None, where: str) -> str | None:
+    """The CRS of a map file: ``stated`` (the file's), else ``given`` (``crs=``), which may not
+    contradict a CRS the file states."""
+    import pyproj
+
+    if given is None or stated is None:
+        return given or stated
+    if not pyproj.CRS.from_user_input(given).equals(pyproj.CRS.from_user_input(stated),
+                                                    ignore_axis_order=True):
+        raise MapFormatError(f"{where}: the file states its CRS, {stated}, and crs={given!r} (CLI: --crs) "
+                             "says otherwise; leave crs out (it is for files that do not say) or mend it")
+    return given
 
 
 def _mask_nodata(values: np.ndarray, nodata: float | None) -> np.ndarray:

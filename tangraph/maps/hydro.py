@@ -35,6 +35,7 @@ from tangraph.maps._common import (
     _existing,
     _grid_to_map,
     _is_geographic,
+    check_given_crs,
     checked_std,
     correlation_length_from,
     unit_factor,
@@ -85,9 +86,14 @@ def _read_hydro(raster: Raster, *, positive_up: bool, label: str, crs, cell, nam
     path = raster.path
     if crs is None:
         crs = raster_crs(raster.crs, {}, path)
+    elif raster.crs is not None:  # a CRS given may not contradict the file's
+        crs = check_given_crs(crs, raster_crs(raster.crs, {}, path), str(path))
     geographic = crs is not None and _is_geographic(crs)
     variable = raster.descriptions[0] or "band 1"
     factor = unit_factor(units, str(path), "units=") if units else 1.0  # metres, as both formats say
+    if factor != 1.0:
+        raise MapFormatError(f"{path}: a {label} holds depths in metres, and units={units!r} (CLI: --units) "
+                             "says otherwise; leave units out")
     depth = (-1.0 if positive_up else 1.0) * raster.bands[0] * factor + 0.0  # + 0.0: no -0.0
     std = _uncertainty_layer(raster, depth, uncertainty, label, nodata, factor)
     return _grid_to_map(raster.y, raster.x, depth, geographic=geographic, crs=crs, cell=cell,

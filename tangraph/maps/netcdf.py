@@ -20,6 +20,7 @@ from tangraph.maps._common import (
     _grid_to_map,
     _is_geographic,
     _mask_nodata,
+    check_given_crs,
     check_memory,
     checked_std,
     correlation_length_from,
@@ -245,7 +246,7 @@ def read_netcdf(path, *, variable=None, sign=None, crs=None, cell=None, name=Non
             file_crs = _netcdf_crs(ds, var)
         except MapFormatError as exc:
             raise MapFormatError(f"{where}: {exc}") from None
-        the_crs = crs or file_crs
+        the_crs = check_given_crs(crs, file_crs, where)
         geographic = kinds[0][1] or kinds[1][1] or (the_crs is not None and _is_geographic(the_crs))
         crs_unit = 1.0 if geographic else metric_crs(the_crs, where)[1]
         depth_factor = _depth_factor(var.attrs.get("units"), units, crs_unit, where, variable)

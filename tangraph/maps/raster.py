@@ -23,6 +23,7 @@ from tangraph.maps._common import (
     _grid_to_map,
     _is_geographic,
     _mask_nodata,
+    check_given_crs,
     check_memory,
     checked_std,
     correlation_length_from,
@@ -190,6 +191,8 @@ def read_geotiff(path, *, sign=None, crs=None, cell=None, name=None, nodata=None
                "positive": band_tags.get("positive")}
     if crs is None:
         crs = raster_crs(raster.crs, own, path)
+    elif raster.crs is not None or own.get("crs"):  # a CRS given may not contradict the file's
+        crs = check_given_crs(crs, raster_crs(raster.crs, own, path), str(path))
     geographic = crs is not None and _is_geographic(crs)
     crs_unit = 1.0 if geographic else metric_crs(crs, str(path))[1]
     variable = raster.descriptions[0] or "band 1"

@@ -135,6 +135,32 @@ def test_unknown_depth_unit_is_refused_naming_the_option(tmp_path):
     assert np.allclose(read_map(path, units="ft").depth, _depths() * 0.3048, rtol=1e-6)
 
 
+def test_an_option_that_contradicts_what_the_file_states_is_refused(tmp_path):
+    """--units, --sign and --crs are for files that do not say: one that contradicts the file is
+    refused naming both (it once won silently: depths in feet beside their std in metres)."""
+    from tangraph.maps import write_map
+
+    path = _classic(tmp_path / "u.nc", attrs={"positive": "down", "units": "m"})
+    assert np.allclose(read_map(path, units="m", sign="depth").depth, _depths(), rtol=1e-6)  # agreeing
+    with pytest.raises(MapFormatError, match=r"u\.nc:depth: variable 'depth' states its units, 'm', and "
+                                             r"units='ft' \(CLI: --units\) says otherwise"):
+        read_map(path, units="ft")
+    with pytest.raises(MapFormatError, match=r"states positive='down' \(depths\), and sign='elevation' "
+                                             r"\(CLI: --sign\) says otherwise"):
+        read_map(path, sign="elevation")
+    placed = tmp_path / "placed.nc"
+    write_map(BathymetryMap(np.arange(5.0) * 10, np.arange(6.0) * 10, np.full((5, 6), 30.0), crs="EPSG:25833",
+                            origin=(5.8e6, 3.6e5)), placed)
+    assert read_map(placed, crs="EPSG:25833").crs == "EPSG:25833"
+    with pytest.raises(MapFormatError, match=r"the file states its CRS, EPSG:25833, and crs='EPSG:3035' "
+                                             r"\(CLI: --crs\) says otherwise"):
+        read_map(placed, crs="EPSG:3035")
+    tif = tmp_path / "placed.tif"
+    write_map(read_map(placed), tif)
+    with pytest.raises(MapFormatError, match=r"placed\.tif: the file states its CRS, EPSG:25833"):
+        read_map(tif, crs="EPSG:3035")
+
+
 def test_coordinates_in_feet_are_converted_to_metres(tmp_path):
     path = _classic(tmp_path / "u.nc", coord_attrs={"y": {"units": "ft"}, "x": {"units": "ft"}})
     m = read_map(path)
