@@ -76,8 +76,15 @@ def map_read_options(parser: argparse.ArgumentParser, *, crs: bool = True) -> No
     )
 
 
+def output_file(text: str) -> Path:
+    """An output path that is not an existing folder (refused at once, before any work)."""
+    if Path(text).is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; give the file's name (in it, if you like)")
+    return Path(text)
+
+
 def output_option(parser: argparse.ArgumentParser, help_text: str) -> None:
-    parser.add_argument("-o", "--output", type=Path, required=True, help=help_text)
+    parser.add_argument("-o", "--output", type=output_file, required=True, help=help_text)
     parser.add_argument("--force", action="store_true", help="replace OUTPUT if it exists")
 
 

@@ -17,6 +17,7 @@ from tangraph.cli._common import (
     figure_file,
     json_option,
     map_read_options,
+    output_file,
     output_option,
     print_json,
     progress,
@@ -190,7 +191,7 @@ def add_parser(subparsers) -> None:
         "smooth", help="re-navigate a recorded survey with the batch factor-graph smoother"
     )
     _track_options(p)
-    p.add_argument("--refined-map", type=Path, metavar="OUT",
+    p.add_argument("--refined-map", type=output_file, metavar="OUT",
                    help="also write the map corrected by its error as estimated with the track, with the "
                    "posterior std as its error layer (any map format by suffix, as maps grid writes); "
                    "sets the graph's smoother_terrain to 'field'")
@@ -218,7 +219,7 @@ def _track_options(p: argparse.ArgumentParser) -> None:
         help="axes of TUM output: ned (default; x north, y east, z down) or enu (x east, "
         "y north, z up; for evo and ROS tools)",
     )
-    p.add_argument("--plot", type=Path, help="figure of the track vs DR (and truth) over the map")
+    p.add_argument("--plot", type=output_file, help="figure of the track vs DR (and truth) over the map")
     p.add_argument(
         "--dr-model",
         type=Path,

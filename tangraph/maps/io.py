@@ -14,16 +14,19 @@ says so with ``sign=``; a file where neither tells, or whose data contradict the
 its names, is refused.
 
 A map is never read wrongly without a word: a truncated classic NetCDF, values beyond 12 000 m
-(an unmarked fill value: ``nodata=``), an unknown unit (``units=``) and a geographic grid too
-wide for one transverse Mercator (``max_scale_error=``) are refused in one line naming the
-file, the variable, the value and the option. Depths in feet (the variable's ``units``) and
-coordinates in feet (the CRS's axis unit) are converted to metres.
+(an unmarked fill value: ``nodata=``), an unknown unit (``units=``), ``units=``, ``sign=`` or
+``crs=`` against what the file states, and a geographic grid too wide for one transverse
+Mercator (``max_scale_error=``) are refused in one line naming the file, the variable, the
+value and the option. Depths and coordinates in feet (the variable's ``units``, the CRS's axis
+unit) are converted to metres.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import os
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -104,7 +107,8 @@ def _load_xyz(path: Path, columns: int = 3) -> np.ndarray:
     delimiter = "," if "," in first else None
     skip = 0 if _is_numeric_row(first, delimiter) else 1  # one header row allowed
     try:
-        data = np.loadtxt(path, comments="#", delimiter=delimiter, skiprows=skip, ndmin=2)
+        with warnings.catch_warnings(action="ignore", category=UserWarning):  # (empty: said below)
+            data = np.loadtxt(path, comments="#", delimiter=delimiter, skiprows=skip, ndmin=2)
     except ValueError as exc:
         raise MapFormatError(f"{path}: not a table of numbers x y z ({exc})") from None
     if data.shape[1] < columns or data.shape[0] == 0:
@@ -119,13 +123,8 @@ _XYZ_STD_COLUMNS = "columns: east north depth depth_std"
 
 def _xyz_header(path: Path) -> str:
     """The comment lines at the top of a text file, joined."""
-    lines = []
     with open(path, encoding="utf-8", errors="replace") as f:
-        for line in f:
-            if not line.startswith("#"):
-                break
-            lines.append(line[1:].strip())
-    return " ".join(lines)
+        return " ".join(line[1:].strip() for line in itertools.takewhile(lambda x: x.startswith("#"), f))
 
 
 def _is_numeric_row(line: str, delimiter: str | None) -> bool:

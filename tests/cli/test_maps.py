@@ -355,6 +355,12 @@ def test_cli_user_errors_are_one_line_and_status_2(tmp_path, capsys):
         assert message in err and err.count("\n") == 1
     assert main(["maps", "grid", str(plain), "--cell", "10", "-o", str(plain), "--force"]) == 2
     assert "is one of the inputs" in capsys.readouterr().err
+    # a folder named as the output is refused before any work, and left as it was
+    (tmp_path / "folder").mkdir()
+    with pytest.raises(SystemExit) as exited:
+        main(["maps", "grid", str(plain), "--cell", "10", "-o", str(tmp_path / "folder"), "--force"])
+    assert exited.value.code == 2 and "folder is a folder; give the file's name" in capsys.readouterr().err
+    assert not any((tmp_path / "folder").iterdir())
     assert main(["maps", "grid", str(dr_only), "--cell", "10", "--use-dr", "-o", out]) == 0
     capsys.readouterr()
     out_xyz = str(tmp_path / "xyz.nc")
