@@ -139,6 +139,8 @@ class Survey:
                 f"{k}; got {[b.shape for b in beams]}"
             )
         has = np.isfinite(beams[2])
+        if np.isinf(beams[2]).any():  # NaN is no return; an infinite depth is a broken value
+            raise SurveyError(f"survey: beam_depth is infinite at pings {_first(np.isinf(beams[2]).any(1))}")
         if not np.all(np.isfinite(beams[0])[has] & np.isfinite(beams[1])[has]):
             raise SurveyError("survey: a beam with a depth has no finite footprint (forward/starboard NaN)")
         if not has.any():

@@ -265,3 +265,7 @@ def test_non_finite_poses_name_the_pings_that_hold_them():
     pose[2, 0], pose[4, 2] = np.nan, np.inf  # one component of two pings
     with pytest.raises(SurveyError, match=r"true_pose holds non-finite values at pings \[2, 4\]"):
         survey.replace(true_pose=pose)
+    depth = survey.beam_depth.copy()
+    depth[3, 1] = np.inf  # NaN is no return, infinity a broken value
+    with pytest.raises(SurveyError, match=r"beam_depth is infinite at pings \[3\]"):
+        survey.replace(beam_depth=depth)

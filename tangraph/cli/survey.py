@@ -84,6 +84,8 @@ def _check_import(args: argparse.Namespace, options: dict) -> None:
     for path in [*args.files, *([args.water_level] if args.water_level else [])]:
         if args.output.resolve() == Path(path).resolve():
             raise TangraphError(f"refusing to write the survey over the input {path}")
+    if args.output.suffix.lower() != ".nc":
+        raise TangraphError(f"-o {args.output}: a survey is written as NetCDF; name it .nc")
     if args.output.exists() and not args.force:
         raise FileExistsError(f"{args.output} exists; pass --force to replace it")
 

@@ -49,9 +49,9 @@ def cmd_smooth(args: argparse.Namespace) -> None:
     survey, bathymetry = _survey_and_map(args)
     model = _model(args)
     unrefined = TangraphError(f"--refined-map {args.refined_map}: the map {bathymetry.name!r} states no "
-                              "error (no depth_std layer, and the navigation model's map_std and "
-                              "map_change_std are 0), so there is nothing to refine; give a map error "
-                              "(map_std or map_change_std in --dr-model)")
+                              "error (no depth_std layer, or one of zeros, and the navigation model's "
+                              "map_std and map_change_std are 0), so there is nothing to refine; give a map "
+                              "error (map_std or map_change_std in --dr-model)")
     if args.refined_map is not None and bathymetry.depth_std is None and model is not None \
             and model.map_std == 0 and model.map_change_std == 0:
         raise unrefined

@@ -254,6 +254,9 @@ def import_sontek_sum(
     files = [paths] if isinstance(paths, str | os.PathLike) else list(paths)
     azimuths, draft = _checked_options(files, timezone, crs, dr_heading, beam_azimuths_deg, draft)
     declination_deg = _checked_declination(declination_deg)
+    if water_level_interpolate and water_level is None:
+        raise SurveyError("water_level_interpolate (--water-level-interpolate) interpolates a water-level "
+                          "table: give it (water_level=, CLI: --water-level)")
     records, rec, t_utc, steps = _read_run(files, timezone)
     return _survey_of_run(records, rec, t_utc, steps, crs=crs, timezone=timezone, water_level=water_level,
                           water_level_interpolate=water_level_interpolate, draft=draft, dr_heading=dr_heading,

@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import os
+import re
 import warnings
 from collections.abc import Callable
 from pathlib import Path
@@ -45,6 +46,7 @@ from tangraph.maps._common import (  # noqa: F401 (the shared pieces, imported f
     _is_geographic,
     _mask_nodata,
     available_memory,
+    check_given_crs,
     check_memory,
     checked_std,
     correlation_length_from,
@@ -139,17 +141,16 @@ def read_xyz(path, *, sign=None, crs=None, cell=None, name=None, nodata=None,
              units=None, uncertainty: Uncertainty = None, max_scale_error=1e-3) -> BathymetryMap:
     """A regular grid from an ``x y z`` text file (x east/longitude, y north/latitude).
 
-    A fourth column is the depths' std only in tangraph's own files (their header says
-    ``columns: east north depth depth_std``; the correlation length is the header's
-    ``correlation_length_m``); other text files carry no error layer. tangraph's own files
-    (header ``tangraph map ...``, depths positive down) need no ``sign=``; the CRS is given
-    with ``crs=`` as for any text grid.
+    A fourth column is the depths' std only in tangraph's own files (header ``columns: east north
+    depth depth_std``, the correlation length its ``correlation_length_m``); other text files
+    carry no error layer. tangraph's own files (header ``tangraph map ...``, depths positive
+    down) need no ``sign=`` and state their CRS; any other text grid's is given with ``crs=``.
     """
-    import re
-
     path = _existing(path)
     header = _xyz_header(path)
     own = header.startswith("tangraph map ") and "positive down" in header  # written by write_xyz
+    stated = re.search(r"; crs (\S+?);", header) if own else None
+    crs = check_given_crs(crs, stated[1] if stated and stated[1] != "None" else None, str(path))
     with_std = uncertainty is not False and _XYZ_STD_COLUMNS in header
     data = _load_xyz(path, 4 if with_std else 3)
     x_values, x_index = np.unique(data[:, 0], return_inverse=True)

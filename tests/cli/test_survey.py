@@ -69,6 +69,9 @@ def test_cli_refuses_writing_over_an_input_and_the_wrong_file_count(tmp_path, ca
     assert xyz.read_bytes() == before
     assert main(["survey", "import", str(nav), "-o", str(tmp_path / "s.nc")]) == 2
     assert "--format csv-xyz takes two files (navigation log, soundings), got 1" in capsys.readouterr().err
+    assert main(["survey", "import", str(nav), str(xyz), "-o", str(tmp_path / "s.txt")]) == 2
+    assert "a survey is written as NetCDF; name it .nc" in capsys.readouterr().err
+    assert not (tmp_path / "s.txt").exists()
     with pytest.raises(SystemExit) as info:
         main(["survey", "import", "--format", "kmall", str(nav), "-o", str(tmp_path / "s.nc")])
     assert info.value.code == 2 and "invalid choice: 'kmall'" in capsys.readouterr().err

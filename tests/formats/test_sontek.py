@@ -150,6 +150,8 @@ def test_refusals_of_the_options(tmp_path, caputh):
         import_sontek_sum(path, crs="EPSG:32610", timezone="UTC")  # UTM zone 10 N: California
     with pytest.raises(SurveyError, match="timezone=.Europe/Potsdam. is not a known time zone"):
         import_sontek_sum(path, crs="EPSG:25833", timezone="Europe/Potsdam")
+    with pytest.raises(SurveyError, match="--water-level-interpolate.*give it .*--water-level"):
+        import_sontek_sum(path, water_level_interpolate=True, **OPTIONS)
     for bad in (float("nan"), float("inf"), 400.0, "east"):
         with pytest.raises(SurveyError, match=r"declination_deg \(--declination\) must be between -180"):
             import_sontek_sum(path, declination_deg=bad, **OPTIONS)

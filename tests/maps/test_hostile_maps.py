@@ -159,6 +159,13 @@ def test_an_option_that_contradicts_what_the_file_states_is_refused(tmp_path):
     write_map(read_map(placed), tif)
     with pytest.raises(MapFormatError, match=r"placed\.tif: the file states its CRS, EPSG:25833"):
         read_map(tif, crs="EPSG:3035")
+    # tangraph's own text map states its CRS in its header, and is read back in it, at the same place
+    xyz = tmp_path / "placed.xyz"
+    write_map(read_map(placed), xyz)
+    back = read_map(xyz)
+    assert back.crs == "EPSG:25833" and back.origin[0] + back.north[0] == pytest.approx(5.8e6)
+    with pytest.raises(MapFormatError, match=r"placed\.xyz: the file states its CRS, EPSG:25833"):
+        read_map(xyz, crs="EPSG:3035")
 
 
 def test_coordinates_in_feet_are_converted_to_metres(tmp_path):
