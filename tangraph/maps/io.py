@@ -222,7 +222,7 @@ def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, no
     them; projected points keep ``crs`` with the origin at the south-west corner of their
     bounding box (rounded down to whole metres).
     """
-    from tangraph.maps.projection import local_crs
+    from tangraph.maps.projection import local_crs, mean_degrees
 
     path = _existing(path)
     data = _load_xyz(path)
@@ -235,7 +235,7 @@ def read_soundings(path, *, sign: Sign | None = None, crs: str | None = None, no
     if geographic:
         import pyproj
 
-        local = local_crs(float(np.mean(y)), float(np.mean(x)))
+        local = local_crs(*mean_degrees(y, x, crs, str(path)))
         east, north = pyproj.Transformer.from_crs(crs, local, always_xy=True).transform(x, y)
         return Soundings(np.column_stack([north, east, depth]), local, (0.0, 0.0), str(path))
     origin = (float(np.floor(np.min(y))), float(np.floor(np.min(x)))) if crs else (0.0, 0.0)

@@ -28,6 +28,17 @@ def local_crs(lat0: float, lon0: float) -> str:
     )
 
 
+def mean_degrees(lat, lon, crs, where: str) -> tuple[float, float]:
+    """The mean latitude and longitude of points given in the geographic ``crs``; points beyond
+    latitude 90 or longitude 360 (projected metres read as degrees) are refused naming ``crs=``."""
+    lat, lon = np.asarray(lat, np.float64), np.asarray(lon, np.float64)
+    if np.any(np.abs(lat) > 90.0) or np.any(np.abs(lon) > 360.0):
+        raise MapFormatError(f"{where}: crs={crs!r} is in degrees, but the points reach latitude "
+                             f"{np.max(np.abs(lat)):,.0f} and longitude {np.max(np.abs(lon)):,.0f}: "
+                             "projected metres? pass their CRS (CLI: --crs)")
+    return float(np.mean(lat)), float(np.mean(lon))
+
+
 def _transformer(source, target) -> pyproj.Transformer:
     try:
         return pyproj.Transformer.from_crs(source, target, always_xy=True)

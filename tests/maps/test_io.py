@@ -115,6 +115,11 @@ def test_geographic_soundings_are_projected(tmp_path):
     s = read_soundings(path, sign="depth", crs="EPSG:4326")
     # 0.001 deg of longitude at 37 S is about 89 m
     assert np.hypot(*(s.points[1, :2] - s.points[0, :2])) == pytest.approx(88.9, abs=0.3)
+    # UTM metres said to be degrees: refused naming the option, not a PROJ error about lat_0
+    np.savetxt(path, [[363463.7, 5800997.7, 5.0], [363426.9, 5800906.0, 6.0]], delimiter=",")
+    with pytest.raises(MapFormatError, match=r"lonlat.csv: crs=.EPSG:4326. is in degrees, but the points "
+                                             r"reach latitude 5,800,998 and longitude 363,464"):
+        read_soundings(path, sign="depth", crs="EPSG:4326")
 
 
 # -- bad input ---------------------------------------------------------------------------------
