@@ -347,7 +347,7 @@ def fill_gaps(grid: SoundingGrid, cells: int) -> SoundingGrid:
 
     if isinstance(cells, bool) or not isinstance(cells, int | np.integer) or cells < 0:
         raise TangraphError(f"gap fill: cells must be an integer >= 0, got {cells!r}")
-    cells = int(cells)
+    cells = min(int(cells), int(np.ceil(np.hypot(*grid.mean.shape))))  # (farther: the same cells)
     depth = grid.mean.depth if grid.statistic == "mean" else cast(np.ndarray, grid.median)
     measured = grid.count > 0
     gap_fill = np.full(grid.mean.shape, np.nan)

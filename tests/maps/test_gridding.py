@@ -121,6 +121,10 @@ def test_fill_gaps_fills_a_one_cell_hole_and_leaves_far_cells_nan():
     assert f.n_filled == 1 + 5 + 2 * 4  # the hole, the block's west column, its north and south rows
     np.testing.assert_array_equal(f.count, g.count)  # the soundings' layers are untouched
     assert np.isnan(f.mean.depth[4, 3]) and f.meta["gap_fill"]["cells"] == 1
+    # a radius beyond the grid's diagonal (15 cells) fills what the diagonal does, at its cost
+    wide, huge = fill_gaps(g, 15), fill_gaps(g, 10**6)
+    np.testing.assert_array_equal(huge.depth.depth, wide.depth.depth)
+    assert huge.meta["gap_fill"]["cells"] == 15 and np.all(np.isfinite(huge.depth.depth))
     assert fill_gaps(g, 0).n_filled == 0
     with pytest.raises(TangraphError, match="integer"):
         fill_gaps(g, -1)
