@@ -112,17 +112,10 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
         ``window <= 0``, ``position_std < 0``, ``measured`` not of the map's shape, or fewer than
         ``MIN_SOUNDINGS`` soundings in the cells used.
     """
-    from tangraph.gridding_surveys import check_distinct
     from tangraph.map_frame import check_overlap, in_map_frame
 
-    if not (np.isfinite(window) and window > 0):
-        raise TangraphError(f"measure_change: window must be > 0 m, got {window!r}")
-    if not surveys:
-        raise TangraphError("measure_change: no survey given (later surveys with a reference track)")
+    names = _checked(surveys, bathymetry, window, measured, names)
     position_std = number(position_std, "measure_change: position_std")
-    if measured is not None and np.shape(measured) != bathymetry.shape:
-        raise TangraphError(f"measure_change: measured cells of shape {np.shape(measured)}, the map "
-                            f"{bathymetry.name!r} {bathymetry.shape}")
     model = (NavigationModel() if model is None else model).replace(map_change_std=0.0, map_change_length=0.0)
     model = model.with_map(bathymetry)
     stated = map_error(bathymetry, model)
@@ -131,11 +124,6 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
                             "and the model's map_std is 0), so a change cannot be told from its own error: "
                             "give the map's error (a map 'maps grid' wrote, or map_std; CLI --map-std)")
     cells = stated.std <= stated.typical_std if measured is None else np.asarray(measured, bool)
-    names = [repr(str(name)) for name in names] if names is not None else [
-        repr(str(s.meta.get("name") or f"survey {k + 1}")) for k, s in enumerate(surveys)]
-    if len(names) != len(surveys):
-        raise TangraphError(f"measure_change: {len(names)} names for {len(surveys)} surveys")
-    check_distinct(surveys, names, "measure_change")
     placed, used, residual, std = [], [], [], []
     for survey, name in zip(surveys, names, strict=True):
         if survey.true_pose is None:
@@ -185,6 +173,26 @@ def measure_change(surveys: Sequence[Survey], bathymetry: BathymetryMap, model: 
     low, high = np.log(cell), np.log(max(MAX_LENGTH_WINDOWS * window, cell))
     log_length, bound = _root(lambda x: robust_spread(windows(float(np.exp(x))), about=0.0) - 1.0, low, high)
     return found(change, float(np.exp(log_length)), length_bound=bound)
+
+
+def _checked(surveys, bathymetry: BathymetryMap, window: float, measured, names) -> list[str]:
+    """The surveys' names as errors give them (``repr``), once the window, the measured cells'
+    shape and the surveys (some, none twice) are checked."""
+    from tangraph.gridding_surveys import check_distinct
+
+    if not (np.isfinite(window) and window > 0):
+        raise TangraphError(f"measure_change: window must be > 0 m, got {window!r}")
+    if not surveys:
+        raise TangraphError("measure_change: no survey given (later surveys with a reference track)")
+    if measured is not None and np.shape(measured) != bathymetry.shape:
+        raise TangraphError(f"measure_change: measured cells of shape {np.shape(measured)}, the map "
+                            f"{bathymetry.name!r} {bathymetry.shape}")
+    names = [repr(str(name)) for name in names] if names is not None else [
+        repr(str(s.meta.get("name") or f"survey {k + 1}")) for k, s in enumerate(surveys)]
+    if len(names) != len(surveys):
+        raise TangraphError(f"measure_change: {len(names)} names for {len(surveys)} surveys")
+    check_distinct(surveys, names, "measure_change")
+    return names
 
 
 def _in_cells(cells: np.ndarray, bathymetry: BathymetryMap, north, east) -> np.ndarray:
