@@ -184,8 +184,9 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
     print(_drift_line(check))
     kinds = check.by_cell().items()
     print("soundings one by one: " + "; ".join(
-        f"{kind.replace('_', ' ')} {v['soundings']}, residual spread {v['robust_residual_m']:.3f} m against "
-        f"{v['median_std_m']:.3f} m stated, robust z {v['robust_z']:.2f}" for kind, v in kinds))
+        f"{kind.replace('_', ' ')} {v['soundings']}" + (
+            f", residual spread {v['robust_residual_m']:.3f} m against {v['median_std_m']:.3f} m stated, "
+            f"robust z {v['robust_z']:.2f}" if v["soundings"] else "") for kind, v in kinds))
 
 
 def cmd_maps_change(args: argparse.Namespace) -> None:
