@@ -87,8 +87,11 @@ def grid_files(
     if output.resolve() in {path.resolve() for path in paths}:
         raise TangraphError(f"{where}: the output {output} is one of the inputs")
     surveys = [path for path in paths if path.suffix.lower() == ".nc"]
-    if (surveys and len(surveys) != len(paths)) or (not surveys and len(paths) > 1):
+    if surveys and len(surveys) != len(paths):
         raise TangraphError(f"{where}: give survey files (.nc) or one x y z text file, not both")
+    if not surveys and len(paths) > 1:
+        raise TangraphError(f"{where}: {len(paths)} x y z text files; give one (their soundings joined in "
+                            "one file), or survey files (.nc)")
     gridding = {"cell": cell, "statistic": statistic, "fill": fill, "position_std": position_std}
     if surveys:
         for keyword, given in (("sign", sign), ("crs", crs), ("units", units)):

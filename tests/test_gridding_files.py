@@ -36,6 +36,9 @@ def test_grid_files_names_its_keywords_or_the_callers_options(tmp_path):
          "tracks; not with --use-dr"),
         ([plain, xyz], {}, "grid_files: give survey files (.nc) or one x y z text file, not both",
          "maps grid: give survey files (.nc) or one x y z text file, not both"),
+        ([xyz, xyz], {}, "grid_files: 2 x y z text files; give one (their soundings joined in one file), or "
+         "survey files (.nc)", "maps grid: 2 x y z text files; give one (their soundings joined in one "
+         "file), or survey files (.nc)"),
         ([plain], {"output": plain}, f"grid_files: the output {plain} is one of the inputs",
          f"maps grid: the output {plain} is one of the inputs"),
     ]

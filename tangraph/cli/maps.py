@@ -171,11 +171,11 @@ def cmd_maps_check(args: argparse.Namespace) -> None:
     from tangraph.survey import read_survey
 
     surveys = [read_survey(path) for path in args.inputs]
+    said = None if args.quiet else (lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True))
     check = check_map_error(
         surveys, cell=args.cell, statistic=args.statistic, fill=args.fill, window=args.window,
         model=NavigationModel(sounding_std=args.sounding_std), names=[str(path) for path in args.inputs],
-        progress=lambda i, n: print(f"held out {i} of {n}", file=sys.stderr, flush=True), lines=args.lines,
-        position_std=args.position_std,
+        progress=said, lines=args.lines, position_std=args.position_std,
     )
     print("survey,windows,rms,robust,share_beyond_3")
     for row in check.per_survey():

@@ -266,6 +266,8 @@ def test_grid_check_lines_scales_the_error_by_held_out_surveys(tmp_path, capsys)
     assert out.count("(the gridding's own, not checked)") == 1  # the plain map's line only
     assert f"a Student-t tail of {dof:.3g} degrees of freedom; wrote {checked}" in out
     # the same figures from `maps check`
+    assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05", "-q"]) == 0
+    assert "held out" not in capsys.readouterr().err  # quiet: no progress lines
     assert main(["maps", "check", *paths, "--cell", "5", "--sounding-std", "0.05"]) == 0
     out = capsys.readouterr().out
     assert f"Student-t of scale {scale:.2f}" in out
