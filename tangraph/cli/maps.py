@@ -63,9 +63,11 @@ def _info_lines(r: dict) -> list[str]:
     ]
     if "centre" in r:
         lines.append(f"centre       {r['centre']['lat']:.5f} N, {r['centre']['lon']:.5f} E")
-    lines.append(f"slope        median {r['slope_median_deg']:.2f} deg")
-    lines.append(f"roughness    median {r['roughness_median_m']:.3f} m "
-                 f"(plane-fit residual std, {w} x {w} cells)")
+    lines.append(f"slope        median {r['slope_median_deg']:.2f} deg" if np.isfinite(r["slope_median_deg"])
+                 else "slope        not told (no two neighbouring cells hold data)")
+    rough = r["roughness_median_m"]
+    lines.append(f"roughness    median {rough:.3f} m (plane-fit residual std, {w} x {w} cells)"
+                 if np.isfinite(rough) else f"roughness    not told (no {w} x {w} cells hold data)")
     error = [f"depth std median {r['depth_std_m']['median']:.3f} m, max {r['depth_std_m']['max']:.3f} m"
              ] if "depth_std_m" in r else []
     error += [f"correlation length {r['correlation_length_m']:g} m"] if "correlation_length_m" in r else []

@@ -357,6 +357,12 @@ def crlb(information) -> np.ndarray:
     return inverse
 
 
+def _median(values: np.ndarray) -> float:
+    """The median of the finite values (NaN when there is none, without numpy's warning)."""
+    finite = values[np.isfinite(values)]
+    return float(np.median(finite)) if finite.size else float("nan")
+
+
 def describe(bathymetry: BathymetryMap, *, window: int = 5) -> dict:
     """A map's figures, as data (``tangraph maps info``, ``--json``): shape, cell, extent, depth
     range, valid fraction, CRS, origin, centre in latitude/longitude (with a CRS), median slope
@@ -371,8 +377,10 @@ def describe(bathymetry: BathymetryMap, *, window: int = 5) -> dict:
                     "mean": float(np.nanmean(m.depth))},
         "valid_fraction": float(m.valid_fraction), "crs": m.crs,
         "origin": {"northing": float(m.origin[0]), "easting": float(m.origin[1])},
-        "slope_median_deg": float(np.nanmedian(slope(m))),
-        "roughness_median_m": float(np.nanmedian(roughness(m, window))), "roughness_window": window,
+        "slope_median_deg": _median(slope(m)),
+        # (NaN: no window of the map holds data, or the map is smaller than a window)
+        "roughness_median_m": _median(roughness(m, window)) if min(m.shape) >= window else float("nan"),
+        "roughness_window": window,
     }
     if m.crs is not None:
         from tangraph.maps.projection import to_lonlat

@@ -6,6 +6,7 @@ reported, --check-lines) and check; their one-line refusals."""
 from __future__ import annotations
 
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -44,6 +45,15 @@ def test_maps_info_of_a_name_and_of_a_file(capsys, tmp_path):
     assert "100 x 100 cells of 4 x 4 m" in capsys.readouterr().out
     assert main(["maps", "info", "lidar-dem", "--sign", "depth"]) == 2  # file options do not apply
     assert "does not apply to the catalogue map 'lidar-dem'" in capsys.readouterr().err
+    # a map smaller than the roughness window, with no two neighbouring cells of data: said, no warning
+    sparse = tmp_path / "sparse.nc"
+    write_map(BathymetryMap(np.arange(3.0), np.arange(3.0), np.array([[30.0, np.nan, 31.0], [np.nan] * 3,
+                                                                      [32.0, np.nan, np.nan]])), sparse)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert main(["maps", "info", str(sparse)]) == 0
+    out = capsys.readouterr().out
+    assert "slope        not told" in out and "roughness    not told (no 5 x 5 cells hold data)" in out
 
 
 def test_maps_plot_writes_a_png_and_does_not_clobber(tmp_path, capsys):
