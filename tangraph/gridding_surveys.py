@@ -27,17 +27,12 @@ import numpy as np
 from tangraph.errors import TangraphError
 from tangraph.maps._grid_checks import check_cell
 from tangraph.maps.gridding import SoundingGrid, Statistic, block_reduce, fill_gaps
+from tangraph.maps.projection import same_crs
 from tangraph.survey import Survey
 
 __all__ = ["DEFAULT_VERTICAL_DATUM", "check_distinct", "grid_surveys"]
 
 DEFAULT_VERTICAL_DATUM = "water surface"  # what a survey without meta["vertical_datum"] means
-
-
-def _same_crs(a: str, b: str) -> bool:
-    import pyproj
-
-    return a == b or pyproj.CRS.from_user_input(a) == pyproj.CRS.from_user_input(b)
 
 
 def _to_frame(north, east, crs, origin, frame_crs, frame_origin, names: tuple[str, str]):
@@ -50,7 +45,7 @@ def _to_frame(north, east, crs, origin, frame_crs, frame_origin, names: tuple[st
     import pyproj
 
     try:
-        if crs is None or _same_crs(crs, frame_crs):
+        if crs is None or same_crs(crs, frame_crs):
             return north + (origin[0] - frame_origin[0]), east + (origin[1] - frame_origin[1])
         transformer = pyproj.Transformer.from_crs(crs, frame_crs, always_xy=True)
     except pyproj.exceptions.CRSError as exc:

@@ -9,6 +9,7 @@ import numpy as np
 
 from tangraph.errors import TangraphError
 from tangraph.maps.grid import BathymetryMap
+from tangraph.maps.projection import same_crs
 from tangraph.survey import Survey
 
 __all__ = ["MIN_MAP_OVERLAP", "check_map", "check_overlap", "in_map_frame", "map_identity"]
@@ -95,7 +96,7 @@ def _overlap_problem(framed: Survey, bathymetry: BathymetryMap, original: Survey
         crs, map_crs = original.meta.get("crs"), bathymetry.crs
         if km > 100.0:
             apart = f"; it lies {km:,.0f} km from them"
-            if not _same_crs(crs, map_crs):
+            if not same_crs(crs, map_crs):
                 apart += f" (its CRS {_crs_name(crs)}, the map's {_crs_name(map_crs)}: another region?)"
     return (
         f"the survey does not overlap map {bathymetry.name!r}: {met} of its {total} pings with soundings "
@@ -139,15 +140,6 @@ def _distance_km(a: np.ndarray, b: np.ndarray) -> float:
     _, _, metres = pyproj.Geod(ellps="WGS84").inv(
         (a[2] + a[3]) / 2, (a[0] + a[1]) / 2, (b[2] + b[3]) / 2, (b[0] + b[1]) / 2)
     return float(metres) / 1000.0
-
-
-def _same_crs(a, b) -> bool:
-    import pyproj
-
-    try:
-        return pyproj.CRS.from_user_input(a).equals(pyproj.CRS.from_user_input(b))
-    except pyproj.exceptions.CRSError:
-        return a == b
 
 
 def _crs_name(crs) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps._grid_checks import check_correlation_length, check_depth_std, check_error_dof
 from tangraph.maps.grid import BathymetryMap
-from tangraph.maps.projection import project_geographic_grid
+from tangraph.maps.projection import project_geographic_grid, same_crs
 
 Sign = Literal["depth", "elevation"]
 #: which uncertainty layer to read: None finds it, a name chooses it, True requires one, False reads none
@@ -197,9 +197,15 @@ def check_given_crs(given: str | None, stated: str | None, where: str) -> str | 
 
     if given is None or stated is None:
         return given or stated
-    if not pyproj.CRS.from_user_input(given).equals(pyproj.CRS.from_user_input(stated),
-                                                    ignore_axis_order=True):
-        raise MapFormatError(f"{where}: the file states its CRS, {stated}, and crs={given!r} (CLI: --crs) "
+    if not same_crs(given, stated):
+        try:
+            pyproj.CRS.from_user_input(given)
+        except pyproj.exceptions.CRSError:
+            return given  # (the reader's check of crs= names it as not understood)
+        file_crs = pyproj.CRS.from_user_input(stated)
+        code = file_crs.to_epsg()
+        named = f"EPSG:{code}" if code else file_crs.name  # (a WKT named short)
+        raise MapFormatError(f"{where}: the file states its CRS, {named}, and crs={given!r} (CLI: --crs) "
                              "says otherwise; leave crs out (it is for files that do not say) or mend it")
     return given
 

@@ -61,7 +61,7 @@ def is_s102(path) -> bool:
 
 
 def _uncertainty_layer(raster: Raster, depth: np.ndarray, uncertainty: Uncertainty, label: str,
-                       nodata, factor: float) -> np.ndarray | None:
+                       nodata) -> np.ndarray | None:
     """The uncertainty band (metres) of a BAG or S-102, checked; None if ``uncertainty`` is False."""
     path = raster.path
     if uncertainty is False:
@@ -78,7 +78,7 @@ def _uncertainty_layer(raster: Raster, depth: np.ndarray, uncertainty: Uncertain
             f"{'missing' if band is None else 'holds no data where the depths do'}); read the depths "
             "alone with uncertainty=False (CLI: --uncertainty none)"
         )
-    return checked_std(band, depth, factor=factor, nodata=nodata, where=where)
+    return checked_std(band, depth, factor=1.0, nodata=nodata, where=where)
 
 
 def _read_hydro(raster: Raster, *, positive_up: bool, label: str, crs, cell, name, nodata, units,
@@ -90,12 +90,11 @@ def _read_hydro(raster: Raster, *, positive_up: bool, label: str, crs, cell, nam
         crs = check_given_crs(crs, raster_crs(raster.crs, {}, path), str(path))
     geographic = crs is not None and _is_geographic(crs)
     variable = raster.descriptions[0] or "band 1"
-    factor = unit_factor(units, str(path), "units=") if units else 1.0  # metres, as both formats say
-    if factor != 1.0:
+    if units and unit_factor(units, str(path), "units=") != 1.0:  # metres, as both formats say
         raise MapFormatError(f"{path}: a {label} holds depths in metres, and units={units!r} (CLI: --units) "
                              "says otherwise; leave units out")
-    depth = (-1.0 if positive_up else 1.0) * raster.bands[0] * factor + 0.0  # + 0.0: no -0.0
-    std = _uncertainty_layer(raster, depth, uncertainty, label, nodata, factor)
+    depth = (-1.0 if positive_up else 1.0) * raster.bands[0] + 0.0  # + 0.0: no -0.0
+    std = _uncertainty_layer(raster, depth, uncertainty, label, nodata)
     return _grid_to_map(raster.y, raster.x, depth, geographic=geographic, crs=crs, cell=cell,
                         name=name or path.stem, where=str(path), variable=variable,
                         max_scale_error=max_scale_error, depth_std=std,

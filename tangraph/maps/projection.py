@@ -13,10 +13,20 @@ import pyproj
 from tangraph.errors import MapFormatError, TangraphError
 from tangraph.maps.grid import BathymetryMap
 
-__all__ = ["from_lonlat", "local_crs", "north_in_grid", "project_geographic_grid", "to_lonlat"]
+__all__ = ["from_lonlat", "local_crs", "north_in_grid", "project_geographic_grid", "same_crs", "to_lonlat"]
 
 _WGS84 = "EPSG:4326"
 _METRES_PER_DEGREE = 111_320.0
+
+
+def same_crs(a, b) -> bool:
+    """Whether two CRSs (strings pyproj reads) are one, axis order aside; two that pyproj cannot
+    read are one only when spelt alike."""
+    try:
+        return a == b or pyproj.CRS.from_user_input(a).equals(pyproj.CRS.from_user_input(b),
+                                                             ignore_axis_order=True)
+    except pyproj.exceptions.CRSError:
+        return False
 
 
 def local_crs(lat0: float, lon0: float) -> str:

@@ -65,6 +65,13 @@ def test_a_bag_written_by_gdal_reads_with_the_right_sign_and_place(tmp_path):
     np.testing.assert_allclose(m.depth, -elevation[::-1])
     assert np.all(m.depth > 0) and np.all(m.depth_std == 0.25) and m.correlation_length is None
     assert m.origin == (6_000_070 - 5 * 2.5, 500_002.0) and m.cell_size == (5.0, 4.0)
+    # crs= and units= are for files that do not say: agreeing they read the same, contradicting refused
+    np.testing.assert_array_equal(read_map(path, crs="EPSG:32633", units="m").depth, m.depth)
+    with pytest.raises(MapFormatError, match=r"g\.bag: the file states its CRS, EPSG:32633, and "
+                                             r"crs='EPSG:32632' \(CLI: --crs\) says otherwise"):
+        read_map(path, crs="EPSG:32632")
+    with pytest.raises(MapFormatError, match=r"g\.bag: a BAG holds depths in metres, and units='ft'"):
+        read_map(path, units="ft")
 
 
 def test_a_bag_without_uncertainty_is_refused_unless_asked(tmp_path):

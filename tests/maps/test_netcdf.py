@@ -133,6 +133,27 @@ def test_gdal_places_tangraph_netcdf(tmp_path, crs):
         np.testing.assert_allclose(src.read(1)[::-1], m.depth)  # GDAL gives north-up rows
 
 
+@pytest.mark.skipif("netCDF" not in rasterio.drivers.raster_driver_extensions().values(),
+                    reason="rasterio's GDAL has no netCDF driver")
+def test_a_netcdf_gdal_wrote_reads_in_its_crs_and_refuses_another(tmp_path):
+    """GDAL's netCDF driver writes the CRS as a WKT grid mapping and a variable 'Band1' (with the
+    GeoTIFF's positive down and units m): crs= and units= may agree with the file, not contradict it."""
+    from rasterio.shutil import copy
+
+    m = tangraph_map("EPSG:32755")
+    copy(write_map(m, tmp_path / "m.tif"), tmp_path / "g.nc", driver="netCDF")
+    back = read_map(tmp_path / "g.nc", sign="depth")
+    assert pyproj.CRS(back.crs).equals(pyproj.CRS("EPSG:32755"))
+    np.testing.assert_allclose(back.depth, m.depth, rtol=1e-6)
+    assert read_map(tmp_path / "g.nc", sign="depth", crs="EPSG:32755").crs == "EPSG:32755"
+    with pytest.raises(MapFormatError, match=r"g\.nc:Band1: the file states its CRS, EPSG:32755, and "
+                                             r"crs='EPSG:32756' \(CLI: --crs\) says otherwise"):
+        read_map(tmp_path / "g.nc", sign="depth", crs="EPSG:32756")
+    np.testing.assert_allclose(read_map(tmp_path / "g.nc", units="m").depth, m.depth, rtol=1e-6)
+    with pytest.raises(MapFormatError, match=r"variable 'Band1' states its units, 'm', and units='ft'"):
+        read_map(tmp_path / "g.nc", units="ft")
+
+
 def test_netcdf_maps_of_older_tangraph_still_read(tmp_path):
     """tangraph <= 0.1 wrote dims (north, east) in local metres, CRS and origin as attributes."""
     m = tangraph_map(local_crs(-37.0, 150.0))
